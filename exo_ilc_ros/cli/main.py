@@ -1,0 +1,42 @@
+"""``exo-ilc``: the command line of exo_ilc_ros (what ros2cli, launch and rosbag2 would do here)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from ..core.errors import ExoIlcError
+
+COMMANDS = ("simulate", "urdf")
+"""Sub-command modules of this package; each has ``register(subparsers)`` setting ``func``."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser with every sub-command registered."""
+    parser = argparse.ArgumentParser(
+        prog="exo-ilc", description="Iterative learning control for a rehabilitation "
+        "exoskeleton arm (sgnPDD^2 / PD, computed torque).")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMANDS:
+        importlib.import_module(f"{__package__}.{name}").register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``exo-ilc``; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except ExoIlcError as exc:
+        print(f"exo-ilc {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"exo-ilc {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,31 @@
+"""``exo-ilc urdf``: write the arm's URDF from the config (the shipped urdf/ is made by this)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from ..core.config import load_config
+from ..core.experiment import build_arm
+from ..core.urdf import arm_urdf
+
+
+def register(sub: Any) -> None:
+    """Add the sub-command."""
+    parser = sub.add_parser("urdf", help="write the arm's URDF from the config")
+    parser.add_argument("--config", help="ROS parameter YAML over the shipped config")
+    parser.add_argument("--out", help="output file (default: standard output)")
+    parser.set_defaults(func=write_urdf)
+
+
+def write_urdf(args: argparse.Namespace) -> int:
+    """Generate and write."""
+    config = load_config(args.config)
+    text = arm_urdf(build_arm(config), config["joint_names"], config["control.effort_limit"])
+    if args.out:
+        Path(args.out).write_text(text)
+        print(f"wrote {args.out}")
+    else:
+        print(text, end="")
+    return 0

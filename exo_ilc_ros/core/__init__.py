@@ -1,0 +1,51 @@
+"""The paper's mathematics, ROS-free: arm model, reference, computed torque, ILC laws, integrator
+and an in-process trial runner. Nothing here imports rclpy."""
+
+from __future__ import annotations
+
+from . import _numba_cache  # noqa: F401  (must run before the kernels are compiled)
+from .config import Config, config_dir, default_config_path, load_config
+from .errors import ConfigError, ExoIlcError, ModelError
+from .experiment import (
+    Experiment,
+    IterationsToBound,
+    RunResult,
+    build_arm,
+    build_law,
+    build_reference,
+    iterations_to_bound,
+    run_trials,
+)
+from .integrator import (
+    PlantDynamics,
+    computed_torque_kernel,
+    feedback_input,
+    integrate_period,
+    simulate_trial,
+)
+from .laws import (
+    ErrorSum,
+    FeedforwardUpdate,
+    InitialFeedforward,
+    LearningLaw,
+    LinearLaw,
+    Memory,
+    ScheduleIndex,
+    SignLaw,
+    StepSchedule,
+    TrialRecord,
+    error_sums,
+    sgn,
+)
+from .model import ArmModel
+from .trajectory import QuinticTrajectory, SampledReference
+
+__all__ = [
+    "ArmModel", "Config", "ConfigError", "ErrorSum", "ExoIlcError", "Experiment",
+    "FeedforwardUpdate", "InitialFeedforward", "IterationsToBound", "LearningLaw", "LinearLaw",
+    "Memory", "ModelError", "PlantDynamics", "QuinticTrajectory", "RunResult", "SampledReference",
+    "ScheduleIndex", "SignLaw", "StepSchedule", "TrialRecord", "build_arm", "build_law",
+    "build_reference", "computed_torque_kernel", "config_dir", "default_config_path",
+    "error_sums", "feedback_input", "integrate_period", "iterations_to_bound", "load_config",
+    "run_trials", "sgn", "simulate_trial",
+]

@@ -1,0 +1,218 @@
+"""Loading, validating and writing the ROS-parameter YAML that configures everything.
+
+The shipped ``config/exo_ilc.yaml`` holds every parameter's value; a user file (same layout,
+any subset of keys) and command-line overrides are laid over it, then the whole is checked
+against :mod:`schema`. Nodes read the same files as ROS parameters.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sys
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from . import schema
+from .errors import ConfigError
+
+PACKAGE = "exo_ilc_ros"
+DEFAULT_CONFIG_NAME = "exo_ilc.yaml"
+
+
+def config_dir() -> Path:
+    """Where the shipped configs are: the ament share directory of an installed package, the
+    ``config/`` of a source checkout or editable install, or ``<prefix>/share`` of a pip install.
+    ``EXO_ILC_CONFIG_DIR`` overrides all three."""
+    override = os.environ.get("EXO_ILC_CONFIG_DIR")
+    candidates = [Path(override)] if override else []
+    candidates.append(Path(__file__).resolve().parents[2] / "config")  # source / editable
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        candidates.append(Path(get_package_share_directory(PACKAGE)) / "config")
+    except Exception:  # not installed through ament, or AMENT_PREFIX_PATH unset
+        pass
+    candidates.append(Path(sys.prefix) / "share" / PACKAGE / "config")
+    for candidate in candidates:
+        if (candidate / DEFAULT_CONFIG_NAME).is_file():
+            return candidate
+    raise ConfigError("config", "cannot find the shipped config/exo_ilc.yaml; looked in "
+                      + ", ".join(str(c) for c in candidates))
+
+
+def default_config_path() -> Path:
+    """The shipped ``exo_ilc.yaml`` (the paper's experiment under the canonical reading)."""
+    return config_dir() / DEFAULT_CONFIG_NAME
+
+
+def flatten_ros_yaml(document: Any, source: str) -> dict[str, Any]:
+    """Flat ``{dotted name: value}`` from a ROS parameter YAML (``node: ros__parameters: ...``).
+
+    Unknown sections and unknown keys are errors naming the file and key; a key in the wrong
+    section is an error too (it would silently not reach its node under ROS).
+    """
+    if document is None:
+        return {}
+    if not isinstance(document, dict):
+        raise ConfigError("<file>", "must be a mapping of node names to ros__parameters",
+                          source)
+    flat: dict[str, Any] = {}
+    for section, body in document.items():
+        name = str(section).lstrip("/") if section != schema.SHARED else section
+        if name not in schema.SECTIONS:
+            raise ConfigError(str(section), "unknown node section; expected one of "
+                              + ", ".join(schema.SECTIONS), source)
+        if not isinstance(body, dict) or set(body) != {"ros__parameters"}:
+            raise ConfigError(str(section), "must contain exactly one key, ros__parameters",
+                              source)
+        params = body["ros__parameters"] or {}
+        if not isinstance(params, dict):
+            raise ConfigError(f"{section}.ros__parameters", "must be a mapping", source)
+        for key, value in _flatten(params, ""):
+            if key in schema.ROS_BUILTIN:
+                continue
+            param = schema.BY_NAME.get(key)
+            if param is None:
+                raise ConfigError(key, "unknown parameter", source)
+            if param.section != name:
+                raise ConfigError(key, f"belongs in section {param.section!r}, not {section!r}",
+                                  source)
+            if key in flat:
+                raise ConfigError(key, "given twice", source)
+            flat[key] = value
+    return flat
+
+
+def _flatten(tree: Mapping[str, Any], prefix: str) -> Iterable[tuple[str, Any]]:
+    for key, value in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            yield from _flatten(value, name + ".")
+        else:
+            yield name, value
+
+
+def validate(values: Mapping[str, Any], source: str | None = None) -> dict[str, Any]:
+    """Every parameter present, typed and within its rule; returns the coerced values."""
+    missing = [p.name for p in schema.PARAMETERS if p.name not in values]
+    if missing:
+        raise ConfigError(missing[0], "missing (every parameter needs a value)", source)
+    unknown = [k for k in values if k not in schema.BY_NAME]
+    if unknown:
+        raise ConfigError(unknown[0], "unknown parameter", source)
+    out: dict[str, Any] = {}
+    try:
+        for param in schema.PARAMETERS:
+            out[param.name] = schema.coerce(param, values[param.name])
+        joints = len(out["joint_names"])
+        if joints < 1:
+            raise ConfigError("joint_names", "at least one joint is needed")
+        for param in schema.PARAMETERS:
+            schema.check_value(param, out[param.name], joints)
+        schema.check_consistency(out)
+    except ConfigError as exc:
+        if source and not exc.source:
+            raise ConfigError(exc.key, exc.rule, source) from None
+        raise
+    return out
+
+
+def read_yaml(path: Path | str) -> dict[str, Any]:
+    """The flat parameters of one ROS parameter YAML file (not yet validated)."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ConfigError("<file>", f"cannot read: {exc.strerror}", str(path)) from None
+    try:
+        document = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError("<file>", f"invalid YAML: {exc}", str(path)) from None
+    return flatten_ros_yaml(document, str(path))
+
+
+class Config:
+    """A complete, validated set of parameter values (immutable)."""
+
+    def __init__(self, values: Mapping[str, Any], source: str | None = None) -> None:
+        self._values = validate(values, source)
+        self.source = source
+
+    def __getitem__(self, name: str) -> Any:
+        value = self._values[name]
+        return list(value) if isinstance(value, list) else value
+
+    @property
+    def values(self) -> dict[str, Any]:
+        """A copy of every value, by dotted name."""
+        return json.loads(json.dumps(self._values))
+
+    @property
+    def joints(self) -> int:
+        """Number of joints."""
+        return len(self._values["joint_names"])
+
+    def replace(self, overrides: Mapping[str, Any]) -> Config:
+        """A new Config with ``overrides`` (dotted names) applied and validated."""
+        unknown = [k for k in overrides if k not in schema.BY_NAME]
+        if unknown:
+            raise ConfigError(unknown[0], "unknown parameter")
+        merged = dict(self._values)
+        merged.update(overrides)
+        return Config(merged, self.source)
+
+    def digest(self) -> str:
+        """A stable hash of every value (keys stores of learned data)."""
+        blob = json.dumps(self._values, sort_keys=True).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+    def section(self, node: str) -> dict[str, Any]:
+        """The values one node declares: the shared parameters and its own."""
+        return {p.name: self[p.name] for p in schema.parameters_of(node)}
+
+    def to_ros_yaml(self, header: str = "") -> str:
+        """This config as a ROS parameter YAML that ``--params-file`` and :func:`load_config`
+        both accept (sections nested, one key per parameter, the schema's text as comments)."""
+        lines = [f"# {line}" for line in header.splitlines()]
+        for section in schema.SECTIONS:
+            params = [p for p in schema.PARAMETERS if p.section == section]
+            if not params:
+                continue
+            key = f'"{section}"' if section == schema.SHARED else section
+            lines += [f"{key}:", "  ros__parameters:"]
+            if section == schema.SHARED:
+                lines.append("    use_sim_time: true")
+            opened: list[str] = []
+            for p in params:
+                parts = p.name.split(".")
+                common = 0
+                while (common < len(opened) and common < len(parts) - 1
+                       and opened[common] == parts[common]):
+                    common += 1
+                opened = opened[:common]
+                for depth in range(common, len(parts) - 1):
+                    lines.append("    " + "  " * depth + f"{parts[depth]}:")
+                    opened.append(parts[depth])
+                indent = "    " + "  " * (len(parts) - 1)
+                value = json.dumps(self._values[p.name])
+                lines.append(f"{indent}{parts[-1]}: {value}  # {p.description}")
+        return "\n".join(lines) + "\n"
+
+
+def load_config(path: Path | str | None = None,
+                overrides: Mapping[str, Any] | None = None) -> Config:
+    """The shipped defaults, then ``path`` (any subset of keys), then ``overrides``."""
+    default = default_config_path()
+    values = read_yaml(default)
+    source = str(default)
+    if path is not None and Path(path).resolve() != default.resolve():
+        values.update(read_yaml(path))
+        source = str(path)
+    if overrides:
+        values.update(overrides)
+    return Config(values, source)

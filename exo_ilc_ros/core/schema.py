@@ -1,0 +1,254 @@
+"""The parameter schema: every parameter's name, ROS section, type and rule, in one list.
+
+Names are the dotted ROS parameter names (nested YAML keys joined by '.'). ``section`` says where
+the parameter lives in the ROS parameter YAML: ``/**`` (read by every node) or one node's name.
+Values come from the YAML in ``config/``; this module holds no defaults, only the rules.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Any
+
+from .errors import ConfigError
+
+SHARED = "/**"
+PLANT = "plant_simulator"
+CONTROLLER = "computed_torque_controller"
+SUPERVISOR = "ilc_supervisor"
+SECTIONS = (SHARED, PLANT, CONTROLLER, SUPERVISOR)
+ROS_BUILTIN = frozenset({"use_sim_time", "start_type_description_service"})
+"""Parameters every rclpy node owns; accepted in any section, not part of the schema."""
+
+
+class Kind(Enum):
+    """ROS parameter types used by the schema."""
+
+    DOUBLE = "double"
+    INTEGER = "integer"
+    BOOL = "bool"
+    STRING = "string"
+    DOUBLE_ARRAY = "double_array"
+    STRING_ARRAY = "string_array"
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One parameter: name, section, type, meaning and the rule its value must follow."""
+
+    name: str
+    section: str
+    kind: Kind
+    description: str
+    per_joint: bool = False
+    """An array with one entry per joint."""
+    minimum: float | None = None
+    strictly_positive: bool = False
+    choices: tuple[str, ...] = ()
+    live: bool = False
+    """May change while the graph runs (takes effect at the next trial boundary)."""
+    extra_rule: Callable[[Any], str | None] | None = field(default=None, compare=False)
+
+
+def _axes_rule(value: Any) -> str | None:
+    from .model import AXIS_VECTORS
+
+    bad = [v for v in value if v not in AXIS_VECTORS]
+    return f"unknown joint axis {bad[0]!r}; use one of {sorted(AXIS_VECTORS)}" if bad else None
+
+
+def _schedule_parameters() -> list[Parameter]:
+    out = []
+    meaning = {"position": ("M", "|s e|"), "velocity": ("M'", "|s e_dot|"),
+               "acceleration": ("M''", "|s e_ddot|")}
+    for term, (symbol, total) in meaning.items():
+        base = f"schedule.{term}"
+        out += [
+            Parameter(f"{base}.threshold_low", SUPERVISOR, Kind.DOUBLE_ARRAY,
+                      f"s1 of {symbol}: {total} at or below it gives level_low, eqs (22)-(24)",
+                      per_joint=True, minimum=0.0, live=True),
+            Parameter(f"{base}.threshold_high", SUPERVISOR, Kind.DOUBLE_ARRAY,
+                      f"s2 of {symbol}: {total} above it gives level_high", per_joint=True,
+                      minimum=0.0, live=True),
+            Parameter(f"{base}.level_low", SUPERVISOR, Kind.DOUBLE_ARRAY,
+                      f"{symbol} step when {total} <= threshold_low", per_joint=True,
+                      minimum=0.0, live=True),
+            Parameter(f"{base}.level_mid", SUPERVISOR, Kind.DOUBLE_ARRAY,
+                      f"{symbol} step when threshold_low < {total} <= threshold_high",
+                      per_joint=True, minimum=0.0, live=True),
+            Parameter(f"{base}.level_high", SUPERVISOR, Kind.DOUBLE_ARRAY,
+                      f"{symbol} step when {total} > threshold_high", per_joint=True,
+                      minimum=0.0, live=True),
+        ]
+    return out
+
+
+PARAMETERS: tuple[Parameter, ...] = (
+    Parameter("joint_names", SHARED, Kind.STRING_ARRAY, "joint names, in chain order"),
+    Parameter("model.link_masses", SHARED, Kind.DOUBLE_ARRAY, "nominal link masses (kg)",
+              per_joint=True, minimum=0.0),
+    Parameter("model.link_lengths", SHARED, Kind.DOUBLE_ARRAY, "link lengths (m)",
+              per_joint=True, minimum=0.0),
+    Parameter("model.radius_proximal", SHARED, Kind.DOUBLE_ARRAY,
+              "truncated-cone radius at the proximal joint (m)", per_joint=True, minimum=0.0),
+    Parameter("model.radius_distal", SHARED, Kind.DOUBLE_ARRAY,
+              "truncated-cone radius at the distal end (m)", per_joint=True, minimum=0.0),
+    Parameter("model.joint_axes", SHARED, Kind.STRING_ARRAY,
+              "joint axis in the parent link's frame: x, y, z, -x, -y or -z", per_joint=True,
+              extra_rule=_axes_rule),
+    Parameter("model.gravity", SHARED, Kind.DOUBLE, "gravity acceleration along -z (m/s^2)",
+              minimum=0.0),
+    Parameter("trajectory.start", SHARED, Kind.DOUBLE_ARRAY, "q_d(0) of eq (14) (rad)",
+              per_joint=True),
+    Parameter("trajectory.goal", SHARED, Kind.DOUBLE_ARRAY, "q_d(T) of eq (14) (rad)",
+              per_joint=True),
+    Parameter("trajectory.duration", SHARED, Kind.DOUBLE, "T of eq (14) (s)",
+              strictly_positive=True),
+    Parameter("control.period", SHARED, Kind.DOUBLE,
+              "control period (s): effort held over it; the error sums (13) are over its samples",
+              strictly_positive=True),
+    Parameter("control.kp", SHARED, Kind.DOUBLE_ARRAY, "K_P of eq (11)", per_joint=True,
+              minimum=0.0),
+    Parameter("control.kd", SHARED, Kind.DOUBLE_ARRAY, "K_D of eq (11)", per_joint=True,
+              minimum=0.0),
+    Parameter("control.effort_limit", SHARED, Kind.DOUBLE_ARRAY,
+              "|effort| limit per joint (N m)", per_joint=True, strictly_positive=True),
+    Parameter("mass_uncertainty", PLANT, Kind.DOUBLE,
+              "delta: the plant's masses are m_i (1 + delta); the controller keeps m_i",
+              minimum=-0.9),
+    Parameter("integration_step", PLANT, Kind.DOUBLE,
+              "RK4 sub-step (s); must divide control.period", strictly_positive=True),
+    Parameter("dynamics", PLANT, Kind.STRING,
+              "full (true masses, eq (15)) or paper_approximation (eqs (17)-(18), a^-1 a_N ~ I)",
+              choices=("full", "paper_approximation")),
+    Parameter("law", SUPERVISOR, Kind.STRING,
+              "learning law: sign (sgnPDD^2, eq (11)) or linear (Arimoto PDD^2-type)",
+              choices=("sign", "linear"), live=True),
+    Parameter("max_trials", SUPERVISOR, Kind.INTEGER, "number of trials to run",
+              strictly_positive=True),
+    Parameter("error_bound", SUPERVISOR, Kind.DOUBLE, "max |e_j| bound (rad)",
+              strictly_positive=True, live=True),
+    Parameter("stop_when_settled", SUPERVISOR, Kind.INTEGER,
+              "stop once every joint has stayed within the bound this many trials (0: never)",
+              minimum=0.0, live=True),
+    Parameter("memory", SUPERVISOR, Kind.STRING,
+              "u_{k-1} of eq (11): total_input (feed-forward + feedback) or feedforward",
+              choices=("total_input", "feedforward"), live=True),
+    Parameter("initial_feedforward", SUPERVISOR, Kind.STRING,
+              "feed-forward of trial 1: zero or reference_acceleration (q_ddot_d)",
+              choices=("zero", "reference_acceleration")),
+    Parameter("schedule_index", SUPERVISOR, Kind.STRING,
+              "M', M'' chosen from their own sums (own_sum) or from |s e| as printed "
+              "(position_sum)", choices=("own_sum", "position_sum"), live=True),
+    Parameter("error_sum", SUPERVISOR, Kind.STRING,
+              "eq (13) sums: abs_of_sum (|sum e|, as printed) or sum_of_abs (sum |e|)",
+              choices=("abs_of_sum", "sum_of_abs"), live=True),
+    *_schedule_parameters(),
+    Parameter("linear.gain_position", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "linear law: learning gain on e", per_joint=True, minimum=0.0, live=True),
+    Parameter("linear.gain_velocity", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "linear law: learning gain on e_dot", per_joint=True, minimum=0.0, live=True),
+    Parameter("linear.gain_acceleration", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "linear law: learning gain on e_ddot", per_joint=True, minimum=0.0, live=True),
+)
+
+BY_NAME: Mapping[str, Parameter] = {p.name: p for p in PARAMETERS}
+
+
+def parameters_of(node: str) -> tuple[Parameter, ...]:
+    """The parameters a node declares: the shared ones and its own section's."""
+    return tuple(p for p in PARAMETERS if p.section in (SHARED, node))
+
+
+def coerce(param: Parameter, value: Any) -> Any:
+    """``value`` converted to the parameter's type, or ConfigError naming the rule."""
+    kind = param.kind
+    if kind is Kind.DOUBLE:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(param.name, f"must be a number, got {value!r}")
+        return float(value)
+    if kind is Kind.INTEGER:
+        if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, float) and value.is_integer():
+                return int(value)
+            raise ConfigError(param.name, f"must be an integer, got {value!r}")
+        return int(value)
+    if kind is Kind.BOOL:
+        if not isinstance(value, bool):
+            raise ConfigError(param.name, f"must be true or false, got {value!r}")
+        return value
+    if kind is Kind.STRING:
+        if not isinstance(value, str):
+            raise ConfigError(param.name, f"must be a string, got {value!r}")
+        return value
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
+        raise ConfigError(param.name, f"must be a list, got {value!r}")
+    items = list(value)
+    if kind is Kind.DOUBLE_ARRAY:
+        if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in items):
+            raise ConfigError(param.name, f"must be a list of numbers, got {items!r}")
+        return [float(v) for v in items]
+    if any(not isinstance(v, str) for v in items):
+        raise ConfigError(param.name, f"must be a list of strings, got {items!r}")
+    return items
+
+
+def check_value(param: Parameter, value: Any, joints: int) -> None:
+    """Raise ConfigError if an already coerced ``value`` breaks ``param``'s own rule."""
+    numbers: list[float] = []
+    if param.kind in (Kind.DOUBLE, Kind.INTEGER):
+        numbers = [float(value)]
+    elif param.kind is Kind.DOUBLE_ARRAY:
+        numbers = list(value)
+    if any(not math.isfinite(x) for x in numbers):
+        raise ConfigError(param.name, "must be finite (no NaN or inf)")
+    if param.per_joint and len(value) != joints:
+        raise ConfigError(param.name, f"must have one entry per joint ({joints}), got {len(value)}")
+    if param.minimum is not None and any(x < param.minimum for x in numbers):
+        raise ConfigError(param.name, f"must be >= {param.minimum:g}, got {value!r}")
+    if param.strictly_positive and any(x <= 0.0 for x in numbers):
+        raise ConfigError(param.name, f"must be > 0, got {value!r}")
+    if param.choices and value not in param.choices:
+        raise ConfigError(param.name, f"must be one of {', '.join(param.choices)}; got {value!r}")
+    if param.extra_rule is not None:
+        problem = param.extra_rule(value)
+        if problem:
+            raise ConfigError(param.name, problem)
+
+
+def check_consistency(values: Mapping[str, Any]) -> None:
+    """Rules between parameters: monotonic thresholds, a whole number of sub-steps, ..."""
+    for term in ("position", "velocity", "acceleration"):
+        low = values[f"schedule.{term}.threshold_low"]
+        high = values[f"schedule.{term}.threshold_high"]
+        for j, (lo, hi) in enumerate(zip(low, high, strict=True)):
+            if not lo < hi:
+                raise ConfigError(f"schedule.{term}.threshold_low",
+                                  f"thresholds must increase: joint {j + 1} has threshold_low "
+                                  f"{lo:g} >= threshold_high {hi:g}")
+    period = values["control.period"]
+    step = values["integration_step"]
+    ratio = period / step
+    if step > period or abs(ratio - round(ratio)) > 1e-9 * ratio:
+        raise ConfigError("integration_step",
+                          f"must divide control.period ({period:g} s) a whole number of times")
+    steps = values["trajectory.duration"] / period
+    if abs(steps - round(steps)) > 1e-9 * max(steps, 1.0):
+        raise ConfigError("trajectory.duration",
+                          f"must be a whole number of control periods ({period:g} s)")
+    masses = values["model.link_masses"]
+    lengths = values["model.link_lengths"]
+    radii = zip(values["model.radius_proximal"], values["model.radius_distal"], strict=True)
+    for j, (m, length, (r1, r2)) in enumerate(zip(masses, lengths, radii, strict=True)):
+        if m > 0.0 and length > 0.0 and r1 == 0.0 and r2 == 0.0:
+            raise ConfigError("model.radius_proximal",
+                              f"link {j + 1} has mass and length, so it needs a positive radius")
+    if all(m == 0.0 for m in masses):
+        raise ConfigError("model.link_masses", "at least one link must have mass")
+    if len(set(values["joint_names"])) != len(values["joint_names"]):
+        raise ConfigError("joint_names", "joint names must be unique")
+    if any(not name for name in values["joint_names"]):
+        raise ConfigError("joint_names", "joint names must not be empty")

@@ -1,0 +1,56 @@
+"""Topic and service names of the graph, their types, and what each message carries.
+
+One place for the wire contract shared by the nodes, the bag recorder and the offline analysis.
+Every array is in the joint order of the ``joint_names`` parameter; times are simulated time.
+
+``/joint_states`` (``sensor_msgs/msg/JointState``, plant_simulator)
+    header.stamp = simulated time of the sample; name = joint_names; position, velocity = the
+    measured state; effort = the effort applied over the period that *ended* at this sample
+    (after the plant's own limit). One message per control period.
+``/clock`` (``rosgraph_msgs/msg/Clock``, plant_simulator)
+    Simulated time; monotonic over the whole run (it does not restart with each trial).
+``/effort_controller/commands`` (``std_msgs/msg/Float64MultiArray``, computed_torque_controller)
+    data = effort per joint (N m), the ros2_control JointGroupEffortController convention.
+``/ilc/feedforward`` (``trajectory_msgs/msg/JointTrajectory``, ilc_supervisor; transient local)
+    The profile of the next trial: header.frame_id = ``trial:<k>``; joint_names; one point per
+    sample t_i with time_from_start = t_i, positions = q_d(t_i), velocities = qdot_d(t_i),
+    accelerations = u_ff(t_i) (the learned feed-forward, rad/s^2), effort empty.
+``/ilc/trial_events`` (``diagnostic_msgs/msg/DiagnosticArray``, ilc_supervisor)
+    header.stamp = simulated time of the event; one status named ``ilc_supervisor/trial`` with
+    message ``start``, ``end`` or ``aborted`` and values ``trial`` = k (and on ``end`` the same
+    key-values as the summary).
+``/ilc/trial_summary`` (``diagnostic_msgs/msg/DiagnosticArray``, ilc_supervisor)
+    After each trial: one status named ``ilc_supervisor/trial_summary``, level OK if every joint
+    is within the bound else WARN, values: ``trial``, ``mass_uncertainty``, ``law``,
+    ``max_abs_error/<joint>``, ``max_abs_feedforward/<joint>``, ``max_abs_effort/<joint>``,
+    ``level/M/<joint>``, ``level/M'/<joint>``, ``level/M''/<joint>`` (repr of floats, so
+    they parse back exactly).
+``/diagnostics`` (``diagnostic_msgs/msg/DiagnosticArray``, every node): health.
+"""
+
+from __future__ import annotations
+
+JOINT_STATES = "/joint_states"
+CLOCK = "/clock"
+EFFORT_COMMANDS = "/effort_controller/commands"
+FEEDFORWARD = "/ilc/feedforward"
+TRIAL_EVENTS = "/ilc/trial_events"
+TRIAL_SUMMARY = "/ilc/trial_summary"
+DIAGNOSTICS = "/diagnostics"
+PARAMETER_EVENTS = "/parameter_events"
+
+TYPES: dict[str, str] = {
+    JOINT_STATES: "sensor_msgs/msg/JointState",
+    CLOCK: "rosgraph_msgs/msg/Clock",
+    EFFORT_COMMANDS: "std_msgs/msg/Float64MultiArray",
+    FEEDFORWARD: "trajectory_msgs/msg/JointTrajectory",
+    TRIAL_EVENTS: "diagnostic_msgs/msg/DiagnosticArray",
+    TRIAL_SUMMARY: "diagnostic_msgs/msg/DiagnosticArray",
+    DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray",
+    PARAMETER_EVENTS: "rcl_interfaces/msg/ParameterEvent",
+}
+"""Every recorded topic and its ROS 2 type name."""
+
+TRIAL_STATUS = "ilc_supervisor/trial"
+SUMMARY_STATUS = "ilc_supervisor/trial_summary"
+FEEDFORWARD_FRAME_PREFIX = "trial:"

@@ -1,0 +1,66 @@
+"""ament_python package: `colcon build` on a ROS install, or `pip install -e .[test]` here."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "exo_ilc_ros"
+
+ROS_DEPENDENCIES = [
+    "ros-jazzy-rclpy[fastrtps]",
+    "ros-jazzy-sensor-msgs",
+    "ros-jazzy-std-msgs",
+    "ros-jazzy-trajectory-msgs",
+    "ros-jazzy-diagnostic-msgs",
+    "ros-jazzy-rosgraph-msgs",
+    "ros-jazzy-std-srvs",
+    "ros-jazzy-rcl-interfaces",
+    "ros-jazzy-ament-index-python",
+]
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*", "bench"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/urdf", glob("urdf/*.urdf")),
+        ("share/" + package_name + "/launch", glob("launch/*.py")),
+    ],
+    python_requires=">=3.11,<3.12",
+    install_requires=[
+        "setuptools",
+        *ROS_DEPENDENCIES,
+        "numpy>=1.26",
+        "numba>=0.60",
+        "scipy>=1.11",
+        "pyyaml>=6",
+        "tqdm>=4.66",
+        "matplotlib>=3.8",
+        "rosbags>=0.10",
+        "mcap>=1.1",
+        "mcap-ros2-support>=0.5",
+        "optuna>=4",
+    ],
+    extras_require={
+        "test": ["pytest>=8", "hypothesis>=6.100", "pin>=3", "ruff>=0.6", "mypy>=1.10",
+                 "types-PyYAML", "colcon-core", "colcon-ros"],
+    },
+    zip_safe=False,
+    maintainer="exo_ilc_ros developers",
+    maintainer_email="exo-ilc-ros@example.com",
+    description="Iterative learning control (sgnPDD^2/PD over computed torque) for a "
+                "rehabilitation exoskeleton arm, as ROS 2 nodes over a fast ROS-free core.",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "exo-ilc = exo_ilc_ros.cli.main:main",
+            "plant_simulator = exo_ilc_ros.nodes.plant_simulator:main",
+            "computed_torque_controller = exo_ilc_ros.nodes.computed_torque_controller:main",
+            "ilc_supervisor = exo_ilc_ros.nodes.ilc_supervisor:main",
+        ],
+    },
+)

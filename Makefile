@@ -16,8 +16,8 @@ $(STAMP): setup.py setup.cfg package.xml
 	@$(PYTHON) -c 'import sys; assert sys.version_info[:2] == (3, 11), \
 	  "the ros-jazzy wheels need CPython 3.11; set PYTHON=/path/to/python3.11"'
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[test]'
+	$(BIN)/pip install -qq --upgrade pip
+	$(BIN)/pip install -qq -e '.[test]'
 	touch $@
 
 venv: $(STAMP)

@@ -54,7 +54,6 @@ setup(
     description="Iterative learning control (sgnPDD^2/PD over computed torque) for a "
                 "rehabilitation exoskeleton arm, as ROS 2 nodes over a fast ROS-free core.",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "exo-ilc = exo_ilc_ros.cli.main:main",

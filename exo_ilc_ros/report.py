@@ -91,8 +91,8 @@ def format_trial_table(runs: Sequence[RunSummary], joint_names: Sequence[str]) -
     head2 = f"{'':>5} "
     for r in runs:
         title = f"{r.law} d={r.mass_uncertainty:g}"
-        head1 += f"| {title:^{n * 11 - 1}}"
-        head2 += "| " + "".join(f"{'e' + str(j + 1):>10} " for j in range(n))[:-1]
+        head1 += f"| {title:^{n * 11}}"
+        head2 += "| " + "".join(f"{'e' + str(j + 1):>10} " for j in range(n))
     lines = [head1, head2, "-" * len(head2)]
     count = max(len(r.max_abs_error) for r in runs)
     for k in range(count):
@@ -101,9 +101,9 @@ def format_trial_table(runs: Sequence[RunSummary], joint_names: Sequence[str]) -
             if k < len(r.max_abs_error):
                 cells = [f"{x:10.3e}" + ("*" if x > r.error_bound else " ")
                          for x in r.max_abs_error[k]]
-                line += "| " + "".join(cells)[:-1]
+                line += "| " + "".join(cells)
             else:
-                line += "| " + " " * (n * 11 - 1)
+                line += "| " + " " * (n * 11)
         lines.append(line)
     lines.append("(* above the bound)")
     return "\n".join(lines)

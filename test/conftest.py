@@ -1,0 +1,42 @@
+"""Test session set-up: a ROS domain of our own and discovery kept on this machine.
+
+Runs before any test imports rclpy, so every node started in-process or as a subprocess (which
+inherits the environment) uses ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and a domain id no
+other concurrent test session holds (claimed with a lock file, released when the process exits).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import tempfile
+from pathlib import Path
+from typing import IO
+
+import pytest
+
+_domain_lock: IO[str] | None = None
+
+
+def _claim_domain_id() -> int:
+    global _domain_lock
+    for domain in range(1, 101):
+        handle = open(Path(tempfile.gettempdir()) / f".exo_ilc_ros_domain_{domain}.lock", "w")
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.close()
+            continue
+        _domain_lock = handle
+        return domain
+    raise RuntimeError("no free ROS domain id in 1..100")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+    os.environ.pop("RMW_IMPLEMENTATION", None)
+    if "EXO_ILC_TEST_DOMAIN_ID" not in os.environ:
+        os.environ["EXO_ILC_TEST_DOMAIN_ID"] = str(_claim_domain_id())
+    os.environ["ROS_DOMAIN_ID"] = os.environ["EXO_ILC_TEST_DOMAIN_ID"]
+    os.environ.setdefault("ROS_LOG_DIR", str(Path(tempfile.gettempdir()) / "exo_ilc_ros_test_logs"))

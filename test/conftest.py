@@ -21,7 +21,8 @@ _domain_lock: IO[str] | None = None
 def _claim_domain_id() -> int:
     global _domain_lock
     for domain in range(1, 101):
-        handle = open(Path(tempfile.gettempdir()) / f".exo_ilc_ros_domain_{domain}.lock", "w")
+        lock = Path(tempfile.gettempdir()) / f".exo_ilc_ros_domain_{domain}.lock"
+        handle = open(lock, "w")  # noqa: SIM115  (held open: the lock lives as long as we do)
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

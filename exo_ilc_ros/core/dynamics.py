@@ -149,6 +149,9 @@ def _metric_into(q: np.ndarray, masses: np.ndarray, axes: np.ndarray, offsets: n
                                + _dot(e[al], tmp) - _dot(je[al], tmp2))
                         da[k, al, be] += mi * (_dot(dt[k, al], t[be])
                                                + _dot(t[al], dt[k, be])) + rot
+    for al in range(n):
+        for be in range(al + 1, n):
+            a[al, be] = a[be, al]
 
 
 @njit(cache=True, error_model="numpy")

@@ -1,4 +1,4 @@
-"""Iterative learning laws behind one small interface: ``update(trial record) -> next feed-forward``.
+"""Iterative learning laws behind one interface: ``update(trial record) -> next feed-forward``.
 
 :class:`SignLaw` is the paper's sgnPDD^2 law, eqs (11)-(13), with :class:`StepSchedule` gains of
 eqs (22)-(24); :class:`LinearLaw` the Arimoto-type PDD^2 law it is compared with. Every option the

@@ -26,6 +26,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/config/layouts", glob("config/layouts/*")),
         ("share/" + package_name + "/urdf", glob("urdf/*.urdf")),
         ("share/" + package_name + "/launch", glob("launch/*.py")),
     ],
@@ -60,6 +61,7 @@ setup(
             "plant_simulator = exo_ilc_ros.nodes.plant_simulator:main",
             "computed_torque_controller = exo_ilc_ros.nodes.computed_torque_controller:main",
             "ilc_supervisor = exo_ilc_ros.nodes.ilc_supervisor:main",
+            "bag_recorder = exo_ilc_ros.nodes.bag_recorder:main",
         ],
     },
 )

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from .core.experiment import IterationsToBound, RunResult, iterations_to_bound
+from .core.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth, format_growth
 
 PAPER_FIRST_JOINT1 = {0.05: 35, 0.10: 96, 0.15: 101}
 """Iterations to the 0.005 rad bound the paper reports for joint 1; joints 2-3: within 20."""
@@ -84,28 +85,70 @@ def _fmt(x: int | None) -> str:
     return "-" if x is None else str(x)
 
 
-def format_trial_table(runs: Sequence[RunSummary], joint_names: Sequence[str]) -> str:
-    """Max |e| (rad) per trial: one column group per run, one column per joint."""
+TABLE_QUANTITIES = {"error": ("e", "max |e| (rad)"),
+                    "feedforward": ("uff", "max |u_ff| (rad/s^2, learned feed-forward)"),
+                    "effort": ("Q", "max |effort| (N m)")}
+"""What :func:`format_trial_table` can show: column prefix and title."""
+
+
+def _table_of(run: RunSummary, quantity: str) -> np.ndarray | None:
+    if quantity == "error":
+        return run.max_abs_error
+    return run.max_abs_feedforward if quantity == "feedforward" else run.max_abs_effort
+
+
+def format_trial_table(runs: Sequence[RunSummary], joint_names: Sequence[str],
+                       quantity: str = "error") -> str:
+    """Max |e| (rad) per trial: one column group per run, one column per joint.
+
+    ``quantity`` "feedforward" or "effort" shows max |u_ff| or max |effort| instead."""
+    prefix, title_q = TABLE_QUANTITIES[quantity]
+    tables = [_table_of(r, quantity) for r in runs]
     n = len(joint_names)
     head1 = f"{'trial':>5} "
     head2 = f"{'':>5} "
     for r in runs:
         title = f"{r.law} d={r.mass_uncertainty:g}"
         head1 += f"| {title:^{n * 11}}"
-        head2 += "| " + "".join(f"{'e' + str(j + 1):>10} " for j in range(n))
-    lines = [head1, head2, "-" * len(head2)]
+        head2 += "| " + "".join(f"{prefix + str(j + 1):>10} " for j in range(n))
+    lines = ([title_q] if quantity != "error" else []) + [head1, head2, "-" * len(head2)]
     count = max(len(r.max_abs_error) for r in runs)
     for k in range(count):
         line = f"{k + 1:>5} "
-        for r in runs:
-            if k < len(r.max_abs_error):
-                cells = [f"{x:10.3e}" + ("*" if x > r.error_bound else " ")
-                         for x in r.max_abs_error[k]]
+        for r, table in zip(runs, tables, strict=True):
+            if table is not None and k < len(table):
+                flag = quantity == "error"
+                cells = [f"{x:10.3e}" + ("*" if flag and x > r.error_bound else " ")
+                         for x in table[k]]
                 line += "| " + "".join(cells)
             else:
                 line += "| " + " " * (n * 11)
         lines.append(line)
-    lines.append("(* above the bound)")
+    if quantity == "error":
+        lines.append("(* above the bound)")
+    return "\n".join(lines)
+
+
+def format_long_run(runs: Sequence[RunSummary], joint_names: Sequence[str],
+                    window: int = DEFAULT_WINDOW) -> str:
+    """Per run: max |u_ff| and max |effort| at the last trial, and whether the learned input
+    keeps growing (:func:`~exo_ilc_ros.core.growth.fit_growth` over the last ``window``
+    trials, at most the second half of the run so that the first trials' learning is not
+    mistaken for growth)."""
+    lines = ["Learned input at the last trial and its growth (max |u_ff| per joint, rad/s^2; "
+             "max |effort|, N m)"]
+    for r in runs:
+        head = f"{r.law:<8}{r.mass_uncertainty:>7.3f}  "
+        if r.max_abs_feedforward is None or len(r.max_abs_feedforward) == 0:
+            lines.append(head + "no feed-forward recorded")
+            continue
+        uff = " ".join(f"{x:.3g}" for x in r.max_abs_feedforward[-1])
+        effort = ("" if r.max_abs_effort is None else
+                  "  |effort| " + " ".join(f"{x:.3g}" for x in r.max_abs_effort[-1]))
+        lines.append(head + f"|u_ff| {uff}{effort}")
+        span = min(window, max(len(r.max_abs_feedforward) // 2, MIN_TRIALS))
+        lines.append(" " * 17 + format_growth(fit_growth(r.max_abs_feedforward, span),
+                                              joint_names))
     return "\n".join(lines)
 
 

@@ -9,6 +9,8 @@ Every array is in the joint order of the ``joint_names`` parameter; times are si
     (after the plant's own limit). One message per control period.
 ``/clock`` (``rosgraph_msgs/msg/Clock``, plant_simulator)
     Simulated time; monotonic over the whole run (it does not restart with each trial).
+    Published at every ``clock_every``-th sample of a trial (plant parameter, default 10) and at
+    each trial's first and last sample; the samples' own stamps are exact.
 ``/effort_controller/commands`` (``std_msgs/msg/Float64MultiArray``, computed_torque_controller)
     data = effort per joint (N m), the ros2_control JointGroupEffortController convention.
 ``/ilc/feedforward`` (``trajectory_msgs/msg/JointTrajectory``, ilc_supervisor; transient local)
@@ -26,6 +28,29 @@ Every array is in the joint order of the ``joint_names`` parameter; times are si
     ``level/M/<joint>``, ``level/M'/<joint>``, ``level/M''/<joint>`` (repr of floats, so
     they parse back exactly).
 ``/diagnostics`` (``diagnostic_msgs/msg/DiagnosticArray``, every node): health.
+    computed_torque_controller also acknowledges each feed-forward it loaded here: status
+    ``computed_torque_controller/feedforward``, message ``loaded``, values ``trial`` = k and
+    ``t0_ns``; its health status ``computed_torque_controller/health`` carries ``steps`` and the
+    receive-to-publish latency percentiles ``latency_p50_us``, ``latency_p99_us`` of the last
+    second.
+
+QoS: /joint_states and /effort_controller/commands reliable, volatile, depth 1000;
+/ilc/feedforward reliable, transient local, depth 1; /ilc/trial_events and /ilc/trial_summary
+reliable, transient local, depth 1000 (late joiners get the history); /diagnostics reliable,
+transient local, depth 10; /clock reliable, depth 1. A volatile subscriber matches them all.
+
+Trial protocol (the supervisor drives it; lock-step and real-time alike):
+
+``/plant_simulator/reset`` (``std_srvs/srv/Trigger``)
+    Puts the arm at x_d(0) and stops stepping; ``message`` is ``t0_ns=<int>``, the simulated
+    time (ns) of the next trial's first sample. Sample i of the trial is stamped
+    ``t0_ns + i * period_ns`` exactly (integer ns), so every node recovers i from the stamp.
+``/ilc/feedforward`` for that trial then carries header.stamp = t0 (the trial's first sample).
+``/plant_simulator/start`` (``std_srvs/srv/Trigger``)
+    Publishes sample 0 and steps until sample N (the command at t_N is never applied). Fails
+    (success false, with the reason) until the plant is linked to a controller.
+``/ilc/trial_events`` message ``finished`` (values ``trials``) when the supervisor stops
+(``max_trials`` reached or ``stop_when_settled``).
 """
 
 from __future__ import annotations
@@ -51,6 +76,15 @@ TYPES: dict[str, str] = {
 }
 """Every recorded topic and its ROS 2 type name."""
 
+RESET_SERVICE = "/plant_simulator/reset"
+START_SERVICE = "/plant_simulator/start"
+
 TRIAL_STATUS = "ilc_supervisor/trial"
 SUMMARY_STATUS = "ilc_supervisor/trial_summary"
 FEEDFORWARD_FRAME_PREFIX = "trial:"
+FEEDFORWARD_ACK_STATUS = "computed_torque_controller/feedforward"
+RECORDER_STATUS = "bag_recorder/status"
+"""bag_recorder's status on /diagnostics (every 0.2 s): message ``ready`` once it is subscribed
+to a publisher of every topic it records, else ``waiting``."""
+CONTROLLER_HEALTH_STATUS = "computed_torque_controller/health"
+T0_PREFIX = "t0_ns="

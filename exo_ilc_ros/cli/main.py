@@ -9,7 +9,8 @@ from collections.abc import Sequence
 
 from ..core.errors import ExoIlcError
 
-COMMANDS = ("simulate", "urdf")
+COMMANDS = ("simulate", "urdf", "tune", "compare", "run", "param", "analyze", "paper",
+            "analyze_loop")
 """Sub-command modules of this package; each has ``register(subparsers)`` setting ``func``."""
 
 

@@ -10,7 +10,13 @@ from tqdm import tqdm
 
 from ..core.config import Config, load_config
 from ..core.experiment import run_trials
-from ..report import RunSummary, format_iterations, format_trial_table, write_json
+from ..report import (
+    RunSummary,
+    format_iterations,
+    format_long_run,
+    format_trial_table,
+    write_json,
+)
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
@@ -43,11 +49,22 @@ def register(sub: Any) -> None:
                             "max |e| per trial and joint, and iterations to the bound.")
     add_config_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")
+    parser.add_argument("--learned", action="store_true", help="also print per-trial tables "
+                        "of max |u_ff| (learned feed-forward) and max |effort| per joint")
+    parser.add_argument("--bag", metavar="DIR", help="also write each run as a rosbag2 bag "
+                        "DIR/<run-name>/ with the graph's topics (what bag_recorder records)")
+    parser.add_argument("--store", metavar="DIR", help="save every trial and the learned "
+                        "feed-forward to DIR (atomic writes, keyed by trajectory + config)")
+    parser.add_argument("--resume", action="store_true", help="with --store: continue each "
+                        "run after the last trial stored (bit-identical to an uninterrupted run)")
     parser.set_defaults(func=simulate)
 
 
 def simulate(args: argparse.Namespace) -> int:
     """Run and report."""
+    if args.resume and not args.store:
+        print("exo-ilc simulate: error: --resume needs --store DIR", file=sys.stderr)
+        return 2
     config = config_from_args(args)
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     trials = config["max_trials"]
@@ -59,13 +76,25 @@ def simulate(args: argparse.Namespace) -> int:
                 bar.update(1)
                 bar.set_postfix_str("max|e| " + " ".join(f"{x:.1e}"
                                                          for x in record.max_abs_error))
-            result = run_trials(config, delta, trials, on_trial=progress)
+            result = run_trials(config, delta, trials, on_trial=progress, store=args.store,
+                                resume=args.resume)
         runs.append(RunSummary.from_result(result))
+        if args.bag:
+            from ..bag import run_name, unique_path, write_run
+
+            path = unique_path(args.bag, run_name("sim", result.law, delta))
+            print(f"bag: {write_run(path, config, result)}", file=sys.stderr)
     names = config["joint_names"]
     if not args.quiet:
         print(format_trial_table(runs, names))
         print()
+        if args.learned:
+            for quantity in ("feedforward", "effort"):
+                print(format_trial_table(runs, names, quantity))
+                print()
     print(format_iterations(runs, names))
+    print()
+    print(format_long_run(runs, names))
     if args.json:
         write_json(args.json, config.values, runs)
         print(f"wrote {args.json}")

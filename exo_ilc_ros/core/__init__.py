@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from . import _numba_cache  # noqa: F401  (must run before the kernels are compiled)
 from .config import Config, config_dir, default_config_path, load_config
+from .convergence import LoopAnalysis, analyze_loop
 from .errors import ConfigError, ExoIlcError, ModelError
 from .experiment import (
     Experiment,
@@ -16,6 +17,7 @@ from .experiment import (
     iterations_to_bound,
     run_trials,
 )
+from .growth import GrowthFit, fit_growth
 from .integrator import (
     PlantDynamics,
     computed_torque_kernel,
@@ -38,14 +40,16 @@ from .laws import (
     sgn,
 )
 from .model import ArmModel
+from .qfilter import QFilter, QFilteredLaw
 from .trajectory import QuinticTrajectory, SampledReference
 
 __all__ = [
     "ArmModel", "Config", "ConfigError", "ErrorSum", "ExoIlcError", "Experiment",
-    "FeedforwardUpdate", "InitialFeedforward", "IterationsToBound", "LearningLaw", "LinearLaw",
-    "Memory", "ModelError", "PlantDynamics", "QuinticTrajectory", "RunResult", "SampledReference",
-    "ScheduleIndex", "SignLaw", "StepSchedule", "TrialRecord", "build_arm", "build_law",
-    "build_reference", "computed_torque_kernel", "config_dir", "default_config_path",
-    "error_sums", "feedback_input", "integrate_period", "iterations_to_bound", "load_config",
+    "FeedforwardUpdate", "GrowthFit", "InitialFeedforward", "IterationsToBound", "LearningLaw",
+    "LinearLaw", "LoopAnalysis", "Memory", "ModelError", "PlantDynamics", "QFilter",
+    "QFilteredLaw", "QuinticTrajectory", "RunResult", "SampledReference", "ScheduleIndex",
+    "SignLaw", "StepSchedule", "TrialRecord", "analyze_loop", "build_arm", "build_law",
+    "build_reference", "computed_torque_kernel", "config_dir", "default_config_path", "error_sums",
+    "feedback_input", "fit_growth", "integrate_period", "iterations_to_bound", "load_config",
     "run_trials", "sgn", "simulate_trial",
 ]

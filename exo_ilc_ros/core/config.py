@@ -199,9 +199,27 @@ class Config:
                     lines.append("    " + "  " * depth + f"{parts[depth]}:")
                     opened.append(parts[depth])
                 indent = "    " + "  " * (len(parts) - 1)
-                value = json.dumps(self._values[p.name])
+                value = _yaml_value(self._values[p.name])
                 lines.append(f"{indent}{parts[-1]}: {value}  # {p.description}")
         return "\n".join(lines) + "\n"
+
+
+def _yaml_float(x: float) -> str:
+    """A float that YAML 1.1 (PyYAML) and rcl both read as a float: ``1e-05`` -> ``1.0e-05``."""
+    text = json.dumps(x)
+    mantissa, e, exponent = text.partition("e")
+    if e and "." not in mantissa:
+        return f"{mantissa}.0e{exponent}"
+    return text
+
+
+def _yaml_value(value: Any) -> str:
+    """A parameter value as a flow-style YAML scalar or list (JSON, floats made YAML-safe)."""
+    if isinstance(value, float):
+        return _yaml_float(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_yaml_value(v) for v in value) + "]"
+    return json.dumps(value)
 
 
 def load_config(path: Path | str | None = None,

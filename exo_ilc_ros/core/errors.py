@@ -24,3 +24,11 @@ class ConfigError(ExoIlcError):
 
 class ModelError(ExoIlcError):
     """The arm model cannot be built or evaluated (e.g. a singular metric tensor)."""
+
+
+class SafetyError(ExoIlcError):
+    """A safety rule would be broken (e.g. a learning law produced a non-finite feed-forward)."""
+
+
+class StoreError(ExoIlcError):
+    """The store of learned data cannot be read, written or resumed (says which file and why)."""

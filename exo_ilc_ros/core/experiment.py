@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from .config import Config
-from .integrator import PlantDynamics, simulate_trial
+from .errors import SafetyError, StoreError
+from .integrator import PlantDynamics
 from .laws import (
     ErrorSum,
     FeedforwardUpdate,
@@ -22,6 +24,9 @@ from .laws import (
     TrialRecord,
 )
 from .model import ArmModel
+from .qfilter import QFilteredLaw, feedforward_limit_of, qfilter_of
+from .safety import simulate_trial_guarded
+from .store import RunStore
 from .trajectory import QuinticTrajectory, SampledReference
 
 
@@ -48,7 +53,18 @@ def build_schedule(config: Config, term: str) -> StepSchedule:
 
 
 def build_law(config: Config, law: str | None = None) -> LearningLaw:
-    """The learning law named by ``law`` (default: the config's ``law``) with its options."""
+    """The learning law named by ``law`` (default: the config's ``law``) with its options,
+    wrapped in :class:`QFilteredLaw` when the config enables the Q-filter or a
+    ``feedforward_limit``."""
+    inner = _build_plain_law(config, law)
+    qfilter = qfilter_of(config)
+    limit = feedforward_limit_of(config)
+    if qfilter is None and limit is None:
+        return inner
+    return QFilteredLaw(inner, qfilter, limit)
+
+
+def _build_plain_law(config: Config, law: str | None) -> LearningLaw:
     name = law or config["law"]
     memory = Memory(config["memory"])
     initial = InitialFeedforward(config["initial_feedforward"])
@@ -103,6 +119,7 @@ class Experiment:
         self.kp = np.asarray(config["control.kp"], dtype=float)
         self.kd = np.asarray(config["control.kd"], dtype=float)
         self.effort_limit = np.asarray(config["control.effort_limit"], dtype=float)
+        self.error_envelope = np.asarray(config["safety.error_envelope"], dtype=float)
         self.period = float(config["control.period"])
         self.substeps = int(round(self.period / config["integration_step"]))
         self.dynamics = PlantDynamics.FULL if config["dynamics"] == "full" \
@@ -110,17 +127,22 @@ class Experiment:
 
     def run_trial(self, feedforward: np.ndarray, trial: int,
                   levels: np.ndarray | None = None) -> TrialRecord:
-        """One trial with the given feed-forward, from x_d(0)."""
+        """One trial with the given feed-forward, from x_d(0), guarded by the error envelope
+        (``record.aborted_at`` set if it left it: safe hold from that sample on)."""
         ref = self.reference
         u_ff = np.ascontiguousarray(feedforward, dtype=float)
         if u_ff.shape != ref.position.shape:
             raise ValueError(f"feed-forward must have shape {ref.position.shape}, "
                              f"got {u_ff.shape}")
-        q, qd, u, effort = simulate_trial(u_ff, ref.position, ref.velocity, self.kp, self.kd,
-                                          self.effort_limit, self.period, self.substeps,
-                                          self.plant.kernel_args, self.nominal.kernel_args,
-                                          int(self.dynamics))
-        return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels)
+        if not np.all(np.isfinite(u_ff)):
+            raise SafetyError(f"trial {trial}: the feed-forward holds non-finite values; "
+                              "refusing to run it")
+        q, qd, u, effort, abort = simulate_trial_guarded(
+            u_ff, ref.position, ref.velocity, self.kp, self.kd, self.effort_limit, self.period,
+            self.substeps, self.plant.kernel_args, self.nominal.kernel_args, int(self.dynamics),
+            self.error_envelope)
+        return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels,
+                           None if abort < 0 else int(abort))
 
 
 @dataclass
@@ -133,6 +155,13 @@ class RunResult:
     records: list[TrialRecord] = field(default_factory=list)
     final: FeedforwardUpdate | None = None
     """The feed-forward learned from the last trial (what trial K+1 would use)."""
+    resumed: int = 0
+    """Trials restored from the store rather than run (0: none)."""
+
+    @property
+    def aborted(self) -> list[int]:
+        """Trial numbers aborted by the error envelope (nothing learned from them)."""
+        return [r.trial for r in self.records if r.aborted]
 
     @property
     def max_abs_errors(self) -> np.ndarray:
@@ -157,11 +186,18 @@ class RunResult:
 def run_trials(config: Config, mass_uncertainty: float | None = None,
                trials: int | None = None, law: str | None = None,
                on_trial: Callable[[TrialRecord], None] | None = None,
-               learning_law: LearningLaw | None = None) -> RunResult:
+               learning_law: LearningLaw | None = None,
+               store: Path | str | None = None, resume: bool = False) -> RunResult:
     """Run K trials of the experiment in-process, learning between trials.
 
     ``law`` names a law of the config (``sign``/``linear``); ``learning_law`` passes any other
-    :class:`LearningLaw`. ``on_trial`` is called after each trial (progress, logging).
+    :class:`LearningLaw`. ``on_trial`` is called after each trial run now (progress, logging).
+    A trial aborted by the error envelope is kept (marked) but not learned from: the next trial
+    reuses its feed-forward. With ``store`` (a root directory, :class:`RunStore`) every trial
+    and the feed-forward it led to are saved before the next trial starts; with ``resume`` the
+    trials already stored under this run's learning key are restored (bit for bit) and the run
+    continues after the last one. A store that already holds trials without ``resume`` is an
+    error (nothing is overwritten).
     """
     experiment = Experiment(config, mass_uncertainty)
     chosen = learning_law or build_law(config, law)
@@ -169,11 +205,29 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
     result = RunResult(experiment.mass_uncertainty, law or config["law"],
                        float(config["error_bound"]))
     update = FeedforwardUpdate(chosen.initial_feedforward(experiment.reference), None)
-    for k in range(1, count + 1):
+    run_store: RunStore | None = None
+    if store is not None:
+        effective = config.replace({"mass_uncertainty": experiment.mass_uncertainty,
+                                    "law": result.law})
+        run_store = RunStore(store, effective, experiment.reference)
+        if run_store.completed and not resume:
+            raise StoreError(f"{run_store.directory}: already holds {run_store.completed} "
+                             "trials of this run; resume it or use another store")
+        for stored in run_store.load()[:count]:
+            result.records.append(stored.record)
+            update = stored.next_update
+        result.resumed = len(result.records)
+    for k in range(len(result.records) + 1, count + 1):
         record = experiment.run_trial(update.feedforward, k, update.levels)
+        if not record.aborted:
+            update = chosen.update(record)
+            if not np.all(np.isfinite(update.feedforward)):
+                raise SafetyError(f"trial {k}: the learning law produced a non-finite "
+                                  "feed-forward; it was not stored or used")
+        if run_store is not None:
+            run_store.save(record, update)
         result.records.append(record)
         if on_trial is not None:
             on_trial(record)
-        update = chosen.update(record)
     result.final = update
     return result

@@ -68,6 +68,14 @@ class TrialRecord:
     control_input: np.ndarray
     effort: np.ndarray
     levels: np.ndarray | None = None
+    aborted_at: int | None = None
+    """Index of the first sample outside the error envelope (the trial was aborted there and
+    the safe hold commanded from it on); None for a completed trial. No law learns from it."""
+
+    @property
+    def aborted(self) -> bool:
+        """True if the trial was aborted by the error envelope."""
+        return self.aborted_at is not None
 
     @cached_property
     def error(self) -> np.ndarray:
@@ -88,8 +96,10 @@ class TrialRecord:
 
     @cached_property
     def max_abs_error(self) -> np.ndarray:
-        """max_t |e_j(t)| per joint."""
-        return np.asarray(np.max(np.abs(self.error), axis=0))
+        """max_t |e_j(t)| per joint (of an aborted trial: up to and including the abort
+        sample, the tracking part; the hold after it does not track the reference)."""
+        end = None if self.aborted_at is None else self.aborted_at + 1
+        return np.asarray(np.max(np.abs(self.error[:end]), axis=0))
 
 
 def error_sums(record: TrialRecord, mode: ErrorSum) -> np.ndarray:

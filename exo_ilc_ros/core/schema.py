@@ -116,6 +116,13 @@ PARAMETERS: tuple[Parameter, ...] = (
               minimum=0.0),
     Parameter("control.effort_limit", SHARED, Kind.DOUBLE_ARRAY,
               "|effort| limit per joint (N m)", per_joint=True, strictly_positive=True),
+    Parameter("safety.error_envelope", SHARED, Kind.DOUBLE_ARRAY,
+              "|e_j| above it aborts the trial at once: safe hold, trial marked aborted, "
+              "nothing learned from it (rad, per joint)", per_joint=True,
+              strictly_positive=True, live=True),
+    Parameter("safety.watchdog_periods", SHARED, Kind.INTEGER,
+              "control periods without /joint_states (controller) or a command (plant) before "
+              "the safe hold / zero effort", strictly_positive=True),
     Parameter("mass_uncertainty", PLANT, Kind.DOUBLE,
               "delta: the plant's masses are m_i (1 + delta); the controller keeps m_i",
               minimum=-0.9),
@@ -124,6 +131,16 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("dynamics", PLANT, Kind.STRING,
               "full (true masses, eq (15)) or paper_approximation (eqs (17)-(18), a^-1 a_N ~ I)",
               choices=("full", "paper_approximation")),
+    Parameter("mode", PLANT, Kind.STRING,
+              "lock_step (advance one period per command: deterministic, as fast as DDS allows) "
+              "or real_time (wall-clock timer, the last command held)",
+              choices=("lock_step", "real_time")),
+    Parameter("real_time_rate", PLANT, Kind.DOUBLE,
+              "real_time mode: simulated seconds per wall-clock second (1.0: real time)",
+              strictly_positive=True),
+    Parameter("clock_every", PLANT, Kind.INTEGER,
+              "publish /clock every this many control periods (and at each trial's first "
+              "sample); 1: every period", strictly_positive=True),
     Parameter("law", SUPERVISOR, Kind.STRING,
               "learning law: sign (sgnPDD^2, eq (11)) or linear (Arimoto PDD^2-type)",
               choices=("sign", "linear"), live=True),
@@ -131,6 +148,9 @@ PARAMETERS: tuple[Parameter, ...] = (
               strictly_positive=True),
     Parameter("error_bound", SUPERVISOR, Kind.DOUBLE, "max |e_j| bound (rad)",
               strictly_positive=True, live=True),
+    Parameter("wait_for_recorder", SUPERVISOR, Kind.BOOL,
+              "before trial 1, wait until bag_recorder reports it is subscribed to every topic "
+              "(exo-ilc run sets it when it records a bag)"),
     Parameter("stop_when_settled", SUPERVISOR, Kind.INTEGER,
               "stop once every joint has stayed within the bound this many trials (0: never)",
               minimum=0.0, live=True),
@@ -153,6 +173,19 @@ PARAMETERS: tuple[Parameter, ...] = (
               "linear law: learning gain on e_dot", per_joint=True, minimum=0.0, live=True),
     Parameter("linear.gain_acceleration", SUPERVISOR, Kind.DOUBLE_ARRAY,
               "linear law: learning gain on e_ddot", per_joint=True, minimum=0.0, live=True),
+    Parameter("q_filter.enabled", SUPERVISOR, Kind.BOOL,
+              "zero-phase low-pass Q applied to the learned feed-forward after every update",
+              live=True),
+    Parameter("q_filter.cutoff_hz", SUPERVISOR, Kind.DOUBLE,
+              "Q-filter cut-off (Hz, Butterworth design; |Q| = 1/2 there after filtfilt); "
+              "below the Nyquist frequency 1 / (2 control.period)", strictly_positive=True,
+              live=True),
+    Parameter("q_filter.order", SUPERVISOR, Kind.INTEGER,
+              "Q-filter Butterworth order (run forwards and backwards: twice the roll-off)",
+              strictly_positive=True, live=True),
+    Parameter("feedforward_limit", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "bound on |learned feed-forward| per joint (rad/s^2, the units of u); 0: no bound",
+              per_joint=True, minimum=0.0, live=True),
 )
 
 BY_NAME: Mapping[str, Parameter] = {p.name: p for p in PARAMETERS}
@@ -248,6 +281,11 @@ def check_consistency(values: Mapping[str, Any]) -> None:
                               f"link {j + 1} has mass and length, so it needs a positive radius")
     if all(m == 0.0 for m in masses):
         raise ConfigError("model.link_masses", "at least one link must have mass")
+    nyquist = 0.5 / period
+    if values["q_filter.cutoff_hz"] >= nyquist:
+        raise ConfigError("q_filter.cutoff_hz",
+                          f"must be below the Nyquist frequency {nyquist:g} Hz of "
+                          f"control.period {period:g} s")
     if len(set(values["joint_names"])) != len(values["joint_names"]):
         raise ConfigError("joint_names", "joint names must be unique")
     if any(not name for name in values["joint_names"]):

@@ -1,0 +1,98 @@
+"""Benchmark of bags: what recording costs the graph, and how fast a big bag is analysed.
+
+Run with ``.venv/bin/python -m bench.bag_bench [--trials K] [--analysis-trials N]``. Prints
+figures; asserts nothing (wall-clock timing is noisy on a shared 2-core machine).
+
+(a) The graph's lock-step control steps per second without and with bag_recorder, in one run
+    (alternating, best of each). Target: the recorder costs at most 10 %.
+(b) Analysing a 150-trial bag at 100 Hz (written in-process by ``write_run``, the same topics
+    and messages as the recorder's): ``read_bag`` + the table. Target: under 5 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+from exo_ilc_ros.bag import read_bag, write_run
+from exo_ilc_ros.core.config import Config, load_config
+from exo_ilc_ros.core.experiment import run_trials
+
+
+def graph_steps_per_second(config: Config, record: bool, bag_dir: Path) -> float:
+    """Lock-step control steps per second of one graph run (first start to finished)."""
+    from exo_ilc_ros.bag.recording import Recording
+    from exo_ilc_ros.graph import run_graph
+
+    samples = int(round(config["trajectory.duration"] / config["control.period"])) + 1
+    if record:
+        recorded = config.replace({"wait_for_recorder": True})
+        with Recording(recorded, bag_dir) as recording:
+            result = run_graph(recorded, extra=[recording.spec])
+    else:
+        result = run_graph(config)
+    if result.wall_time is None:
+        raise RuntimeError("the graph did not report its start and end")
+    return config["max_trials"] * samples / result.wall_time
+
+
+def bench_recording(trials: int, repeats: int, bag_dir: Path) -> None:
+    """(a): alternate runs without and with the recorder."""
+    config = load_config(overrides={"max_trials": trials})
+    bare: list[float] = []
+    recorded: list[float] = []
+    for _ in range(repeats):
+        bare.append(graph_steps_per_second(config, False, bag_dir))
+        recorded.append(graph_steps_per_second(config, True, bag_dir))
+        print(f"  graph steps/s: without recorder {bare[-1]:.0f}, with {recorded[-1]:.0f}")
+    best_bare, best_recorded = max(bare), max(recorded)
+    cost = 1.0 - best_recorded / best_bare
+    print(f"(a) lock-step graph, {trials} trials x 501 samples, best of {repeats}: "
+          f"{best_bare:.0f} steps/s without the recorder, {best_recorded:.0f} with; "
+          f"recording costs {100 * cost:.1f} % (target <= 10 %)")
+
+
+def bench_analysis(trials: int, bag_dir: Path) -> None:
+    """(b): write a bag of ``trials`` trials at 100 Hz, then time its analysis."""
+    config = load_config(overrides={"max_trials": trials})
+    start = time.perf_counter()
+    result = run_trials(config, 0.10)
+    simulated = time.perf_counter() - start
+    bag = bag_dir / "analysis"
+    start = time.perf_counter()
+    write_run(bag, config, result, split_every=1)
+    written = time.perf_counter() - start
+    size = sum(p.stat().st_size for p in bag.iterdir()) / 2**20
+    times = []
+    for _ in range(3):
+        start = time.perf_counter()
+        summary = read_bag(bag).summary()
+        times.append(time.perf_counter() - start)
+    assert summary.max_abs_error.shape[0] == trials
+    print(f"(b) {trials}-trial bag at 100 Hz ({trials * 501} joint states, {size:.1f} MiB, "
+          f"{trials + 1} files; simulated in {simulated:.1f} s, written in {written:.1f} s): "
+          f"analysed in {min(times):.2f} s (best of 3; target < 5 s)")
+
+
+def main() -> None:
+    """Measure and print."""
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--trials", type=int, default=10, help="graph trials per run (a)")
+    parser.add_argument("--repeats", type=int, default=2, help="runs of each kind (a)")
+    parser.add_argument("--analysis-trials", type=int, default=150, help="trials of (b)")
+    parser.add_argument("--skip-graph", action="store_true", help="only (b)")
+    args = parser.parse_args()
+    bag_dir = Path(tempfile.mkdtemp(prefix="exo_ilc_bag_bench_"))
+    try:
+        bench_analysis(args.analysis_trials, bag_dir)
+        if not args.skip_graph:
+            bench_recording(args.trials, args.repeats, bag_dir)
+    finally:
+        shutil.rmtree(bag_dir, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,168 @@
+"""CDR bytes of the graph's messages (as :mod:`exo_ilc_ros.topics` describes them) built with
+rosbags' typestore, and the parsing of their key-values.
+
+Serialisation goes through ``typestore.serialize_cdr`` (exact sizes); never through rclpy's
+``serialize_message``, whose buffers carry trailing bytes rosbags rejects.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from functools import cache
+from typing import Any
+
+import numpy as np
+
+from .. import topics
+
+LEVEL_NAMES = ("M", "M'", "M''")
+"""The rows of a trial's levels, as the summary's ``level/<name>/<joint>`` keys name them."""
+
+
+@cache
+def typestore() -> Any:
+    """The ROS 2 Jazzy typestore of rosbags (loaded once)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _type(name: str) -> Any:
+    return typestore().types[name]
+
+
+def time_msg(ns: int) -> Any:
+    """``builtin_interfaces/msg/Time`` of ``ns`` nanoseconds."""
+    sec, nanosec = divmod(int(ns), 1_000_000_000)
+    return _type("builtin_interfaces/msg/Time")(sec=sec, nanosec=nanosec)
+
+
+def time_ns(stamp: Any) -> int:
+    """Nanoseconds of a ``Time`` (rosbags or rclpy message)."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def serialize(msg: Any, msgtype: str) -> bytes:
+    """CDR bytes of ``msg``."""
+    return bytes(typestore().serialize_cdr(msg, msgtype))
+
+
+def header(ns: int, frame_id: str = "") -> Any:
+    """``std_msgs/msg/Header``."""
+    return _type("std_msgs/msg/Header")(stamp=time_msg(ns), frame_id=frame_id)
+
+
+def _f64(values: Any) -> np.ndarray:
+    return np.ascontiguousarray(values, dtype=np.float64)
+
+
+def joint_state(ns: int, names: Sequence[str], position: Any, velocity: Any,
+                effort: Any) -> bytes:
+    """``/joint_states``: the sample at ``ns`` with the effort applied over the period that
+    ended there."""
+    msg = _type("sensor_msgs/msg/JointState")(
+        header=header(ns), name=list(names), position=_f64(position),
+        velocity=_f64(velocity), effort=_f64(effort))
+    return serialize(msg, topics.TYPES[topics.JOINT_STATES])
+
+
+def clock(ns: int) -> bytes:
+    """``/clock``."""
+    msg = _type("rosgraph_msgs/msg/Clock")(clock=time_msg(ns))
+    return serialize(msg, topics.TYPES[topics.CLOCK])
+
+
+def effort_command(effort: Any) -> bytes:
+    """``/effort_controller/commands``: one effort per joint."""
+    layout = _type("std_msgs/msg/MultiArrayLayout")(dim=[], data_offset=0)
+    msg = _type("std_msgs/msg/Float64MultiArray")(layout=layout, data=_f64(effort))
+    return serialize(msg, topics.TYPES[topics.EFFORT_COMMANDS])
+
+
+def duration_msg(seconds: float) -> Any:
+    """``builtin_interfaces/msg/Duration`` of ``seconds`` (rounded to whole nanoseconds)."""
+    sec, nanosec = divmod(int(round(seconds * 1e9)), 1_000_000_000)
+    return _type("builtin_interfaces/msg/Duration")(sec=sec, nanosec=nanosec)
+
+
+def feedforward(ns: int, trial: int, names: Sequence[str], time: Any, position: Any,
+                velocity: Any, u_ff: Any) -> bytes:
+    """``/ilc/feedforward``: the profile of ``trial`` (q_d, qdot_d, u_ff per sample)."""
+    point_type = _type("trajectory_msgs/msg/JointTrajectoryPoint")
+    empty = np.zeros(0)
+    q, qd, u = _f64(position), _f64(velocity), _f64(u_ff)
+    points = [point_type(positions=q[i], velocities=qd[i], accelerations=u[i], effort=empty,
+                         time_from_start=duration_msg(float(t)))
+              for i, t in enumerate(np.asarray(time, dtype=float))]
+    msg = _type("trajectory_msgs/msg/JointTrajectory")(
+        header=header(ns, f"{topics.FEEDFORWARD_FRAME_PREFIX}{trial}"),
+        joint_names=list(names), points=points)
+    return serialize(msg, topics.TYPES[topics.FEEDFORWARD])
+
+
+def _diagnostics(ns: int, name: str, level: int, message: str,
+                 values: Iterable[tuple[str, str]]) -> bytes:
+    key_value = _type("diagnostic_msgs/msg/KeyValue")
+    status = _type("diagnostic_msgs/msg/DiagnosticStatus")(
+        level=level, name=name, message=message,
+        hardware_id="", values=[key_value(key=k, value=v) for k, v in values])
+    msg = _type("diagnostic_msgs/msg/DiagnosticArray")(header=header(ns), status=[status])
+    return serialize(msg, topics.TYPES[topics.TRIAL_SUMMARY])
+
+
+OK, WARN = 0, 1
+"""DiagnosticStatus levels used by the summaries."""
+
+
+def trial_event(ns: int, event: str, trial: int,
+                values: Sequence[tuple[str, str]] = ()) -> bytes:
+    """``/ilc/trial_events``: ``start``, ``end`` (with the summary's key-values), ``aborted``,
+    or ``finished`` (values ``trials``)."""
+    first = [] if event == "finished" else [("trial", str(trial))]
+    return _diagnostics(ns, topics.TRIAL_STATUS, OK, event,
+                        [*first, *((k, v) for k, v in values if k != "trial")])
+
+
+def trial_summary(ns: int, values: Sequence[tuple[str, str]], within_bound: bool) -> bytes:
+    """``/ilc/trial_summary``: level OK if every joint is within the bound, else WARN."""
+    trial = dict(values).get("trial", "?")
+    return _diagnostics(ns, topics.SUMMARY_STATUS, OK if within_bound else WARN,
+                        f"trial {trial}", values)
+
+
+def summary_values(trial: int, mass_uncertainty: float, law: str, names: Sequence[str],
+                   max_abs_error: Any, max_abs_feedforward: Any, max_abs_effort: Any,
+                   levels: Any | None) -> list[tuple[str, str]]:
+    """The key-values of a trial summary (floats as ``repr`` so they parse back exactly)."""
+    out = [("trial", str(trial)), ("mass_uncertainty", repr(float(mass_uncertainty))),
+           ("law", law)]
+    for key, row in (("max_abs_error", max_abs_error),
+                     ("max_abs_feedforward", max_abs_feedforward),
+                     ("max_abs_effort", max_abs_effort)):
+        out += [(f"{key}/{n}", repr(float(x))) for n, x in zip(names, row, strict=True)]
+    if levels is not None:
+        for level_name, row in zip(LEVEL_NAMES, np.asarray(levels), strict=False):
+            out += [(f"level/{level_name}/{n}", repr(float(x)))
+                    for n, x in zip(names, row, strict=True)]
+    return out
+
+
+def key_values(status: Any) -> dict[str, str]:
+    """A DiagnosticStatus' values as a dict."""
+    return {str(kv.key): str(kv.value) for kv in status.values}
+
+
+def per_joint(values: Mapping[str, str], key: str, names: Sequence[str]) -> np.ndarray | None:
+    """The ``<key>/<joint>`` floats in joint order (None if any is missing or unparsable)."""
+    try:
+        return np.array([float(values[f"{key}/{n}"]) for n in names])
+    except (KeyError, ValueError):
+        return None
+
+
+def levels_of(values: Mapping[str, str], names: Sequence[str]) -> np.ndarray | None:
+    """The (3, joints) levels M, M', M'' of a summary (None if absent)."""
+    rows = [per_joint(values, f"level/{name}", names) for name in LEVEL_NAMES]
+    if any(r is None for r in rows):
+        return None
+    return np.array(rows)

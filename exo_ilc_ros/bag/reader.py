@@ -1,0 +1,442 @@
+"""Reading a run back from any rosbag2 bag (MCAP or sqlite3, ours or ``ros2 bag record``'s).
+
+Trials are cut out of ``/joint_states`` by the header stamps of the trial start/end events
+(falling back to the summaries' stamps when the events were not recorded); each sample goes to
+index ``round((stamp - start) / period)``, so a dropped message leaves a NaN row, never a shift.
+The reference and the learned feed-forward come from ``/ilc/feedforward`` (or the bag's config),
+the effort commands are matched to the last joint state received before them.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from .. import topics
+from ..core.experiment import build_reference
+from ..report import RunSummary
+from . import messages
+from .cdr import joint_states
+from .errors import BagReadError
+from .provenance import ParameterChange, Provenance, read_provenance
+
+
+@dataclass
+class TrialData:
+    """One trial as recorded, sampled at t_i = i * period (NaN rows where a sample is missing)."""
+
+    trial: int
+    time: np.ndarray
+    reference_position: np.ndarray
+    reference_velocity: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+    """Effort the plant applied over the period that *ended* at each sample (JointState)."""
+    summary: dict[str, str] = field(default_factory=dict)
+    ended: bool = False
+    """An ``end`` event (or a summary) was recorded for the trial."""
+    command_messages: list[bytes] = field(default_factory=list, repr=False)
+    """The trial's effort commands (CDR), one per sample when all were recorded."""
+    feedforward_message: bytes | None = field(default=None, repr=False)
+    decode: Callable[[bytes, str], Any] | None = field(default=None, repr=False)
+
+    @cached_property
+    def command(self) -> np.ndarray:
+        """Effort the controller commanded at each sample (NaN where not recorded); decoded
+        on first use."""
+        samples, joints = np.shape(self.position)
+        rows = np.full((samples, joints), np.nan)
+        if self.decode is not None and len(self.command_messages) == samples:
+            msgtype = topics.TYPES[topics.EFFORT_COMMANDS]
+            for i, raw in enumerate(self.command_messages):
+                data = self.decode(raw, msgtype).data
+                if len(data) == joints:
+                    rows[i] = data
+        return rows
+
+    @cached_property
+    def feedforward(self) -> np.ndarray | None:
+        """u_ff of the trial (from its /ilc/feedforward profile; None if not recorded)."""
+        if self.decode is None or self.feedforward_message is None:
+            return None
+        msg = self.decode(self.feedforward_message, topics.TYPES[topics.FEEDFORWARD])
+        if len(msg.points) != self.position.shape[0]:
+            return None
+        return np.array([p.accelerations for p in msg.points], dtype=float)
+
+    @property
+    def missing_samples(self) -> int:
+        """Samples of the trial with no JointState."""
+        return int(np.count_nonzero(np.isnan(self.position[:, 0])))
+
+    @property
+    def complete(self) -> bool:
+        """Ended, with every sample recorded."""
+        return self.ended and self.missing_samples == 0
+
+    @property
+    def error(self) -> np.ndarray:
+        """e = q_d - q."""
+        return np.asarray(self.reference_position - self.position)
+
+    @property
+    def max_abs_error(self) -> np.ndarray:
+        """max_t |e_j| per joint over the recorded samples."""
+        return np.asarray(np.nanmax(np.abs(self.error), axis=0))
+
+
+@dataclass
+class BagRun:
+    """A run read from one bag."""
+
+    path: Path
+    storage: str
+    joint_names: list[str]
+    period: float
+    provenance: Provenance
+    trials: dict[int, TrialData]
+    summaries: dict[int, dict[str, str]]
+    parameter_changes: list[ParameterChange]
+    notes: list[str] = field(default_factory=list)
+    """What the reader had to work around (missing topics, incomplete trials, ...)."""
+
+    @property
+    def completed(self) -> list[int]:
+        """Trials that ended, in order."""
+        return sorted(k for k, t in self.trials.items() if t.ended)
+
+    @property
+    def incomplete(self) -> list[int]:
+        """Trials that started but have no end (the run was stopped or the recorder killed)."""
+        return sorted(k for k, t in self.trials.items() if not t.ended)
+
+    @property
+    def mass_uncertainty(self) -> float:
+        """From the provenance, else the summaries (NaN if neither has it)."""
+        if self.provenance.mass_uncertainty is not None:
+            return self.provenance.mass_uncertainty
+        for values in self.summaries.values():
+            if "mass_uncertainty" in values:
+                return float(values["mass_uncertainty"])
+        return math.nan
+
+    @property
+    def law(self) -> str:
+        """From the provenance, else the summaries."""
+        if self.provenance.law:
+            return self.provenance.law
+        for values in self.summaries.values():
+            if "law" in values:
+                return values["law"]
+        return "?"
+
+    @property
+    def error_bound(self) -> float:
+        """The config's bound (0.005 rad, the paper's, if the bag has no config)."""
+        values = self.provenance.config_values or {}
+        return float(values.get("error_bound", 0.005))
+
+    def summary(self) -> RunSummary:
+        """The per-trial table of the ended trials 1..K: max |e| from the recorded samples, or
+        from the trial's summary where samples are missing; NaN rows for trials not recorded."""
+        count = max(self.completed, default=0)
+        joints = len(self.joint_names)
+        errors = np.full((count, joints), np.nan)
+        ff = np.full((count, joints), np.nan)
+        effort = np.full((count, joints), np.nan)
+        sources: list[str] = []
+        for k in range(1, count + 1):
+            trial = self.trials.get(k)
+            values = self.summaries.get(k, {})
+            recorded = messages.per_joint(values, "max_abs_error", self.joint_names)
+            if trial is not None and trial.ended and trial.missing_samples == 0:
+                errors[k - 1] = trial.max_abs_error
+                sources.append("samples")
+            elif recorded is not None:
+                errors[k - 1] = recorded
+                sources.append("summary")
+            else:
+                sources.append("missing")
+            recorded_ff = messages.per_joint(values, "max_abs_feedforward", self.joint_names)
+            if recorded_ff is not None:
+                ff[k - 1] = recorded_ff
+            elif trial is not None and trial.feedforward is not None:
+                ff[k - 1] = np.max(np.abs(trial.feedforward), axis=0)
+            v = messages.per_joint(values, "max_abs_effort", self.joint_names)
+            if v is not None:
+                effort[k - 1] = v
+            elif trial is not None and not np.all(np.isnan(trial.command)):
+                effort[k - 1] = np.nanmax(np.abs(trial.command), axis=0)
+        extra: dict[str, Any] = {"bag": str(self.path), "sources": sources}
+        if self.incomplete:
+            extra["incomplete_trials"] = self.incomplete
+        return RunSummary(self.mass_uncertainty, self.law, self.error_bound, errors,
+                          None if np.isnan(ff).all() else ff,
+                          None if np.isnan(effort).all() else effort, extra)
+
+
+def read_metadata(path: Path) -> dict[str, Any]:
+    """``rosbag2_bagfile_information`` of the bag at ``path``."""
+    meta = path / "metadata.yaml"
+    try:
+        document = yaml.safe_load(meta.read_text())
+    except OSError as exc:
+        raise BagReadError(path, f"no readable metadata.yaml ({exc.strerror}); is it a "
+                           "rosbag2 bag directory?") from None
+    except yaml.YAMLError as exc:
+        raise BagReadError(meta, f"invalid YAML: {exc}") from None
+    if not isinstance(document, dict) or "rosbag2_bagfile_information" not in document:
+        raise BagReadError(meta, "no rosbag2_bagfile_information")
+    info = document["rosbag2_bagfile_information"]
+    return info if isinstance(info, dict) else {}
+
+
+@dataclass
+class _Stream:
+    """Messages of one topic: log times, and the decoded messages (or the raw ones, for the
+    topics decoded lazily)."""
+
+    log: list[int] = field(default_factory=list)
+    msgs: list[Any] = field(default_factory=list)
+
+
+@contextmanager
+def _qos_parsed_once() -> Iterator[None]:
+    """rosbags parses every channel's QoS YAML in every file (ruamel, ~3 ms each: seconds for a
+    bag split per trial); the texts repeat, so parse each once while reading."""
+    from rosbags.rosbag2 import storage_mcap
+
+    original = storage_mcap.parse_qos
+    cache: dict[str, Any] = {}
+
+    def parse(value: Any) -> Any:
+        if not isinstance(value, str):
+            return original(value)
+        if value not in cache:
+            cache[value] = original(value)
+        return cache[value]
+
+    storage_mcap.parse_qos = parse
+    try:
+        yield
+    finally:
+        storage_mcap.parse_qos = original
+
+
+def _read_topics(path: Path, wanted: Sequence[str], raw_topics: Iterable[str]
+                 ) -> tuple[dict[str, _Stream], Callable[[bytes, str], Any]]:
+    from rosbags.highlevel import AnyReader, AnyReaderError
+    from rosbags.rosbag2 import ReaderError
+
+    streams = {t: _Stream() for t in wanted}
+    keep_raw = set(raw_topics)
+    try:
+        with _qos_parsed_once(), \
+                AnyReader([path], default_typestore=messages.typestore()) as reader:
+            connections = [c for c in reader.connections if c.topic in streams]
+            for conn in connections:
+                expected = topics.TYPES.get(conn.topic)
+                if expected and conn.msgtype != expected:
+                    raise BagReadError(path, f"topic {conn.topic} has type {conn.msgtype}, "
+                                       f"expected {expected}")
+            deserialize = reader.typestore.deserialize_cdr
+            for conn, log_time, raw in reader.messages(connections=connections):
+                stream = streams[conn.topic]
+                stream.log.append(log_time)
+                stream.msgs.append(raw if conn.topic in keep_raw
+                                   else deserialize(raw, conn.msgtype))
+    except (AnyReaderError, ReaderError) as exc:
+        raise BagReadError(path, f"rosbags cannot read it: {exc}") from None
+    return streams, deserialize
+
+
+def _frame_id(raw: bytes, decode: Callable[[bytes, str], Any]) -> str:
+    """header.frame_id of a CDR message without decoding the rest (a feed-forward profile is
+    thousands of points)."""
+    if len(raw) >= 16 and raw[:2] == b"\x00\x01":  # little-endian CDR: stamp, then the string
+        (length,) = struct.unpack_from("<I", raw, 12)
+        if 0 < length <= len(raw) - 16:
+            return raw[16:16 + length - 1].decode(errors="replace")
+    return str(decode(raw, topics.TYPES[topics.FEEDFORWARD]).header.frame_id)
+
+
+def _statuses(stream: _Stream, name: str) -> Iterator[tuple[int, int, Any]]:
+    for log, msg in zip(stream.log, stream.msgs, strict=True):
+        for status in msg.status:
+            if status.name == name:
+                yield messages.time_ns(msg.header.stamp), log, status
+
+
+def _trial_number(values: dict[str, str]) -> int | None:
+    try:
+        return int(values["trial"])
+    except (KeyError, ValueError):
+        return None
+
+
+def _assign_commands(windows: Sequence[tuple[int, int, TrialData]], cmd_log: np.ndarray,
+                     commands: Sequence[bytes], notes: list[str]) -> None:
+    """The controller answers every sample once, in order: trial k's commands are those
+    logged from its start (event, else first sample) to the next trial's start, row i the i-th.
+    (Matching each command to the last sample received before it breaks when DDS delivers a
+    command to the recorder before the sample that caused it.)"""
+    if not commands:
+        return
+    bounds = sorted((log, k, trial) for k, log, trial in windows if log >= 0)
+    for n, (log, k, trial) in enumerate(bounds):
+        stop = bounds[n + 1][0] if n + 1 < len(bounds) else np.iinfo(np.int64).max
+        picked = np.flatnonzero((cmd_log >= log) & (cmd_log < stop))
+        if len(picked) != trial.position.shape[0]:
+            notes.append(f"trial {k}: {len(picked)} effort commands for "
+                         f"{trial.position.shape[0]} samples; commands not shown")
+            continue
+        trial.command_messages = [commands[int(c)] for c in picked]
+
+
+def read_bag(path: Path | str) -> BagRun:
+    """Read the run recorded in the rosbag2 bag directory ``path``."""
+    path = Path(path)
+    info = read_metadata(path)
+    provenance = read_provenance(info.get("custom_data"))
+    notes = list(provenance.problems)
+    streams, decode = _read_topics(path, [topics.JOINT_STATES, topics.EFFORT_COMMANDS,
+                                          topics.FEEDFORWARD, topics.TRIAL_EVENTS,
+                                          topics.TRIAL_SUMMARY],
+                                   raw_topics=[topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
+                                               topics.JOINT_STATES])
+
+    # Trial boundaries: start/end events, else the summaries.
+    starts: dict[int, int] = {}
+    start_logs: dict[int, int] = {}
+    ends: dict[int, int] = {}
+    summaries: dict[int, dict[str, str]] = {}
+    for stamp, log, status in _statuses(streams[topics.TRIAL_EVENTS], topics.TRIAL_STATUS):
+        values = messages.key_values(status)
+        if status.message == "finished":
+            continue
+        k = _trial_number(values)
+        if k is None:
+            notes.append(f"trial event {status.message!r} at {stamp} ns without a trial number")
+            continue
+        if status.message == "aborted":
+            notes.append(f"trial {k} was aborted once and run again ({values})")
+        if status.message == "start":
+            starts[k] = stamp  # a retried trial starts again: the last start counts
+            start_logs[k] = log
+        elif status.message == "end":
+            ends[k] = stamp
+            summaries.setdefault(k, {}).update(values)
+    summary_stamps: dict[int, int] = {}
+    for stamp, _, status in _statuses(streams[topics.TRIAL_SUMMARY], topics.SUMMARY_STATUS):
+        values = messages.key_values(status)
+        k = _trial_number(values)
+        if k is not None:
+            summaries.setdefault(k, {}).update(values)
+            summary_stamps[k] = stamp
+
+    # Feed-forward profiles by trial.
+    profiles: dict[int, bytes] = {}
+    for raw in streams[topics.FEEDFORWARD].msgs:
+        frame = _frame_id(raw, decode)
+        if frame.startswith(topics.FEEDFORWARD_FRAME_PREFIX):
+            try:
+                profiles[int(frame[len(topics.FEEDFORWARD_FRAME_PREFIX):])] = raw
+            except ValueError:
+                notes.append(f"feed-forward with frame_id {frame!r}")
+
+    js = streams[topics.JOINT_STATES]
+    if not js.msgs:
+        raise BagReadError(path, f"no {topics.JOINT_STATES} messages")
+    config = provenance.config
+    decoded = joint_states(js.msgs, decode, config["joint_names"] if config else ())
+    names = decoded.names
+    if not names:
+        raise BagReadError(path, f"{topics.JOINT_STATES} has no joint names and the bag no "
+                           "config")
+    joints = len(names)
+    stamps, position, velocity = decoded.stamps, decoded.position, decoded.velocity
+    applied = decoded.effort
+
+    # Reference: any feed-forward profile (the reference is the same every trial) or config.
+    reference: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    if profiles:
+        msg = decode(profiles[min(profiles)], topics.TYPES[topics.FEEDFORWARD])
+        reference = (np.array([messages.time_ns(p.time_from_start) for p in msg.points]) / 1e9,
+                     np.array([p.positions for p in msg.points], dtype=float),
+                     np.array([p.velocities for p in msg.points], dtype=float))
+    elif config is not None:
+        ref = build_reference(config)
+        reference = (ref.time, ref.position, ref.velocity)
+        notes.append(f"no {topics.FEEDFORWARD}: reference rebuilt from the bag's config")
+    if reference is None:
+        raise BagReadError(path, f"neither {topics.FEEDFORWARD} nor a config in custom_data: "
+                           "no reference to compute the errors against")
+    ref_time, ref_q, ref_qd = reference
+    samples = len(ref_time)
+    if config is not None:
+        period = float(config["control.period"])
+    elif samples > 1:
+        period = float(ref_time[1] - ref_time[0])
+    else:
+        raise BagReadError(path, "cannot tell the control period")
+    period_ns = period * 1e9
+
+    if not starts:
+        if summary_stamps:
+            notes.append(f"no {topics.TRIAL_EVENTS}: trials cut at the summaries' stamps")
+            for k, stamp in summary_stamps.items():
+                starts[k] = int(round(stamp - (samples - 1) * period_ns))
+                ends[k] = stamp
+        else:
+            raise BagReadError(path, f"neither {topics.TRIAL_EVENTS} nor "
+                               f"{topics.TRIAL_SUMMARY}: cannot tell where trials are")
+    for k, stamp in summary_stamps.items():
+        ends.setdefault(k, stamp)
+    for k, stamp in ends.items():
+        if k not in starts:  # recording began during trial k: keep its tail
+            starts[k] = int(round(stamp - (samples - 1) * period_ns))
+            notes.append(f"trial {k}: no start event (recording began during it)")
+
+    js_log = np.asarray(js.log, dtype=np.int64)
+    cmd = streams[topics.EFFORT_COMMANDS]
+    cmd_log = np.asarray(cmd.log, dtype=np.int64)
+
+    trials: dict[int, TrialData] = {}
+    windows: list[tuple[int, int, TrialData]] = []
+    sorted_starts = sorted(starts.items(), key=lambda kv: kv[1])
+    for n, (k, start) in enumerate(sorted_starts):
+        stop = sorted_starts[n + 1][1] if n + 1 < len(sorted_starts) else np.iinfo(np.int64).max
+        if k in ends:
+            stop = min(stop, ends[k] + 1)
+        inside = np.flatnonzero((stamps >= start) & (stamps < stop))
+        index = np.rint((stamps[inside] - start) / period_ns).astype(np.int64)
+        keep = (index >= 0) & (index < samples)
+        inside, index = inside[keep], index[keep]
+        q = np.full((samples, joints), np.nan)
+        qd = np.full((samples, joints), np.nan)
+        eff = np.full((samples, joints), np.nan)
+        q[index], qd[index], eff[index] = position[inside], velocity[inside], applied[inside]
+        trials[k] = TrialData(k, ref_time.copy(), ref_q, ref_qd, q, qd, eff,
+                              summaries.get(k, {}), k in ends,
+                              feedforward_message=profiles.get(k), decode=decode)
+        windows.append((k, start_logs.get(k, int(js_log[inside].min()) if inside.size
+                                         else -1), trials[k]))
+    _assign_commands(windows, cmd_log, cmd.msgs, notes)
+    for k in sorted(trials):
+        t = trials[k]
+        if t.ended and t.missing_samples:
+            notes.append(f"trial {k}: {t.missing_samples} of {samples} samples missing")
+    if not provenance.parameter_changes and provenance.recorded_by is None:
+        notes.append("no exo_ilc_ros provenance in custom_data (recorded by another tool?)")
+    return BagRun(path, str(info.get("storage_identifier", "?")), names, period, provenance,
+                  trials, summaries, provenance.parameter_changes, notes)

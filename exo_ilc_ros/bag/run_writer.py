@@ -1,0 +1,102 @@
+"""A bag of an in-process run (``exo-ilc simulate --bag``): the messages the graph would have
+published, on the same topics and types, so users without the graph get the same record.
+
+Simulated time is the plant simulator's: trial k's sample i is stamped
+``((k - 1) (N + 1) + 1 + i) * period`` (each reset puts the next t0 one period after the last
+sample). The order per trial is the supervisor's: feed-forward and ``start`` at t0, the samples,
+the summary and ``end`` at the last sample; ``finished`` after the last trial. Log times equal the
+stamps.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+
+from .. import topics
+from ..core.config import Config
+from ..core.experiment import RunResult
+from . import messages
+from .provenance import TRIALS_COMPLETED, provenance_data
+from .writer import BagWriter
+
+NS = 1_000_000_000
+
+
+def run_name(source: str, law: str, mass_uncertainty: float,
+             when: datetime | None = None) -> str:
+    """``<source>_<law>_d<delta>_<YYYYmmdd-HHMMSS>`` (source: ``sim`` or ``graph``): the
+    directory name of a run's bag."""
+    stamp = (when or datetime.now()).strftime("%Y%m%d-%H%M%S")
+    return re.sub(r"[^A-Za-z0-9_.-]", "_", f"{source}_{law}_d{mass_uncertainty:g}_{stamp}")
+
+
+def unique_path(parent: Path | str, name: str) -> Path:
+    """``parent/name``, or ``parent/name-2``, ... if taken."""
+    parent = Path(parent)
+    candidate, n = parent / name, 1
+    while candidate.exists():
+        n += 1
+        candidate = parent / f"{name}-{n}"
+    return candidate
+
+
+def declare_topics(writer: BagWriter) -> None:
+    """Every topic of :data:`topics.TYPES`, with the QoS the graph's publishers offer."""
+    from .qos import offered_qos
+
+    for topic, msgtype in topics.TYPES.items():
+        writer.add_topic(topic, msgtype, offered_qos(topic))
+
+
+def write_run(path: Path | str, config: Config, result: RunResult, *, storage: str = "mcap",
+              split_every: int = 0, name: str = "",
+              extra_custom_data: Mapping[str, str] | None = None) -> Path:
+    """Write ``result`` (a run of ``config``) as a bag at ``path``; ``split_every`` > 0 starts a
+    new storage file every that many trials (as the recorder does). Returns ``path``."""
+    path = Path(path)
+    names = list(config["joint_names"])
+    custom = provenance_data(config, recorded_by="exo-ilc simulate",
+                             run_name=name or path.name,
+                             mass_uncertainty=result.mass_uncertainty, law=result.law)
+    custom.update(extra_custom_data or {})
+    period_ns = int(round(float(config["control.period"]) * NS))
+    with BagWriter(path, storage=storage, custom_data=custom) as writer:
+        declare_topics(writer)
+        for k, record in enumerate(result.records, start=1):
+            ref = record.reference
+            samples = ref.samples
+            t0 = ((k - 1) * samples + 1) * period_ns
+            ff = messages.feedforward(t0, k, names, ref.time, ref.position, ref.velocity,
+                                      record.feedforward)
+            writer.write(topics.FEEDFORWARD, t0, ff)
+            writer.write(topics.TRIAL_EVENTS, t0, messages.trial_event(t0, "start", k))
+            applied = np.vstack([np.zeros((1, record.effort.shape[1])), record.effort[:-1]])
+            for i in range(samples):
+                ns = t0 + i * period_ns
+                writer.write(topics.CLOCK, ns, messages.clock(ns))
+                writer.write(topics.JOINT_STATES, ns, messages.joint_state(
+                    ns, names, record.position[i], record.velocity[i], applied[i]))
+                writer.write(topics.EFFORT_COMMANDS, ns,
+                             messages.effort_command(record.effort[i]))
+            end = t0 + (samples - 1) * period_ns
+            values = messages.summary_values(
+                k, result.mass_uncertainty, result.law, names, record.max_abs_error,
+                np.max(np.abs(record.feedforward), axis=0), np.max(np.abs(record.effort), axis=0),
+                record.levels)
+            within = bool(np.all(record.max_abs_error <= result.error_bound))
+            writer.write(topics.TRIAL_SUMMARY, end, messages.trial_summary(end, values, within))
+            writer.write(topics.TRIAL_EVENTS, end, messages.trial_event(end, "end", k, values))
+            writer.set_custom_data(TRIALS_COMPLETED, str(k))
+            if split_every > 0 and k % split_every == 0:
+                writer.split()
+        if result.records:
+            count = len(result.records)
+            end = (count * result.records[-1].reference.samples) * period_ns
+            writer.write(topics.TRIAL_EVENTS, end, messages.trial_event(
+                end, "finished", count, [("trials", str(count))]))
+    return path

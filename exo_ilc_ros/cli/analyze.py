@@ -1,0 +1,132 @@
+"""``exo-ilc analyze BAG [BAG ...]``: tables and the paper's figures from recorded runs."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from ..bag import BagReadError, BagRun, read_bag
+from ..report import RunSummary, format_iterations, format_trial_table, write_json
+
+
+def register(sub: Any) -> None:
+    """Add the sub-command."""
+    parser = sub.add_parser(
+        "analyze", help="tables and figures from recorded bags (MCAP or sqlite3)",
+        description="Read rosbag2 bags of runs (recorded by bag_recorder, `exo-ilc simulate "
+        "--bag`, or `ros2 bag record` of the same topics) and print per bag the max |e| per "
+        "trial and joint and the iterations to the bound beside the paper's numbers.")
+    parser.add_argument("bags", nargs="+", metavar="BAG", help="rosbag2 bag directories")
+    parser.add_argument("--plot", metavar="OUT.png",
+                        help="the paper's Figures 5-7: max |e| per iteration, one curve per bag")
+    parser.add_argument("--trial", type=int, metavar="K",
+                        help="also a tracking figure of trial K (q vs q_d, error, effort, "
+                        "feed-forward), written beside --plot as <OUT>_trial<K>.png (default "
+                        "trial<K>.png)")
+    parser.add_argument("--csv", metavar="OUT", help="write the per-trial table as CSV")
+    parser.add_argument("--json", metavar="OUT",
+                        help="write the tables as JSON (the shape of `exo-ilc simulate --json`)")
+    parser.add_argument("--config-out", metavar="FILE",
+                        help="write the first bag's effective config (rerun it with "
+                        "`exo-ilc simulate --config FILE`)")
+    parser.add_argument("--quiet", action="store_true", help="no per-trial table")
+    parser.set_defaults(func=analyze)
+
+
+def describe(run: BagRun) -> str:
+    """A few lines about one bag: origin, provenance, trials, parameter changes, notes."""
+    prov = run.provenance
+    lines = [f"bag {run.path} ({run.storage}): {run.law}, mass uncertainty "
+             f"{run.mass_uncertainty:g}; recorded by {prov.recorded_by or 'unknown'}"
+             + (f" (exo_ilc_ros {prov.version})" if prov.version else "")
+             + f"; {len(run.completed)} trials completed"
+             + (f", incomplete: {run.incomplete}" if run.incomplete else "")]
+    if prov.options:
+        lines.append("  options: " + ", ".join(f"{k}={v}" for k, v in prov.options.items()))
+    for change in run.parameter_changes:
+        lines.append(f"  parameter {change.node} {change.name} = {json.dumps(change.value)} "
+                     f"from trial {change.effective_trial}")
+    lines += [f"  note: {note}" for note in run.notes]
+    return "\n".join(lines)
+
+
+def write_csv(path: Path | str, runs: Sequence[RunSummary], joint_names: Sequence[str]) -> None:
+    """One row per bag and trial: max |e|, |u_ff| and |effort| per joint."""
+    header = ["bag", "law", "mass_uncertainty", "trial"]
+    for key in ("max_abs_error", "max_abs_feedforward", "max_abs_effort"):
+        header += [f"{key}/{name}" for name in joint_names]
+    with open(path, "w", newline="") as handle:
+        out = csv.writer(handle)
+        out.writerow(header)
+        for run in runs:
+            for k in range(len(run.max_abs_error)):
+                row: list[Any] = [run.extra.get("bag", ""), run.law, repr(run.mass_uncertainty),
+                                  k + 1]
+                for table in (run.max_abs_error, run.max_abs_feedforward, run.max_abs_effort):
+                    row += ([repr(float(x)) for x in table[k]] if table is not None
+                            else [""] * len(joint_names))
+                out.writerow(row)
+
+
+def trial_figure_path(plot: str | None, trial: int, bag: Path, several: bool) -> Path:
+    """Where the tracking figure of ``trial`` goes."""
+    if plot is None:
+        base = Path(f"trial{trial}.png")
+        return base.with_stem(f"{bag.name}_trial{trial}") if several else base
+    out = Path(plot)
+    middle = f"_{bag.name}" if several else ""
+    return out.with_stem(f"{out.stem}{middle}_trial{trial}")
+
+
+def analyze(args: argparse.Namespace) -> int:
+    """Read, report, export, plot."""
+    bag_runs = [read_bag(path) for path in args.bags]
+    names = bag_runs[0].joint_names
+    for run in bag_runs[1:]:
+        if len(run.joint_names) != len(names):
+            raise BagReadError(run.path, f"has {len(run.joint_names)} joints, "
+                               f"{bag_runs[0].path} has {len(names)}")
+    for run in bag_runs:
+        print(describe(run))
+    runs = [run.summary() for run in bag_runs]
+    usable = [r for r in runs if len(r.max_abs_error)]
+    if not usable:
+        raise BagReadError(bag_runs[0].path, "no completed trial in any bag")
+    print()
+    if not args.quiet:
+        print(format_trial_table(usable, names))
+        print()
+    print(format_iterations(usable, names))
+    if args.csv:
+        write_csv(args.csv, usable, names)
+        print(f"wrote {args.csv}")
+    if args.json:
+        config = bag_runs[0].provenance.config_values or {}
+        write_json(args.json, config, usable)
+        print(f"wrote {args.json}")
+    if args.config_out:
+        text = bag_runs[0].provenance.config_yaml
+        if not text:
+            raise BagReadError(bag_runs[0].path, "has no config in custom_data")
+        Path(args.config_out).write_text(text)
+        print(f"wrote {args.config_out}")
+    if args.plot or args.trial is not None:
+        from ..figures import convergence_figure, save, tracking_figure
+
+        if args.plot:
+            print(f"wrote {save(convergence_figure(usable, names), args.plot)}")
+        if args.trial is not None:
+            for run in bag_runs:
+                trial = run.trials.get(args.trial)
+                if trial is None:
+                    raise BagReadError(run.path, f"has no trial {args.trial} (recorded: "
+                                       f"{sorted(run.trials)})")
+                title = f"{run.path.name}: trial {args.trial}, {run.law}, mass uncertainty " \
+                        f"{run.mass_uncertainty:g}"
+                path = trial_figure_path(args.plot, args.trial, run.path, len(bag_runs) > 1)
+                print(f"wrote {save(tracking_figure(trial, run.joint_names, title), path)}")
+    return 0

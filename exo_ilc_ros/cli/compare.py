@@ -1,0 +1,87 @@
+"""``exo-ilc compare``: the paper's sign law, the tuned sign law and the linear law side by side."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from ..comparison import Variant, format_comparison, plot_comparison, run_comparison
+from ..core.config import config_dir, load_config, read_yaml
+from ..core.errors import ConfigError
+from ..report import RunSummary, write_json
+from .tune import default_jobs
+
+TUNED_NAME = "tuned.yaml"
+
+
+def find_tuned() -> Path | None:
+    """``config/tuned.yaml`` of the current directory, else of the shipped config directory."""
+    for candidate in (Path("config") / TUNED_NAME, config_dir() / TUNED_NAME):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def register(sub: Any) -> None:
+    """Add the sub-command."""
+    parser = sub.add_parser(
+        "compare", help="compare the paper's, the tuned sign law and the linear law",
+        description="Run the paper's hand-tuned sign law, the tuned sign law (from --tuned, or "
+        "config/tuned.yaml if there is one) and the linear law at each mass uncertainty; print "
+        "one table and write one figure.")
+    parser.add_argument("--config", help="ROS parameter YAML laid over the shipped config (the "
+                        "paper's law and the linear law run with it)")
+    parser.add_argument("--tuned", help="tuned YAML laid over --config (default: "
+                        "config/tuned.yaml if found)")
+    parser.add_argument("--no-tuned", action="store_true", help="leave the tuned law out")
+    parser.add_argument("--mass-uncertainty", type=float, nargs="+", metavar="D",
+                        default=[0.05, 0.10, 0.15], help="default: 0.05 0.10 0.15")
+    parser.add_argument("--trials", type=int, help="trials per run (default: max_trials)")
+    parser.add_argument("--plot", default="compare.png", help="figure (default: compare.png)")
+    parser.add_argument("--json", metavar="OUT", help="also write the per-trial tables as JSON")
+    parser.add_argument("--jobs", type=int, default=default_jobs(),
+                        help="parallel worker processes (default: the CPUs available)")
+    parser.set_defaults(func=compare)
+
+
+def compare(args: argparse.Namespace) -> int:
+    """Run the variants, print the table, write the figure."""
+    overrides: dict[str, Any] = {}
+    if args.trials is not None:
+        overrides["max_trials"] = args.trials
+    base = load_config(args.config, overrides)
+    trials = int(base["max_trials"])
+    variants = [Variant("sign (paper)", base.replace({"law": "sign"}), "sign")]
+    tuned_path = None if args.no_tuned else (Path(args.tuned) if args.tuned else find_tuned())
+    if tuned_path is not None:
+        if not tuned_path.is_file():
+            raise ConfigError("--tuned", "no such file", str(tuned_path))
+        tuned_values = read_yaml(tuned_path)
+        tuned_values.pop("max_trials", None)
+        tuned = base.replace(tuned_values)
+        variants.append(Variant("sign (tuned)", tuned.replace({"law": "sign"}), "sign"))
+    variants.append(Variant("linear", base.replace({"law": "linear"}), "linear"))
+    deltas = args.mass_uncertainty
+    print("compare: " + ", ".join(v.label for v in variants) + " at delta = "
+          + " ".join(f"{d:g}" for d in deltas) + f", {trials} trials"
+          + (f"; tuned from {tuned_path}" if tuned_path else "; no tuned file"))
+    with tqdm(total=len(variants) * len(deltas), desc="compare", unit="run", file=sys.stderr,
+              disable=None) as bar:
+        runs = run_comparison(variants, deltas, trials, args.jobs, lambda: bar.update(1))
+    names = base["joint_names"]
+    print(format_comparison(runs, names))
+    plot_comparison(runs, names, args.plot)
+    print(f"wrote {args.plot}")
+    if args.json:
+        summaries = []
+        for r in runs:
+            s: RunSummary = r.summary
+            s.law = r.label
+            summaries.append(s)
+        write_json(args.json, base.values, summaries)
+        print(f"wrote {args.json}")
+    return 0

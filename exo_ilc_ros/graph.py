@@ -1,0 +1,208 @@
+"""Run the node graph for one configuration and collect its trial summaries.
+
+:class:`GraphSession` starts the processes of :data:`launcher.GRAPH_NODES` (plus any ``extra``)
+on a domain of their own and a monitor node in this process that follows
+``/ilc/trial_summary`` and ``/ilc/trial_events``; :func:`run_graph` runs it to the end and
+returns a :class:`report.RunSummary`, the same as ``exo-ilc simulate`` reports.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from . import topics
+from .core.config import Config
+from .launcher import (
+    GRAPH_NODES,
+    DomainClaim,
+    GraphError,
+    GraphProcesses,
+    NodeSpec,
+    claim_domain_id,
+    graph_environment,
+)
+from .report import RunSummary
+
+LEVEL_NAMES = ("M", "M'", "M''")
+
+
+@dataclass
+class TrialSummary:
+    """One ``/ilc/trial_summary`` status, parsed (floats exactly as the supervisor had them)."""
+
+    trial: int
+    values: dict[str, str]
+    received: float = field(default_factory=time.monotonic)
+
+    def row(self, key: str, joints: Sequence[str]) -> np.ndarray:
+        """``key/<joint>`` for every joint (NaN where absent)."""
+        return np.array([float(self.values.get(f"{key}/{name}", "nan")) for name in joints])
+
+    def levels(self, joints: Sequence[str]) -> np.ndarray | None:
+        """M, M', M'' (rows) per joint, or None if the trial had none (trial 1, linear law)."""
+        if f"level/M/{joints[0]}" not in self.values:
+            return None
+        return np.array([self.row(f"level/{symbol}", joints) for symbol in LEVEL_NAMES])
+
+
+def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSummary:
+    """The :class:`RunSummary` of a graph run, as ``RunSummary.from_result`` gives in-process."""
+    joints = config["joint_names"]
+    first = summaries[0].values if summaries else {}
+    return RunSummary(float(first.get("mass_uncertainty", config["mass_uncertainty"])),
+                      str(first.get("law", config["law"])), float(config["error_bound"]),
+                      np.array([s.row("max_abs_error", joints) for s in summaries]),
+                      np.array([s.row("max_abs_feedforward", joints) for s in summaries]),
+                      np.array([s.row("max_abs_effort", joints) for s in summaries]))
+
+
+class GraphSession:
+    """The graph's processes plus a monitor node here; a context manager.
+
+    ``node`` and ``executor`` are usable by callers (parameter clients, extra subscriptions);
+    :meth:`spin_until` spins while watching the processes.
+    """
+
+    def __init__(self, config: Config, domain_id: int | None = None,
+                 extra: Sequence[NodeSpec] = (), log_dir: Path | None = None,
+                 on_summary: Callable[[TrialSummary], None] | None = None,
+                 nodes: Sequence[NodeSpec] = GRAPH_NODES) -> None:
+        self.config = config
+        self._claim: DomainClaim = claim_domain_id(domain_id)
+        self.domain_id = self._claim.domain_id
+        self._tmp = tempfile.TemporaryDirectory(prefix="exo_ilc_run_")
+        self.params_file = Path(self._tmp.name) / "params.yaml"
+        self.params_file.write_text(config.to_ros_yaml("written by exo-ilc run"))
+        self.env = graph_environment(self.domain_id)
+        self.processes = GraphProcesses([*nodes, *extra], self.params_file, self.env,
+                                        log_dir or Path(self._tmp.name) / "logs")
+        self.on_summary = on_summary
+        self.summaries: list[TrialSummary] = []
+        self.events: list[tuple[str, dict[str, str], float]] = []
+        self.finished = False
+        self.started_at: float | None = None
+        """Wall time of the first trial's start event."""
+        self.finished_at: float | None = None
+        self.context: Any = None
+        self.node: Any = None
+        self.executor: Any = None
+
+    def __enter__(self) -> GraphSession:
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.experimental import EventsExecutor
+
+        from .nodes.common import EVENTS_QOS
+
+        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE",
+                              self.env["ROS_AUTOMATIC_DISCOVERY_RANGE"])
+        os.environ.setdefault("ROS_LOG_DIR", self.env["ROS_LOG_DIR"])
+        try:
+            self.context = rclpy.Context()
+            rclpy.init(context=self.context, domain_id=self.domain_id)
+            self.node = rclpy.create_node("exo_ilc_run", context=self.context)
+            self.node.create_subscription(DiagnosticArray, topics.TRIAL_SUMMARY,
+                                          self._on_summary, EVENTS_QOS)
+            self.node.create_subscription(DiagnosticArray, topics.TRIAL_EVENTS,
+                                          self._on_event, EVENTS_QOS)
+            self.executor = EventsExecutor(context=self.context)
+            self.executor.add_node(self.node)
+            self.processes.start()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
+                 trace: TracebackType | None) -> None:
+        self.close()
+
+    def close(self) -> dict[str, int]:
+        """Stop the processes (SIGINT, then SIGKILL), the monitor node, the domain claim."""
+        codes = self.processes.stop() if self.processes.processes else {}
+        if self.node is not None:
+            self.executor.remove_node(self.node)
+            self.node.destroy_node()
+            self.node = None
+        if self.context is not None:
+            self.context.try_shutdown()
+            self.context = None
+        self._claim.release()
+        self._tmp.cleanup()
+        return codes
+
+    def _on_summary(self, msg: Any) -> None:
+        for item in msg.status:
+            if item.name == topics.SUMMARY_STATUS:
+                values = {kv.key: kv.value for kv in item.values}
+                summary = TrialSummary(int(values["trial"]), values)
+                self.summaries.append(summary)
+                if self.on_summary is not None:
+                    self.on_summary(summary)
+
+    def _on_event(self, msg: Any) -> None:
+        for item in msg.status:
+            if item.name == topics.TRIAL_STATUS:
+                values = {kv.key: kv.value for kv in item.values}
+                self.events.append((item.message, values, time.monotonic()))
+                if item.message == "start" and self.started_at is None:
+                    self.started_at = time.monotonic()
+                if item.message == "finished":
+                    self.finished = True
+                    self.finished_at = time.monotonic()
+
+    def spin_until(self, done: Callable[[], bool], timeout: float,
+                   stall_timeout: float | None = None) -> None:
+        """Spin until ``done()``; GraphError if a node exits, after ``timeout`` s, or when no
+        summary arrived for ``stall_timeout`` s."""
+        start = time.monotonic()
+        last_check = 0.0
+        while not done():
+            now = time.monotonic()
+            if now - start > timeout:
+                raise GraphError(f"timed out after {timeout:g} s; supervisor log:\n"
+                                 + self.processes.log_tail("ilc_supervisor"))
+            if stall_timeout is not None:
+                last = self.summaries[-1].received if self.summaries else start
+                if now - last > stall_timeout:
+                    raise GraphError(f"no trial summary for {stall_timeout:g} s; supervisor "
+                                     "log:\n" + self.processes.log_tail("ilc_supervisor"))
+            if now - last_check > 0.5:
+                self.processes.check()
+                last_check = now
+            self.executor.spin_once(timeout_sec=0.05)
+
+
+@dataclass
+class GraphRun:
+    """What :func:`run_graph` returns."""
+
+    summary: RunSummary
+    """The run as ``exo-ilc simulate`` reports it."""
+    summaries: list[TrialSummary]
+    wall_time: float | None
+    """Wall seconds from the first trial's start to the supervisor's ``finished``."""
+
+
+def run_graph(config: Config, domain_id: int | None = None, extra: Sequence[NodeSpec] = (),
+              on_summary: Callable[[TrialSummary], None] | None = None,
+              timeout: float = 3600.0, stall_timeout: float = 90.0,
+              on_start: Callable[[GraphSession], None] | None = None) -> GraphRun:
+    """Run the graph until the supervisor finishes, then stop every process."""
+    with GraphSession(config, domain_id, extra, on_summary=on_summary) as session:
+        if on_start is not None:
+            on_start(session)
+        session.spin_until(lambda: session.finished, timeout, stall_timeout)
+        wall = None
+        if session.started_at is not None and session.finished_at is not None:
+            wall = session.finished_at - session.started_at
+        return GraphRun(summaries_to_run(session.summaries, config), session.summaries, wall)

@@ -1,0 +1,182 @@
+"""Start the node graph as separate processes on a ROS domain of its own, and stop it cleanly.
+
+:data:`GRAPH_NODES` is the one list of what ``exo-ilc run`` starts; another process (the bag
+recorder) is one more :class:`NodeSpec` passed in ``extra``. Every child gets the run's
+``ROS_DOMAIN_ID`` and, unless the user set it, ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import fcntl
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import IO
+
+from .core.errors import ExoIlcError
+
+DOMAIN_IDS = range(1, 101)
+LOCK_PATTERN = ".exo_ilc_ros_domain_{}.lock"
+"""Same lock files as the test session (test/conftest.py), so concurrent runs never share."""
+
+
+class GraphError(ExoIlcError):
+    """A node of the graph failed, or the graph made no progress."""
+
+
+@dataclass(frozen=True)
+class NodeSpec:
+    """One process of the graph: a ROS node run as ``python -m module --ros-args ...``."""
+
+    name: str
+    """The node name (and its section in the parameter YAML)."""
+    module: str
+    arguments: tuple[str, ...] = ()
+    """Extra ROS arguments (``-p name:=value`` ...)."""
+    executable: str | None = None
+    """Run this file instead of ``python -m module`` (e.g. colcon's ``lib/exo_ilc_ros/<node>``)."""
+
+    def command(self, params_file: Path | str) -> list[str]:
+        """The command line of this node with ``params_file``."""
+        program = [self.executable] if self.executable else [sys.executable, "-m", self.module]
+        return [*program, "--ros-args", "--params-file", str(params_file), *self.arguments]
+
+
+GRAPH_NODES: tuple[NodeSpec, ...] = (
+    NodeSpec("plant_simulator", "exo_ilc_ros.nodes.plant_simulator"),
+    NodeSpec("computed_torque_controller", "exo_ilc_ros.nodes.computed_torque_controller"),
+    NodeSpec("ilc_supervisor", "exo_ilc_ros.nodes.ilc_supervisor"),
+)
+"""The processes ``exo-ilc run`` starts, in this order."""
+
+
+@dataclass
+class DomainClaim:
+    """A ROS domain id held (through a lock file) until :meth:`release` or process exit."""
+
+    domain_id: int
+    handle: IO[str] | None = None
+
+    def release(self) -> None:
+        """Give the domain id back."""
+        if self.handle is not None:
+            self.handle.close()
+            self.handle = None
+
+
+def claim_domain_id(requested: int | None = None) -> DomainClaim:
+    """A free domain id (lock-file claim), or ``requested`` as given."""
+    if requested is not None:
+        return DomainClaim(requested)
+    for domain in DOMAIN_IDS:
+        handle = open(Path(tempfile.gettempdir()) / LOCK_PATTERN.format(domain), "w")  # noqa: SIM115 (held)
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.close()
+            continue
+        return DomainClaim(domain, handle)
+    raise GraphError(f"no free ROS domain id in {DOMAIN_IDS.start}..{DOMAIN_IDS.stop - 1}")
+
+
+def graph_environment(domain_id: int, base: Mapping[str, str] | None = None) -> dict[str, str]:
+    """The environment of the graph's processes: the domain id, discovery on this machine
+    unless the user chose a range, and a log directory."""
+    env = dict(os.environ if base is None else base)
+    env["ROS_DOMAIN_ID"] = str(domain_id)
+    if "ROS_AUTOMATIC_DISCOVERY_RANGE" not in env and "ROS_LOCALHOST_ONLY" not in env:
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.setdefault("ROS_LOG_DIR", str(Path(tempfile.gettempdir()) / "exo_ilc_ros_logs"))
+    env.setdefault("PYTHONUNBUFFERED", "1")
+    return env
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child before exec
+    os.setsid()
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGINT)  # PR_SET_PDEATHSIG: SIGINT when the parent dies
+    except OSError:
+        pass
+
+
+@dataclass
+class GraphProcesses:
+    """The graph's processes: started together, watched, and stopped with SIGINT (then
+    SIGKILL for stragglers, and ``fastdds shm clean`` after a kill). A context manager."""
+
+    specs: Sequence[NodeSpec]
+    params_file: Path
+    env: dict[str, str]
+    log_dir: Path
+    processes: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
+    _logs: list[IO[bytes]] = field(default_factory=list)
+
+    def start(self) -> None:
+        """Start every node; its stdout and stderr go to ``log_dir/<name>.log``."""
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        for spec in self.specs:
+            log = open(self.log_dir / f"{spec.name}.log", "wb")  # noqa: SIM115 (closed in stop)
+            self._logs.append(log)
+            self.processes[spec.name] = subprocess.Popen(
+                spec.command(self.params_file), env=self.env, stdin=subprocess.DEVNULL,
+                stdout=log, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
+
+    def log_tail(self, name: str, lines: int = 15) -> str:
+        """The last lines a node wrote."""
+        path = self.log_dir / f"{name}.log"
+        text = path.read_text(errors="replace") if path.exists() else ""
+        return "\n".join(text.splitlines()[-lines:])
+
+    def check(self) -> None:
+        """GraphError naming a node that exited, with the end of its log."""
+        for name, process in self.processes.items():
+            code = process.poll()
+            if code is not None:
+                raise GraphError(f"node {name} exited with code {code}:\n{self.log_tail(name)}")
+
+    def stop(self, timeout: float = 10.0) -> dict[str, int]:
+        """SIGINT every node, wait up to ``timeout`` s, SIGKILL the rest; the exit codes."""
+        for process in self.processes.values():
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + timeout
+        killed = False
+        codes: dict[str, int] = {}
+        for name, process in self.processes.items():
+            try:
+                codes[name] = process.wait(max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                process.kill()
+                codes[name] = process.wait()
+                killed = True
+        for log in self._logs:
+            log.close()
+        self._logs.clear()
+        if killed:
+            clean_shared_memory(self.env)
+        return codes
+
+    def __enter__(self) -> GraphProcesses:
+        self.start()
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
+                 trace: TracebackType | None) -> None:
+        self.stop()
+
+
+def clean_shared_memory(env: Mapping[str, str] | None = None) -> None:
+    """``fastdds shm clean``: remove the segments of killed participants (if the tool exists)."""
+    tool = Path(sys.prefix) / "bin" / "fastdds"
+    if tool.exists():
+        subprocess.run([str(tool), "shm", "clean"], env=dict(env or os.environ),
+                       stdin=subprocess.DEVNULL, capture_output=True, timeout=30, check=False)

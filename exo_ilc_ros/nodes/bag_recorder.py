@@ -1,0 +1,273 @@
+"""bag_recorder: records every topic of the graph into a rosbag2 MCAP bag, as received.
+
+Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.topics.TYPES` (depth 1000; the
+feed-forward transient local, as published) and stores the CDR bytes untouched, stamped with the
+wall-clock receive time (what ``ros2 bag record`` does without ``--use-sim-time``). A new storage
+file starts after each trial (``split_every`` trials), so a SIGKILL loses at most the trial being
+recorded; Ctrl-C / SIGTERM close the bag normally. ``custom_data`` holds the run's provenance
+and every parameter change with the trial it took effect at.
+
+Parameters (the recorder's own, not part of the experiment's schema):
+``bag_path`` (default ``bags/<run_name>``), ``run_name`` (default ``run_<date>-<time>``),
+``config_file`` (the run's effective parameter YAML, for the provenance), ``split_every``
+(trials per storage file, default 1; 0: one file) and ``storage`` (``mcap`` or ``sqlite3``).
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import signal
+import sys
+import time
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from rcl_interfaces.msg import ParameterEvent
+from rclpy.node import Node
+from rclpy.parameter import parameter_value_to_python
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+
+from .. import topics
+from ..bag.errors import BagError
+from ..bag.provenance import (
+    RECORDED_BY,
+    RUN_NAME,
+    TRIALS_COMPLETED,
+    VERSION,
+    ParameterChange,
+    parameter_changes_data,
+    provenance_data,
+)
+from ..bag.qos import RECORDER_DEPTH, TRANSIENT_LOCAL_TOPICS, offered_qos
+from ..bag.writer import BagWriter
+from ..core.config import load_config
+from ..core.errors import ConfigError
+from .common import EVENTS_QOS, diagnostic_array, status, wall_clock
+
+NAME = "bag_recorder"
+READY_TOPICS = (topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
+                topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY)
+"""Topics whose publishers must be matched before the recorder reports ``ready``."""
+
+
+def message_class(msgtype: str) -> Any:
+    """The rclpy message class of ``pkg/msg/Name``."""
+    package, _, name = msgtype.split("/")
+    return getattr(importlib.import_module(f"{package}.msg"), name)
+
+
+def subscription_qos(topic: str) -> QoSProfile:
+    """Reliable, depth 1000; transient local where the publisher latches."""
+    durable = topic in TRANSIENT_LOCAL_TOPICS
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=RECORDER_DEPTH,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if durable
+                      else DurabilityPolicy.VOLATILE)
+
+
+class BagRecorder(Node):
+    """Writes the graph's topics into a bag, one storage file per trial."""
+
+    def __init__(self) -> None:
+        super().__init__(NAME)
+        stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+        self.run_name = str(self.declare_parameter("run_name", f"run_{stamp}").value)
+        bag_path = str(self.declare_parameter("bag_path", "").value)
+        config_file = str(self.declare_parameter("config_file", "").value)
+        self.split_every = int(self.declare_parameter("split_every", 1).value)
+        storage = str(self.declare_parameter("storage", "mcap").value)
+        path = Path(bag_path) if bag_path else Path("bags") / self.run_name
+
+        custom = {VERSION: "", RECORDED_BY: NAME, RUN_NAME: self.run_name}
+        if config_file:
+            config = load_config(config_file)
+            custom = provenance_data(config, recorded_by=NAME, run_name=self.run_name)
+        else:
+            from .. import __version__
+
+            custom[VERSION] = __version__
+            self.get_logger().warning("no config_file given: the bag will not hold the run's "
+                                      "config")
+        self.writer = BagWriter(path, storage=storage, custom_data=custom)
+        self.writer.open()
+        self.started = 0
+        """The last trial that started (0: none yet)."""
+        self.running: int | None = None
+        """The trial between its start and end events, else None."""
+        self.completed = 0
+        self.received = 0
+        """The last trial whose end event and summary are written."""
+        self.ended: int | None = None
+        """A trial that ended but whose summary has not arrived yet."""
+        self.summarised: set[int] = set()
+        self.changes: list[ParameterChange] = []
+        self.messages = 0
+
+        for topic, msgtype in topics.TYPES.items():
+            self.writer.add_topic(topic, msgtype, offered_qos(topic))
+            self.create_subscription(message_class(msgtype), topic,
+                                     lambda raw, topic=topic: self.on_message(topic, raw),
+                                     subscription_qos(topic), raw=True)
+        self.status_pub = self.create_publisher(
+            message_class(topics.TYPES[topics.DIAGNOSTICS]), topics.DIAGNOSTICS, EVENTS_QOS)
+        self.create_timer(0.2, self.on_status_timer, clock=wall_clock())
+        self.get_logger().info(f"recording {len(topics.TYPES)} topics to {path}")
+
+    def on_status_timer(self) -> None:
+        """``ready`` on /diagnostics once every recorded graph topic has a publisher (the
+        supervisor waits for it when ``wait_for_recorder`` is set)."""
+        missing = [topic for topic in READY_TOPICS
+                   if self.count_publishers(topic) < 1]
+        message = "waiting" if missing else "ready"
+        values = [("bag", str(self.writer.path)), ("messages", str(self.messages)),
+                  ("trials_received", str(self.received)),
+                  ("trials_filed", str(self.completed))]
+        values += [("waiting_for", topic) for topic in missing]
+        self.status_pub.publish(diagnostic_array(
+            self, [status(topics.RECORDER_STATUS, message, values, hardware_id=NAME)]))
+
+    def on_message(self, topic: str, raw: bytes) -> None:
+        """Store the bytes; follow the trial protocol to split the bag at trial boundaries."""
+        if topic == topics.TRIAL_EVENTS:
+            self._before_event(raw)
+        self.writer.write(topic, time.time_ns(), raw)
+        self.messages += 1
+        if topic == topics.TRIAL_EVENTS:
+            self._after_event(raw)
+        elif topic == topics.TRIAL_SUMMARY:
+            self.on_summary(raw)
+        elif topic == topics.PARAMETER_EVENTS:
+            self.on_parameter_event(raw)
+
+    def _events(self, raw: bytes) -> list[tuple[str, int | None]]:
+        msg = deserialize_message(raw, message_class(topics.TYPES[topics.TRIAL_EVENTS]))
+        out = []
+        for item in msg.status:
+            if item.name == topics.TRIAL_STATUS:
+                values = {kv.key: kv.value for kv in item.values}
+                trial = values.get("trial")
+                out.append((item.message, int(trial) if trial and trial.isdigit() else None))
+        return out
+
+    def _before_event(self, raw: bytes) -> None:
+        """A trial starting while the previous one awaits its summary: split first."""
+        if self.ended is not None and any(e == "start" for e, _ in self._events(raw)):
+            self._split()
+
+    def _after_event(self, raw: bytes) -> None:
+        for event, trial in self._events(raw):
+            if event == "start" and trial is not None:
+                self.started, self.running = trial, trial
+            elif event == "end" and trial is not None:
+                self.running = None
+                self.completed = max(self.completed, trial)
+                self.ended = trial
+                if trial in self.summarised:
+                    self._split()
+            elif event == "aborted":
+                self.running = None
+            elif event == "finished" and self.ended is not None:
+                self._split()
+
+    def on_summary(self, raw: bytes) -> None:
+        """The summary of trial k: split if its end event is in already."""
+        msg = deserialize_message(raw, message_class(topics.TYPES[topics.TRIAL_SUMMARY]))
+        for item in msg.status:
+            values = {kv.key: kv.value for kv in item.values}
+            if item.name == topics.SUMMARY_STATUS and values.get("trial", "").isdigit():
+                trial = int(values["trial"])
+                self.summarised.add(trial)
+                if self.ended == trial:
+                    self._split()
+
+    def on_parameter_event(self, raw: bytes) -> None:
+        """Note every changed parameter with the trial it applies from (the next boundary)."""
+        event = deserialize_message(raw, ParameterEvent)
+        stamp = int(event.stamp.sec) * 1_000_000_000 + int(event.stamp.nanosec)
+        for parameter in event.changed_parameters:
+            value = parameter_value_to_python(parameter.value)
+            if isinstance(value, (list, tuple)) or type(value).__name__ == "array":
+                value = list(value)
+            self.changes.append(ParameterChange(event.node, parameter.name, value, stamp,
+                                                self.running, self.started + 1))
+            self.get_logger().info(f"parameter {event.node} {parameter.name} = "
+                                   f"{json.dumps(value)}, from trial {self.started + 1}")
+        if event.changed_parameters:
+            for key, text in parameter_changes_data(self.changes).items():
+                self.writer.set_custom_data(key, text)
+
+    def _split(self) -> None:
+        trial, self.ended = self.ended, None
+        if trial is not None:
+            self.received = max(self.received, trial)
+            self.on_status_timer()  # the supervisor may wait for this before the next trial
+        self.writer.set_custom_data(TRIALS_COMPLETED, str(self.completed))
+        for key, text in parameter_changes_data(self.changes).items():
+            self.writer.set_custom_data(key, text)
+        if self.split_every > 0 and trial is not None and trial % self.split_every == 0:
+            self.writer.split()
+
+    def destroy_node(self) -> None:
+        """Close the bag (writes the last file and metadata.yaml), then the node."""
+        self.writer.set_custom_data(TRIALS_COMPLETED, str(self.completed))
+        for key, text in parameter_changes_data(self.changes).items():
+            self.writer.set_custom_data(key, text)
+        self.writer.close()
+        print(f"[{NAME}] bag {self.writer.path} closed: {self.messages} messages, "
+              f"{self.completed} trials", file=sys.stderr, flush=True)  # rclpy may be shut down
+        super().destroy_node()
+
+
+DRAIN_IDLE = 0.3
+DRAIN_MAX = 3.0
+"""On SIGINT/SIGTERM: keep receiving until no message came for DRAIN_IDLE s (at most DRAIN_MAX
+s), so what the graph published before it was told to stop is in the bag."""
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point: ``ros2 run exo_ilc_ros bag_recorder``. SIGINT and SIGTERM stop it cleanly
+    (the queued messages are written, then the bag is closed)."""
+    import rclpy
+    from rclpy.experimental import EventsExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    stop: list[int] = []
+
+    def on_signal(signum: int, frame: Any) -> None:
+        stop.append(signum)
+
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    node: BagRecorder | None = None
+    try:
+        node = BagRecorder()
+        executor = EventsExecutor()
+        executor.add_node(node)
+        while not stop and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+        deadline = time.monotonic() + DRAIN_MAX
+        last_count, last_change = node.messages, time.monotonic()
+        while rclpy.ok() and time.monotonic() < deadline and \
+                time.monotonic() - last_change < DRAIN_IDLE:
+            executor.spin_once(timeout_sec=0.05)
+            if node.messages != last_count:
+                last_count, last_change = node.messages, time.monotonic()
+    except (BagError, ConfigError) as exc:
+        print(f"{NAME}: error: {exc}", file=sys.stderr, flush=True)
+        return 2
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,152 @@
+"""CDR (little-endian XCDR1, what rmw_fastrtps puts on the wire) for the two messages of the
+control loop, so the hot callbacks skip rclpy's Python message objects.
+
+``JointStateWriter`` fills a preallocated JointState image (stamp, position, velocity,
+effort) in place; ``read_joint_state`` and ``read_float64_array`` decode the raw bytes a
+``raw=True`` subscription delivers, for any publisher (names, frame_id and layout of any
+length). Checked against rclpy's own (de)serialisation in ``test/test_cdr.py``.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Sequence
+
+import numpy as np
+
+HEADER = b"\x00\x01\x00\x00"
+"""Encapsulation: CDR, little endian."""
+_U32 = struct.Struct("<I")
+_STAMP = struct.Struct("<iI")
+
+
+class CdrError(ValueError):
+    """The bytes are not a message of the expected layout."""
+
+
+def _align(offset: int, size: int) -> int:
+    """``offset`` (counted after the 4-byte encapsulation header) rounded up to ``size``."""
+    return offset + (-offset % size)
+
+
+class _Writer:
+    def __init__(self) -> None:
+        self.body = bytearray()
+
+    def pad(self, size: int) -> None:
+        self.body += b"\x00" * (-len(self.body) % size)
+
+    def u32(self, value: int) -> None:
+        self.pad(4)
+        self.body += _U32.pack(value)
+
+    def string(self, text: str) -> None:
+        data = text.encode() + b"\x00"
+        self.u32(len(data))
+        self.body += data
+
+    def doubles(self, count: int) -> int:
+        """A sequence of ``count`` zero doubles; returns the offset of the first."""
+        self.u32(count)
+        self.pad(8)
+        offset = len(self.body)
+        self.body += b"\x00" * (8 * count)
+        return offset
+
+
+class JointStateWriter:
+    """A sensor_msgs/JointState image with fixed names; :meth:`write` fills it in place."""
+
+    def __init__(self, names: Sequence[str], frame_id: str = "") -> None:
+        w = _Writer()
+        w.body += b"\x00" * 8  # stamp
+        w.string(frame_id)
+        w.u32(len(names))
+        for name in names:
+            w.string(name)
+        n = len(names)
+        offsets = [w.doubles(n) for _ in range(3)]
+        self._buffer = bytearray(HEADER + w.body)
+        self._fields = [np.frombuffer(self._buffer, dtype="<f8", count=n, offset=4 + o)
+                        for o in offsets]
+
+    def write(self, stamp_ns: int, position: np.ndarray, velocity: np.ndarray,
+              effort: np.ndarray) -> bytes:
+        """The serialised message with this stamp and state."""
+        sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+        _STAMP.pack_into(self._buffer, 4, sec, nanosec)
+        self._fields[0][:] = position
+        self._fields[1][:] = velocity
+        self._fields[2][:] = effort
+        return bytes(self._buffer)
+
+
+def float64_array(values: np.ndarray) -> bytes:
+    """A std_msgs/Float64MultiArray with an empty layout and ``values`` as data."""
+    n = values.shape[0]
+    # dim: count 0 (4 bytes), data_offset (4), data count (4), pad to 8 -> data at body 16
+    return HEADER + struct.pack("<III", 0, 0, n) + b"\x00" * 4 + \
+        np.ascontiguousarray(values, dtype="<f8").tobytes()
+
+
+def _skip_string(raw: bytes, offset: int) -> int:
+    offset = _align(offset, 4)
+    (length,) = _U32.unpack_from(raw, 4 + offset)
+    return offset + 4 + length
+
+
+def _doubles(raw: bytes, offset: int) -> tuple[np.ndarray, int]:
+    offset = _align(offset, 4)
+    (count,) = _U32.unpack_from(raw, 4 + offset)
+    offset = _align(offset + 4, 8) if count else offset + 4
+    end = offset + 8 * count
+    if 4 + end > len(raw):
+        raise CdrError("sequence runs past the end of the message")
+    return np.frombuffer(raw, dtype="<f8", count=count, offset=4 + offset), end
+
+
+def _check_header(raw: bytes) -> None:
+    if raw[:2] != HEADER[:2]:
+        raise CdrError(f"not little-endian CDR (encapsulation {raw[:4]!r})")
+
+
+def read_joint_state(raw: bytes) -> tuple[int, np.ndarray, np.ndarray]:
+    """(stamp in ns, position, velocity) of a serialised sensor_msgs/JointState (read-only
+    views into ``raw``)."""
+    try:
+        return _read_joint_state(raw)
+    except struct.error as exc:
+        raise CdrError(f"truncated JointState: {exc}") from None
+
+
+def _read_joint_state(raw: bytes) -> tuple[int, np.ndarray, np.ndarray]:
+    _check_header(raw)
+    sec, nanosec = _STAMP.unpack_from(raw, 4)
+    offset = _skip_string(raw, 8)  # frame_id
+    (count,) = _U32.unpack_from(raw, 4 + _align(offset, 4))
+    offset = _align(offset, 4) + 4
+    for _ in range(count):
+        offset = _skip_string(raw, offset)
+    position, offset = _doubles(raw, offset)
+    velocity, offset = _doubles(raw, offset)
+    return sec * 1_000_000_000 + nanosec, position, velocity
+
+
+def read_float64_array(raw: bytes) -> np.ndarray:
+    """The data of a serialised std_msgs/Float64MultiArray (a read-only view into ``raw``)."""
+    try:
+        return _read_float64_array(raw)
+    except struct.error as exc:
+        raise CdrError(f"truncated Float64MultiArray: {exc}") from None
+
+
+def _read_float64_array(raw: bytes) -> np.ndarray:
+    _check_header(raw)
+    (dims,) = _U32.unpack_from(raw, 4)
+    offset = 4
+    for _ in range(dims):
+        offset = _skip_string(raw, offset)  # label
+        offset = _align(offset, 4) + 8  # size, stride
+    offset = _align(offset, 4) + 4  # data_offset
+    data, _ = _doubles(raw, offset)
+    return data

@@ -1,0 +1,326 @@
+"""Bags and offline analysis: round trip, independent reader, sqlite3, SIGKILL, figures.
+
+In-process tests write bags with ``write_run`` (the graph's topics and messages, no DDS); the
+``graph`` tests run the real bag_recorder process against the real node graph.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from exo_ilc_ros import topics
+from exo_ilc_ros.bag import BagReadError, BagWriteError, BagWriter, read_bag, write_run
+from exo_ilc_ros.bag.provenance import read_provenance
+from exo_ilc_ros.cli.main import main as exo_ilc
+from exo_ilc_ros.core.config import Config, load_config
+from exo_ilc_ros.core.experiment import RunResult, run_trials
+from exo_ilc_ros.figures import convergence_figure, tracking_figure
+from exo_ilc_ros.report import RunSummary
+
+TRIALS = 5
+SHORT = {"trajectory.duration": 1.0, "max_trials": TRIALS}
+"""101 samples per trial keep the tests short."""
+
+
+@pytest.fixture(scope="module")
+def config() -> Config:
+    return load_config(overrides=SHORT)
+
+
+@pytest.fixture(scope="module")
+def result(config: Config) -> RunResult:
+    return run_trials(config, 0.10)
+
+
+@pytest.fixture(scope="module")
+def mcap_bag(tmp_path_factory: pytest.TempPathFactory, config: Config,
+             result: RunResult) -> Path:
+    return write_run(tmp_path_factory.mktemp("bags") / "run_mcap", config, result,
+                     split_every=2)
+
+
+def assert_same_table(summary: RunSummary, reference: RunSummary, tol: float = 1e-12) -> None:
+    assert summary.max_abs_error.shape == reference.max_abs_error.shape
+    np.testing.assert_allclose(summary.max_abs_error, reference.max_abs_error, rtol=0, atol=tol)
+    for got, want in ((summary.max_abs_feedforward, reference.max_abs_feedforward),
+                      (summary.max_abs_effort, reference.max_abs_effort)):
+        assert got is not None and want is not None
+        np.testing.assert_allclose(got, want, rtol=0, atol=tol)
+    assert summary.iterations_to_bound() == reference.iterations_to_bound()
+    assert summary.mass_uncertainty == reference.mass_uncertainty
+    assert summary.law == reference.law
+
+
+def test_round_trip_equals_the_runs_own_table(mcap_bag: Path, config: Config,
+                                              result: RunResult) -> None:
+    run = read_bag(mcap_bag)
+    assert_same_table(run.summary(), RunSummary.from_result(result))
+    assert run.summary().extra["sources"] == ["samples"] * TRIALS
+    assert run.completed == list(range(1, TRIALS + 1)) and not run.incomplete
+    assert run.joint_names == config["joint_names"]
+    assert not run.notes
+    for record in result.records:
+        trial = run.trials[record.trial]
+        np.testing.assert_array_equal(trial.position, record.position)
+        np.testing.assert_array_equal(trial.velocity, record.velocity)
+        np.testing.assert_array_equal(trial.command, record.effort)
+        np.testing.assert_array_equal(trial.effort[1:], record.effort[:-1])
+        assert trial.feedforward is not None
+        np.testing.assert_array_equal(trial.feedforward, record.feedforward)
+        np.testing.assert_array_equal(trial.error, record.error)
+
+
+def test_provenance_is_enough_to_rerun(mcap_bag: Path, config: Config, result: RunResult,
+                                       tmp_path: Path) -> None:
+    info = yaml.safe_load((mcap_bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    prov = read_provenance(info["custom_data"])
+    assert prov.version and prov.recorded_by == "exo-ilc simulate"
+    assert prov.mass_uncertainty == 0.10 and prov.law == "sign"
+    assert prov.options["memory"] == config["memory"]
+    assert prov.options["control.period"] == config["control.period"]
+    assert prov.config is not None
+    assert prov.config.values == config.replace({"mass_uncertainty": 0.10}).values
+    assert prov.trials_completed == TRIALS
+    out = tmp_path / "from_bag.yaml"
+    assert exo_ilc(["analyze", str(mcap_bag), "--quiet", "--config-out", str(out)]) == 0
+    rerun = run_trials(load_config(out))
+    np.testing.assert_array_equal(rerun.max_abs_errors, result.max_abs_errors)
+
+
+def test_independent_mcap_reader_reads_every_message(mcap_bag: Path, config: Config) -> None:
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    info = yaml.safe_load((mcap_bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    expected = {t["topic_metadata"]["name"]: t["message_count"]
+                for t in info["topics_with_message_count"]}
+    files = info["relative_file_paths"]
+    assert len(files) == TRIALS // 2 + 1  # split every 2 trials, the rest in the last file
+    counts: dict[str, int] = {}
+    for name in files:
+        with open(mcap_bag / name, "rb") as handle:
+            reader = make_reader(handle, decoder_factories=[DecoderFactory()])
+            assert reader.get_header().profile == "ros2"
+            for _, channel, _, decoded in reader.iter_decoded_messages():
+                counts[channel.topic] = counts.get(channel.topic, 0) + 1
+                if channel.topic == topics.JOINT_STATES:
+                    assert list(decoded.name) == config["joint_names"]
+                    assert len(decoded.position) == config.joints
+    assert counts == expected
+    assert counts[topics.JOINT_STATES] == TRIALS * 101
+    assert sum(counts.values()) == info["message_count"]
+
+
+def test_sqlite3_bag_analyses_identically(tmp_path: Path, mcap_bag: Path, config: Config,
+                                          result: RunResult) -> None:
+    bag = write_run(tmp_path / "run_db3", config, result, storage="sqlite3")
+    assert [p.suffix for p in bag.iterdir() if p.name != "metadata.yaml"] == [".db3"]
+    sqlite_run, mcap_run = read_bag(bag), read_bag(mcap_bag)
+    assert sqlite_run.storage == "sqlite3" and mcap_run.storage == "mcap"
+    assert_same_table(sqlite_run.summary(), mcap_run.summary(), tol=0.0)
+
+
+def test_bag_without_events_or_provenance_uses_summaries(tmp_path: Path, mcap_bag: Path,
+                                                         result: RunResult) -> None:
+    """A `ros2 bag record` of fewer topics: trials cut at the summaries' stamps."""
+    from rosbags.highlevel import AnyReader
+
+    bag = tmp_path / "partial"
+    keep = {topics.JOINT_STATES, topics.TRIAL_SUMMARY, topics.FEEDFORWARD}
+    with AnyReader([mcap_bag]) as reader, BagWriter(bag) as writer:
+        for conn in reader.connections:
+            if conn.topic in keep:
+                writer.add_topic(conn.topic, conn.msgtype)
+        for conn, stamp, raw in reader.messages([c for c in reader.connections
+                                                 if c.topic in keep]):
+            writer.write(conn.topic, stamp, raw)
+    run = read_bag(bag)
+    assert any("summaries' stamps" in note for note in run.notes)
+    np.testing.assert_array_equal(run.summary().max_abs_error, result.max_abs_errors)
+    assert run.mass_uncertainty == 0.10 and run.law == "sign"
+
+
+def test_writer_refuses_existing_bag_and_undeclared_topic(tmp_path: Path) -> None:
+    with BagWriter(tmp_path / "b") as writer, pytest.raises(BagWriteError, match="undeclared"):
+        writer.write("/nope", 1, b"")
+    with pytest.raises(BagWriteError, match="exists already"):
+        BagWriter(tmp_path / "b").open()
+    with pytest.raises(BagReadError, match=r"metadata\.yaml"):
+        read_bag(tmp_path)
+
+
+def test_killed_writer_leaves_every_finished_trial(tmp_path: Path, config: Config,
+                                                   result: RunResult) -> None:
+    """SIGKILL in the middle of trial 4 (no close, no metadata update): trials 1-3 analyse."""
+    bag = tmp_path / "killed"
+    script = textwrap.dedent(f"""
+        import os, signal
+        from exo_ilc_ros.bag import run_writer
+        from exo_ilc_ros.core.config import load_config
+        from exo_ilc_ros.core.experiment import run_trials
+        real = run_writer.messages.trial_event
+        def event(ns, kind, trial, values=()):
+            if kind == "start" and trial == 4:
+                os.kill(os.getpid(), signal.SIGKILL)
+            return real(ns, kind, trial, values)
+        run_writer.messages.trial_event = event
+        config = load_config(overrides={SHORT!r})
+        run_writer.write_run({str(bag)!r}, config, run_trials(config, 0.10), split_every=1)
+    """)
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120, check=False)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr[-2000:]
+    assert (bag / ".splits").is_dir()  # the interrupted file, never listed
+    run = read_bag(bag)
+    assert run.completed == [1, 2, 3]
+    np.testing.assert_array_equal(run.summary().max_abs_error, result.max_abs_errors[:3])
+
+
+def test_analyze_cli_exports_and_figures(tmp_path: Path, mcap_bag: Path, config: Config,
+                                         result: RunResult,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    out_json, out_csv, plot = tmp_path / "t.json", tmp_path / "t.csv", tmp_path / "f.png"
+    code = exo_ilc(["analyze", str(mcap_bag), "--json", str(out_json), "--csv", str(out_csv),
+                    "--plot", str(plot), "--trial", "2"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "Iterations to the bound" in text and "paper joint 1" in text
+    document = json.loads(out_json.read_text())
+    assert set(document) == {"config", "runs"}
+    reference = RunSummary.from_result(result).to_json()
+    (run,) = document["runs"]
+    assert {k: run[k] for k in reference} == reference  # simulate's shape, plus bag info
+    assert_same_table(RunSummary.from_json(run), RunSummary.from_result(result))
+    rows = out_csv.read_text().splitlines()
+    assert len(rows) == 1 + TRIALS and rows[0].startswith("bag,law,mass_uncertainty,trial")
+    assert plot.stat().st_size > 10_000
+    assert (tmp_path / "f_trial2.png").stat().st_size > 10_000
+
+
+def test_figures_have_one_curve_per_run(config: Config, result: RunResult,
+                                        mcap_bag: Path) -> None:
+    names = config["joint_names"]
+    other = RunSummary.from_result(result)
+    other.mass_uncertainty = 0.15
+    fig = convergence_figure([RunSummary.from_result(result), other], names)
+    assert len(fig.axes) == config.joints
+    for ax in fig.axes:
+        assert len(ax.get_lines()) == 2 + 1  # two runs and the bound
+        assert ax.get_yscale() == "log"
+        bound = ax.get_lines()[-1]
+        assert list(bound.get_ydata()) == [0.005, 0.005]
+        assert len(ax.get_lines()[0].get_xdata()) == TRIALS
+    trial = read_bag(mcap_bag).trials[2]
+    fig = tracking_figure(trial, names)
+    assert len(fig.axes) == 4 * config.joints
+    assert [len(ax.get_lines()) for ax in fig.axes[:config.joints]] == [2] * config.joints
+
+
+# --- over DDS: the real recorder against the real graph ------------------------------------
+
+def _spin_until(session: Any, done: Any, timeout: float) -> None:
+    deadline = time.monotonic() + timeout
+    while not done():
+        assert time.monotonic() < deadline, session.processes.log_tail("ilc_supervisor")
+        session.executor.spin_once(timeout_sec=0.05)
+
+
+def _trials_in(bag: Path) -> int:
+    """Trials the recorder has finished files for (its metadata.yaml, rewritten per split)."""
+    try:
+        info = yaml.safe_load((bag / "metadata.yaml").read_text())
+    except (OSError, yaml.YAMLError):
+        return 0
+    custom = info["rosbag2_bagfile_information"].get("custom_data") or {}
+    return int(custom.get("exo_ilc_ros.trials_completed", 0))
+
+
+@pytest.mark.graph
+def test_recorder_sigkill_leaves_the_filed_trials(tmp_path: Path) -> None:
+    """The real recorder on the real graph, killed with SIGKILL once it has filed trial 2 while
+    the run goes on: its bag holds those trials, equal to the in-process run to 1e-12, and the
+    live parameter change made before."""
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    from exo_ilc_ros.bag.recording import Recording
+    from exo_ilc_ros.graph import GraphSession
+
+    trials = 10
+    config = load_config(overrides={**SHORT, "max_trials": trials, "wait_for_recorder": True})
+    reference = run_trials(config)
+    with Recording(config, tmp_path, "killed") as recording, \
+            GraphSession(config, extra=[recording.spec]) as session:
+        _spin_until(session, lambda: len(session.summaries) >= 1, 120)
+        client = AsyncParameterClient(session.node, "ilc_supervisor")
+        assert client.wait_for_services(timeout_sec=10.0)
+        future = client.set_parameters([Parameter("error_bound", value=0.006)])
+        _spin_until(session, future.done, 10)
+        assert future.result().results[0].successful
+        filed = max(2, len(session.summaries) + 1)  # a trial ended after the change
+        _spin_until(session, lambda: _trials_in(recording.path) >= filed, 60)
+        process = session.processes.processes.pop("bag_recorder")
+        process.send_signal(signal.SIGKILL)
+        assert process.wait(10) == -signal.SIGKILL
+        _spin_until(session, lambda: session.finished, 120)
+
+    run = read_bag(recording.path)
+    count = len(run.completed)
+    assert 2 <= count < trials  # killed mid-run
+    assert run.completed == list(range(1, count + 1))
+    assert run.summary().extra["sources"] == ["samples"] * count
+    np.testing.assert_allclose(run.summary().max_abs_error, reference.max_abs_errors[:count],
+                               rtol=0, atol=1e-12)
+    for record in reference.records[:count]:
+        np.testing.assert_array_equal(run.trials[record.trial].position, record.position)
+        np.testing.assert_array_equal(run.trials[record.trial].command, record.effort)
+    (change,) = [c for c in run.parameter_changes if c.name == "error_bound"]
+    assert change.node.endswith("ilc_supervisor") and change.value == 0.006
+    assert 2 <= change.effective_trial <= count + 1
+
+
+@pytest.mark.graph
+def test_run_records_a_bag_that_analyses_to_its_table(tmp_path: Path) -> None:
+    """`exo-ilc run` starts the recorder, stops it with SIGINT at the end; `exo-ilc analyze` of
+    the bag prints/exports the run's own table (1e-12)."""
+    config_file = tmp_path / "short.yaml"
+    config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n')
+    run_json, bag_json = tmp_path / "run.json", tmp_path / "bag.json"
+    proc = subprocess.run([sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--config",
+                           str(config_file), "--trials", "3", "--quiet", "--json", str(run_json),
+                           "--bag-dir", str(tmp_path / "bags")], capture_output=True, text=True,
+                          timeout=150, stdin=subprocess.DEVNULL, check=False)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    (bag,) = (tmp_path / "bags").iterdir()
+    assert f"bag: {bag}" in proc.stderr
+    assert exo_ilc(["analyze", str(bag), "--quiet", "--json", str(bag_json)]) == 0
+    (graph,) = json.loads(run_json.read_text())["runs"]
+    (recorded,) = json.loads(bag_json.read_text())["runs"]
+    assert_same_table(RunSummary.from_json(recorded), RunSummary.from_json(graph))
+    run = read_bag(bag)
+    assert run.summary().extra["sources"] == ["samples"] * 3 and not run.notes
+    assert not (bag / ".splits").exists()  # closed normally
+
+
+def test_layouts_name_every_joint_and_known_topics(config: Config) -> None:
+    layouts = Path(__file__).resolve().parents[1] / "config" / "layouts"
+    foxglove = json.loads((layouts / "foxglove.json").read_text())
+    plotjuggler = (layouts / "plotjuggler.xml").read_text()
+    paths = [p["value"] for panel in foxglove["configById"].values()
+             for p in panel.get("paths", [])]
+    for name in config["joint_names"]:
+        assert f"/joint_states/{name}/position" in plotjuggler
+        assert any(name in p for p in paths)
+    for path in paths:
+        assert path.split(".")[0] in topics.TYPES

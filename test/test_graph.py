@@ -1,0 +1,265 @@
+"""The ROS 2 graph over real DDS: same numbers as in-process, live parameters, Ctrl-C, colcon.
+
+Each test starts its own processes on the session's domain (conftest) or a claimed one, waits
+for discovery with timeouts, and stops everything at teardown.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from exo_ilc_ros.core.config import Config, load_config
+from exo_ilc_ros.core.experiment import Experiment, build_law, run_trials
+from exo_ilc_ros.launcher import claim_domain_id
+
+pytestmark = pytest.mark.graph
+
+ROOT = Path(__file__).resolve().parents[1]
+SHORT = {"trajectory.duration": 1.0}
+"""101 samples per trial keep the graph tests short."""
+
+
+def _short_config(**overrides: Any) -> Config:
+    return load_config(overrides={**SHORT, **overrides})
+
+
+def _exo_ilc(*args: str, timeout: float, **kwargs: Any) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "exo_ilc_ros.cli.main", *args], text=True,
+                          capture_output=True, timeout=timeout, stdin=subprocess.DEVNULL,
+                          check=False, **kwargs)
+
+
+def test_run_json_equals_simulate(tmp_path: Path) -> None:
+    """`exo-ilc run` through the graph gives simulate's per-trial numbers to 1e-9."""
+    config_file = tmp_path / "short.yaml"
+    config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n')
+    graph_json, local_json = tmp_path / "graph.json", tmp_path / "local.json"
+    result = _exo_ilc("run", "--no-bag", "--config", str(config_file), "--trials", "3",
+                      "--json", str(graph_json), timeout=150)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "Iterations to the bound" in result.stdout
+    local = _exo_ilc("simulate", "--config", str(config_file), "--trials", "3", "--json",
+                     str(local_json), timeout=120)
+    assert local.returncode == 0, local.stderr[-3000:]
+    graph, reference = json.loads(graph_json.read_text()), json.loads(local_json.read_text())
+    assert graph["config"] == reference["config"]
+    (g,), (r,) = graph["runs"], reference["runs"]
+    assert len(g["trials"]) == len(r["trials"]) == 3
+    for key in ("max_abs_error", "max_abs_feedforward", "max_abs_effort"):
+        np.testing.assert_allclose([t[key] for t in g["trials"]], [t[key] for t in r["trials"]],
+                                   rtol=0.0, atol=1e-9, err_msg=key)
+    assert g["iterations_to_bound"] == r["iterations_to_bound"]
+    # The per-trial table and the iterations are the same text as simulate's.
+    for marker in ("(* above the bound)", "('-': never within"):
+        assert result.stdout.split(marker)[0] == local.stdout.split(marker)[0]
+
+
+def _set(session: Any, name: str, value: Any) -> Any:
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    client = AsyncParameterClient(session.node, "ilc_supervisor")
+    assert client.wait_for_services(timeout_sec=20.0), "ilc_supervisor parameter services"
+    future = client.set_parameters([Parameter(name, value=value)])
+    session.spin_until(future.done, timeout=20.0)
+    return future.result().results[0]
+
+
+def _in_process_with_change(config: Config, changed: Config, trials: int,
+                            first_changed: int) -> np.ndarray:
+    """max |e| per trial when the new parameters form the feed-forward of trial
+    ``first_changed`` onwards (the change applied at that trial boundary)."""
+    experiment = Experiment(config)
+    laws = build_law(config), build_law(changed)
+    feedforward, levels = laws[0].initial_feedforward(experiment.reference), None
+    errors = []
+    for k in range(1, trials + 1):
+        record = experiment.run_trial(feedforward, k, levels)
+        errors.append(record.max_abs_error)
+        update = laws[1 if k + 1 >= first_changed else 0].update(record)
+        feedforward, levels = update.feedforward, update.levels
+    return np.array(errors)
+
+
+def test_live_threshold_changes_next_trial_and_bad_values_are_rejected() -> None:
+    """SetParameters on the supervisor: bad values refused with their reason (the old value
+    stays); a new threshold changes the M levels from the next trial boundary on, and the whole
+    run still equals in-process with the change applied at that boundary."""
+    from exo_ilc_ros.graph import GraphSession
+
+    trials = 25
+    config = _short_config(max_trials=trials)
+    change = {"schedule.position.threshold_low": [0.0, 0.0, 0.0]}  # every sum > 0: level_mid
+    with GraphSession(config) as session:
+        session.spin_until(lambda: len(session.summaries) >= 2, timeout=90.0)
+        bad = _set(session, "schedule.position.threshold_low", [30.0, 2.0, 1.0])
+        assert not bad.successful
+        assert "thresholds must increase" in bad.reason
+        negative = _set(session, "schedule.velocity.level_mid", [-0.1, 0.005, 0.005])
+        assert not negative.successful and "must be >= 0" in negative.reason
+        short = _set(session, "schedule.position.level_low", [0.001, 0.001])
+        assert not short.successful and "one entry per joint" in short.reason
+        fixed = _set(session, "max_trials", 3)
+        assert not fixed.successful and "cannot change" in fixed.reason
+        assert _set(session, "schedule.position.threshold_low", [0.0, 0.0, 0.0]).successful
+        seen = len(session.summaries)
+        session.spin_until(lambda: session.finished, timeout=120.0, stall_timeout=60.0)
+    joints = config["joint_names"]
+    assert [s.trial for s in session.summaries] == list(range(1, trials + 1))
+    graph = np.array([s.row("max_abs_error", joints) for s in session.summaries])
+    unchanged = run_trials(config)
+    changed = config.replace(change)
+    first = None
+    for candidate in range(3, trials + 1):
+        expected = _in_process_with_change(config, changed, trials, candidate)
+        if np.max(np.abs(graph - expected)) <= 1e-9:
+            first = candidate
+            break
+    assert first is not None, "the graph equals in-process with the change at one boundary"
+    assert first <= seen + 3, (first, seen)
+    np.testing.assert_allclose(graph[:first - 1], unchanged.max_abs_errors[:first - 1],
+                               rtol=0.0, atol=1e-9)
+    before = session.summaries[first - 2].levels(joints)
+    after = session.summaries[first - 1].levels(joints)
+    old_after = unchanged.records[first - 1].levels
+    assert after is not None and old_after is not None
+    assert not np.array_equal(after[0], old_after[0]), "the new threshold changed M"
+    np.testing.assert_array_equal(after[0], [0.03, 0.05, 0.05])  # level_mid everywhere
+    if before is not None and first - 2 >= 1:
+        np.testing.assert_array_equal(before, unchanged.records[first - 2].levels)
+
+
+def test_ctrl_c_stops_every_process(tmp_path: Path) -> None:
+    """SIGINT to `exo-ilc run` mid-run: exit 130, every node process gone."""
+    claim = claim_domain_id()
+    env = dict(os.environ, ROS_DOMAIN_ID=str(claim.domain_id))
+    process = subprocess.Popen(
+        [sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--trials", "100",
+         "--domain-id", str(claim.domain_id)], stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env, text=True)
+    try:
+        deadline = time.monotonic() + 90.0
+        children: list[int] = []
+        while time.monotonic() < deadline and len(children) < 3:
+            children = _children(process.pid)
+            time.sleep(0.2)
+        assert len(children) >= 3, "the three nodes started"
+        time.sleep(8.0)  # let trials run (the nodes are up and discovering)
+        process.send_signal(signal.SIGINT)
+        _, err = process.communicate(timeout=30)
+        assert process.returncode == 130, err[-2000:]
+        gone_by = time.monotonic() + 15.0
+        while time.monotonic() < gone_by and any(_alive(pid) for pid in children):
+            time.sleep(0.1)
+        assert not any(_alive(pid) for pid in children)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+        claim.release()
+
+
+def _children(pid: int) -> list[int]:
+    path = Path(f"/proc/{pid}/task/{pid}/children")
+    return [int(x) for x in path.read_text().split()] if path.exists() else []
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().split()[2]
+    except (FileNotFoundError, IndexError):
+        return False
+    return state != "Z"
+
+
+def test_real_time_mode_runs_trials() -> None:
+    """Real-time plant (4x wall rate): trials complete, errors close to lock-step."""
+    from exo_ilc_ros.graph import run_graph
+
+    config = _short_config(max_trials=2, mode="real_time", real_time_rate=4.0)
+    result = run_graph(config, timeout=120.0, stall_timeout=60.0)
+    local = run_trials(config)
+    assert result.summary.max_abs_error.shape == (2, 3)
+    np.testing.assert_allclose(result.summary.max_abs_error, local.max_abs_errors, rtol=0.2)
+
+
+def test_colcon_build_gives_ros2_run_executables(tmp_path: Path) -> None:
+    """colcon builds the package: lib/exo_ilc_ros/<node> exist, ament_index finds the package,
+    and the built executables run a trial together."""
+    colcon = Path(sys.executable).parent / "colcon"
+    if not colcon.exists():
+        pytest.skip("colcon is not installed in this environment")
+    source = tmp_path / "src" / "exo_ilc_ros"
+    shutil.copytree(ROOT, source, ignore=shutil.ignore_patterns(
+        ".venv", ".git", "build", "install", "log", "bags", "*.egg-info", "__pycache__",
+        ".ros_log", ".pytest_cache", ".mypy_cache", ".ruff_cache", "test", "bench"))
+    build = subprocess.run(
+        [str(colcon), "build", "--base-paths", str(tmp_path / "src"), "--build-base",
+         str(tmp_path / "build"), "--install-base", str(tmp_path / "install")],
+        cwd=tmp_path, env=dict(os.environ, CI="true"), capture_output=True, text=True,
+        timeout=180, stdin=subprocess.DEVNULL, check=False)
+    assert build.returncode == 0, build.stdout[-2000:] + build.stderr[-2000:]
+    prefix = tmp_path / "install" / "exo_ilc_ros"
+    names = ("plant_simulator", "computed_torque_controller", "ilc_supervisor")
+    for name in names:
+        exe = prefix / "lib" / "exo_ilc_ros" / name
+        assert exe.is_file() and os.access(exe, os.X_OK), exe
+    site = next((prefix / "lib").glob("python3*/site-packages"))
+    env = dict(os.environ, AMENT_PREFIX_PATH=f"{prefix}:{sys.prefix}",
+               PYTHONPATH=str(site), EXO_ILC_CONFIG_DIR=str(prefix / "share/exo_ilc_ros/config"))
+    found = subprocess.run(
+        [sys.executable, "-c", "from ament_index_python.packages import get_package_prefix, "
+         "get_package_share_directory as s; print(get_package_prefix('exo_ilc_ros')); "
+         "print(s('exo_ilc_ros'))"], env=env, capture_output=True, text=True, timeout=60,
+        check=False)
+    assert found.returncode == 0, found.stderr
+    assert found.stdout.split() == [str(prefix), str(prefix / "share" / "exo_ilc_ros")]
+    assert (prefix / "share/exo_ilc_ros/config/exo_ilc.yaml").is_file()
+    assert (prefix / "share/exo_ilc_ros/launch/exo_ilc.launch.py").is_file()
+
+    # Each built executable starts, reads its parameters and refuses a bad one with the rule
+    # (exit 2, before any kernel is compiled: cheap) ...
+    for name in names:
+        bad = subprocess.run([str(prefix / "lib" / "exo_ilc_ros" / name), "--ros-args", "-p",
+                              "control.period:=-1.0"], env=env, capture_output=True, text=True,
+                             timeout=120, stdin=subprocess.DEVNULL, check=False)
+        assert bad.returncode == 2, bad.stdout + bad.stderr
+        assert "control.period: must be > 0" in bad.stdout + bad.stderr
+    # ... and one comes up with the installed config and stops cleanly on SIGINT.
+    params = prefix / "share/exo_ilc_ros/config/exo_ilc.yaml"
+    plant = subprocess.Popen([str(prefix / "lib/exo_ilc_ros/plant_simulator"), "--ros-args",
+                              "--params-file", str(params)], env=env, stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True)
+    try:
+        assert plant.stdout is not None
+        deadline = time.monotonic() + 150.0
+        lines: list[str] = []
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([plant.stdout], [], [], deadline - time.monotonic())
+            if not ready:
+                break
+            line = plant.stdout.readline()
+            if not line:
+                break
+            lines.append(line)
+            if "lock_step plant" in line:
+                break
+        assert any("lock_step plant" in line for line in lines), "".join(lines)
+        plant.send_signal(signal.SIGINT)
+        assert plant.wait(timeout=30) == 0
+    finally:
+        if plant.poll() is None:
+            plant.kill()
+            plant.wait()

@@ -1,0 +1,151 @@
+"""Safety in the loop: error envelope and safe hold, effort limits and saturation, watchdog."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from exo_ilc_ros.core import load_config, run_trials, simulate_trial
+from exo_ilc_ros.core.errors import SafetyError
+from exo_ilc_ros.core.experiment import Experiment
+from exo_ilc_ros.core.safety import (
+    SaturationReport,
+    Watchdog,
+    WatchdogState,
+    clamp_effort,
+    outside_envelope,
+    safe_hold_effort,
+    saturation_counts,
+)
+
+CONFIG = load_config()
+TIGHT = CONFIG.replace({"safety.error_envelope": [0.1, 0.1, 0.1]})
+
+
+def test_guarded_trial_is_bit_identical_to_the_plain_kernel() -> None:
+    e = Experiment(CONFIG, 0.15)
+    ref = e.reference
+    u_ff = np.zeros_like(ref.position)
+    plain = simulate_trial(u_ff, ref.position, ref.velocity, e.kp, e.kd, e.effort_limit,
+                           e.period, e.substeps, e.plant.kernel_args, e.nominal.kernel_args,
+                           int(e.dynamics))
+    record = e.run_trial(u_ff, 1)
+    assert record.aborted_at is None
+    for a, b in zip(plain, (record.position, record.velocity, record.control_input,
+                            record.effort), strict=True):
+        assert np.array_equal(a, b)
+    assert record.max_abs_error.max() < CONFIG["safety.error_envelope"][0]
+
+
+def test_envelope_aborts_at_the_first_sample_outside_and_holds() -> None:
+    e = Experiment(TIGHT)
+    record = e.run_trial(np.zeros_like(e.reference.position), 1)
+    k = record.aborted_at
+    assert k is not None and record.aborted
+    env = np.asarray(TIGHT["safety.error_envelope"])
+    assert np.all(np.abs(record.error[:k]) <= env)
+    assert np.any(np.abs(record.error[k]) > env)
+    q_hold = record.position[k]
+    for i in (k, k + 1, len(record.effort) - 1):  # the safe hold from the abort sample on
+        expect = safe_hold_effort(q_hold, record.position[i], record.velocity[i], e.kp, e.kd,
+                                  e.nominal.kernel_args, e.effort_limit)
+        assert np.array_equal(record.effort[i], expect)
+    # the arm comes to rest near the abort pose (gravity compensated, PD-damped)
+    assert np.all(np.abs(record.velocity[-1]) < 0.05)
+    assert np.all(np.abs(record.position[-1] - q_hold) < 0.2)
+    # max |e| of an aborted trial covers the tracking part only
+    assert np.array_equal(record.max_abs_error, np.max(np.abs(record.error[:k + 1]), axis=0))
+
+
+def test_aborted_trial_is_not_learned_from() -> None:
+    result = run_trials(TIGHT, trials=3)
+    assert result.aborted == [1, 2, 3]
+    first, second = result.records[0], result.records[1]
+    assert np.array_equal(first.feedforward, second.feedforward)
+    assert second.levels is None
+    assert np.array_equal(result.records[2].position, first.position)
+
+
+def test_shipped_envelope_does_not_touch_the_papers_first_trials() -> None:
+    for delta in (0.05, 0.10, 0.15):
+        result = run_trials(CONFIG, delta, trials=3)
+        assert result.aborted == []
+
+
+@pytest.mark.slow
+def test_shipped_envelope_does_not_abort_the_papers_experiment() -> None:
+    result = run_trials(CONFIG, 0.05)  # the shipped 150 trials: peak 0.54 rad (elbow)
+    assert result.aborted == []
+    assert result.max_abs_errors.max() < CONFIG["safety.error_envelope"][2]
+
+
+def test_nan_feedforward_is_refused() -> None:
+    e = Experiment(CONFIG)
+    u_ff = np.zeros_like(e.reference.position)
+    u_ff[10, 1] = math.nan
+    with pytest.raises(SafetyError, match="non-finite"):
+        e.run_trial(u_ff, 4)
+
+
+def test_outside_envelope() -> None:
+    env = np.array([0.3, 0.3, 0.3])
+    assert not outside_envelope(np.array([0.3, -0.3, 0.0]), env)
+    assert outside_envelope(np.array([0.0, -0.31, 0.0]), env)
+    assert outside_envelope(np.array([math.nan, 0.0, 0.0]), env)
+    assert outside_envelope(np.array([0.0, math.inf, 0.0]), env)
+
+
+def test_effort_never_exceeds_the_limit_even_for_a_diverging_feedforward() -> None:
+    e = Experiment(CONFIG)
+    u_ff = np.full_like(e.reference.position, 1e6)
+    record = e.run_trial(u_ff, 1)
+    assert np.all(np.abs(record.effort) <= e.effort_limit)
+    assert saturation_counts(record.effort, e.effort_limit).min() >= 1
+
+
+def test_plant_clamp_and_saturation_report() -> None:
+    limit = np.array([40.0, 40.0, 20.0])
+    clipped, mask = clamp_effort(np.array([50.0, -10.0, -20.0]), limit)
+    assert clipped.tolist() == [40.0, -10.0, -20.0]
+    assert mask.tolist() == [True, False, True]
+    report = SaturationReport(limit)
+    report.apply(np.array([50.0, 0.0, 0.0]))
+    report.apply(np.array([0.0, 0.0, 0.0]))
+    assert report.samples == 2 and report.saturated.tolist() == [1, 0, 0]
+    assert ("saturated/a", "1") in report.as_values(["a", "b", "c"])
+
+
+def test_watchdog_trips_after_the_timeout_and_latches() -> None:
+    period = 10_000_000
+    dog = Watchdog(3, period)
+    assert dog.state is WatchdogState.IDLE
+    assert not dog.feed(0) and not dog.check(10**12)  # idle: nothing expected
+    dog.arm(0)
+    for i in range(1, 20):  # on time
+        assert dog.feed(i * period)
+        assert not dog.check(i * period + period // 2)
+    last = 19 * period
+    assert not dog.check(last + 3 * period)  # exactly the timeout: still fine
+    assert dog.check(last + 3 * period + 1)  # just over: trips, reported once
+    assert dog.tripped and not dog.check(last + 10 * period)
+    assert not dog.feed(last + 11 * period)  # late input ignored, stays tripped
+    assert dog.tripped and dog.trips == 1 and dog.late == 1
+    dog.arm(last + 20 * period)  # next trial
+    assert dog.state is WatchdogState.RUNNING and dog.feed(last + 21 * period)
+    dog.disarm()
+    assert dog.state is WatchdogState.IDLE and not dog.check(10**15)
+    assert ("trips", "1") in dog.as_values()
+
+
+def test_watchdog_late_feed_trips_it() -> None:
+    dog = Watchdog(2, 100)
+    dog.arm(0)
+    assert not dog.feed(201)  # a gap longer than the timeout is a trip even if input resumes
+    assert dog.tripped
+
+
+def test_watchdog_rejects_nonsense() -> None:
+    with pytest.raises(ValueError, match="periods"):
+        Watchdog(0, 10)

@@ -65,6 +65,38 @@ def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSu
                       np.array([s.row("max_abs_effort", joints) for s in summaries]))
 
 
+def stored_summaries(config: Config) -> list[TrialSummary]:
+    """The trials the store of ``config`` (``store.directory``, this run's learning key) holds,
+    as trial summaries: what a resumed run restored rather than ran (empty without a store)."""
+    if not config["store.directory"]:
+        return []
+    from .core.experiment import build_reference
+    from .core.store import RunStore
+
+    store = RunStore(config["store.directory"], config, build_reference(config))
+    joints = config["joint_names"]
+    out = []
+    for entry in store.summaries:
+        values = {"trial": str(entry["trial"]),
+                  "mass_uncertainty": repr(float(config["mass_uncertainty"])),
+                  "law": str(entry["live"].get("law", config["law"]))}
+        for key in ("max_abs_error", "max_abs_feedforward", "max_abs_effort"):
+            values.update({f"{key}/{name}": repr(float(x))
+                           for name, x in zip(joints, entry[key], strict=True)})
+        if entry.get("aborted_at") is not None:
+            values["aborted_at"] = str(entry["aborted_at"])
+        out.append(TrialSummary(int(entry["trial"]), values))
+    return out
+
+
+def merge_with_store(summaries: Sequence[TrialSummary], config: Config) -> list[TrialSummary]:
+    """Trials 1..K: the live summaries, completed with the store's for trials restored on
+    resume (or whose summary a crash swallowed after they were saved)."""
+    by_trial = {s.trial: s for s in stored_summaries(config)}
+    by_trial.update({s.trial: s for s in summaries})
+    return [by_trial[k] for k in sorted(by_trial)]
+
+
 class GraphSession:
     """The graph's processes plus a monitor node here; a context manager.
 
@@ -205,4 +237,5 @@ def run_graph(config: Config, domain_id: int | None = None, extra: Sequence[Node
         wall = None
         if session.started_at is not None and session.finished_at is not None:
             wall = session.finished_at - session.started_at
-        return GraphRun(summaries_to_run(session.summaries, config), session.summaries, wall)
+        summaries = merge_with_store(session.summaries, config)
+        return GraphRun(summaries_to_run(summaries, config), summaries, wall)

@@ -32,7 +32,9 @@ Every array is in the joint order of the ``joint_names`` parameter; times are si
     ``computed_torque_controller/feedforward``, message ``loaded``, values ``trial`` = k and
     ``t0_ns``; its health status ``computed_torque_controller/health`` carries ``steps`` and the
     receive-to-publish latency percentiles ``latency_p50_us``, ``latency_p99_us`` of the last
-    second.
+    second. Every node publishes ``<node>/health`` once a second: level OK / WARN / ERROR,
+    message = the reasons (inputs rejected per cause, effort saturation, watchdog trips,
+    trials aborted by the error envelope, store failures), values = the counts.
 
 QoS: /joint_states and /effort_controller/commands reliable, volatile, depth 1000;
 /ilc/feedforward reliable, transient local, depth 1; /ilc/trial_events and /ilc/trial_summary
@@ -87,4 +89,12 @@ RECORDER_STATUS = "bag_recorder/status"
 """bag_recorder's status on /diagnostics (every 0.2 s): message ``ready`` once it is subscribed
 to a publisher of every topic it records, else ``waiting``."""
 CONTROLLER_HEALTH_STATUS = "computed_torque_controller/health"
+CONTROLLER_TRIAL_STATUS = "computed_torque_controller/trial"
+"""Sent by the controller on /diagnostics after the last sample of each trial: message
+``done``, values ``trial``, ``t0_ns``, ``aborted_at`` (first sample outside the error envelope,
+-1: none) and ``watchdog_trips`` (in this trial). The supervisor ends a trial only with it: the
+record is rebuilt with the safe hold from ``aborted_at``; a trial with a watchdog trip is run
+again (the commands it got are not the ones the record would assume)."""
+PLANT_HEALTH_STATUS = "plant_simulator/health"
+SUPERVISOR_HEALTH_STATUS = "ilc_supervisor/health"
 T0_PREFIX = "t0_ns="

@@ -324,3 +324,23 @@ def test_layouts_name_every_joint_and_known_topics(config: Config) -> None:
         assert any(name in p for p in paths)
     for path in paths:
         assert path.split(".")[0] in topics.TYPES
+
+
+def test_joint_states_decoded_row_wise_equal_rosbags() -> None:
+    """The fast decoder against rosbags' own, with a message of another layout mixed in."""
+    from exo_ilc_ros.bag import messages
+    from exo_ilc_ros.bag.cdr import joint_states
+
+    names = ["a", "bb", "ccc"]
+    raws = [messages.joint_state(10**9 * k + 7, names, [k, 2.0, 3.0], [0.5, k, -1.0],
+                                 [1.0, 2.0, k]) for k in range(5)]
+    raws.insert(2, messages.joint_state(123, names, [9.0, 9.0, 9.0], [8.0, 8.0, 8.0], []))
+    decoded = joint_states(raws, messages.typestore().deserialize_cdr)
+    assert decoded.names == names
+    for i, raw in enumerate(raws):
+        msg = messages.typestore().deserialize_cdr(raw, topics.TYPES[topics.JOINT_STATES])
+        assert decoded.stamps[i] == messages.time_ns(msg.header.stamp)
+        np.testing.assert_array_equal(decoded.position[i], msg.position)
+        np.testing.assert_array_equal(decoded.velocity[i], msg.velocity)
+    assert np.isnan(decoded.effort[2]).all()
+    np.testing.assert_array_equal(decoded.effort[3], [1.0, 2.0, 2.0])

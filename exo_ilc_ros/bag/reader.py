@@ -285,22 +285,50 @@ def _trial_number(values: dict[str, str]) -> int | None:
 
 
 def _assign_commands(windows: Sequence[tuple[int, int, TrialData]], cmd_log: np.ndarray,
-                     commands: Sequence[bytes], notes: list[str]) -> None:
+                     commands: Sequence[bytes], decode: Callable[[bytes, str], Any],
+                     notes: list[str]) -> None:
     """The controller answers every sample once, in order: trial k's commands are those
     logged from its start (event, else first sample) to the next trial's start, row i the i-th.
-    (Matching each command to the last sample received before it breaks when DDS delivers a
-    command to the recorder before the sample that caused it.)"""
+    Messages of different topics may be logged slightly out of order, so when the count is off
+    the window is shifted to where command i equals the effort the plant reports at sample
+    i + 1 (it applied exactly that)."""
     if not commands:
         return
+    msgtype = topics.TYPES[topics.EFFORT_COMMANDS]
     bounds = sorted((log, k, trial) for k, log, trial in windows if log >= 0)
     for n, (log, k, trial) in enumerate(bounds):
         stop = bounds[n + 1][0] if n + 1 < len(bounds) else np.iinfo(np.int64).max
-        picked = np.flatnonzero((cmd_log >= log) & (cmd_log < stop))
-        if len(picked) != trial.position.shape[0]:
-            notes.append(f"trial {k}: {len(picked)} effort commands for "
-                         f"{trial.position.shape[0]} samples; commands not shown")
+        picked: np.ndarray | None = np.flatnonzero((cmd_log >= log) & (cmd_log < stop))
+        samples = trial.position.shape[0]
+        if picked is not None and len(picked) != samples:
+            picked = _matching_window(picked, samples, trial.effort, commands, decode, msgtype)
+        if picked is None or len(picked) != samples:
+            notes.append(f"trial {k}: effort commands do not line up with the {samples} "
+                         "samples; commands not shown")
             continue
         trial.command_messages = [commands[int(c)] for c in picked]
+
+
+def _matching_window(picked: np.ndarray, samples: int, applied: np.ndarray,
+                     commands: Sequence[bytes], decode: Callable[[bytes, str], Any],
+                     msgtype: str) -> np.ndarray | None:
+    """``samples`` consecutive commands near ``picked`` whose first N equal the efforts the
+    plant applied (``applied[1:]``), or None."""
+    if not len(picked):
+        return None
+    slack = 3 + abs(len(picked) - samples)
+    first = max(0, int(picked[0]) - slack)
+    last = min(len(commands), int(picked[-1]) + 1 + slack)
+    data = [np.asarray(decode(commands[c], msgtype).data, dtype=float)
+            for c in range(first, last)]
+    target = applied[1:]
+    known = ~np.isnan(target).any(axis=1)
+    for offset in range(0, len(data) - samples + 1):
+        rows = data[offset:offset + samples - 1]
+        if all(len(r) == target.shape[1] for r in rows) and \
+                np.array_equal(np.array(rows)[known], target[known]):
+            return np.arange(first + offset, first + offset + samples)
+    return None
 
 
 def read_bag(path: Path | str) -> BagRun:
@@ -431,7 +459,7 @@ def read_bag(path: Path | str) -> BagRun:
                               feedforward_message=profiles.get(k), decode=decode)
         windows.append((k, start_logs.get(k, int(js_log[inside].min()) if inside.size
                                          else -1), trials[k]))
-    _assign_commands(windows, cmd_log, cmd.msgs, notes)
+    _assign_commands(windows, cmd_log, cmd.msgs, decode, notes)
     for k in sorted(trials):
         t = trials[k]
         if t.ended and t.missing_samples:

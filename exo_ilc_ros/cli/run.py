@@ -3,11 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import os
+import shlex
 import sys
+import time
+from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
+from ..core.config import Config
+from ..core.errors import ConfigError
 from ..report import (
     RunSummary,
     format_iterations,
@@ -37,37 +43,108 @@ def register(sub: Any) -> None:
                         "<bag-dir>/<run-name>/, rosbag2 MCAP)")
     parser.add_argument("--bag-dir", default="bags", metavar="DIR",
                         help="where the bags go (default: bags)")
+    parser.add_argument("--store", metavar="DIR",
+                        help="save every completed trial and the feed-forward it led to under "
+                        "DIR (default: a new .exo-ilc/runs/<date-time>-<pid>/store per run)")
+    parser.add_argument("--resume", action="store_true",
+                        help="with --store DIR: continue after the last trial stored there "
+                        "(after a crash or a killed node), bit-identical to an uninterrupted "
+                        "run")
+    parser.add_argument("--no-store", action="store_true", help="do not save the trials")
     parser.set_defaults(func=run)
+
+
+def _store_root(args: argparse.Namespace) -> Path | None:
+    """The store root of this invocation (module docstring of core.store)."""
+    if args.no_store:
+        if args.resume or args.store:
+            raise ConfigError("--no-store", "cannot be combined with --store or --resume")
+        return None
+    if args.store:
+        return Path(args.store).resolve()
+    if args.resume:
+        raise ConfigError("--resume", "needs --store DIR (the store printed by the run to "
+                          "continue)")
+    stamp = f"{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
+    return (Path(".exo-ilc") / "runs" / stamp / "store").resolve()
+
+
+def _check_store(config: Config, resume: bool) -> int:
+    """Before any node starts: trials already stored for this run (an error without
+    ``resume``)."""
+    from ..core.experiment import build_reference
+    from ..core.store import RunStore
+
+    store = RunStore(config["store.directory"], config, build_reference(config))
+    if store.completed and not resume:
+        raise ConfigError("--store", f"{store.directory} already holds {store.completed} "
+                          "trials of this run; add --resume to continue it or use another "
+                          "store")
+    return store.completed
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the graph once per mass uncertainty and report."""
-    from ..bag.recording import Recording
-    from ..graph import TrialSummary, run_graph
 
-    config = config_from_args(args)
+    from ..launcher import GraphError
+
+    config = config_from_args(args)  # an invalid YAML fails here, before any node starts
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     trials = config["max_trials"]
+    root = _store_root(args)
     runs: list[RunSummary] = []
     for delta in deltas:
         run_config = config.replace({"mass_uncertainty": delta})
-        with tqdm(total=trials, desc=f"graph {config['law']} delta={delta:g}", unit="trial",
-                  file=sys.stderr, disable=None) as bar:
-            def progress(summary: TrialSummary, bar: Any = bar) -> None:
-                bar.update(1)
-                errors = summary.row("max_abs_error", config["joint_names"])
-                bar.set_postfix_str("max|e| " + " ".join(f"{x:.1e}" for x in errors))
-            if args.no_bag:
-                result = run_graph(run_config, args.domain_id, on_summary=progress,
-                               on_start=lambda s: print(f"graph on ROS_DOMAIN_ID={s.domain_id}",
-                                                        file=sys.stderr, flush=True))
-            else:
-                run_config = run_config.replace({"wait_for_recorder": True})
-                with Recording(run_config, args.bag_dir) as recording:
-                    result = run_graph(run_config, args.domain_id, extra=[recording.spec],
-                                       on_summary=progress)
-                bar.write(f"bag: {recording.path}", file=sys.stderr)
-        runs.append(result.summary)
+        if root is not None:
+            run_config = run_config.replace({"store.directory": str(root),
+                                             "store.resume": bool(args.resume)})
+            done = _check_store(run_config, args.resume)
+            print(f"store: {root}" + (f" (resuming after trial {done})" if done else ""),
+                  file=sys.stderr, flush=True)
+        try:
+            runs.append(_run_one(args, run_config, delta, trials))
+        except GraphError as exc:
+            print(f"exo-ilc run: {exc}", file=sys.stderr)
+            if root is not None:
+                again = [a for a in sys.argv[1:] if a not in ("--resume",)]
+                if "--store" not in again:
+                    again += ["--store", str(root)]
+                print(f"exo-ilc run: the graph was stopped; every completed trial is saved in "
+                      f"{root}. Continue with:\n  exo-ilc {shlex.join(again)} --resume",
+                      file=sys.stderr)
+            return 3
+    _report(args, config, runs)
+    return 0
+
+
+def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
+             trials: int) -> RunSummary:
+    """One graph run (one mass uncertainty)."""
+    from ..bag.recording import Recording
+    from ..graph import TrialSummary, run_graph
+
+    config = run_config
+    with tqdm(total=trials, desc=f"graph {config['law']} delta={delta:g}", unit="trial",
+              file=sys.stderr, disable=None) as bar:
+        def progress(summary: TrialSummary, bar: Any = bar) -> None:
+            bar.update(1)
+            errors = summary.row("max_abs_error", config["joint_names"])
+            bar.set_postfix_str("max|e| " + " ".join(f"{x:.1e}" for x in errors))
+        if args.no_bag:
+            result = run_graph(run_config, args.domain_id, on_summary=progress,
+                           on_start=lambda s: print(f"graph on ROS_DOMAIN_ID={s.domain_id}",
+                                                    file=sys.stderr, flush=True))
+        else:
+            run_config = run_config.replace({"wait_for_recorder": True})
+            with Recording(run_config, args.bag_dir) as recording:
+                result = run_graph(run_config, args.domain_id, extra=[recording.spec],
+                                   on_summary=progress)
+            bar.write(f"bag: {recording.path}", file=sys.stderr)
+    return result.summary
+
+
+def _report(args: argparse.Namespace, config: Config, runs: list[RunSummary]) -> None:
+    """The same report as ``exo-ilc simulate``."""
     names = config["joint_names"]
     if not args.quiet:  # the same report as `exo-ilc simulate`
         print(format_trial_table(runs, names))
@@ -82,4 +159,3 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         write_json(args.json, config.values, runs)
         print(f"wrote {args.json}")
-    return 0

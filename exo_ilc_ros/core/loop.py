@@ -15,6 +15,7 @@ from .dynamics import workspace
 from .experiment import Experiment
 from .integrator import _computed_torque_into, _feedback_into, _rk4_period
 from .laws import TrialRecord
+from .safety import _outside_envelope, _safe_hold_into
 from .trajectory import SampledReference
 
 
@@ -117,14 +118,79 @@ class ControlStep:
 def record_from_samples(experiment: Experiment, trial: int, feedforward: np.ndarray,
                         position: np.ndarray, velocity: np.ndarray,
                         levels: np.ndarray | None = None,
-                        reference: SampledReference | None = None) -> TrialRecord:
+                        reference: SampledReference | None = None,
+                        aborted_at: int | None = None) -> TrialRecord:
     """The :class:`TrialRecord` of a trial run elsewhere (the graph), from its sampled states:
-    u and effort are formed again exactly as the controller did."""
+    u and effort are formed again exactly as the controller did (the safe hold from
+    ``aborted_at`` on, for a trial the error envelope aborted)."""
     ref = reference or experiment.reference
     u_ff = np.ascontiguousarray(feedforward, dtype=float)
     q = np.ascontiguousarray(position, dtype=float)
     qd = np.ascontiguousarray(velocity, dtype=float)
-    u, effort = control_inputs(u_ff, ref.position, ref.velocity, q, qd, experiment.kp,
-                               experiment.kd, experiment.nominal.kernel_args,
-                               experiment.effort_limit)
-    return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels)
+    if aborted_at is None:
+        u, effort = control_inputs(u_ff, ref.position, ref.velocity, q, qd, experiment.kp,
+                                   experiment.kd, experiment.nominal.kernel_args,
+                                   experiment.effort_limit)
+    else:
+        u, effort = control_inputs_guarded(u_ff, ref.position, ref.velocity, q, qd,
+                                           experiment.kp, experiment.kd,
+                                           experiment.nominal.kernel_args,
+                                           experiment.effort_limit, int(aborted_at))
+    return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels, aborted_at)
+
+
+@njit(cache=True, error_model="numpy")
+def abort_index(q_ref: np.ndarray, q: np.ndarray, envelope: np.ndarray) -> int:
+    """The first sample whose |e_j| leaves the envelope (NaN counts as outside), or -1:
+    the test :func:`safety.simulate_trial_guarded` makes at every sample."""
+    for i in range(q.shape[0]):
+        if _outside_envelope(q_ref[i], q[i], envelope):
+            return i
+    return -1
+
+
+@njit(cache=True, error_model="numpy")
+def control_inputs_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray,
+                           q: np.ndarray, qd: np.ndarray, kp: np.ndarray, kd: np.ndarray,
+                           nominal: tuple, effort_limit: np.ndarray, aborted_at: int
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`control_inputs` of a trial aborted at sample ``aborted_at`` (-1: not aborted):
+    from that sample on the safe hold around q[aborted_at], as the controller commanded it."""
+    n_samples, n = q.shape
+    u = np.empty((n_samples, n))
+    effort = np.empty((n_samples, n))
+    ws = workspace(n)
+    for i in range(n_samples):
+        if aborted_at < 0 or i < aborted_at:
+            _control_into(u_ff[i], q_ref[i], qd_ref[i], q[i], qd[i], kp, kd, nominal,
+                          effort_limit, ws, u[i], effort[i])
+        else:
+            _safe_hold_into(q[aborted_at], q[i], qd[i], kp, kd, nominal, effort_limit, ws,
+                            u[i], effort[i])
+    return u, effort
+
+
+class GuardedControlStep(ControlStep):
+    """:class:`ControlStep` with the error envelope and the safe hold, one sample at a time,
+    the arithmetic of :func:`safety.simulate_trial_guarded`: at the first sample outside the
+    envelope (:meth:`outside`) the caller latches the hold pose (:meth:`hold_at`) and commands
+    :meth:`hold` from then on."""
+
+    def __init__(self, experiment: Experiment) -> None:
+        super().__init__(experiment)
+        self.envelope = np.asarray(experiment.error_envelope, dtype=float).copy()
+        self.q_hold = np.empty(experiment.reference.position.shape[1])
+
+    def outside(self, q_ref: np.ndarray, q: np.ndarray) -> bool:
+        """True if any |q_ref_j - q_j| exceeds the envelope (or is not finite)."""
+        return bool(_outside_envelope(q_ref, q, self.envelope))
+
+    def hold_at(self, q: np.ndarray) -> None:
+        """Latch the pose the safe hold keeps."""
+        self.q_hold[:] = q
+
+    def hold(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """The safe-hold effort at (q, qdot) around the latched pose (clamped)."""
+        _safe_hold_into(self.q_hold, q, qd, self._kp, self._kd, self._nominal, self._limit,
+                        self._ws, self.control_input, self.effort)
+        return self.effort

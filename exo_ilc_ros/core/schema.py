@@ -151,6 +151,12 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("wait_for_recorder", SUPERVISOR, Kind.BOOL,
               "before trial 1, wait until bag_recorder reports it is subscribed to every topic "
               "(exo-ilc run sets it when it records a bag)"),
+    Parameter("store.directory", SUPERVISOR, Kind.STRING,
+              "root of the store of learned data (every accepted trial and the feed-forward it "
+              "led to, core/store.py); empty: no store (exo-ilc run sets it)"),
+    Parameter("store.resume", SUPERVISOR, Kind.BOOL,
+              "continue after the last trial in store.directory (false: a store that already "
+              "holds trials of this run is an error)"),
     Parameter("stop_when_settled", SUPERVISOR, Kind.INTEGER,
               "stop once every joint has stayed within the bound this many trials (0: never)",
               minimum=0.0, live=True),

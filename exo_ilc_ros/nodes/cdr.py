@@ -150,3 +150,48 @@ def _read_float64_array(raw: bytes) -> np.ndarray:
     offset = _align(offset, 4) + 4  # data_offset
     data, _ = _doubles(raw, offset)
     return data
+
+
+def names_segment(raw: bytes) -> bytes:
+    """The bytes of a serialised JointState's ``name`` sequence (and the frame_id before it):
+    equal segments mean equal names, so a node checks names once per layout."""
+    try:
+        _check_header(raw)
+        offset = _skip_string(raw, 8)
+        start = offset
+        (count,) = _U32.unpack_from(raw, 4 + _align(offset, 4))
+        offset = _align(offset, 4) + 4
+        for _ in range(count):
+            offset = _skip_string(raw, offset)
+    except struct.error as exc:
+        raise CdrError(f"truncated JointState: {exc}") from None
+    return bytes(raw[4 + start:4 + offset])
+
+
+def read_joint_state_full(raw: bytes
+                          ) -> tuple[int, list[str], np.ndarray, np.ndarray, np.ndarray]:
+    """(stamp in ns, names, position, velocity, effort) of a serialised sensor_msgs/JointState
+    (the slow path for messages of another layout than the plant's)."""
+    try:
+        _check_header(raw)
+        sec, nanosec = _STAMP.unpack_from(raw, 4)
+        offset = _skip_string(raw, 8)
+        (count,) = _U32.unpack_from(raw, 4 + _align(offset, 4))
+        offset = _align(offset, 4) + 4
+        if count > len(raw):
+            raise CdrError(f"{count} names in a message of {len(raw)} bytes")
+        names = []
+        for _ in range(count):
+            start = _align(offset, 4)
+            (length,) = _U32.unpack_from(raw, 4 + start)
+            text = bytes(raw[4 + start + 4:4 + start + 4 + length])
+            if len(text) != length:
+                raise CdrError("name runs past the end of the message")
+            names.append(text.rstrip(b"\x00").decode("utf-8", errors="replace"))
+            offset = start + 4 + length
+        position, offset = _doubles(raw, offset)
+        velocity, offset = _doubles(raw, offset)
+        effort, offset = _doubles(raw, offset)
+    except struct.error as exc:
+        raise CdrError(f"truncated JointState: {exc}") from None
+    return sec * 1_000_000_000 + nanosec, names, position, velocity, effort

@@ -141,7 +141,8 @@ def stamp_ns(stamp: Any) -> int:
 def spin(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
     """Init, build the node, spin it with the EventsExecutor until shutdown or Ctrl-C.
 
-    Returns the exit code: 0, or 2 for a configuration error.
+    Returns the exit code: 0, 2 for a configuration error, or the node's ``exit_code`` once it
+    sets one (a fatal error it already logged and reported on /diagnostics).
     """
     rclpy.init(args=args)
     node: Node | None = None
@@ -152,6 +153,10 @@ def spin(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
         executor.add_node(node)
         while rclpy.ok():
             executor.spin_once(timeout_sec=0.1)
+            stop = getattr(node, "exit_code", None)  # a node that must stop (fatal error)
+            if stop is not None:
+                code = int(stop)
+                break
     except ConfigError as exc:
         print(f"error: {exc}", flush=True)
         code = 2

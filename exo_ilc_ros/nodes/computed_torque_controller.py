@@ -4,6 +4,15 @@ On each /joint_states sample of the current trial it forms eq (11) with the feed
 reference of /ilc/feedforward, then eq (16) with the nominal model, clamps to the effort limits
 and publishes on /effort_controller/commands (the ros2_control JointGroupEffortController
 convention). Acknowledges every feed-forward it loaded on /diagnostics.
+
+Safety (core.safety, the arithmetic of ``simulate_trial_guarded``): at the first sample whose
+|e_j| leaves ``safety.error_envelope`` the trial is aborted at once and the safe hold (gravity
+compensation and PD around the pose measured there) is commanded for the rest of it; the
+watchdog (``safety.watchdog_periods`` control periods of wall time without /joint_states during
+a trial) commands the safe hold around the last pose received. Bad /joint_states or
+feed-forward messages are rejected (core.validation), logged once per cause and counted; no
+effort is ever computed from them. After each trial's last sample the controller reports
+``done`` (abort index, watchdog trips) on /diagnostics; its health once a second.
 """
 
 from __future__ import annotations
@@ -11,7 +20,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -20,8 +29,10 @@ from trajectory_msgs.msg import JointTrajectory
 from .. import topics
 from ..core import schema
 from ..core.experiment import Experiment
-from ..core.loop import ControlStep, period_ns, sample_index
-from .cdr import CdrError, float64_array, read_joint_state
+from ..core.loop import GuardedControlStep, period_ns, sample_index
+from ..core.safety import Watchdog
+from ..core.validation import Cause, Rejection, validate_feedforward
+from .cdr import float64_array
 from .common import (
     DIAGNOSTICS_QOS,
     LATCHED_QOS,
@@ -33,6 +44,7 @@ from .common import (
     status,
     wall_clock,
 )
+from .guard import Health, JointStateGate, Rejections, rejections_check
 
 NAME = schema.CONTROLLER
 LATENCY_WINDOW = 100_000
@@ -47,11 +59,21 @@ class ComputedTorqueController(Node):
         config = self.params.config
         experiment = Experiment(config)
         self.joint_names = config["joint_names"]
-        self.step = ControlStep(experiment)
+        self.step = GuardedControlStep(experiment)
         self.step_ns = period_ns(experiment.period)
+        self.rejections = Rejections(self)
+        self.gate = JointStateGate(self.joint_names, self.rejections)
+        self.watchdog = Watchdog(config["safety.watchdog_periods"], self.step_ns)
+        self.aborted_at = -1
+        """First sample of the current trial outside the error envelope (-1: none)."""
+        self.trial_trips = 0
+        self.aborted_trials: list[int] = []
+        self.tripped_trials: list[int] = []
+        self.holding = False
         self.trial = 0
         self.t0_ns = -1
         self.samples = 0
+        self.step_count = experiment.reference.samples
         self.feedforward = np.zeros((0, config.joints))
         self.q_ref = self.feedforward
         self.qd_ref = self.feedforward
@@ -73,27 +95,46 @@ class ComputedTorqueController(Node):
                                  LATCHED_QOS)
         self.create_timer(0.05, self.on_ack_timer, clock=wall_clock())
         self.create_timer(1.0, self.on_health_timer, clock=wall_clock())
+        self.create_timer(max(self.watchdog.timeout_ns / 2e9, 0.002), self.on_watchdog_timer,
+                          clock=wall_clock())
+        self.health = Health(self, NAME)
+        self.health.checks += [self._loop_check, rejections_check(self.rejections, "inputs")]
         ref = experiment.reference
         self.step(ref.acceleration[0], ref.position[0], ref.velocity[0], ref.position[0],
                   ref.velocity[0])  # compile the kernels before the first trial
 
     def on_feedforward(self, msg: JointTrajectory) -> None:
-        """Load the next trial's reference and feed-forward profile."""
-        if list(msg.joint_names) != self.joint_names:
-            self.get_logger().error(f"feed-forward for joints {list(msg.joint_names)} ignored; "
-                                    f"this controller drives {self.joint_names}")
-            return
+        """Load the next trial's reference and feed-forward profile (validated first)."""
         frame = msg.header.frame_id
-        if not frame.startswith(topics.FEEDFORWARD_FRAME_PREFIX):
-            self.get_logger().error(f"feed-forward with frame_id {frame!r} ignored")
+        if not frame.startswith(topics.FEEDFORWARD_FRAME_PREFIX) or \
+                not frame[len(topics.FEEDFORWARD_FRAME_PREFIX):].isdigit():
+            self.rejections.reject(Rejection(Cause.BAD_STAMP, f"{topics.FEEDFORWARD}: frame_id "
+                                             f"{frame!r} is not trial:<k>"))
             return
         points = msg.points
-        self.feedforward = np.array([p.accelerations for p in points], dtype=float)
-        self.q_ref = np.array([p.positions for p in points], dtype=float)
-        self.qd_ref = np.array([p.velocities for p in points], dtype=float)
-        self.samples = len(points)
+        samples = self.step_count
+        profile = validate_feedforward(
+            list(msg.joint_names),
+            [int(p.time_from_start.sec) * 1_000_000_000 + int(p.time_from_start.nanosec)
+             for p in points],
+            [p.positions for p in points], [p.velocities for p in points],
+            [p.accelerations for p in points], self.joint_names, samples, self.step_ns)
+        if isinstance(profile, Rejection):
+            self.rejections.reject(profile)
+            return
+        self.feedforward = profile.feedforward
+        self.q_ref = profile.position
+        self.qd_ref = profile.velocity
+        self.samples = samples
         self.trial = int(frame[len(topics.FEEDFORWARD_FRAME_PREFIX):])
         self.t0_ns = stamp_ns(msg.header.stamp)
+        self.aborted_at = -1
+        self.trial_trips = 0
+        self.holding = False
+        self.watchdog.disarm()
+        self.gate.restart()
+        if self.params.pending is not self.params.config:  # live envelope: trial boundary
+            self.step.envelope[:] = self.params.pending["safety.error_envelope"]
         self.ack_due = True
         self.on_ack_timer()
         if self.pending is not None:
@@ -111,29 +152,89 @@ class ComputedTorqueController(Node):
         self.diagnostics_pub.publish(diagnostic_array(self, [ack], self.t0_ns))
 
     def on_joint_state(self, raw: bytes) -> None:
-        """Effort for this sample of the trial."""
+        """Effort for this sample of the trial (the safe hold once aborted or tripped)."""
         received = time.perf_counter_ns()
-        try:
-            stamp, q, qd = read_joint_state(raw)
-        except CdrError as exc:
-            self.get_logger().error(f"bad joint state ignored: {exc}", throttle_duration_sec=5.0)
+        sample = self.gate(raw)
+        if sample is None:
             return
+        stamp, q, qd = sample
         i = sample_index(stamp, self.t0_ns, self.step_ns, self.samples)
         if i is None:
             if self.t0_ns < 0 or stamp > self.t0_ns:
                 self.pending = raw  # its feed-forward has not arrived yet
-            return
-        if q.shape[0] != self.q.shape[0] or qd.shape[0] != q.shape[0]:
-            self.get_logger().error("joint state of the wrong size ignored",
-                                    throttle_duration_sec=5.0)
+                self.gate.restart()
             return
         self.q[:] = q
         self.qd[:] = qd
-        effort = self.step(self.feedforward[i], self.q_ref[i], self.qd_ref[i], self.q, self.qd)
+        if i <= 1:  # armed from the second sample on: the first round trip of a new
+            self.watchdog.arm(time.monotonic_ns())  # DDS link may be slow (not a fault)
+        else:
+            self.watchdog.feed(time.monotonic_ns())
+            if self.watchdog.tripped and not self.holding:
+                self._trip()
+        if self.aborted_at < 0 and not self.holding and \
+                self.step.outside(self.q_ref[i], self.q):
+            self.aborted_at = i
+            self.step.hold_at(self.q)
+            self.aborted_trials.append(self.trial)
+            self.get_logger().error(
+                f"trial {self.trial}: |e| left the error envelope at sample {i} "
+                f"(|e| = {np.abs(self.q_ref[i] - self.q).tolist()}, envelope "
+                f"{self.step.envelope.tolist()}); trial aborted, safe hold commanded")
+            self._publish_health()
+        if self.aborted_at >= 0 or self.holding:
+            effort = self.step.hold(self.q, self.qd)
+        else:
+            effort = self.step(self.feedforward[i], self.q_ref[i], self.qd_ref[i], self.q,
+                               self.qd)
         self.command_pub.publish(float64_array(effort))
         self.latency_ns[self.latency_count % LATENCY_WINDOW] = time.perf_counter_ns() - received
         self.latency_count += 1
         self.steps += 1
+        if i == self.samples - 1:
+            self.watchdog.disarm()
+            done = status(topics.CONTROLLER_TRIAL_STATUS, "done",
+                          [("trial", str(self.trial)), ("t0_ns", str(self.t0_ns)),
+                           ("aborted_at", str(self.aborted_at)),
+                           ("watchdog_trips", str(self.trial_trips))], hardware_id=NAME)
+            self.diagnostics_pub.publish(diagnostic_array(self, [done], stamp))
+
+    def on_watchdog_timer(self) -> None:
+        """No /joint_states for the watchdog's timeout during a trial: safe hold, reported."""
+        if self.watchdog.check(time.monotonic_ns()):
+            self._trip()
+            self.command_pub.publish(float64_array(self.step.hold(self.q, self.qd)))
+
+    def _trip(self) -> None:
+        self.trial_trips += 1
+        self.tripped_trials.append(self.trial)
+        if not self.holding and self.aborted_at < 0:
+            self.step.hold_at(self.q)
+        self.holding = True
+        self.get_logger().error(
+            f"trial {self.trial}: no /joint_states for {self.watchdog.timeout_ns / 1e6:g} ms "
+            f"({self.params.config['safety.watchdog_periods']} control periods); safe hold "
+            "commanded around the last pose received")
+        self._publish_health()
+
+    def _loop_check(self) -> tuple[bytes, str, list[tuple[str, str]]]:
+        level = DiagnosticStatus.OK
+        reasons = []
+        values = [("aborted_trials", " ".join(map(str, self.aborted_trials))),
+                  ("watchdog_tripped_trials", " ".join(map(str, self.tripped_trials))),
+                  *(("watchdog/" + k, v) for k, v in self.watchdog.as_values())]
+        if self.holding:
+            level = DiagnosticStatus.ERROR
+            reasons.append(f"watchdog: no /joint_states in trial {self.trial}; safe hold")
+        elif self.aborted_at >= 0:
+            level = DiagnosticStatus.ERROR
+            reasons.append(f"trial {self.trial} aborted at sample {self.aborted_at} (error "
+                           "envelope); safe hold")
+        elif self.aborted_trials or self.tripped_trials:
+            level = DiagnosticStatus.WARN
+            reasons.append(f"{len(self.aborted_trials)} trials aborted (error envelope), "
+                           f"{len(self.tripped_trials)} watchdog trips")
+        return level, "; ".join(reasons), values
 
     def on_health_timer(self) -> None:
         """Steps and receive-to-publish latency of the last second on /diagnostics."""
@@ -144,9 +245,12 @@ class ComputedTorqueController(Node):
             values += [("latency_samples", str(count)), ("latency_p50_us", repr(float(p50))),
                        ("latency_p99_us", repr(float(p99)))]
         self.latency_count = 0
-        health = status(topics.CONTROLLER_HEALTH_STATUS, "ok", values, hardware_id=NAME)
-        self.diagnostics_pub.publish(diagnostic_array(self, [health]))
+        self._publish_health(values)
 
+    def _publish_health(self, extra: list[tuple[str, str]] | None = None) -> None:
+        health = self.health.status()
+        health.values = [*(status("", "", extra or []).values), *health.values]
+        self.diagnostics_pub.publish(diagnostic_array(self, [health]))
 
 def main(args: list[str] | None = None) -> int:
     """Entry point: ``ros2 run exo_ilc_ros computed_torque_controller``."""

@@ -6,6 +6,14 @@ wait for the controller's acknowledgement, start the plant, collect the N+1 samp
 publish the summary, and compute the next feed-forward with the configured law. Live parameter
 changes take effect at the next trial boundary. Stops after ``max_trials`` or once every joint
 stayed within the bound ``stop_when_settled`` trials.
+
+A trial ends when all its samples are in *and* the controller reported it ``done``: a trial the
+controller aborted (error envelope) is rebuilt with the safe hold from the abort sample, marked
+(``aborted`` event, ``aborted_at`` in the summary) and not learned from: the next trial reuses
+its feed-forward, exactly as ``run_trials`` in-process. A trial with a watchdog trip is run
+again. With ``store.directory`` every accepted trial and the feed-forward it led to are saved
+(core.store.RunStore, atomic) before the next trial starts; with ``store.resume`` the run
+continues after the last stored trial. Invalid /joint_states are rejected and counted.
 """
 
 from __future__ import annotations
@@ -18,6 +26,8 @@ import numpy as np
 from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
+from rclpy.parameter import parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
@@ -26,10 +36,12 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from .. import topics
 from ..core import schema
 from ..core.config import Config
+from ..core.errors import ExoIlcError
 from ..core.experiment import Experiment, build_law
-from ..core.laws import LearningLaw, TrialRecord
+from ..core.laws import FeedforwardUpdate, LearningLaw, TrialRecord
 from ..core.loop import period_ns, record_from_samples, sample_index
-from .cdr import CdrError, read_joint_state
+from ..core.store import RunStore
+from ..core.validation import Rejection, check_feedforward_array
 from .common import (
     DIAGNOSTICS_QOS,
     EVENTS_QOS,
@@ -43,6 +55,7 @@ from .common import (
     values_of,
     wall_clock,
 )
+from .guard import Health, JointStateGate, Rejections, rejections_check
 
 NAME = schema.SUPERVISOR
 LEVEL_NAMES = ("M", "M'", "M''")
@@ -89,10 +102,24 @@ class IlcSupervisor(Node):
         self.within_streak = 0
         self.recorder_ready = False
         self.recorder_trials = 0
-        self.recorder_lost = False
         """Trials bag_recorder has received completely (its status on /diagnostics)."""
+        self.recorder_lost = False
         self.start_future: Future | None = None
         self.t0_ns_end = 0
+        self.rejections = Rejections(self)
+        self.gate = JointStateGate(self.joint_names, self.rejections)
+        self.done_report: dict[str, str] | None = None
+        """The controller's ``done`` of the current trial (abort index, watchdog trips)."""
+        self.aborted_trials: list[int] = []
+        self.retried: list[tuple[int, str]] = []
+        self.error: str | None = None
+        self.exit_code: int | None = None
+        """Set when the node must stop (read by common.spin)."""
+        self.plant_values: dict[str, object] | None = None
+        self.plant_future: Future | None = None
+        self.store: RunStore | None = None
+        self.ready = False
+        """Store opened (or none) and the starting trial known."""
 
         self.reset_client = self.create_client(Trigger, topics.RESET_SERVICE)
         self.start_client = self.create_client(Trigger, topics.START_SERVICE)
@@ -106,6 +133,13 @@ class IlcSupervisor(Node):
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.on_diagnostics,
                                  DIAGNOSTICS_QOS)
         self.create_timer(0.1, self.on_timer, clock=wall_clock())
+        self.plant_params = AsyncParameterClient(self, schema.PLANT)
+        self.health = Health(self, NAME)
+        self.health.checks += [self._run_check, rejections_check(self.rejections,
+                                                                 "/joint_states")]
+        self.health_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
+                                                DIAGNOSTICS_QOS)
+        self.create_timer(1.0, self.on_health_timer, clock=wall_clock())
         self.get_logger().info(f"{self.active['law']} law, up to {self.active['max_trials']} "
                                "trials; waiting for the plant and the controller")
 
@@ -120,6 +154,9 @@ class IlcSupervisor(Node):
             if self.reset_client.service_is_ready() and self.start_client.service_is_ready() \
                     and self.state_sub.get_publisher_count() >= 1 and \
                     (self.recorder_ready or not self.active["wait_for_recorder"]):
+                if not self.ready:
+                    self._prepare()
+                    return
                 self._reset()
         elif self.phase is Phase.WAIT_RECORDER and \
                 time.monotonic() - self.phase_since > RECORDER_TIMEOUT:
@@ -153,6 +190,8 @@ class IlcSupervisor(Node):
             return
         self.t0_ns = int(response.message[len(topics.T0_PREFIX):])
         self.received[:] = False
+        self.done_report = None
+        self.gate.restart()
         self._enter(Phase.WAIT_ACK)
         self.feedforward_pub.publish(self._feedforward_message())
 
@@ -166,6 +205,15 @@ class IlcSupervisor(Node):
                                            int(received) if received.isdigit() else 0)
         if self.phase is Phase.WAIT_RECORDER and self.recorder_trials >= self.trial - 1:
             self._reset()
+            return
+        if self.phase is Phase.RUNNING:
+            for item in msg.status:
+                if item.name == topics.CONTROLLER_TRIAL_STATUS and item.message == "done":
+                    values = values_of(item)
+                    if values.get("trial") == str(self.trial) and \
+                            values.get("t0_ns") == str(self.t0_ns):
+                        self.done_report = values
+                        self._maybe_end_trial()
             return
         if self.phase is not Phase.WAIT_ACK:
             return
@@ -198,14 +246,14 @@ class IlcSupervisor(Node):
                                    throttle_duration_sec=2.0)
 
     def on_joint_state(self, raw: bytes) -> None:
-        """Keep the samples of the current trial; the last one ends it."""
+        """Keep the samples of the current trial; the last one (with the controller's
+        ``done``) ends it."""
         if self.t0_ns < 0:
             return
-        try:
-            stamp, position, velocity = read_joint_state(raw)
-        except CdrError as exc:
-            self.get_logger().error(f"bad joint state ignored: {exc}", throttle_duration_sec=5.0)
+        sample = self.gate(raw)
+        if sample is None:
             return
+        stamp, position, velocity = sample
         i = sample_index(stamp, self.t0_ns, self.step_ns, self.received.shape[0])
         if i is None or self.received[i]:
             return
@@ -217,34 +265,75 @@ class IlcSupervisor(Node):
             if not self.received.all():
                 missing = int((~self.received).sum())
                 self.get_logger().error(f"trial {self.trial}: {missing} samples lost; retrying")
-                self._event("aborted", [("trial", str(self.trial)), ("lost", str(missing))])
-                self._reset()
+                self._retry("lost", [("lost", str(missing))])
                 return
-            self._end_trial()
+            self._maybe_end_trial()
+
+    def _maybe_end_trial(self) -> None:
+        report = self.done_report
+        if self.t0_ns < 0 or report is None or not self.received[-1]:
+            return
+        trips = int(report.get("watchdog_trips", "0"))
+        if trips:
+            self.get_logger().error(f"trial {self.trial}: the controller's watchdog tripped "
+                                    f"{trips}x (safe hold); running the trial again")
+            self._retry("watchdog", [("watchdog_trips", str(trips))])
+            return
+        self._end_trial()
+
+    def _retry(self, reason: str, values: Sequence[tuple[str, str]]) -> None:
+        self.retried.append((self.trial, reason))
+        self._event("aborted", [("trial", str(self.trial)), ("reason", reason), *values])
+        self._reset()
 
     def _end_trial(self) -> None:
+        assert self.done_report is not None
+        aborted = int(self.done_report.get("aborted_at", "-1"))
         self.t0_ns_end = self.t0_ns + (self.received.shape[0] - 1) * self.step_ns
         self.t0_ns = -1
         record = record_from_samples(self.experiment, self.trial, self.feedforward,
-                                     self.position, self.velocity, self.levels, self.reference)
+                                     self.position, self.velocity, self.levels, self.reference,
+                                     aborted if aborted >= 0 else None)
+        if record.aborted:  # nothing learned from it: the next trial reuses its feed-forward
+            self.aborted_trials.append(self.trial)
+            self.get_logger().error(f"trial {self.trial} aborted by the error envelope at "
+                                    f"sample {aborted}; not learned from")
+            update = FeedforwardUpdate(self.feedforward, self.levels)
+        else:
+            if self.params.pending is not self.active:  # the trial boundary: changes apply
+                self._apply_pending()
+            update = self.law.update(record)
+            checked = check_feedforward_array(update.feedforward, self.feedforward.shape,
+                                              "learned feed-forward")
+            if isinstance(checked, Rejection):
+                self._fail(f"trial {self.trial}: the learning law produced a bad feed-forward "
+                           f"({checked}); it was not stored or used")
+                return
+        if self.store is not None:
+            try:
+                self.store.save(record, update, self._store_config())
+            except (ExoIlcError, OSError) as exc:
+                self._fail(f"trial {self.trial}: cannot save to the store: {exc}")
+                return
         summary = self._summary(record)
+        if record.aborted:
+            self._event("aborted", [("trial", str(self.trial)), ("reason", "error_envelope"),
+                                    ("aborted_at", str(aborted))], self.t0_ns_end)
         self.summary_pub.publish(diagnostic_array(self, [summary], self.t0_ns_end))
         self._event("end", [(kv.key, kv.value) for kv in summary.values], self.t0_ns_end)
+        self._after_trial(record, update)
+
+    def _after_trial(self, record: TrialRecord, update: FeedforwardUpdate) -> None:
         bound = self.active["error_bound"]
-        within = bool(np.all(record.max_abs_error <= bound))
+        within = bool(np.all(record.max_abs_error <= bound)) and not record.aborted
         self.within_streak = self.within_streak + 1 if within else 0
         settled = self.active["stop_when_settled"]
         if self.trial >= self.active["max_trials"] or \
                 (settled > 0 and self.within_streak >= settled):
-            self._enter(Phase.FINISHED)
-            self._event("finished", [("trials", str(self.trial))], self.t0_ns_end)
-            self.get_logger().info(f"finished after {self.trial} trials")
+            self._finish(self.trial)
             return
         if self.params.pending is not self.active:  # the trial boundary: live changes apply
-            self.active = self.params.pending
-            self.law = build_law(self.active)
-            self.get_logger().info(f"parameters changed; applied from trial {self.trial + 1}")
-        update = self.law.update(record)
+            self._apply_pending()
         self.feedforward = update.feedforward
         self.levels = update.levels
         self.trial += 1
@@ -253,6 +342,111 @@ class IlcSupervisor(Node):
             self._enter(Phase.WAIT_RECORDER)  # bag_recorder lags: let it catch up first
         else:
             self._reset()
+
+    def _apply_pending(self) -> None:
+        self.active = self.params.pending
+        self.law = build_law(self.active)
+        self.get_logger().info(f"parameters changed; applied from trial {self.trial + 1}")
+
+    # --- store and start-up ---------------------------------------------------------------
+    def _store_config(self) -> Config:
+        """The supervisor's configuration with the plant's parameters (the store's key
+        covers the plant: mass uncertainty, integration)."""
+        if not self.plant_values:
+            return self.active
+        return self.active.replace(self.plant_values)
+
+    def _prepare(self) -> None:
+        """Before trial 1: the plant's parameters (for the store key), then the store."""
+        if not self.active["store.directory"]:
+            self.ready = True
+            return
+        if self.plant_future is None:
+            names = [p.name for p in schema.PARAMETERS if p.section == schema.PLANT]
+            if not self.plant_params.services_are_ready():
+                return
+            self.plant_future = self.plant_params.get_parameters(names)
+            return
+        if not self.plant_future.done():
+            return
+        result = self.plant_future.result()
+        names = [p.name for p in schema.PARAMETERS if p.section == schema.PLANT]
+        if result is None or len(result.values) != len(names):
+            self.plant_future = None  # try again
+            return
+        self.plant_values = {n: parameter_value_to_python(v)
+                             for n, v in zip(names, result.values, strict=True)}
+        try:
+            self._open_store()
+        except ExoIlcError as exc:
+            self._fail(str(exc), code=2)
+            return
+        self.ready = True
+
+    def _open_store(self) -> None:
+        config = self._store_config()
+        self.experiment = Experiment(config)
+        store = RunStore(self.active["store.directory"], config, self.reference)
+        if store.completed and not self.active["store.resume"]:
+            raise ExoIlcError(f"store {store.directory} already holds {store.completed} trials "
+                              "of this run; resume it (store.resume / exo-ilc run --resume) or "
+                              "use another store")
+        self.store = store
+        if not store.completed:
+            self.get_logger().info(f"saving every trial to {store.directory}")
+            return
+        stored = store.load()
+        bound = self.active["error_bound"]
+        for item in stored:
+            within = bool(np.all(item.record.max_abs_error <= bound)) and \
+                not item.record.aborted
+            self.within_streak = self.within_streak + 1 if within else 0
+            if item.record.aborted:
+                self.aborted_trials.append(item.record.trial)
+        last = stored[-1]
+        self.feedforward = last.next_update.feedforward
+        self.levels = last.next_update.levels
+        self.trial = last.record.trial + 1
+        self.get_logger().info(f"resumed from {store.directory}: trials 1..{last.record.trial} "
+                               f"restored, continuing with trial {self.trial}")
+        self._event("resumed", [("trials", str(last.record.trial))])
+        settled = self.active["stop_when_settled"]
+        if last.record.trial >= self.active["max_trials"] or \
+                (settled > 0 and self.within_streak >= settled):
+            self._finish(last.record.trial)
+
+    def _finish(self, trials: int, values: Sequence[tuple[str, str]] = ()) -> None:
+        self._enter(Phase.FINISHED)
+        self._event("finished", [("trials", str(trials)), *values], self.t0_ns_end or None)
+        self.get_logger().info(f"finished after {trials} trials")
+
+    def _fail(self, message: str, code: int = 1) -> None:
+        """Stop running trials: ERROR on /diagnostics, ``finished`` with the error."""
+        self.error = message
+        self.get_logger().error(message)
+        self._finish(self.trial - 1, [("error", message)])
+        self.on_health_timer()
+        self.exit_code = code
+
+    def on_health_timer(self) -> None:
+        """Health on /diagnostics."""
+        self.health_pub.publish(diagnostic_array(self, [self.health.status()]))
+
+    def _run_check(self) -> tuple[bytes, str, list[tuple[str, str]]]:
+        values = [("trial", str(self.trial)), ("phase", self.phase.value),
+                  ("aborted_trials", " ".join(map(str, self.aborted_trials))),
+                  ("retried", " ".join(f"{k}:{why}" for k, why in self.retried)),
+                  ("store", "" if self.store is None else str(self.store.directory)),
+                  ("stored_trials", "0" if self.store is None else str(self.store.completed))]
+        if self.error:
+            return DiagnosticStatus.ERROR, self.error, values
+        reasons = []
+        if self.aborted_trials:
+            reasons.append(f"trials aborted by the error envelope: {self.aborted_trials}")
+        if self.retried:
+            reasons.append(f"{len(self.retried)} trials run again")
+        level = DiagnosticStatus.WARN if reasons else DiagnosticStatus.OK
+        return level, "; ".join(reasons), values
 
     # --- messages -------------------------------------------------------------------------
     def _feedforward_message(self) -> JointTrajectory:
@@ -287,7 +481,10 @@ class IlcSupervisor(Node):
             for symbol, row in zip(LEVEL_NAMES, record.levels, strict=True):
                 values += [(f"level/{symbol}/{name}", repr(float(x)))
                            for name, x in zip(self.joint_names, row, strict=True)]
-        level = DiagnosticStatus.OK if np.all(max_error <= bound) else DiagnosticStatus.WARN
+        if record.aborted:
+            values.append(("aborted_at", str(record.aborted_at)))
+        level = DiagnosticStatus.OK if np.all(max_error <= bound) and not record.aborted \
+            else DiagnosticStatus.WARN
         return status(topics.SUMMARY_STATUS, f"trial {record.trial}", values, level, NAME)
 
     def _event(self, message: str, values: Sequence[tuple[str, str]],

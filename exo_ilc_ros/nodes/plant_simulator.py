@@ -4,11 +4,21 @@ Publishes /joint_states and /clock, takes efforts on /effort_controller/commands
 the reset/start services of the trial protocol (see :mod:`exo_ilc_ros.topics`). Lock-step mode
 advances one period per command; real-time mode steps on a wall-clock timer with the last
 command held.
+
+Safety: every command is checked (one finite value per joint, else rejected: logged once per
+cause, counted, never applied) and clamped again to ``control.effort_limit``; samples at the
+limit are counted per joint (saturation, on /diagnostics). In real-time mode a watchdog
+(``safety.watchdog_periods`` periods of wall time without a command during a trial) stops holding
+the last command and applies the safe hold (nominal gravity compensation and PD around the pose
+at the trip) instead, until the next trial.
 """
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from rclpy.timer import Timer
 from rosgraph_msgs.msg import Clock
@@ -20,8 +30,19 @@ from .. import topics
 from ..core import schema
 from ..core.experiment import Experiment
 from ..core.loop import PlantStepper, period_ns
+from ..core.safety import Watchdog, safe_hold_effort
+from ..core.validation import Cause, Rejection, validate_effort_command
 from .cdr import CdrError, JointStateWriter, read_float64_array
-from .common import CLOCK_QOS, SAMPLES_QOS, SchemaParameters, spin, wall_clock
+from .common import (
+    CLOCK_QOS,
+    DIAGNOSTICS_QOS,
+    SAMPLES_QOS,
+    SchemaParameters,
+    diagnostic_array,
+    spin,
+    wall_clock,
+)
+from .guard import Health, Rejections, rejections_check
 
 NAME = schema.PLANT
 
@@ -46,6 +67,15 @@ class PlantSimulator(Node):
         self.running = False
         self.held = np.zeros(config.joints)
         self.timer: Timer | None = None
+        self.limit = np.asarray(self.experiment.effort_limit, dtype=float)
+        self.unbounded = np.full(config.joints, np.inf)
+        self.rejections = Rejections(self)
+        self.saturated = np.zeros(config.joints, dtype=np.int64)
+        self.over_limit = 0
+        self.commands = 0
+        self.watchdog = Watchdog(config["safety.watchdog_periods"], self.step_ns)
+        self.hold_pose: np.ndarray | None = None
+        """Real-time mode: the pose the plant's safe hold keeps after a watchdog trip."""
 
         self.state = JointStateWriter(config["joint_names"])
         self.clock = Clock()
@@ -53,6 +83,12 @@ class PlantSimulator(Node):
         self.clock_pub = self.create_publisher(Clock, topics.CLOCK, CLOCK_QOS)
         self.command_sub = self.create_subscription(
             Float64MultiArray, topics.EFFORT_COMMANDS, self.on_command, SAMPLES_QOS, raw=True)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
+                                                     DIAGNOSTICS_QOS)
+        self.health = Health(self, NAME)
+        self.health.checks += [self._effort_check, rejections_check(self.rejections,
+                                                                    "effort commands")]
+        self.create_timer(1.0, self.on_health_timer, clock=wall_clock())
         self.create_service(Trigger, topics.RESET_SERVICE, self.on_reset)
         self.create_service(Trigger, topics.START_SERVICE, self.on_start)
         if not self.lock_step:
@@ -71,6 +107,7 @@ class PlantSimulator(Node):
         self._stop()
         self.stepper.reset()
         self.held[:] = 0.0
+        self.hold_pose = None
         self.t0_ns = self.now_ns + self.step_ns
         self.armed = True
         response.success = True
@@ -95,32 +132,81 @@ class PlantSimulator(Node):
         self.now_ns = self.t0_ns
         self._publish()
         if self.timer is not None:
+            self.watchdog.arm(time.monotonic_ns())
             self.timer.reset()
         response.success = True
         response.message = f"{topics.T0_PREFIX}{self.t0_ns}"
         return response
 
     def on_command(self, raw: bytes) -> None:
-        """Lock-step: apply the command for the current sample and advance; real-time: hold."""
+        """Lock-step: apply the command for the current sample and advance; real-time: hold.
+        A command that is not one finite value per joint is rejected (never applied)."""
         try:
             effort = read_float64_array(raw)
         except CdrError as exc:
-            self.get_logger().error(f"bad effort command ignored: {exc}",
-                                    throttle_duration_sec=5.0)
+            self.rejections.reject(Rejection(Cause.NOT_NUMERIC, f"{topics.EFFORT_COMMANDS}: "
+                                             f"undecodable: {exc}"))
             return
-        if effort.shape[0] != self.held.shape[0]:
-            self.get_logger().error(f"effort command with {effort.shape[0]} entries ignored; "
-                                    f"expected {self.held.shape[0]}", throttle_duration_sec=5.0)
-        elif self.lock_step:
+        if effort.shape[0] != self.held.shape[0] or not np.isfinite(effort).all():
+            checked = validate_effort_command(effort.tolist(), self.unbounded.tolist())
+            if isinstance(checked, Rejection):
+                self.rejections.reject(checked)
+                return
+        self.commands += 1
+        at_limit = np.abs(effort) >= self.limit
+        if at_limit.any():
+            self.saturated += at_limit
+            if (np.abs(effort) > self.limit).any():
+                self.over_limit += 1  # clamped below (PlantStepper.step)
+        if self.lock_step:
             if self.running:
                 self._advance(effort)
         else:
-            self.held[:] = effort
+            self.held[:] = np.clip(effort, -self.limit, self.limit)
+            if self.running:
+                self.watchdog.feed(time.monotonic_ns())
 
     def on_tick(self) -> None:
-        """Real-time mode: one period with the held command."""
-        if self.running:
-            self._advance(self.held)
+        """Real-time mode: one period with the held command (the safe hold after a trip)."""
+        if not self.running:
+            return
+        if self.watchdog.check(time.monotonic_ns()) or \
+                (self.watchdog.tripped and self.hold_pose is None):
+            self.hold_pose = self.stepper.position.copy()
+            self.get_logger().error(
+                f"no effort command for {self.watchdog.timeout_ns / 1e6:g} ms: stopped holding "
+                "the last command; safe hold around the current pose until the next trial")
+            self.on_health_timer()
+        if self.hold_pose is not None:
+            e = self.experiment
+            self.held[:] = safe_hold_effort(self.hold_pose, self.stepper.position,
+                                            self.stepper.velocity, e.kp, e.kd,
+                                            e.nominal.kernel_args, self.limit)
+        self._advance(self.held)
+
+    def on_health_timer(self) -> None:
+        """Health on /diagnostics: rejections, saturation, watchdog."""
+        self.diagnostics_pub.publish(diagnostic_array(self, [self.health.status()]))
+
+    def _effort_check(self) -> tuple[bytes, str, list[tuple[str, str]]]:
+        names = self.params.config["joint_names"]
+        values = [("commands", str(self.commands)), ("over_limit", str(self.over_limit)),
+                  *((f"saturated/{n}", str(int(c))) for n, c in zip(names, self.saturated,
+                                                                      strict=True)),
+                  *(("watchdog/" + k, v) for k, v in self.watchdog.as_values())]
+        reasons = []
+        level = DiagnosticStatus.OK
+        if self.hold_pose is not None:
+            level = DiagnosticStatus.ERROR
+            reasons.append("watchdog: no effort command; safe hold")
+        if self.saturated.any():
+            level = max(level, DiagnosticStatus.WARN)
+            reasons.append("effort at the limit in " + ", ".join(
+                f"{n} x{int(c)}" for n, c in zip(names, self.saturated, strict=True) if c))
+        if self.over_limit:
+            level = max(level, DiagnosticStatus.WARN)
+            reasons.append(f"{self.over_limit} commands beyond the limit clamped")
+        return level, "; ".join(reasons), values
 
     def _advance(self, effort: np.ndarray) -> None:
         self.stepper.step(effort)
@@ -132,6 +218,7 @@ class PlantSimulator(Node):
 
     def _stop(self) -> None:
         self.running = False
+        self.watchdog.disarm()
         if self.timer is not None:
             self.timer.cancel()
 

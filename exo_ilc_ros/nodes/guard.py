@@ -1,0 +1,129 @@
+"""Input gates and health reporting shared by the nodes (thin wrappers of core.validation).
+
+:class:`JointStateGate` checks every /joint_states message before a node uses it: names (a
+message naming the configured joints in another order is reordered), lengths, finite values,
+stamps strictly increasing. The common case (the plant's own layout) costs a bytes compare and
+one ``isfinite``; anything else goes through :func:`core.validation.validate_joint_state`.
+Rejections are counted per cause (:class:`core.validation.LogOnce`), logged once per cause, and
+reported on /diagnostics by :class:`Health`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.node import Node
+
+from ..core.validation import Cause, LogOnce, Rejection, validate_joint_state
+from .cdr import CdrError, names_segment, read_joint_state, read_joint_state_full
+from .common import status
+
+LEVEL_NAMES = {DiagnosticStatus.OK: "OK", DiagnosticStatus.WARN: "WARN",
+               DiagnosticStatus.ERROR: "ERROR"}
+
+
+def health_status_name(node: str) -> str:
+    """The name of a node's health status on /diagnostics."""
+    return f"{node}/health"
+
+
+class Rejections:
+    """LogOnce plus the node's logger: the first rejection of each cause is logged (error),
+    later ones only counted."""
+
+    def __init__(self, node: Node) -> None:
+        self.node = node
+        self.log = LogOnce()
+
+    def reject(self, rejection: Rejection) -> None:
+        """Count ``rejection``; log it if its cause is new."""
+        if self.log.record(rejection):
+            self.node.get_logger().error(
+                f"rejected ({rejection.cause.value}): {rejection.message}; further "
+                f"{rejection.cause.value} rejections are counted on /diagnostics")
+
+    def reject_cause(self, cause: Cause, message: str) -> None:
+        """Count a rejection given as cause and message."""
+        self.reject(Rejection(cause, message))
+
+
+class JointStateGate:
+    """Validated (stamp, position, velocity) from raw /joint_states bytes, or None."""
+
+    def __init__(self, joint_names: Sequence[str], rejections: Rejections) -> None:
+        self.joint_names = list(joint_names)
+        self.n = len(self.joint_names)
+        self.rejections = rejections
+        self.fast_names: bytes | None = None
+        """The names segment of the last message whose names were exactly joint_names."""
+        self.last_stamp_ns: int | None = None
+
+    def restart(self) -> None:
+        """Forget the last stamp (a new trial: the plant may have been restarted)."""
+        self.last_stamp_ns = None
+
+    def __call__(self, raw: bytes) -> tuple[int, np.ndarray, np.ndarray] | None:
+        try:
+            segment = names_segment(raw)
+            if segment == self.fast_names:
+                stamp, position, velocity = read_joint_state(raw)
+                if position.shape[0] == self.n and velocity.shape[0] == self.n and \
+                        np.isfinite(position).all() and np.isfinite(velocity).all() and \
+                        (self.last_stamp_ns is None or stamp > self.last_stamp_ns):
+                    self.last_stamp_ns = stamp
+                    return stamp, position, velocity
+            stamp, names, position, velocity, effort = read_joint_state_full(raw)
+        except CdrError as exc:
+            self.rejections.reject_cause(Cause.NOT_NUMERIC, f"/joint_states: undecodable: {exc}")
+            return None
+        sample = validate_joint_state(names, stamp, position.tolist(), velocity.tolist(),
+                                      effort.tolist(), self.joint_names,
+                                      self.last_stamp_ns)
+        if isinstance(sample, Rejection):
+            self.rejections.reject(sample)
+            return None
+        if names == self.joint_names:
+            self.fast_names = segment
+        self.last_stamp_ns = sample.stamp_ns
+        return sample.stamp_ns, sample.position, sample.velocity
+
+
+class Health:
+    """A node's health on /diagnostics: OK, WARN or ERROR with the reasons, and key-values.
+
+    ``checks`` are called at each report; each returns (level, reason or "") and key-values.
+    """
+
+    def __init__(self, node: Node, name: str) -> None:
+        self.node = node
+        self.name = name
+        self.checks: list[Callable[[], tuple[bytes, str, list[tuple[str, str]]]]] = []
+
+    def status(self) -> DiagnosticStatus:
+        """The current health status."""
+        level = DiagnosticStatus.OK
+        reasons: list[str] = []
+        values: list[tuple[str, str]] = []
+        for check in self.checks:
+            item_level, reason, item_values = check()
+            if reason:
+                reasons.append(reason)
+            if item_level > level:
+                level = item_level
+            values += item_values
+        message = "; ".join(reasons) if reasons else "ok"
+        return status(health_status_name(self.name), message, values, level, self.name)
+
+
+def rejections_check(rejections: Rejections, what: str
+                     ) -> Callable[[], tuple[bytes, str, list[tuple[str, str]]]]:
+    """A health check: WARN once any input was rejected, with the counts per cause."""
+    def check() -> tuple[bytes, str, list[tuple[str, str]]]:
+        log = rejections.log
+        if not log.total:
+            return DiagnosticStatus.OK, "", []
+        causes = ", ".join(f"{c.value} x{n}" for c, n in log.counts.items())
+        return DiagnosticStatus.WARN, f"{what} rejected: {causes}", log.as_values()
+    return check

@@ -1,0 +1,409 @@
+"""Safety and reliability of the node graph (issue 5): error envelope, bad input, watchdog,
+diagnostics, crash-safe store and resume after kill -9, clean shutdown on SIGTERM.
+
+Short trials (trajectory.duration 1.0 s: 101 samples) and few trials keep the graph tests
+short. "Equal" below means exactly equal (atol 0): the graph runs the in-process arithmetic.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from exo_ilc_ros import topics
+from exo_ilc_ros.core.config import Config, load_config
+from exo_ilc_ros.core.experiment import Experiment, run_trials
+from exo_ilc_ros.core.loop import record_from_samples
+from exo_ilc_ros.launcher import GraphError
+
+pytestmark = pytest.mark.graph
+
+SHORT = {"trajectory.duration": 1.0}
+JOINTS = ["shoulder_flexion", "shoulder_abduction", "elbow_flexion"]
+
+
+def _config(**overrides: Any) -> Config:
+    return load_config(overrides={**SHORT, **overrides})
+
+
+def _table(summaries: list[Any], config: Config, key: str = "max_abs_error") -> np.ndarray:
+    joints = config["joint_names"]
+    return np.array([s.row(key, joints) for s in summaries])
+
+
+def _same_as_in_process(summaries: list[Any], config: Config) -> None:
+    local = run_trials(config)
+    assert [s.trial for s in summaries] == list(range(1, config["max_trials"] + 1))
+    for key, expected in (("max_abs_error", local.max_abs_errors),
+                          ("max_abs_feedforward", local.max_abs_feedforward),
+                          ("max_abs_effort", local.max_abs_effort)):
+        np.testing.assert_array_equal(_table(summaries, config, key), expected, err_msg=key)
+
+
+def _health(session: Any) -> dict[str, Any]:
+    """Follow /diagnostics: the last health status of each node (by status name)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from exo_ilc_ros.nodes.common import DIAGNOSTICS_QOS
+
+    seen: dict[str, Any] = {}
+
+    def on_msg(msg: Any) -> None:
+        for item in msg.status:
+            if item.name.endswith("/health"):
+                seen[item.name] = item
+    session.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_msg,
+                                     DIAGNOSTICS_QOS)
+    session.executor.remove_node(session.node)  # EventsExecutor: register the new entity
+    session.executor.add_node(session.node)
+    return seen
+
+
+def _values(item: Any) -> dict[str, str]:
+    return {kv.key: kv.value for kv in item.values}
+
+
+# --- start-up -------------------------------------------------------------------------------
+def test_invalid_yaml_fails_with_file_key_rule_before_any_node_moves(tmp_path: Path) -> None:
+    """`exo-ilc run --config bad.yaml` exits 2 naming file, key and rule before starting a node;
+    each node started with the file exits 2 with the key and the rule."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text('"/**":\n  ros__parameters:\n    control:\n      effort_limit: [80.0, -1.0, '
+                   '40.0]\n')
+    started = time.monotonic()
+    result = subprocess.run([sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--config",
+                             str(bad), "--no-bag", "--no-store"], capture_output=True,
+                            text=True, timeout=60, stdin=subprocess.DEVNULL, check=False)
+    assert result.returncode == 2, result.stderr
+    assert str(bad) in result.stderr and "control.effort_limit" in result.stderr
+    assert "must be > 0" in result.stderr
+    assert "ROS_DOMAIN_ID" not in result.stderr  # no graph was started
+    assert time.monotonic() - started < 30
+    for module in ("plant_simulator", "computed_torque_controller", "ilc_supervisor"):
+        node = subprocess.run([sys.executable, "-m", f"exo_ilc_ros.nodes.{module}",
+                               "--ros-args", "--params-file", str(bad)], capture_output=True,
+                              text=True, timeout=60, stdin=subprocess.DEVNULL, check=False)
+        out = node.stdout + node.stderr
+        assert node.returncode == 2, out
+        assert "control.effort_limit" in out and "must be > 0" in out, out
+
+
+# --- bad input at the nodes (callbacks driven directly, no DDS traffic needed) ---------------
+def _joint_state_raw(names: list[str], stamp_ns: int, position: list[float],
+                     velocity: list[float]) -> bytes:
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+
+    msg = JointState(name=names, position=position, velocity=velocity)
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+    return bytes(serialize_message(msg))
+
+
+def test_nodes_reject_bad_input_keep_running_and_report_it() -> None:
+    """NaN/inf, wrong lengths, unknown or missing joints, repeated stamps, undecodable bytes:
+    rejected, counted per cause on the node's health, never turned into an effort; names in
+    another order are reordered; over-limit efforts are clamped by the plant and counted."""
+    import rclpy
+    from trajectory_msgs.msg import JointTrajectory
+
+    from exo_ilc_ros.nodes.cdr import float64_array
+    from exo_ilc_ros.nodes.computed_torque_controller import ComputedTorqueController
+    from exo_ilc_ros.nodes.ilc_supervisor import IlcSupervisor
+    from exo_ilc_ros.nodes.plant_simulator import PlantSimulator
+
+    rclpy.init()
+    try:
+        controller = ComputedTorqueController()
+        plant = PlantSimulator()
+        supervisor = IlcSupervisor()
+        published: list[bytes] = []
+        controller.command_pub.publish = lambda msg: published.append(msg)  # type: ignore
+        # The supervisor's own feed-forward message for trial 1 at t0 = 10 ms.
+        supervisor.t0_ns = 10_000_000
+        good_ff = supervisor._feedforward_message()
+        nan_ff = supervisor._feedforward_message()
+        nan_ff.points[5].accelerations[1] = float("nan")
+        renamed = supervisor._feedforward_message()
+        renamed.joint_names = ["a", "b", "c"]
+        short = supervisor._feedforward_message()
+        short.points = short.points[:-1]
+        for bad in (nan_ff, renamed, short, JointTrajectory()):
+            controller.on_feedforward(bad)
+        assert controller.samples == 0, "no bad profile was loaded"
+        controller.on_feedforward(good_ff)
+        assert controller.samples == controller.step_count and controller.trial == 1
+
+        q0 = list(controller.q_ref[0])
+        zero = [0.0, 0.0, 0.0]
+        t0 = controller.t0_ns
+        bad_states = [
+            _joint_state_raw(JOINTS, t0, [float("nan"), 0.0, 0.0], zero),
+            _joint_state_raw(JOINTS, t0, q0, [0.0, float("inf"), 0.0]),
+            _joint_state_raw(JOINTS, t0, q0[:2], zero),
+            _joint_state_raw(["shoulder_flexion", "wrist", "elbow_flexion"], t0, q0, zero),
+            _joint_state_raw(JOINTS[:2], t0, q0[:2], zero[:2]),
+            _joint_state_raw([JOINTS[0], JOINTS[0], JOINTS[2]], t0, q0, zero),
+            b"\x00\x01\x00\x00\x01",
+            b"garbage",
+        ]
+        for raw in bad_states:
+            controller.on_joint_state(raw)
+        assert published == [], "no effort from a rejected state"
+        # Reordered names are accepted and reordered: same effort as the plant's layout.
+        order = [2, 0, 1]
+        controller.on_joint_state(_joint_state_raw([JOINTS[j] for j in order], t0,
+                                                   [q0[j] for j in order], zero))
+        assert len(published) == 1
+        controller.on_joint_state(_joint_state_raw(JOINTS, t0, q0, zero))  # repeated stamp
+        assert len(published) == 1, "a repeated stamp gives no second command"
+        experiment = Experiment(controller.params.config)
+        ref = experiment.reference
+        record = record_from_samples(experiment, 1, good_ff_array(good_ff), ref.position,
+                                     ref.velocity)
+        np.testing.assert_allclose(np.frombuffer(published[0][-24:], "<f8"),
+                                   record.effort[0], rtol=0.0, atol=1e-12)
+        health = controller.health.status()
+        causes = _values(health)
+        for cause in ("non_finite", "wrong_length", "unknown_joint", "missing_joint",
+                      "duplicate_joint", "non_monotonic_stamp", "not_numeric"):
+            assert int(causes[f"rejected/{cause}"]) >= 1, (cause, causes)
+        assert health.level == health.WARN and "rejected" in health.message
+
+        # The plant: rejected commands never move it; over-limit ones are clamped, counted.
+        limit = np.asarray(plant.params.config["control.effort_limit"])
+        plant.running = True  # as after /start
+        before = plant.stepper.position.copy()
+        for raw in (float64_array(np.array([np.nan, 0.0, 0.0])), float64_array(np.zeros(2)),
+                    float64_array(np.array([0.0, np.inf, 0.0])), b"\x00\x01\x00\x00"):
+            plant.on_command(raw)
+        np.testing.assert_array_equal(plant.stepper.position, before)
+        assert plant.index == 0
+        plant.on_command(float64_array(np.array([1e9, -1e9, 0.0])))
+        assert plant.index == 1
+        np.testing.assert_array_equal(plant.stepper.applied, [limit[0], -limit[1], 0.0])
+        health = plant.health.status()
+        values = _values(health)
+        assert values["over_limit"] == "1" and values[f"saturated/{JOINTS[0]}"] == "1"
+        assert int(values["rejected/non_finite"]) == 2
+        assert int(values["rejected/wrong_length"]) == 1
+        assert health.level == health.WARN and "beyond the limit" in health.message
+        for node in (controller, plant, supervisor):
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown()
+
+
+def good_ff_array(msg: Any) -> np.ndarray:
+    return np.array([list(p.accelerations) for p in msg.points])
+
+
+# --- the error envelope in the graph ----------------------------------------------------------
+def test_envelope_abort_in_the_graph_equals_in_process_and_sigterm_stops_cleanly() -> None:
+    """A tight envelope aborts every trial at the same sample: the graph gives exactly
+    run_trials' table, marks each trial aborted (event and summary), learns nothing (the
+    feed-forward stays), reports it on /diagnostics; SIGTERM then stops every node (exit 0)."""
+    from exo_ilc_ros.graph import GraphSession
+
+    config = _config(max_trials=3, **{"safety.error_envelope": [0.01, 0.01, 0.01]})
+    local = run_trials(config)
+    assert local.aborted == [1, 2, 3]
+    with GraphSession(config) as session:
+        health = _health(session)
+        session.spin_until(lambda: session.finished, timeout=120.0, stall_timeout=60.0)
+        session.spin_until(lambda: "computed_torque_controller/health" in health and
+                           "ilc_supervisor/health" in health and _values(
+                               health["computed_torque_controller/health"]).get(
+                                   "aborted_trials") == "1 2 3" and "aborted by" in
+                           health["ilc_supervisor/health"].message, timeout=10.0)
+        _same_as_in_process(session.summaries, config)
+        assert [s.values["aborted_at"] for s in session.summaries] == \
+            [str(r.aborted_at) for r in local.records]
+        aborted = [v for m, v, _ in session.events if m == "aborted" and
+                   v["reason"] == "error_envelope"]
+        assert [v["trial"] for v in aborted] == ["1", "2", "3"]
+        ff = _table(session.summaries, config, "max_abs_feedforward")
+        np.testing.assert_array_equal(ff, np.zeros_like(ff))  # nothing learned
+        controller = health["computed_torque_controller/health"]
+        assert controller.level >= controller.WARN
+        assert _values(controller)["aborted_trials"] == "1 2 3"
+        supervisor = health["ilc_supervisor/health"]
+        assert "aborted by the error envelope" in supervisor.message
+        processes = session.processes.processes
+        for process in processes.values():
+            process.send_signal(signal.SIGTERM)
+        codes = {name: process.wait(timeout=20) for name, process in processes.items()}
+        assert codes == dict.fromkeys(processes, 0), codes
+
+
+# --- bad input in a running graph, and the watchdog -------------------------------------------
+def test_bad_messages_and_a_stalled_plant_change_nothing_learned() -> None:
+    """While the graph runs: bad /joint_states and effort commands are rejected by every node
+    (counted on /diagnostics); the plant frozen (SIGSTOP) mid-trial trips the controller's
+    watchdog (safe hold, ERROR, the trial run again). The table still equals in-process."""
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    from exo_ilc_ros.graph import GraphSession
+    from exo_ilc_ros.nodes.common import SAMPLES_QOS
+
+    config = _config(max_trials=6, **{"trajectory.duration": 3.0})
+    with GraphSession(config) as session:
+        health = _health(session)
+        state_pub = session.node.create_publisher(JointState, topics.JOINT_STATES, SAMPLES_QOS)
+        effort_pub = session.node.create_publisher(Float64MultiArray, topics.EFFORT_COMMANDS,
+                                                   QoSProfile(depth=10))
+        session.spin_until(lambda: len(session.summaries) >= 1 and
+                           state_pub.get_subscription_count() >= 2 and
+                           effort_pub.get_subscription_count() >= 1, timeout=90.0)
+        for _ in range(3):
+            state_pub.publish(JointState(name=JOINTS, position=[float("nan")] * 3,
+                                         velocity=[0.0] * 3))
+            state_pub.publish(JointState(name=["x", "y", "z"], position=[0.0] * 3,
+                                         velocity=[0.0] * 3))
+            state_pub.publish(JointState(name=JOINTS, position=[0.0] * 2, velocity=[0.0] * 3))
+            effort_pub.publish(Float64MultiArray(data=[float("nan"), 0.0, 0.0]))
+            effort_pub.publish(Float64MultiArray(data=[0.0, 0.0]))
+        # Freeze the plant in the middle of a trial (from trial 3 on; tried again on the next
+        # trial if the stop fell between two trials).
+        plant = session.processes.processes["plant_simulator"]
+
+        def tripped() -> bool:
+            item = health.get("computed_torque_controller/health")
+            return item is not None and "watchdog" in item.message
+
+        for trial in (3, 4, 5):
+            session.spin_until(lambda t=trial: any(m == "start" and v.get("trial") == str(t)
+                                                   for m, v, _ in session.events),
+                               timeout=60.0)
+            # "start" comes before the plant's start service: let sample 0 and a few go by.
+            end = time.monotonic() + 0.1
+            while time.monotonic() < end:
+                session.executor.spin_once(timeout_sec=0.01)
+            plant.send_signal(signal.SIGSTOP)
+            try:
+                with contextlib.suppress(GraphError):
+                    session.spin_until(tripped, timeout=3.0)
+            finally:
+                plant.send_signal(signal.SIGCONT)
+            if tripped():
+                break
+        assert tripped(), "the controller's watchdog tripped"
+        assert health["computed_torque_controller/health"].level == b"\x02"  # ERROR
+        session.spin_until(lambda: session.finished, timeout=120.0, stall_timeout=60.0)
+        session.spin_until(lambda: all(
+            "rejected" in getattr(health.get(f"{n}/health"), "message", "")
+            for n in ("plant_simulator", "computed_torque_controller", "ilc_supervisor")),
+            timeout=10.0)
+    _same_as_in_process(session.summaries, config)
+    retried = [v for m, v, _ in session.events if m == "aborted"]
+    assert any(v.get("reason") == "watchdog" for v in retried), retried
+    for name in ("plant_simulator", "computed_torque_controller", "ilc_supervisor"):
+        values = _values(health[f"{name}/health"])
+        assert sum(int(v) for k, v in values.items() if k.startswith("rejected/")) >= 3, name
+
+
+# --- nothing lost: kill -9 and resume ----------------------------------------------------------
+def _kill_mid_trial(config: Config, victim: str, after: int) -> int:
+    """Run the graph with a store, kill -9 ``victim`` as soon as ``after`` trials are stored
+    (i.e. during trial ``after + 1``); returns the number of trials stored."""
+    from exo_ilc_ros.graph import GraphSession, stored_summaries
+
+    with GraphSession(config) as session:
+        def stored() -> bool:
+            found = list(Path(config["store.directory"]).glob("*/index.json"))
+            return bool(found) and len(json.loads(found[0].read_text())["trials"]) >= after
+        deadline = time.monotonic() + 90.0
+        while not stored() and time.monotonic() < deadline:
+            session.executor.spin_once(timeout_sec=0.005)
+        session.processes.processes[victim].send_signal(signal.SIGKILL)
+        with pytest.raises(GraphError, match=f"node {victim} exited with code -9"):
+            session.spin_until(lambda: False, timeout=20.0)
+    return len(stored_summaries(config))
+
+
+@pytest.mark.parametrize("victim", ["plant_simulator", "computed_torque_controller"])
+def test_kill_9_a_node_mid_trial_then_resume_is_bit_identical(tmp_path: Path,
+                                                               victim: str) -> None:
+    """kill -9 of a node in the middle of trial 3 (trials of 3 s, 301 samples): the graph stops
+    with the node named, the store holds trials 1..2 (3 if trial 3 ended first), and a resumed
+    graph finishes with exactly the uninterrupted table."""
+    from exo_ilc_ros.graph import run_graph
+
+    config = _config(max_trials=5, **{"store.directory": str(tmp_path / "store"),
+                                      "trajectory.duration": 3.0})
+    stored = _kill_mid_trial(config, victim, 2)
+    assert stored in (2, 3), stored
+    resumed = run_graph(config.replace({"store.resume": True}), timeout=120.0,
+                        stall_timeout=60.0)
+    assert resumed.summaries[stored].trial == stored + 1
+    _same_as_in_process(resumed.summaries, config)
+
+
+def test_kill_9_the_supervisor_then_exo_ilc_run_resume(tmp_path: Path) -> None:
+    """`exo-ilc run --store DIR`: kill -9 of ilc_supervisor mid-trial stops the graph with the
+    node named and the resume command (exit 3); `--resume` finishes the run and its JSON equals
+    `exo-ilc simulate`'s exactly. Without --resume the used store is refused before any node
+    starts."""
+    config_file = tmp_path / "short.yaml"
+    config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n')
+    store = tmp_path / "store"
+    common = [sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--no-bag", "--config",
+              str(config_file), "--trials", "5", "--store", str(store)]
+    process = subprocess.Popen(common, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               stdin=subprocess.DEVNULL, text=True)
+    try:
+        index = None
+        deadline = time.monotonic() + 120.0
+        while time.monotonic() < deadline and process.poll() is None:
+            found = list(store.glob("*/index.json"))
+            if found and len(json.loads(found[0].read_text())["trials"]) >= 2:
+                index = found[0]
+                break
+            time.sleep(0.02)
+        assert index is not None, "two trials stored"
+        supervisor = [pid for pid in _children(process.pid)
+                      if "ilc_supervisor" in Path(f"/proc/{pid}/cmdline").read_text()]
+        assert len(supervisor) == 1
+        os.kill(supervisor[0], signal.SIGKILL)
+        _, err = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 3, err[-3000:]
+    assert "node ilc_supervisor exited with code -9" in err
+    assert "--resume" in err and str(store) in err
+    refused = subprocess.run(common, capture_output=True, text=True, timeout=60,
+                             stdin=subprocess.DEVNULL, check=False)
+    assert refused.returncode == 2 and "add --resume" in refused.stderr, refused.stderr
+    graph_json, local_json = tmp_path / "graph.json", tmp_path / "local.json"
+    resumed = subprocess.run([*common, "--resume", "--json", str(graph_json)],
+                             capture_output=True, text=True, timeout=180,
+                             stdin=subprocess.DEVNULL, check=False)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert "resuming after trial" in resumed.stderr
+    local = subprocess.run([sys.executable, "-m", "exo_ilc_ros.cli.main", "simulate",
+                            "--config", str(config_file), "--trials", "5", "--json",
+                            str(local_json)], capture_output=True, text=True, timeout=120,
+                           stdin=subprocess.DEVNULL, check=False)
+    assert local.returncode == 0, local.stderr
+    (g,), (r,) = json.loads(graph_json.read_text())["runs"], json.loads(
+        local_json.read_text())["runs"]
+    assert g["trials"] == r["trials"]
+    assert g["iterations_to_bound"] == r["iterations_to_bound"]
+
+
+def _children(pid: int) -> list[int]:
+    path = Path(f"/proc/{pid}/task/{pid}/children")
+    return [int(x) for x in path.read_text().split()] if path.exists() else []

@@ -187,6 +187,61 @@ def test_killed_writer_leaves_every_finished_trial(tmp_path: Path, config: Confi
     np.testing.assert_array_equal(run.summary().max_abs_error, result.max_abs_errors[:3])
 
 
+def test_reader_tells_envelope_aborts_reruns_and_resume_apart(tmp_path: Path, mcap_bag: Path,
+                                                               result: RunResult) -> None:
+    """A synthetic bag of a resumed run (trials 3-5 of the module's run): a ``resumed`` event
+    (no trial number), a watchdog abort of a first attempt at trial 4 (run again: the last start
+    counts), and an envelope abort of trial 5 (``reason: error_envelope``, kept, aborted_at)."""
+    from rosbags.highlevel import AnyReader
+
+    from exo_ilc_ros.bag import messages
+
+    period_ns = 10_000_000
+    samples = 101
+
+    def t0(k: int) -> int:
+        return ((k - 1) * samples + 1) * period_ns
+
+    end5 = t0(5) + (samples - 1) * period_ns
+    injected = [
+        (t0(3) - 3, messages.trial_event(t0(3) - 3, "resumed", 0, [("trials", "2")])),
+        (t0(4) - 2, messages.trial_event(t0(4) - 2, "start", 4)),
+        (t0(4) - 1, messages.trial_event(t0(4) - 1, "aborted", 4,
+                                         [("reason", "watchdog"), ("watchdog_trips", "1")])),
+        (end5 - 1, messages.trial_event(end5, "aborted", 5,
+                                        [("reason", "error_envelope"), ("aborted_at", "60")])),
+    ]
+    bag = tmp_path / "resumed"
+    with AnyReader([mcap_bag]) as reader, BagWriter(bag) as writer:
+        for conn in reader.connections:
+            writer.add_topic(conn.topic, conn.msgtype)
+        pending = sorted(injected, key=lambda item: item[0])
+        for conn, stamp, raw in reader.messages():
+            if stamp < t0(3) and conn.topic != topics.FEEDFORWARD:
+                continue  # trials 1-2 ran before the interruption: in the other bag
+            while pending and pending[0][0] <= stamp:
+                writer.write(topics.TRIAL_EVENTS, *pending.pop(0))
+            writer.write(conn.topic, stamp, raw)
+        assert not pending
+    run = read_bag(bag)
+    assert run.resumed_after == 2
+    assert run.completed == [3, 4, 5] and not run.incomplete
+    assert run.aborted == [5] and run.trials[5].aborted_at == 60
+    assert run.trials[3].aborted_at is None and run.trials[4].aborted_at is None
+    assert run.trials[4].reruns == ["watchdog"] and run.trials[5].reruns == []
+    for record in result.records[2:]:  # the retried attempt left the kept trial's samples alone
+        np.testing.assert_array_equal(run.trials[record.trial].position, record.position)
+    notes = "\n".join(run.notes)
+    assert "resumed from its store after trial 2" in notes
+    assert "trial 4 was aborted once and run again (watchdog" in notes
+    assert "trial 5 was aborted by the error envelope at sample 60" in notes
+    assert "trial 5 was aborted once" not in notes and "without a trial number" not in notes
+    summary = run.summary()
+    assert summary.extra["aborted_trials"] == [5] and summary.extra["resumed_after"] == 2
+    assert summary.extra["sources"] == ["missing", "missing", "samples", "samples", "samples"]
+    np.testing.assert_array_equal(summary.max_abs_error[2:], result.max_abs_errors[2:])
+
+
 def test_analyze_cli_exports_and_figures(tmp_path: Path, mcap_bag: Path, config: Config,
                                          result: RunResult,
                                          capsys: pytest.CaptureFixture[str]) -> None:

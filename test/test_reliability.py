@@ -207,6 +207,125 @@ def good_ff_array(msg: Any) -> np.ndarray:
     return np.array([list(p.accelerations) for p in msg.points])
 
 
+# --- the plant's watchdog in real-time mode (node in-process, no controller) -------------------
+def test_plant_watchdog_in_real_time_mode_stops_holding_the_last_command(tmp_path: Path
+                                                                         ) -> None:
+    """Real-time plant, commands fed for the first ticks, then none: the last command is held
+    until ``safety.watchdog_periods`` periods of wall time passed; from then on every tick
+    applies the safe hold around the pose at the trip (exactly ``safe_hold_effort``), reported
+    on /joint_states and as ERROR on /diagnostics; a late command is ignored (counted). The next
+    trial (reset + start) clears it and holds commands again."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from std_srvs.srv import Trigger
+
+    from exo_ilc_ros.core.safety import safe_hold_effort
+    from exo_ilc_ros.nodes.cdr import float64_array
+    from exo_ilc_ros.nodes.common import DIAGNOSTICS_QOS, SAMPLES_QOS
+    from exo_ilc_ros.nodes.plant_simulator import PlantSimulator
+
+    periods = 10
+    config = _config(mode="real_time", **{"trajectory.duration": 3.0,
+                                          "safety.watchdog_periods": periods})
+    params = tmp_path / "params.yaml"
+    params.write_text(config.to_ros_yaml("plant watchdog test"))
+    rclpy.init(args=["--ros-args", "--params-file", str(params)])
+    try:
+        plant = PlantSimulator()
+        timeout_ns = periods * 10_000_000  # control.period 0.01 s, real_time_rate 1
+        assert not plant.lock_step and plant.watchdog.timeout_ns == timeout_ns
+        peer = rclpy.create_node("watchdog_test_peer")
+        states: list[Any] = []
+        health: list[Any] = []
+        peer.create_subscription(JointState, topics.JOINT_STATES, states.append, SAMPLES_QOS)
+        peer.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, lambda m: health.extend(
+            s for s in m.status if s.name == "plant_simulator/health"), DIAGNOSTICS_QOS)
+        peer.create_publisher(Float64MultiArray, topics.EFFORT_COMMANDS, QoSProfile(depth=10))
+        executor = SingleThreadedExecutor()
+        executor.add_node(plant)
+        executor.add_node(peer)
+
+        def spin_until(done: Any, timeout: float) -> None:
+            deadline = time.monotonic() + timeout
+            while not done():
+                assert time.monotonic() < deadline, "timed out"
+                executor.spin_once(timeout_sec=0.01)
+
+        spin_until(lambda: plant.state_pub.get_subscription_count() >= 1 and
+                   plant.command_sub.get_publisher_count() >= 1, 10.0)
+        # Every step the plant takes: (effort asked, q and qdot before it, wall time, tripped).
+        steps: list[tuple[np.ndarray, np.ndarray, np.ndarray, int, bool]] = []
+        real_step = plant.stepper.step
+
+        def step(effort: np.ndarray) -> None:
+            steps.append((effort.copy(), plant.stepper.position.copy(),
+                          plant.stepper.velocity.copy(), time.monotonic_ns(),
+                          plant.hold_pose is not None))
+            real_step(effort)
+        plant.stepper.step = step  # type: ignore[method-assign]
+
+        assert plant.on_reset(Trigger.Request(), Trigger.Response()).success
+        assert plant.on_start(Trigger.Request(), Trigger.Response()).success
+        command = np.array([3.0, -2.0, 1.0])
+        while len(steps) < 10 and plant.hold_pose is None:  # commands in time: held
+            plant.on_command(float64_array(command))
+            executor.spin_once(timeout_sec=0.01)
+        last_command_ns = plant.watchdog.last_ns  # the last command it took
+        spin_until(lambda: plant.hold_pose is not None, 5.0)  # no more commands
+        assert plant.watchdog.trips == 1
+        first_hold = next(i for i, s in enumerate(steps) if s[4])
+        spin_until(lambda: len(steps) >= first_hold + 10, 5.0)
+        late = plant.watchdog.late
+        plant.on_command(float64_array(np.array([50.0, 50.0, 50.0])))  # late: ignored
+        late_at = len(steps)
+        spin_until(lambda: len(steps) >= late_at + 5, 5.0)
+        assert plant.watchdog.late == late + 1
+
+        before = steps[:first_hold]
+        assert before, "the last command was held before the trip"
+        for effort, *_ in before:
+            np.testing.assert_array_equal(effort, command)
+        assert steps[first_hold][3] - last_command_ns > timeout_ns  # not before the timeout
+        hold_pose = steps[first_hold][1]
+        np.testing.assert_array_equal(plant.hold_pose, hold_pose)
+        e = plant.experiment
+        for effort, q, qd, _, tripped in steps[first_hold:]:
+            assert tripped
+            expected = safe_hold_effort(hold_pose, q, qd, e.kp, e.kd, e.nominal.kernel_args,
+                                        plant.limit)
+            np.testing.assert_array_equal(effort, expected)
+            assert not np.array_equal(effort, command)
+        # /joint_states reports what was applied: state i follows step i (sample 0 first).
+        spin_until(lambda: len(states) >= len(steps) + 1 and any(
+            h.level == h.ERROR for h in health), 5.0)
+        for i, (effort, *_) in enumerate(steps[:len(states) - 1], start=1):
+            np.testing.assert_array_equal(states[i].effort, np.clip(effort, -plant.limit,
+                                                                     plant.limit))
+        item = next(h for h in health if h.level == h.ERROR)
+        assert "watchdog: no effort command; safe hold" in item.message
+        values = _values(item)
+        assert values["watchdog/state"] == "timed_out" and values["watchdog/trips"] == "1"
+
+        # The next trial clears the trip: commands are held again.
+        assert plant.on_reset(Trigger.Request(), Trigger.Response()).success
+        assert plant.hold_pose is None
+        assert plant.on_start(Trigger.Request(), Trigger.Response()).success
+        steps.clear()
+        plant.on_command(float64_array(command))
+        spin_until(lambda: len(steps) >= 1, 5.0)
+        np.testing.assert_array_equal(steps[0][0], command)
+        assert not steps[0][4] and plant.health.status().level != item.ERROR
+        executor.shutdown()
+        plant.destroy_node()
+        peer.destroy_node()
+    finally:
+        rclpy.try_shutdown()
+
+
 # --- the error envelope in the graph ----------------------------------------------------------
 def test_envelope_abort_in_the_graph_equals_in_process_and_sigterm_stops_cleanly() -> None:
     """A tight envelope aborts every trial at the same sample: the graph gives exactly
@@ -402,6 +521,103 @@ def test_kill_9_the_supervisor_then_exo_ilc_run_resume(tmp_path: Path) -> None:
         local_json.read_text())["runs"]
     assert g["trials"] == r["trials"]
     assert g["iterations_to_bound"] == r["iterations_to_bound"]
+
+
+def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(tmp_path: Path
+                                                                       ) -> None:
+    """`exo-ilc run --store DIR --bag-dir B`: kill -9 of bag_recorder in the middle of trial 3
+    (after it filed trial 2) stops the graph with the node named and the resume command
+    (exit 3). `--resume` finishes the run into a second bag; its JSON equals run_trials'
+    exactly, and the two bags together (the first up to the kill, the second from the resumed
+    trial on) hold every trial they recorded once, with run_trials' max |e|.
+
+    Known gap (RELIABILITY.md, "Not done"): the graph is stopped up to ~0.5 s after the
+    recorder died, so trial 3 may still end and be stored in that time; it is then in the final
+    table but in neither bag. The test accepts both outcomes and checks exactly which trial is
+    missing."""
+    from exo_ilc_ros.bag import read_bag
+    from exo_ilc_ros.report import RunSummary
+
+    config_file = tmp_path / "short.yaml"
+    config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 3.0\n')
+    store, bags = tmp_path / "store", tmp_path / "bags"
+    trials = 5
+    common = [sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--quiet", "--config",
+              str(config_file), "--trials", str(trials), "--store", str(store), "--bag-dir",
+              str(bags)]
+    process = subprocess.Popen(common, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               stdin=subprocess.DEVNULL, text=True)
+    try:
+        first_bag: Path | None = None
+        stored_at_kill = -1
+        deadline = time.monotonic() + 120.0
+        while time.monotonic() < deadline and process.poll() is None:
+            found = list(store.glob("*/index.json"))
+            stored = len(json.loads(found[0].read_text())["trials"]) if found else 0
+            made = list(bags.iterdir()) if bags.is_dir() else []
+            if stored >= 2 and made and _bag_trials_filed(made[0]) >= 2:
+                first_bag, stored_at_kill = made[0], stored
+                break
+            time.sleep(0.01)
+        assert first_bag is not None, "two trials stored and filed"
+        time.sleep(0.05)  # into trial 3 (the supervisor starts it once trial 2 is filed)
+        recorder = [pid for pid in _children(process.pid)
+                    if "bag_recorder" in Path(f"/proc/{pid}/cmdline").read_text()]
+        assert len(recorder) == 1
+        os.kill(recorder[0], signal.SIGKILL)
+        _, err = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 3, err[-3000:]
+    assert "node bag_recorder exited with code -9" in err
+    assert "--resume" in err and str(store) in err
+    stored_after = len(json.loads(next(store.glob("*/index.json")).read_text())["trials"])
+    assert stored_at_kill == 2 and stored_after in (2, 3), (stored_at_kill, stored_after)
+
+    graph_json = tmp_path / "graph.json"
+    resumed = subprocess.run([*common, "--resume", "--json", str(graph_json)],
+                             capture_output=True, text=True, timeout=180,
+                             stdin=subprocess.DEVNULL, check=False)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert f"resuming after trial {stored_after}" in resumed.stderr
+    (second_bag,) = [b for b in bags.iterdir() if b != first_bag]
+    assert f"bag: {second_bag}" in resumed.stderr
+
+    config = load_config(config_file).replace({"max_trials": trials})
+    reference = run_trials(config)
+    local = RunSummary.from_result(reference).to_json()
+    (graph,) = json.loads(graph_json.read_text())["runs"]
+    assert graph["trials"] == local["trials"]  # exactly: floats through repr and JSON
+    assert graph["iterations_to_bound"] == local["iterations_to_bound"]
+
+    before, after = read_bag(first_bag), read_bag(second_bag)
+    assert before.completed == [1, 2] and before.resumed_after is None
+    assert after.completed == list(range(stored_after + 1, trials + 1))
+    assert after.resumed_after == stored_after and not after.incomplete
+    # Every trial is in a bag except one that ended after the recorder died (gap, see above).
+    missing = set(range(1, trials + 1)) - set(before.completed) - set(after.completed)
+    assert missing == set(range(3, stored_after + 1)), missing
+    for run in (before, after):
+        for k in run.completed:
+            assert run.trials[k].complete, (run.path, k)
+            np.testing.assert_array_equal(run.trials[k].max_abs_error,
+                                          reference.max_abs_errors[k - 1])
+    assert (first_bag / ".splits").is_dir()  # the killed recorder's unfinished file, unlisted
+    assert not (second_bag / ".splits").exists()  # closed normally
+
+
+def _bag_trials_filed(bag: Path) -> int:
+    """Trials the recorder has finished files for (from its metadata.yaml, per split)."""
+    import yaml
+
+    try:
+        info = yaml.safe_load((bag / "metadata.yaml").read_text())
+    except (OSError, yaml.YAMLError):
+        return 0
+    custom = info["rosbag2_bagfile_information"].get("custom_data") or {}
+    return int(custom.get("exo_ilc_ros.trials_completed", 0))
 
 
 def _children(pid: int) -> list[int]:

@@ -116,9 +116,10 @@ OK, WARN = 0, 1
 
 def trial_event(ns: int, event: str, trial: int,
                 values: Sequence[tuple[str, str]] = ()) -> bytes:
-    """``/ilc/trial_events``: ``start``, ``end`` (with the summary's key-values), ``aborted``,
-    or ``finished`` (values ``trials``)."""
-    first = [] if event == "finished" else [("trial", str(trial))]
+    """``/ilc/trial_events``: ``start``, ``end`` (with the summary's key-values), ``aborted``
+    (``reason``: ``error_envelope`` with ``aborted_at``, or ``watchdog``), or ``finished`` /
+    ``resumed`` (no trial number; values ``trials``)."""
+    first = [] if event in ("finished", "resumed") else [("trial", str(trial))]
     return _diagnostics(ns, topics.TRIAL_STATUS, OK, event,
                         [*first, *((k, v) for k, v in values if k != "trial")])
 

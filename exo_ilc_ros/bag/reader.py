@@ -5,6 +5,13 @@ Trials are cut out of ``/joint_states`` by the header stamps of the trial start/
 index ``round((stamp - start) / period)``, so a dropped message leaves a NaN row, never a shift.
 The reference and the learned feed-forward come from ``/ilc/feedforward`` (or the bag's config),
 the effort commands are matched to the last joint state received before them.
+
+``aborted`` events are told apart by their ``reason``: ``error_envelope`` marks a trial that is
+kept as recorded, with ``aborted_at`` (:attr:`TrialData.aborted_at`); any other reason
+(``watchdog``, a stuck protocol step) means that attempt was dropped and the trial run again
+(:attr:`TrialData.reruns`; the last start counts). A ``resumed`` event (no trial number) says the
+run continued from its store (:attr:`BagRun.resumed_after`): the earlier trials are in the
+interrupted run's bag, not this one.
 """
 
 from __future__ import annotations
@@ -45,6 +52,12 @@ class TrialData:
     summary: dict[str, str] = field(default_factory=dict)
     ended: bool = False
     """An ``end`` event (or a summary) was recorded for the trial."""
+    aborted_at: int | None = None
+    """Sample at which the error envelope aborted the trial (safe hold from there on; the trial
+    is kept and the law did not learn from it; -1 if the bag does not say at which sample);
+    None if it was not aborted."""
+    reruns: list[str] = field(default_factory=list)
+    """Why each earlier attempt of the trial was aborted and run again (e.g. ``watchdog``)."""
     command_messages: list[bytes] = field(default_factory=list, repr=False)
     """The trial's effort commands (CDR), one per sample when all were recorded."""
     feedforward_message: bytes | None = field(default=None, repr=False)
@@ -109,6 +122,14 @@ class BagRun:
     parameter_changes: list[ParameterChange]
     notes: list[str] = field(default_factory=list)
     """What the reader had to work around (missing topics, incomplete trials, ...)."""
+    resumed_after: int | None = None
+    """The run was resumed from its store after this trial (``resumed`` event): trials
+    1..resumed_after ran before this recording (another bag) and are not in this bag."""
+
+    @property
+    def aborted(self) -> list[int]:
+        """Trials the error envelope aborted (kept, marked, not learned from), in order."""
+        return sorted(k for k, t in self.trials.items() if t.aborted_at is not None)
 
     @property
     def completed(self) -> list[int]:
@@ -180,6 +201,10 @@ class BagRun:
         extra: dict[str, Any] = {"bag": str(self.path), "sources": sources}
         if self.incomplete:
             extra["incomplete_trials"] = self.incomplete
+        if self.aborted:
+            extra["aborted_trials"] = self.aborted
+        if self.resumed_after is not None:
+            extra["resumed_after"] = self.resumed_after
         return RunSummary(self.mass_uncertainty, self.law, self.error_bound, errors,
                           None if np.isnan(ff).all() else ff,
                           None if np.isnan(effort).all() else effort, extra)
@@ -277,11 +302,16 @@ def _statuses(stream: _Stream, name: str) -> Iterator[tuple[int, int, Any]]:
                 yield messages.time_ns(msg.header.stamp), log, status
 
 
-def _trial_number(values: dict[str, str]) -> int | None:
+def _trial_number(values: dict[str, str], key: str = "trial") -> int | None:
     try:
-        return int(values["trial"])
+        return int(values[key])
     except (KeyError, ValueError):
         return None
+
+
+ENVELOPE_REASON = "error_envelope"
+"""``reason`` of the ``aborted`` event of a trial the error envelope aborted: unlike the other
+``aborted`` events (watchdog, a stuck protocol step), that trial is not run again."""
 
 
 def _assign_commands(windows: Sequence[tuple[int, int, TrialData]], cmd_log: np.ndarray,
@@ -348,16 +378,34 @@ def read_bag(path: Path | str) -> BagRun:
     start_logs: dict[int, int] = {}
     ends: dict[int, int] = {}
     summaries: dict[int, dict[str, str]] = {}
+    aborted_at: dict[int, int] = {}
+    reruns: dict[int, list[str]] = {}
+    resumed_after: int | None = None
     for stamp, log, status in _statuses(streams[topics.TRIAL_EVENTS], topics.TRIAL_STATUS):
         values = messages.key_values(status)
         if status.message == "finished":
+            continue
+        if status.message == "resumed":  # no trial number: trials 1..N came from the store
+            resumed_after = _trial_number(values, "trials")
+            notes.append(f"the run was resumed from its store after trial {resumed_after}: "
+                         "the trials before were recorded in the interrupted run's bag"
+                         if resumed_after is not None else "the run was resumed from its store")
             continue
         k = _trial_number(values)
         if k is None:
             notes.append(f"trial event {status.message!r} at {stamp} ns without a trial number")
             continue
         if status.message == "aborted":
-            notes.append(f"trial {k} was aborted once and run again ({values})")
+            if values.get("reason") == ENVELOPE_REASON:
+                at = _trial_number(values, "aborted_at")
+                aborted_at[k] = -1 if at is None else at
+                notes.append(f"trial {k} was aborted by the error envelope at sample "
+                             f"{values.get('aborted_at', '?')} (safe hold from there; kept, "
+                             "not learned from)")
+            else:
+                reason = values.get("reason") or values.get("phase") or "?"
+                reruns.setdefault(k, []).append(reason)
+                notes.append(f"trial {k} was aborted once and run again ({reason}: {values})")
         if status.message == "start":
             starts[k] = stamp  # a retried trial starts again: the last start counts
             start_logs[k] = log
@@ -371,6 +419,10 @@ def read_bag(path: Path | str) -> BagRun:
         if k is not None:
             summaries.setdefault(k, {}).update(values)
             summary_stamps[k] = stamp
+    for k, values in summaries.items():  # a bag without the events: the summary marks it
+        at = _trial_number(values, "aborted_at")
+        if at is not None and aborted_at.get(k, -1) < 0:
+            aborted_at[k] = at
 
     # Feed-forward profiles by trial.
     profiles: dict[int, bytes] = {}
@@ -456,6 +508,7 @@ def read_bag(path: Path | str) -> BagRun:
         q[index], qd[index], eff[index] = position[inside], velocity[inside], applied[inside]
         trials[k] = TrialData(k, ref_time.copy(), ref_q, ref_qd, q, qd, eff,
                               summaries.get(k, {}), k in ends,
+                              aborted_at=aborted_at.get(k), reruns=reruns.get(k, []),
                               feedforward_message=profiles.get(k), decode=decode)
         windows.append((k, start_logs.get(k, int(js_log[inside].min()) if inside.size
                                          else -1), trials[k]))
@@ -467,4 +520,4 @@ def read_bag(path: Path | str) -> BagRun:
     if not provenance.parameter_changes and provenance.recorded_by is None:
         notes.append("no exo_ilc_ros provenance in custom_data (recorded by another tool?)")
     return BagRun(path, str(info.get("storage_identifier", "?")), names, period, provenance,
-                  trials, summaries, provenance.parameter_changes, notes)
+                  trials, summaries, provenance.parameter_changes, notes, resumed_after)

@@ -16,12 +16,8 @@ from ..core.config import Config
 from ..core.errors import ConfigError
 from ..report import (
     RunSummary,
-    format_iterations,
-    format_long_run,
-    format_trial_table,
-    write_json,
 )
-from .simulate import add_config_arguments, config_from_args
+from .simulate import add_config_arguments, config_from_args, print_report
 
 
 def register(sub: Any) -> None:
@@ -113,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
                       f"{root}. Continue with:\n  exo-ilc {shlex.join(again)} --resume",
                       file=sys.stderr)
             return 3
-    _report(args, config, runs)
+    print_report(args, config, runs)
     return 0
 
 
@@ -141,21 +137,3 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
                                    on_summary=progress)
             bar.write(f"bag: {recording.path}", file=sys.stderr)
     return result.summary
-
-
-def _report(args: argparse.Namespace, config: Config, runs: list[RunSummary]) -> None:
-    """The same report as ``exo-ilc simulate``."""
-    names = config["joint_names"]
-    if not args.quiet:  # the same report as `exo-ilc simulate`
-        print(format_trial_table(runs, names))
-        print()
-        if args.learned:
-            for quantity in ("feedforward", "effort"):
-                print(format_trial_table(runs, names, quantity))
-                print()
-    print(format_iterations(runs, names))
-    print()
-    print(format_long_run(runs, names))
-    if args.json:
-        write_json(args.json, config.values, runs)
-        print(f"wrote {args.json}")

@@ -84,6 +84,13 @@ def simulate(args: argparse.Namespace) -> int:
 
             path = unique_path(args.bag, run_name("sim", result.law, delta))
             print(f"bag: {write_run(path, config, result)}", file=sys.stderr)
+    print_report(args, config, runs)
+    return 0
+
+
+def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary]) -> None:
+    """The per-trial table (unless --quiet; --learned adds max |u_ff| and max |effort|), the
+    iterations to the bound, the long-run check, and --json: shared by simulate and run."""
     names = config["joint_names"]
     if not args.quiet:
         print(format_trial_table(runs, names))
@@ -98,4 +105,3 @@ def simulate(args: argparse.Namespace) -> int:
     if args.json:
         write_json(args.json, config.values, runs)
         print(f"wrote {args.json}")
-    return 0

@@ -170,11 +170,12 @@ class Watchdog:
     feeds it with every command and stops holding the last command once tripped.
     """
 
-    def __init__(self, periods: int, period_ns: int) -> None:
-        if periods < 1 or period_ns < 1:
-            raise ValueError(f"watchdog needs periods >= 1 and period_ns >= 1, got {periods} "
-                             f"and {period_ns}")
-        self.timeout_ns = int(periods) * int(period_ns)
+    def __init__(self, periods: int, period_ns: int, min_timeout_ns: int = 0) -> None:
+        if periods < 1 or period_ns < 1 or min_timeout_ns < 0:
+            raise ValueError(f"watchdog needs periods >= 1, period_ns >= 1 and min_timeout_ns "
+                             f">= 0, got {periods}, {period_ns} and {min_timeout_ns}")
+        self.timeout_ns = max(int(periods) * int(period_ns), int(min_timeout_ns))
+        """``periods`` control periods, but never less than ``min_timeout_ns``."""
         self.state = WatchdogState.IDLE
         self.last_ns = 0
         self.trips = 0

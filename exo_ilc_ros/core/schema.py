@@ -123,6 +123,9 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("safety.watchdog_periods", SHARED, Kind.INTEGER,
               "control periods without /joint_states (controller) or a command (plant) before "
               "the safe hold / zero effort", strictly_positive=True),
+    Parameter("watchdog_min_timeout", CONTROLLER, Kind.DOUBLE,
+              "wall-clock floor of the controller's watchdog (s): in lock-step a loaded machine "
+              "may deliver a sample late without any fault; 0 on hardware", minimum=0.0),
     Parameter("mass_uncertainty", PLANT, Kind.DOUBLE,
               "delta: the plant's masses are m_i (1 + delta); the controller keeps m_i",
               minimum=-0.9),

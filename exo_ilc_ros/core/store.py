@@ -45,7 +45,8 @@ from .trajectory import SampledReference
 
 STORE_VERSION = 1
 NOT_KEYED = frozenset({"max_trials", "mode", "real_time_rate", "wait_for_recorder",
-                       "safety.watchdog_periods", "store.directory",
+                       "safety.watchdog_periods", "watchdog_min_timeout",
+                       "store.directory",
                        "store.resume"})
 """Non-live parameters that change how a run is driven, not what it learns."""
 

@@ -201,14 +201,16 @@ class BagRecorder(Node):
 
     def _split(self) -> None:
         trial, self.ended = self.ended, None
-        if trial is not None:
-            self.received = max(self.received, trial)
-            self.on_status_timer()  # the supervisor may wait for this before the next trial
         self.writer.set_custom_data(TRIALS_COMPLETED, str(self.completed))
         for key, text in parameter_changes_data(self.changes).items():
             self.writer.set_custom_data(key, text)
         if self.split_every > 0 and trial is not None and trial % self.split_every == 0:
             self.writer.split()
+        if trial is not None:
+            # Only now (the trial's file is finished and listed) tell the supervisor, which
+            # waits for this before the next trial: a kill -9 from here on loses no ended trial.
+            self.received = max(self.received, trial)
+            self.on_status_timer()
 
     def destroy_node(self) -> None:
         """Close the bag (writes the last file and metadata.yaml), then the node."""

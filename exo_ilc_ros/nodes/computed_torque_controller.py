@@ -63,7 +63,8 @@ class ComputedTorqueController(Node):
         self.step_ns = period_ns(experiment.period)
         self.rejections = Rejections(self)
         self.gate = JointStateGate(self.joint_names, self.rejections)
-        self.watchdog = Watchdog(config["safety.watchdog_periods"], self.step_ns)
+        self.watchdog = Watchdog(config["safety.watchdog_periods"], self.step_ns,
+                                 int(config["watchdog_min_timeout"] * 1e9))
         self.aborted_at = -1
         """First sample of the current trial outside the error envelope (-1: none)."""
         self.trial_trips = 0

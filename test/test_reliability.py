@@ -376,7 +376,9 @@ def test_bad_messages_and_a_stalled_plant_change_nothing_learned() -> None:
     from exo_ilc_ros.graph import GraphSession
     from exo_ilc_ros.nodes.common import SAMPLES_QOS
 
-    config = _config(max_trials=6, **{"trajectory.duration": 3.0})
+    # 30 s trials last ~1-2 s of wall time in lock-step, so the freeze below lands mid-trial
+    # (a 3 s trial can be over before the signal arrives on a busy machine).
+    config = _config(max_trials=6, **{"trajectory.duration": 30.0})
     with GraphSession(config) as session:
         health = _health(session)
         state_pub = session.node.create_publisher(JointState, topics.JOINT_STATES, SAMPLES_QOS)
@@ -412,7 +414,7 @@ def test_bad_messages_and_a_stalled_plant_change_nothing_learned() -> None:
             plant.send_signal(signal.SIGSTOP)
             try:
                 with contextlib.suppress(GraphError):
-                    session.spin_until(tripped, timeout=3.0)
+                    session.spin_until(tripped, timeout=6.0)  # >= watchdog_min_timeout
             finally:
                 plant.send_signal(signal.SIGCONT)
             if tripped():
@@ -420,10 +422,16 @@ def test_bad_messages_and_a_stalled_plant_change_nothing_learned() -> None:
         assert tripped(), "the controller's watchdog tripped"
         assert health["computed_torque_controller/health"].level == b"\x02"  # ERROR
         session.spin_until(lambda: session.finished, timeout=120.0, stall_timeout=60.0)
-        session.spin_until(lambda: all(
-            "rejected" in getattr(health.get(f"{n}/health"), "message", "")
-            for n in ("plant_simulator", "computed_torque_controller", "ilc_supervisor")),
-            timeout=10.0)
+        nodes = ("plant_simulator", "computed_torque_controller", "ilc_supervisor")
+
+        def messages() -> dict[str, str]:
+            return {n: getattr(health.get(f"{n}/health"), "message", "") for n in nodes}
+
+        try:
+            session.spin_until(lambda: all("rejected" in m for m in messages().values()),
+                               timeout=10.0)
+        except GraphError:
+            pytest.fail(f"not every node reports the rejected input: {messages()}")
     _same_as_in_process(session.summaries, config)
     retried = [v for m, v, _ in session.events if m == "aborted"]
     assert any(v.get("reason") == "watchdog" for v in retried), retried

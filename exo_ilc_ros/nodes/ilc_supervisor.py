@@ -247,11 +247,10 @@ class IlcSupervisor(Node):
 
     def on_joint_state(self, raw: bytes) -> None:
         """Keep the samples of the current trial; the last one (with the controller's
-        ``done``) ends it."""
-        if self.t0_ns < 0:
-            return
+        ``done``) ends it. Every message is checked (bad input is counted even between
+        trials); only the current trial's samples are kept."""
         sample = self.gate(raw)
-        if sample is None:
+        if sample is None or self.t0_ns < 0:
             return
         stamp, position, velocity = sample
         i = sample_index(stamp, self.t0_ns, self.step_ns, self.received.shape[0])

@@ -499,18 +499,12 @@ def test_kill_9_the_supervisor_then_exo_ilc_run_resume(tmp_path: Path) -> None:
                 break
             time.sleep(0.02)
         assert index is not None, "two trials stored"
-        supervisor = [pid for pid in _children(process.pid)
-                      if "ilc_supervisor" in Path(f"/proc/{pid}/cmdline").read_text()]
-        assert len(supervisor) == 1
-        os.kill(supervisor[0], signal.SIGKILL)
-        _, err = process.communicate(timeout=60)
+        err = _sigkill_node(process, "ilc_supervisor")
     finally:
         if process.poll() is None:
             process.kill()
             process.wait()
-    assert process.returncode == 3, err[-3000:]
-    assert "node ilc_supervisor exited with code -9" in err
-    assert "--resume" in err and str(store) in err
+    _assert_stopped_for_resume(process, err, "ilc_supervisor", store)
     refused = subprocess.run(common, capture_output=True, text=True, timeout=60,
                              stdin=subprocess.DEVNULL, check=False)
     assert refused.returncode == 2 and "add --resume" in refused.stderr, refused.stderr
@@ -569,18 +563,12 @@ def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(tmp_path:
             time.sleep(0.01)
         assert first_bag is not None, "two trials stored and filed"
         time.sleep(0.05)  # into trial 3 (the supervisor starts it once trial 2 is filed)
-        recorder = [pid for pid in _children(process.pid)
-                    if "bag_recorder" in Path(f"/proc/{pid}/cmdline").read_text()]
-        assert len(recorder) == 1
-        os.kill(recorder[0], signal.SIGKILL)
-        _, err = process.communicate(timeout=60)
+        err = _sigkill_node(process, "bag_recorder")
     finally:
         if process.poll() is None:
             process.kill()
             process.wait()
-    assert process.returncode == 3, err[-3000:]
-    assert "node bag_recorder exited with code -9" in err
-    assert "--resume" in err and str(store) in err
+    _assert_stopped_for_resume(process, err, "bag_recorder", store)
     stored_after = len(json.loads(next(store.glob("*/index.json")).read_text())["trials"])
     assert stored_at_kill == 2 and stored_after in (2, 3), (stored_at_kill, stored_after)
 
@@ -631,3 +619,20 @@ def _bag_trials_filed(bag: Path) -> int:
 def _children(pid: int) -> list[int]:
     path = Path(f"/proc/{pid}/task/{pid}/children")
     return [int(x) for x in path.read_text().split()] if path.exists() else []
+
+
+def _sigkill_node(process: subprocess.Popen[str], node: str) -> str:
+    """SIGKILL the one child of the ``exo-ilc run`` process that runs ``node``; its stderr."""
+    pids = [pid for pid in _children(process.pid)
+            if node in Path(f"/proc/{pid}/cmdline").read_text()]
+    assert len(pids) == 1, pids
+    os.kill(pids[0], signal.SIGKILL)
+    return process.communicate(timeout=60)[1]
+
+
+def _assert_stopped_for_resume(process: subprocess.Popen[str], err: str, node: str,
+                               store: Path) -> None:
+    """``exo-ilc run`` stopped with exit 3, named the dead node and printed the resume."""
+    assert process.returncode == 3, err[-3000:]
+    assert f"node {node} exited with code -9" in err
+    assert "--resume" in err and str(store) in err

@@ -32,8 +32,6 @@ from .launcher import (
 )
 from .report import RunSummary
 
-LEVEL_NAMES = ("M", "M'", "M''")
-
 
 @dataclass
 class TrialSummary:
@@ -51,7 +49,8 @@ class TrialSummary:
         """M, M', M'' (rows) per joint, or None if the trial had none (trial 1, linear law)."""
         if f"level/M/{joints[0]}" not in self.values:
             return None
-        return np.array([self.row(f"level/{symbol}", joints) for symbol in LEVEL_NAMES])
+        return np.array([self.row(f"level/{symbol}", joints)
+                         for symbol in topics.LEVEL_SYMBOLS])
 
 
 def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSummary:

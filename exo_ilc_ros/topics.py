@@ -83,6 +83,8 @@ START_SERVICE = "/plant_simulator/start"
 
 TRIAL_STATUS = "ilc_supervisor/trial"
 SUMMARY_STATUS = "ilc_supervisor/trial_summary"
+LEVEL_SYMBOLS = ("M", "M'", "M''")
+"""The step gains in the summary keys ``level/<symbol>/<joint>``, in eq (11)'s order."""
 FEEDFORWARD_FRAME_PREFIX = "trial:"
 FEEDFORWARD_ACK_STATUS = "computed_torque_controller/feedforward"
 RECORDER_STATUS = "bag_recorder/status"

@@ -20,7 +20,14 @@ import pytest
 import yaml
 
 from exo_ilc_ros import topics
-from exo_ilc_ros.bag import BagReadError, BagWriteError, BagWriter, read_bag, write_run
+from exo_ilc_ros.bag import (
+    BagReadError,
+    BagWriteError,
+    BagWriter,
+    read_bag,
+    trials_filed,
+    write_run,
+)
 from exo_ilc_ros.bag.provenance import read_provenance
 from exo_ilc_ros.cli.main import main as exo_ilc
 from exo_ilc_ros.core.config import Config, load_config
@@ -291,16 +298,6 @@ def _spin_until(session: Any, done: Any, timeout: float) -> None:
         session.executor.spin_once(timeout_sec=0.05)
 
 
-def _trials_in(bag: Path) -> int:
-    """Trials the recorder has finished files for (its metadata.yaml, rewritten per split)."""
-    try:
-        info = yaml.safe_load((bag / "metadata.yaml").read_text())
-    except (OSError, yaml.YAMLError):
-        return 0
-    custom = info["rosbag2_bagfile_information"].get("custom_data") or {}
-    return int(custom.get("exo_ilc_ros.trials_completed", 0))
-
-
 @pytest.mark.graph
 def test_recorder_sigkill_leaves_the_filed_trials(tmp_path: Path) -> None:
     """The real recorder on the real graph, killed with SIGKILL once it has filed trial 2 while
@@ -324,7 +321,7 @@ def test_recorder_sigkill_leaves_the_filed_trials(tmp_path: Path) -> None:
         _spin_until(session, future.done, 10)
         assert future.result().results[0].successful
         filed = max(2, len(session.summaries) + 1)  # a trial ended after the change
-        _spin_until(session, lambda: _trials_in(recording.path) >= filed, 60)
+        _spin_until(session, lambda: trials_filed(recording.path) >= filed, 60)
         process = session.processes.processes.pop("bag_recorder")
         process.send_signal(signal.SIGKILL)
         assert process.wait(10) == -signal.SIGKILL

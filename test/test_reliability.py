@@ -537,7 +537,7 @@ def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(tmp_path:
     recorder died, so trial 3 may still end and be stored in that time; it is then in the final
     table but in neither bag. The test accepts both outcomes and checks exactly which trial is
     missing."""
-    from exo_ilc_ros.bag import read_bag
+    from exo_ilc_ros.bag import read_bag, trials_filed
     from exo_ilc_ros.report import RunSummary
 
     config_file = tmp_path / "short.yaml"
@@ -557,7 +557,7 @@ def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(tmp_path:
             found = list(store.glob("*/index.json"))
             stored = len(json.loads(found[0].read_text())["trials"]) if found else 0
             made = list(bags.iterdir()) if bags.is_dir() else []
-            if stored >= 2 and made and _bag_trials_filed(made[0]) >= 2:
+            if stored >= 2 and made and trials_filed(made[0]) >= 2:
                 first_bag, stored_at_kill = made[0], stored
                 break
             time.sleep(0.01)
@@ -602,18 +602,6 @@ def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(tmp_path:
                                           reference.max_abs_errors[k - 1])
     assert (first_bag / ".splits").is_dir()  # the killed recorder's unfinished file, unlisted
     assert not (second_bag / ".splits").exists()  # closed normally
-
-
-def _bag_trials_filed(bag: Path) -> int:
-    """Trials the recorder has finished files for (from its metadata.yaml, per split)."""
-    import yaml
-
-    try:
-        info = yaml.safe_load((bag / "metadata.yaml").read_text())
-    except (OSError, yaml.YAMLError):
-        return 0
-    custom = info["rosbag2_bagfile_information"].get("custom_data") or {}
-    return int(custom.get("exo_ilc_ros.trials_completed", 0))
 
 
 def _children(pid: int) -> list[int]:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from .errors import BagError, BagReadError, BagWriteError
 from .provenance import ParameterChange, Provenance, provenance_data, read_provenance
-from .reader import BagRun, TrialData, read_bag
+from .reader import BagRun, TrialData, read_bag, trials_filed
 from .run_writer import run_name, unique_path, write_run
 from .writer import BagWriter
 
@@ -26,6 +26,7 @@ __all__ = [
     "read_bag",
     "read_provenance",
     "run_name",
+    "trials_filed",
     "unique_path",
     "write_run",
 ]

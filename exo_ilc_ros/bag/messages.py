@@ -15,7 +15,6 @@ import numpy as np
 
 from .. import topics
 
-LEVEL_NAMES = ("M", "M'", "M''")
 """The rows of a trial's levels, as the summary's ``level/<name>/<joint>`` keys name them."""
 
 
@@ -142,7 +141,7 @@ def summary_values(trial: int, mass_uncertainty: float, law: str, names: Sequenc
                      ("max_abs_effort", max_abs_effort)):
         out += [(f"{key}/{n}", repr(float(x))) for n, x in zip(names, row, strict=True)]
     if levels is not None:
-        for level_name, row in zip(LEVEL_NAMES, np.asarray(levels), strict=False):
+        for level_name, row in zip(topics.LEVEL_SYMBOLS, np.asarray(levels), strict=False):
             out += [(f"level/{level_name}/{n}", repr(float(x)))
                     for n, x in zip(names, row, strict=True)]
     return out
@@ -159,11 +158,3 @@ def per_joint(values: Mapping[str, str], key: str, names: Sequence[str]) -> np.n
         return np.array([float(values[f"{key}/{n}"]) for n in names])
     except (KeyError, ValueError):
         return None
-
-
-def levels_of(values: Mapping[str, str], names: Sequence[str]) -> np.ndarray | None:
-    """The (3, joints) levels M, M', M'' of a summary (None if absent)."""
-    rows = [per_joint(values, f"level/{name}", names) for name in LEVEL_NAMES]
-    if any(r is None for r in rows):
-        return None
-    return np.array(rows)

@@ -226,6 +226,16 @@ def read_metadata(path: Path) -> dict[str, Any]:
     return info if isinstance(info, dict) else {}
 
 
+def trials_filed(path: Path | str) -> int:
+    """Trials the recorder has finished files for, from ``metadata.yaml`` (rewritten after each
+    trial); 0 while there is no readable metadata yet (a live or just-started recording)."""
+    try:
+        info = read_metadata(Path(path))
+    except BagReadError:
+        return 0
+    return read_provenance(info.get("custom_data")).trials_completed or 0
+
+
 @dataclass
 class _Stream:
     """Messages of one topic: log times, and the decoded messages (or the raw ones, for the

@@ -140,16 +140,6 @@ def record_from_samples(experiment: Experiment, trial: int, feedforward: np.ndar
 
 
 @njit(cache=True, error_model="numpy")
-def abort_index(q_ref: np.ndarray, q: np.ndarray, envelope: np.ndarray) -> int:
-    """The first sample whose |e_j| leaves the envelope (NaN counts as outside), or -1:
-    the test :func:`safety.simulate_trial_guarded` makes at every sample."""
-    for i in range(q.shape[0]):
-        if _outside_envelope(q_ref[i], q[i], envelope):
-            return i
-    return -1
-
-
-@njit(cache=True, error_model="numpy")
 def control_inputs_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray,
                            q: np.ndarray, qd: np.ndarray, kp: np.ndarray, kd: np.ndarray,
                            nominal: tuple, effort_limit: np.ndarray, aborted_at: int

@@ -58,7 +58,6 @@ from .common import (
 from .guard import Health, JointStateGate, Rejections, rejections_check
 
 NAME = schema.SUPERVISOR
-LEVEL_NAMES = ("M", "M'", "M''")
 STEP_TIMEOUT = 30.0
 RECORDER_TIMEOUT = 5.0
 """Wall seconds to wait for bag_recorder to catch up before going on without it."""
@@ -477,7 +476,7 @@ class IlcSupervisor(Node):
             values += [(f"{key}/{name}", repr(float(x)))
                        for name, x in zip(self.joint_names, row, strict=True)]
         if record.levels is not None:
-            for symbol, row in zip(LEVEL_NAMES, record.levels, strict=True):
+            for symbol, row in zip(topics.LEVEL_SYMBOLS, record.levels, strict=True):
                 values += [(f"level/{symbol}/{name}", repr(float(x)))
                            for name, x in zip(self.joint_names, row, strict=True)]
         if record.aborted:

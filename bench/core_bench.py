@@ -12,6 +12,28 @@ import time
 import numpy as np
 
 from exo_ilc_ros.core import Experiment, load_config, run_trials
+from exo_ilc_ros.core.dynamics import workspace
+from exo_ilc_ros.core.integrator import _rk4_period
+
+
+def plant_step_times(experiment: Experiment, repeats: int = 2000) -> list[float]:
+    """Seconds per control period of the plant alone (what the simulator node's lock-step step
+    runs), called from Python: RK4 on the sub-steps, 4 plant evaluations each."""
+    ref = experiment.reference
+    n = ref.position.shape[1]
+    ws, stage, extra = workspace(n), np.empty((10, n)), np.empty(2 * n)
+    q, qd, effort = np.empty(n), np.empty(n), np.array([0.5, -1.0, 0.2])[:n]
+    args = (experiment.period, experiment.substeps, experiment.plant.kernel_args,
+            experiment.nominal.kernel_args, int(experiment.dynamics), ws, stage, extra)
+    times = []
+    for _ in range(5):
+        start = time.perf_counter()
+        for _ in range(repeats):
+            q[:] = ref.position[1]  # the same state each time: no drift
+            qd[:] = ref.velocity[1]
+            _rk4_period(q, qd, effort, *args)
+        times.append((time.perf_counter() - start) / repeats)
+    return times
 
 
 def main() -> None:
@@ -36,6 +58,11 @@ def main() -> None:
           f"over {len(trial_times)} runs (target <= 35 ms)")
     print(f"  per RK4 sub-step: {median / substeps * 1e6:.2f} us "
           f"(4 plant evaluations + the controller every {experiment.substeps})")
+    step = statistics.median(plant_step_times(experiment))
+    evaluations = 4 * experiment.substeps
+    print(f"plant step (one period, {experiment.substeps} RK4 sub-steps = {evaluations} plant "
+          f"evaluations, called from Python): median {step * 1e6:.1f} us "
+          f"({step / evaluations * 1e9:.0f} ns per evaluation, call overhead included)")
     run_times = []
     for law in ("sign", "linear"):
         start = time.perf_counter()

@@ -18,6 +18,7 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -25,41 +26,52 @@ import numpy as np
 from exo_ilc_ros import topics
 from exo_ilc_ros.core.config import Config, load_config
 from exo_ilc_ros.graph import GraphSession, run_graph
-from exo_ilc_ros.launcher import claim_domain_id, graph_environment
+from exo_ilc_ros.launcher import NodeSpec, claim_domain_id, graph_environment
 
 
-def middleware_floor(count: int, raw: bool) -> dict[str, float]:
-    """(a): ping-pong round trips per second between two processes."""
+def middleware_floor(count: int, raw: bool, listener: bool = False) -> dict[str, float]:
+    """(a): ping-pong round trips per second between two processes (``listener``: with a
+    third process subscribed to both topics, as a recorder is)."""
     claim = claim_domain_id()
     env = graph_environment(claim.domain_id)
     flag = ["raw"] if raw else []
     pong = subprocess.Popen([sys.executable, "-m", "bench.pingpong", "pong", *flag], env=env,
                             stdin=subprocess.DEVNULL)
+    third = subprocess.Popen([sys.executable, "-m", "bench.pingpong", "listen"], env=env,
+                             stdin=subprocess.DEVNULL) if listener else None
     try:
         out = subprocess.run([sys.executable, "-m", "bench.pingpong", "ping", str(count), *flag],
                              env=env, capture_output=True, text=True, timeout=300, check=True)
         return dict(json.loads(out.stdout.strip().splitlines()[-1]))
     finally:
-        pong.send_signal(2)
-        try:
-            pong.wait(10)
-        except subprocess.TimeoutExpired:
-            pong.kill()
+        for process in (pong, third):
+            if process is None:
+                continue
+            process.send_signal(2)
+            try:
+                process.wait(10)
+            except subprocess.TimeoutExpired:
+                process.kill()
         claim.release()
 
 
-def graph_rate(config: Config) -> dict[str, float]:
-    """(b): control steps per second through the graph, within trials and overall."""
+def graph_rate(config: Config, extra: Sequence[NodeSpec] = ()) -> dict[str, float]:
+    """(b): control steps per second through the graph (plus ``extra`` processes, e.g. the
+    recorder), within trials and overall."""
     samples = int(round(config["trajectory.duration"] / config["control.period"])) + 1
-    with GraphSession(config) as session:
+    with GraphSession(config, extra=extra) as session:
         session.spin_until(lambda: session.finished, timeout=1800.0, stall_timeout=120.0)
-    # Receipt times are wall times only once the monitor matched the supervisor (earlier
-    # trials arrive together from the transient-local history): skip the first three trials.
+    # Receipt times are wall times only once the monitor matched the supervisor: the trials
+    # before arrive together from the transient-local history. Skip that burst (everything
+    # received within 50 ms of the first event) and the first three trials (warm-up).
+    first = min(t for _, _, t in session.events)
     starts = {int(v["trial"]): t for m, v, t in session.events if m == "start"}
     ends = {int(v["trial"]): t for m, v, t in session.events if m == "end"}
-    in_trial = [ends[k] - starts[k] for k in starts if k in ends and k > 3]
-    received = np.array([s.received for s in session.summaries])
-    per_trial = float(np.median(np.diff(received)[3:]))
+    in_trial = [ends[k] - starts[k] for k in starts
+                if k in ends and k > 3 and starts[k] > first + 0.05]
+    received = np.array([s.received for s in session.summaries[3:]
+                         if s.received > first + 0.05])
+    per_trial = float(np.median(np.diff(received)))
     return {"trials": len(session.summaries), "samples_per_trial": samples,
             "steps_per_s_in_trial": samples * len(in_trial) / sum(in_trial),
             "steps_per_s_overall": samples / per_trial}

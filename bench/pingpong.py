@@ -6,6 +6,7 @@ Float64MultiArray reply of ``pong`` before the next; both spin an EventsExecutor
 
     python -m bench.pingpong pong [raw] &
     python -m bench.pingpong ping 3000 [raw]   # prints {"round_trips_per_s": ...} as JSON
+    python -m bench.pingpong listen &          # optional: a third, silent subscriber
 
 ``raw``: serialised CDR bytes both ways (``raw=True`` subscriptions, ``publish(bytes)``), as the
 graph's hot paths do; without it, rclpy message objects.
@@ -20,6 +21,7 @@ import time
 
 import numpy as np
 import rclpy
+from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -52,6 +54,21 @@ def pong(raw: bool) -> None:
     executor.add_node(node)
     while rclpy.ok():
         executor.spin_once(timeout_sec=0.1)
+
+
+def listen() -> None:
+    """Subscribe to both topics and drain them every 10 ms without waking per message (the
+    recorder's :class:`~exo_ilc_ros.nodes.common.Inbox`): what one more subscriber process
+    costs the ping-pong."""
+    from exo_ilc_ros.nodes.common import INBOX_PERIOD, INBOX_QOS, Inbox
+
+    owner = Node("bench_listener")
+    inbox = Inbox(owner)
+    inbox.subscribe(JointState, "/bench/joint_states", INBOX_QOS)
+    inbox.subscribe(Float64MultiArray, "/bench/commands", INBOX_QOS)
+    while rclpy.ok():
+        time.sleep(INBOX_PERIOD)
+        inbox.take()
 
 
 def ping(count: int, raw: bool, warmup: int = 200, timeout: float = 60.0) -> dict[str, float]:
@@ -109,9 +126,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args[0] == "pong":
             pong(raw)
+        elif args[0] == "listen":
+            listen()
         else:
             print(json.dumps(ping(int(args[1]), raw)), flush=True)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         rclpy.try_shutdown()

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from exo_ilc_ros.core import ArmModel, build_arm, integrate_period, load_config
+from exo_ilc_ros.core import ArmModel, build_arm, dynamics, integrate_period, load_config
 from exo_ilc_ros.core.geometry import truncated_cone
 from exo_ilc_ros.core.integrator import PlantDynamics, computed_torque_kernel
 from exo_ilc_ros.core.trajectory import QuinticTrajectory
@@ -176,3 +176,74 @@ def test_paper_approximation_equals_full_plant_without_uncertainty(arm: ArmModel
     full = integrate_period(q0, qd0, effort, 0.01, 10, plant.kernel_args, args, 0)
     approx = integrate_period(q0, qd0, effort, 0.01, 10, plant.kernel_args, args, 1)
     assert not np.allclose(full[1], approx[1], atol=1e-9)  # the approximation differs with delta
+
+
+def random_chain(n: int, rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+    """kernel_args of a generic chain: tilted axes, offsets and centres of mass off the axes,
+    full (non-diagonal) inertia tensors, gravity not along z."""
+    axes = rng.normal(size=(n, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    root = rng.normal(size=(n, 3, 3))
+    inertias = 0.02 * (root @ np.swapaxes(root, 1, 2) + 0.1 * np.eye(3))
+    return (rng.uniform(0.2, 2.0, n), axes, 0.3 * rng.normal(size=(n, 3)),
+            0.2 * rng.normal(size=(n, 3)), inertias, np.array([0.4, -0.3, -9.81]))
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 6])
+def test_fast_kernels_match_the_reference_path_on_other_chains(n: int) -> None:
+    """The fused outward pass (a and c of eq (7)) and the solves against the slow reference
+    path (eq (2) loops, c by the Christoffel contraction of eq (5)) and numpy, for any n."""
+    rng = np.random.default_rng(100 + n)
+    args = random_chain(n, rng)
+    ws = dynamics.workspace(n)  # reused across states, as the integrator does
+    out = np.empty(n)
+    for _ in range(30):
+        q, qd, effort = (rng.uniform(-np.pi, np.pi, n), rng.uniform(-4.0, 4.0, n),
+                         rng.uniform(-5.0, 5.0, n))
+        a_ref, da, qg = dynamics.metric_terms(q, *args, True)
+        c_ref = dynamics.christoffel_bias(da, qg, qd)
+        a, c = dynamics.inertia_and_bias(q, qd, *args)
+        np.testing.assert_allclose(a, a_ref, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(a, a.T)
+        np.testing.assert_allclose(c, c_ref, rtol=0, atol=1e-11)
+        bias = np.empty(n)
+        a_ws = dynamics.inertia_and_bias_into(q, qd, *args, ws, bias)
+        np.testing.assert_array_equal(a_ws, a)
+        np.testing.assert_array_equal(bias, c)
+        dynamics.forward_dynamics_into(q, qd, effort, *args, ws, out)
+        expected = np.linalg.solve(a_ref, effort - c_ref)
+        np.testing.assert_allclose(out, expected, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(dynamics.solve_spd(a, effort - c), expected, rtol=1e-9,
+                                   atol=1e-9)
+        aliased = effort.copy()  # out may be the effort array itself
+        dynamics.forward_dynamics_into(q, qd, aliased, *args, ws, aliased)
+        np.testing.assert_array_equal(aliased, out)
+
+
+@pytest.mark.parametrize("n", [2, 3, 4])
+def test_solves_reject_a_matrix_that_is_not_positive_definite(n: int) -> None:
+    """The 3x3 unrolled solve and the general Cholesky fail alike, also inside the forward
+    dynamics (a massless chain has a = 0)."""
+    indefinite = np.eye(n)
+    indefinite[-1, -1] = -1.0
+    with pytest.raises(ValueError, match="not positive definite"):
+        dynamics.solve_spd(indefinite, np.ones(n))
+    masses, axes, offsets, coms, inertias, gravity = random_chain(n, np.random.default_rng(n))
+    args = (0.0 * masses, axes, offsets, coms, 0.0 * inertias, gravity)
+    with pytest.raises(ValueError, match="not positive definite"):
+        dynamics.forward_dynamics_into(np.zeros(n), np.zeros(n), np.ones(n), *args,
+                                       dynamics.workspace(n), np.empty(n))
+
+
+def test_chain_frames_are_the_kinematics_of_the_arm(arm: ArmModel) -> None:
+    """e_i, p_i, r_Ci and R_i J_i R_i^T: unit axes, rotated inertia with the same spectrum."""
+    for q, _ in random_states(10, seed=23):
+        e, p, rc, jw = dynamics.chain_frames(q, arm.axes, arm.offsets, arm.coms, arm.inertias)
+        assert e.shape == p.shape == rc.shape == (3, 3) and jw.shape == (3, 3, 3)
+        np.testing.assert_allclose(np.linalg.norm(e, axis=1), 1.0, atol=1e-15)
+        np.testing.assert_allclose(p[0], arm.offsets[0], atol=1e-15)
+        for i in range(3):
+            np.testing.assert_allclose(np.linalg.norm(rc[i] - p[i]),
+                                       np.linalg.norm(arm.coms[i]), atol=1e-15)
+            np.testing.assert_allclose(np.linalg.eigvalsh(jw[i]),
+                                       np.linalg.eigvalsh(arm.inertias[i]), atol=1e-15)

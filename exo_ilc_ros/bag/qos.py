@@ -6,8 +6,12 @@ from typing import Any
 
 from .. import topics
 
-RECORDER_DEPTH = 1000
-"""Queue depth of the recorder's subscriptions: at 2 x 1 kHz, depth 10 dropped ~1 %."""
+OFFERED_DEPTH = 1000
+"""History depth of the graph's sample and event publishers (``SAMPLES_QOS``, ``EVENTS_QOS``)."""
+
+RECORDER_DEPTH = 10000
+"""Queue depth of the recorder's subscriptions, drained every 10 ms (at 2 x 1 kHz, depth 10
+dropped ~1 % when read per message; 10 000 leaves seconds of slack)."""
 
 TRANSIENT_LOCAL_TOPICS = frozenset({topics.FEEDFORWARD})
 """Latched topics: a late subscriber still gets the last message."""
@@ -27,7 +31,7 @@ def offered_qos(topic: str) -> list[Any]:
 
     durable = topic in TRANSIENT_LOCAL_TOPICS
     default = QosTime(0, 0)  # 0 = the RMW default (infinite) for deadline, lifespan, lease
-    depth = 1 if durable or topic == topics.CLOCK else RECORDER_DEPTH
+    depth = 1 if durable or topic == topics.CLOCK else OFFERED_DEPTH
     return [Qos(QosHistory.KEEP_LAST, depth, QosReliability.RELIABLE,
                 QosDurability.TRANSIENT_LOCAL if durable else QosDurability.VOLATILE,
                 default, default, QosLiveliness.AUTOMATIC, default, False)]

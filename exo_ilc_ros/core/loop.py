@@ -45,6 +45,34 @@ def control_inputs(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: n
     return u, effort
 
 
+@njit(cache=True, error_model="numpy")
+def _plant_period(effort: np.ndarray, limit: np.ndarray, saturated: np.ndarray, q: np.ndarray,
+                  qd: np.ndarray, applied: np.ndarray, period: float, substeps: int,
+                  plant: tuple, nominal: tuple, mode: int, ws: tuple, stage: np.ndarray,
+                  extra: np.ndarray) -> int:
+    """The plant's period in one call: refuse a non-finite effort (-1, nothing changes), count
+    saturation, clamp to +-limit into ``applied``, integrate (ZOH, RK4; eq (8)). Returns the
+    number of joints beyond the limit."""
+    n = q.shape[0]
+    for j in range(n):
+        if not np.isfinite(effort[j]):
+            return -1
+    beyond = 0
+    for j in range(n):
+        x = effort[j]
+        if x >= limit[j] or x <= -limit[j]:
+            saturated[j] += 1
+            if x > limit[j]:
+                x = limit[j]
+                beyond += 1
+            elif x < -limit[j]:
+                x = -limit[j]
+                beyond += 1
+        applied[j] = x
+    _rk4_period(q, qd, applied, period, substeps, plant, nominal, mode, ws, stage, extra)
+    return beyond
+
+
 def period_ns(period: float) -> int:
     """The control period in integer nanoseconds (the stamp step of the samples)."""
     return int(round(period * 1e9))
@@ -74,6 +102,7 @@ class PlantStepper:
         self._stage = np.empty((10, n))
         self._extra = np.empty(2 * n)
         self._limit = experiment.effort_limit
+        self._no_count = np.zeros(n, dtype=np.int64)
         self.reset()
 
     def reset(self) -> None:
@@ -83,13 +112,21 @@ class PlantStepper:
         self.velocity[:] = ref.velocity[0]
         self.applied[:] = 0.0
 
-    def step(self, effort: np.ndarray) -> None:
-        """Hold ``effort`` (clamped to +-effort_limit) over one period: RK4 on the sub-steps."""
-        np.clip(effort, -self._limit, self._limit, out=self.applied)
+    def step(self, effort: np.ndarray, saturated: np.ndarray | None = None) -> int:
+        """Hold ``effort`` (clamped to +-effort_limit) over one period: RK4 on the sub-steps.
+
+        ``saturated`` (int64 per joint), if given, counts the joints at or beyond the limit.
+        Returns how many joints were beyond it (clamped), or -1, without stepping, for an
+        effort that is not one finite value per joint.
+        """
+        if effort.shape != self.applied.shape:
+            return -1
         e = self.experiment
-        _rk4_period(self.position, self.velocity, self.applied, e.period, e.substeps,
-                    e.plant.kernel_args, e.nominal.kernel_args, int(e.dynamics), self._ws,
-                    self._stage, self._extra)
+        return int(_plant_period(effort, self._limit, self._no_count if saturated is None
+                                 else saturated, self.position, self.velocity, self.applied,
+                                 e.period, e.substeps, e.plant.kernel_args,
+                                 e.nominal.kernel_args, int(e.dynamics), self._ws, self._stage,
+                                 self._extra))
 
 
 class ControlStep:

@@ -1,11 +1,13 @@
 """bag_recorder: records every topic of the graph into a rosbag2 MCAP bag, as received.
 
-Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.topics.TYPES` (depth 1000; the
-feed-forward transient local, as published) and stores the CDR bytes untouched, stamped with the
-wall-clock receive time (what ``ros2 bag record`` does without ``--use-sim-time``). A new storage
-file starts after each trial (``split_every`` trials), so a SIGKILL loses at most the trial being
-recorded; Ctrl-C / SIGTERM close the bag normally. ``custom_data`` holds the run's provenance
-and every parameter change with the trial it took effect at.
+Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.topics.TYPES` (depth
+``RECORDER_DEPTH``; the feed-forward transient local, as published) and stores the CDR bytes
+untouched, stamped with the wall-clock time DDS received them (what ``ros2 bag record`` does
+without ``--use-sim-time``). The subscriptions are an :class:`~.common.Inbox` drained every
+``INBOX_PERIOD``, so the recorder does not wake once per message next to the control loop.
+A new storage file starts after each trial (``split_every`` trials), so a SIGKILL loses at most
+the trial being recorded; Ctrl-C / SIGTERM close the bag normally. ``custom_data`` holds the
+run's provenance and every parameter change with the trial it took effect at.
 
 Parameters (the recorder's own, not part of the experiment's schema):
 ``bag_path`` (default ``bags/<run_name>``), ``run_name`` (default ``run_<date>-<time>``),
@@ -45,7 +47,7 @@ from ..bag.qos import RECORDER_DEPTH, TRANSIENT_LOCAL_TOPICS, offered_qos
 from ..bag.writer import BagWriter
 from ..core.config import load_config
 from ..core.errors import ConfigError
-from .common import EVENTS_QOS, diagnostic_array, status, wall_clock
+from .common import EVENTS_QOS, INBOX_PERIOD, Inbox, diagnostic_array, status, wall_clock
 
 NAME = "bag_recorder"
 READY_TOPICS = (topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
@@ -60,7 +62,7 @@ def message_class(msgtype: str) -> Any:
 
 
 def subscription_qos(topic: str) -> QoSProfile:
-    """Reliable, depth 1000; transient local where the publisher latches."""
+    """Reliable, ``RECORDER_DEPTH`` deep; transient local where the publisher latches."""
     durable = topic in TRANSIENT_LOCAL_TOPICS
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=RECORDER_DEPTH,
                       reliability=ReliabilityPolicy.RELIABLE,
@@ -106,11 +108,10 @@ class BagRecorder(Node):
         self.changes: list[ParameterChange] = []
         self.messages = 0
 
+        self.inbox = Inbox(self)  # every topic, drained in batches (see Inbox)
         for topic, msgtype in topics.TYPES.items():
             self.writer.add_topic(topic, msgtype, offered_qos(topic))
-            self.create_subscription(message_class(msgtype), topic,
-                                     lambda raw, topic=topic: self.on_message(topic, raw),
-                                     subscription_qos(topic), raw=True)
+            self.inbox.subscribe(message_class(msgtype), topic, subscription_qos(topic))
         self.status_pub = self.create_publisher(
             message_class(topics.TYPES[topics.DIAGNOSTICS]), topics.DIAGNOSTICS, EVENTS_QOS)
         self.create_timer(0.2, self.on_status_timer, clock=wall_clock())
@@ -129,11 +130,20 @@ class BagRecorder(Node):
         self.status_pub.publish(diagnostic_array(
             self, [status(topics.RECORDER_STATUS, message, values, hardware_id=NAME)]))
 
-    def on_message(self, topic: str, raw: bytes) -> None:
-        """Store the bytes; follow the trial protocol to split the bag at trial boundaries."""
+    def poll(self) -> int:
+        """Write every message waiting in the inbox, in the order DDS received them; returns
+        how many."""
+        taken = self.inbox.take()
+        for received_ns, topic, raw in taken:
+            self.on_message(topic, raw, received_ns)
+        return len(taken)
+
+    def on_message(self, topic: str, raw: bytes, received_ns: int) -> None:
+        """Store the bytes stamped with their DDS receive time (wall clock, ns); follow the
+        trial protocol to split the bag at trial boundaries."""
         if topic == topics.TRIAL_EVENTS:
             self._before_event(raw)
-        self.writer.write(topic, time.time_ns(), raw)
+        self.writer.write(topic, received_ns, raw)
         self.messages += 1
         if topic == topics.TRIAL_EVENTS:
             self._after_event(raw)
@@ -214,6 +224,8 @@ class BagRecorder(Node):
 
     def destroy_node(self) -> None:
         """Close the bag (writes the last file and metadata.yaml), then the node."""
+        self.poll()
+        self.inbox.destroy()
         self.writer.set_custom_data(TRIALS_COMPLETED, str(self.completed))
         for key, text in parameter_changes_data(self.changes).items():
             self.writer.set_custom_data(key, text)
@@ -249,12 +261,14 @@ def main(args: list[str] | None = None) -> int:
         executor = EventsExecutor()
         executor.add_node(node)
         while not stop and rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
+            executor.spin_once(timeout_sec=INBOX_PERIOD)
+            node.poll()
         deadline = time.monotonic() + DRAIN_MAX
         last_count, last_change = node.messages, time.monotonic()
         while rclpy.ok() and time.monotonic() < deadline and \
                 time.monotonic() - last_change < DRAIN_IDLE:
-            executor.spin_once(timeout_sec=0.05)
+            executor.spin_once(timeout_sec=INBOX_PERIOD)
+            node.poll()
             if node.messages != last_count:
                 last_count, last_change = node.messages, time.monotonic()
     except (BagError, ConfigError) as exc:

@@ -132,8 +132,34 @@ def _read_joint_state(raw: bytes) -> tuple[int, np.ndarray, np.ndarray]:
     return sec * 1_000_000_000 + nanosec, position, velocity
 
 
+_NO_DIMS = b"\x00\x00\x00\x00"
+
+
+def joint_state_offsets(raw: bytes) -> tuple[int, int]:
+    """Byte offsets (in ``raw``) of the first position and the first velocity of a serialised
+    sensor_msgs/JointState."""
+    try:
+        _check_header(raw)
+        offset = _skip_string(raw, 8)
+        (count,) = _U32.unpack_from(raw, 4 + _align(offset, 4))
+        offset = _align(offset, 4) + 4
+        for _ in range(count):
+            offset = _skip_string(raw, offset)
+        position, offset = _doubles(raw, offset)
+        velocity, end = _doubles(raw, offset)
+    except struct.error as exc:
+        raise CdrError(f"truncated JointState: {exc}") from None
+    # _doubles returns the body offset just past the values; +4 skips the encapsulation.
+    return 4 + offset - 8 * position.shape[0], 4 + end - 8 * velocity.shape[0]
+
+
 def read_float64_array(raw: bytes) -> np.ndarray:
     """The data of a serialised std_msgs/Float64MultiArray (a read-only view into ``raw``)."""
+    if raw[4:8] == _NO_DIMS and raw[:2] == HEADER[:2] and len(raw) > 20:
+        # The common layout (no dims, as float64_array writes it): data at byte 20.
+        (count,) = _U32.unpack_from(raw, 12)
+        if len(raw) == 20 + 8 * count:
+            return np.frombuffer(raw, dtype="<f8", count=count, offset=20)
     try:
         return _read_float64_array(raw)
     except struct.error as exc:

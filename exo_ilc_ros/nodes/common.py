@@ -138,11 +138,80 @@ def stamp_ns(stamp: Any) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
+INBOX_PERIOD = 0.01
+"""Seconds between two drains of an :class:`Inbox` (at most; also drained after every event
+the executor handles)."""
+
+INBOX_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10000,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+"""An inbox's sample subscriptions: 10 000 deep (100 s at 100 Hz, 3 s of a lock-step graph
+at full speed) between two drains."""
+
+
+class Inbox:
+    """Raw subscriptions read in batches instead of one executor wake-up per message.
+
+    A node that only needs a topic's messages every few milliseconds (the supervisor's trial
+    samples, the recorder's every topic) would otherwise wake its Python thread once per
+    message, on the same two cores as the plant and controller whose round trip it slows.
+    The subscriptions live on a companion node ``<node>_inbox`` that no executor spins;
+    :meth:`take` drains them (``rcl_take`` until empty). The owner calls it from its spin loop
+    (``poll``, at least every :data:`INBOX_PERIOD`) and before acting on an event that must
+    see every earlier message. Messages come back in the order DDS received them.
+    """
+
+    def __init__(self, owner: Node) -> None:
+        self.node = Node(f"{owner.get_name()}_inbox", namespace=owner.get_namespace(),
+                         parameter_overrides=[Parameter("use_sim_time", value=False)],
+                         start_parameter_services=False, enable_rosout=False)
+        self._subscriptions: list[Any] = []
+        self._topics: list[str] = []
+
+    def subscribe(self, msg_type: Any, topic: str, qos: QoSProfile = INBOX_QOS) -> Any:
+        """A raw subscription drained by :meth:`take` (returned for its publisher count)."""
+        sub = self.node.create_subscription(msg_type, topic, _never_called, qos, raw=True)
+        self._subscriptions.append(sub)
+        self._topics.append(sub.topic_name)
+        return sub
+
+    def take(self) -> list[tuple[int, str, bytes]]:
+        """Every waiting message as (DDS receive time in ns, topic, CDR bytes), in receive
+        order."""
+        out: list[tuple[int, str, bytes]] = []
+        for sub, topic in zip(self._subscriptions, self._topics, strict=True):
+            handle = sub.handle
+            with handle:
+                while True:
+                    taken = handle.take_message(sub.msg_type, True)
+                    if taken is None:
+                        break
+                    raw, info = taken
+                    out.append((int(info["received_timestamp"]), topic, raw))
+        if len(self._subscriptions) > 1:
+            out.sort(key=_receive_time)
+        return out
+
+    def destroy(self) -> None:
+        """Destroy the companion node."""
+        self.node.destroy_node()
+
+
+def _never_called(raw: bytes) -> None:  # pragma: no cover - inbox subscriptions are not spun
+    raise RuntimeError("an inbox subscription was spun by an executor")
+
+
+def _receive_time(item: tuple[int, str, bytes]) -> int:
+    return item[0]
+
+
 def spin(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
     """Init, build the node, spin it with the EventsExecutor until shutdown or Ctrl-C.
 
-    Returns the exit code: 0, 2 for a configuration error, or the node's ``exit_code`` once it
-    sets one (a fatal error it already logged and reported on /diagnostics).
+    A node with a ``poll()`` method (an :class:`Inbox` owner) has it called after every event
+    and at least every :data:`INBOX_PERIOD`. Returns the exit code: 0, 2 for a configuration
+    error, or the node's ``exit_code`` once it sets one (a fatal error it already logged and
+    reported on /diagnostics).
     """
     rclpy.init(args=args)
     node: Node | None = None
@@ -151,8 +220,12 @@ def spin(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
         node = make_node()
         executor = EventsExecutor()
         executor.add_node(node)
+        poll: Callable[[], None] | None = getattr(node, "poll", None)
+        timeout = 0.1 if poll is None else INBOX_PERIOD
         while rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
+            executor.spin_once(timeout_sec=timeout)
+            if poll is not None:
+                poll()
             stop = getattr(node, "exit_code", None)  # a node that must stop (fatal error)
             if stop is not None:
                 code = int(stop)

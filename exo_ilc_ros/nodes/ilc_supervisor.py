@@ -46,7 +46,7 @@ from .common import (
     DIAGNOSTICS_QOS,
     EVENTS_QOS,
     LATCHED_QOS,
-    SAMPLES_QOS,
+    Inbox,
     SchemaParameters,
     diagnostic_array,
     doubles,
@@ -59,9 +59,9 @@ from .guard import Health, JointStateGate, Rejections, rejections_check
 
 NAME = schema.SUPERVISOR
 STEP_TIMEOUT = 30.0
-RECORDER_TIMEOUT = 5.0
-"""Wall seconds to wait for bag_recorder to catch up before going on without it."""
 """Wall seconds a protocol step may take before the trial is aborted and tried again."""
+RECORDER_TIMEOUT = 5.0
+"""Wall seconds to wait for bag_recorder to file a trial before going on without it."""
 
 
 class Phase(Enum):
@@ -103,6 +103,8 @@ class IlcSupervisor(Node):
         self.recorder_trials = 0
         """Trials bag_recorder has received completely (its status on /diagnostics)."""
         self.recorder_lost = False
+        self.unsaved: tuple[TrialRecord, FeedforwardUpdate] | None = None
+        """The ended trial waiting for bag_recorder to file it before it is stored."""
         self.start_future: Future | None = None
         self.t0_ns_end = 0
         self.rejections = Rejections(self)
@@ -127,8 +129,8 @@ class IlcSupervisor(Node):
         self.events_pub = self.create_publisher(DiagnosticArray, topics.TRIAL_EVENTS, EVENTS_QOS)
         self.summary_pub = self.create_publisher(DiagnosticArray, topics.TRIAL_SUMMARY,
                                                  EVENTS_QOS)
-        self.state_sub = self.create_subscription(JointState, topics.JOINT_STATES,
-                                                  self.on_joint_state, SAMPLES_QOS, raw=True)
+        self.inbox = Inbox(self)  # the trial's samples, drained in batches (see Inbox)
+        self.state_sub = self.inbox.subscribe(JointState, topics.JOINT_STATES)
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.on_diagnostics,
                                  DIAGNOSTICS_QOS)
         self.create_timer(0.1, self.on_timer, clock=wall_clock())
@@ -162,7 +164,7 @@ class IlcSupervisor(Node):
             self.get_logger().error(f"bag_recorder silent for {RECORDER_TIMEOUT:g} s; going "
                                     "on without waiting for it")
             self.recorder_lost = True
-            self._reset()
+            self._save_trial()
         elif self.phase is not Phase.FINISHED and \
                 time.monotonic() - self.phase_since > STEP_TIMEOUT:
             self.get_logger().error(f"trial {self.trial}: no progress in {self.phase.value} for "
@@ -194,16 +196,28 @@ class IlcSupervisor(Node):
         self._enter(Phase.WAIT_ACK)
         self.feedforward_pub.publish(self._feedforward_message())
 
+    def poll(self) -> None:
+        """Every /joint_states message waiting in the inbox (called by the spin loop)."""
+        for _, _, raw in self.inbox.take():
+            self.on_joint_state(raw)
+
+    def destroy_node(self) -> None:
+        """The inbox's companion node, then this one."""
+        self.inbox.destroy()
+        super().destroy_node()
+
     def on_diagnostics(self, msg: DiagnosticArray) -> None:
-        """The controller's acknowledgement of this trial's feed-forward starts the trial."""
+        """The controller's acknowledgement of this trial's feed-forward starts the trial;
+        its ``done`` ends it once every sample is in (the inbox is drained first)."""
+        self.poll()
         for item in msg.status:
             if item.name == topics.RECORDER_STATUS and item.message == "ready":
                 self.recorder_ready = True
                 received = values_of(item).get("trials_received", "0")
                 self.recorder_trials = max(self.recorder_trials,
                                            int(received) if received.isdigit() else 0)
-        if self.phase is Phase.WAIT_RECORDER and self.recorder_trials >= self.trial - 1:
-            self._reset()
+        if self.phase is Phase.WAIT_RECORDER and self.recorder_trials >= self.trial:
+            self._save_trial()
             return
         if self.phase is Phase.RUNNING:
             for item in msg.status:
@@ -307,18 +321,32 @@ class IlcSupervisor(Node):
                 self._fail(f"trial {self.trial}: the learning law produced a bad feed-forward "
                            f"({checked}); it was not stored or used")
                 return
-        if self.store is not None:
-            try:
-                self.store.save(record, update, self._store_config())
-            except (ExoIlcError, OSError) as exc:
-                self._fail(f"trial {self.trial}: cannot save to the store: {exc}")
-                return
         summary = self._summary(record)
         if record.aborted:
             self._event("aborted", [("trial", str(self.trial)), ("reason", "error_envelope"),
                                     ("aborted_at", str(aborted))], self.t0_ns_end)
         self.summary_pub.publish(diagnostic_array(self, [summary], self.t0_ns_end))
         self._event("end", [(kv.key, kv.value) for kv in summary.values], self.t0_ns_end)
+        self.unsaved = (record, update)
+        if self.active["wait_for_recorder"] and not self.recorder_lost and \
+                self.recorder_trials < self.trial:
+            self._enter(Phase.WAIT_RECORDER)  # stored only once the bag holds it too
+        else:
+            self._save_trial()
+
+    def _save_trial(self) -> None:
+        """The ended trial into the store, then on to the next. With ``wait_for_recorder``
+        this runs only after bag_recorder filed the trial, so a stored trial is always in a
+        bag: if the recorder dies first, the trial is not stored and a resume runs it again."""
+        assert self.unsaved is not None
+        record, update = self.unsaved
+        self.unsaved = None
+        if self.store is not None:
+            try:
+                self.store.save(record, update, self._store_config())
+            except (ExoIlcError, OSError) as exc:
+                self._fail(f"trial {self.trial}: cannot save to the store: {exc}")
+                return
         self._after_trial(record, update)
 
     def _after_trial(self, record: TrialRecord, update: FeedforwardUpdate) -> None:
@@ -335,11 +363,7 @@ class IlcSupervisor(Node):
         self.feedforward = update.feedforward
         self.levels = update.levels
         self.trial += 1
-        if self.active["wait_for_recorder"] and not self.recorder_lost and \
-                self.recorder_trials < self.trial - 1:
-            self._enter(Phase.WAIT_RECORDER)  # bag_recorder lags: let it catch up first
-        else:
-            self._reset()
+        self._reset()
 
     def _apply_pending(self) -> None:
         self.active = self.params.pending

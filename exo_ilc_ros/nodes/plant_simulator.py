@@ -147,24 +147,34 @@ class PlantSimulator(Node):
             self.rejections.reject(Rejection(Cause.NOT_NUMERIC, f"{topics.EFFORT_COMMANDS}: "
                                              f"undecodable: {exc}"))
             return
-        if effort.shape[0] != self.held.shape[0] or not np.isfinite(effort).all():
-            checked = validate_effort_command(effort.tolist(), self.unbounded.tolist())
-            if isinstance(checked, Rejection):
-                self.rejections.reject(checked)
+        if self.lock_step and self.running:  # the hot path: check, count, clamp, step at once
+            beyond = self.stepper.step(effort, self.saturated)
+            if beyond < 0:
+                self._reject(effort)
                 return
+            self.commands += 1
+            if beyond:
+                self.over_limit += 1
+            self._stepped()
+            return
+        if effort.shape[0] != self.held.shape[0] or not np.isfinite(effort).all():
+            self._reject(effort)
+            return
         self.commands += 1
         at_limit = np.abs(effort) >= self.limit
         if at_limit.any():
             self.saturated += at_limit
             if (np.abs(effort) > self.limit).any():
-                self.over_limit += 1  # clamped below (PlantStepper.step)
-        if self.lock_step:
-            if self.running:
-                self._advance(effort)
-        else:
+                self.over_limit += 1  # clamped below
+        if not self.lock_step:
             self.held[:] = np.clip(effort, -self.limit, self.limit)
             if self.running:
                 self.watchdog.feed(time.monotonic_ns())
+
+    def _reject(self, effort: np.ndarray) -> None:
+        checked = validate_effort_command(effort.tolist(), self.unbounded.tolist())
+        self.rejections.reject(checked if isinstance(checked, Rejection) else Rejection(
+            Cause.NOT_NUMERIC, f"{topics.EFFORT_COMMANDS}: not one finite value per joint"))
 
     def on_tick(self) -> None:
         """Real-time mode: one period with the held command (the safe hold after a trip)."""
@@ -210,6 +220,9 @@ class PlantSimulator(Node):
 
     def _advance(self, effort: np.ndarray) -> None:
         self.stepper.step(effort)
+        self._stepped()
+
+    def _stepped(self) -> None:
         self.index += 1
         self.now_ns += self.step_ns
         self._publish()

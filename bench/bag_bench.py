@@ -5,10 +5,10 @@ figures; asserts nothing (wall-clock timing is noisy on a shared 2-core machine)
 
 (a) The graph's lock-step control steps per second within trials without and with bag_recorder,
     in one run (alternating; best and median of each). Target: the recorder costs at most 10 %.
-(c) The middleware's own share: the raw ping-pong of graph_bench with and without one more,
-    silent subscriber process on both topics (what any recorder adds to the round trip).
 (b) Analysing a 150-trial bag at 100 Hz (written in-process by ``write_run``, the same topics
     and messages as the recorder's): ``read_bag`` + the table. Target: under 5 s.
+(c) The middleware's own share of (a): the raw ping-pong of graph_bench with and without one
+    more, silent subscriber process on both topics (what any recorder adds to the round trip).
 """
 
 from __future__ import annotations

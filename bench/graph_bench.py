@@ -40,7 +40,8 @@ def middleware_floor(count: int, raw: bool, listener: bool = False) -> dict[str,
     third = subprocess.Popen([sys.executable, "-m", "bench.pingpong", "listen"], env=env,
                              stdin=subprocess.DEVNULL) if listener else None
     try:
-        out = subprocess.run([sys.executable, "-m", "bench.pingpong", "ping", str(count), *flag],
+        ping = [sys.executable, "-m", "bench.pingpong", "ping", str(count), *flag]
+        out = subprocess.run([*ping, "listen"] if listener else ping,
                              env=env, capture_output=True, text=True, timeout=300, check=True)
         return dict(json.loads(out.stdout.strip().splitlines()[-1]))
     finally:

@@ -7,6 +7,7 @@ Float64MultiArray reply of ``pong`` before the next; both spin an EventsExecutor
     python -m bench.pingpong pong [raw] &
     python -m bench.pingpong ping 3000 [raw]   # prints {"round_trips_per_s": ...} as JSON
     python -m bench.pingpong listen &          # optional: a third, silent subscriber
+                                               # (then: ping 3000 [raw] listen)
 
 ``raw``: serialised CDR bytes both ways (``raw=True`` subscriptions, ``publish(bytes)``), as the
 graph's hot paths do; without it, rclpy message objects.
@@ -71,7 +72,8 @@ def listen() -> None:
         inbox.take()
 
 
-def ping(count: int, raw: bool, warmup: int = 200, timeout: float = 60.0) -> dict[str, float]:
+def ping(count: int, raw: bool, warmup: int = 200, timeout: float = 60.0,
+         listeners: int = 0) -> dict[str, float]:
     """``count`` timed round trips after ``warmup``; the rate and RTT percentiles."""
     node = Node("bench_ping")
     pub = node.create_publisher(JointState, "/bench/joint_states", QOS)
@@ -81,7 +83,9 @@ def ping(count: int, raw: bool, warmup: int = 200, timeout: float = 60.0) -> dic
     executor = EventsExecutor()
     executor.add_node(node)
     deadline = time.monotonic() + timeout
-    while pub.get_subscription_count() < 1 or node.count_publishers("/bench/commands") < 1:
+    # pong and every listener matched before the first (volatile) message, else it is lost
+    while pub.get_subscription_count() < 1 + listeners or \
+            node.count_publishers("/bench/commands") < 1:
         executor.spin_once(timeout_sec=0.05)
         if time.monotonic() > deadline:
             raise RuntimeError("pong not discovered")
@@ -129,7 +133,8 @@ def main(argv: list[str] | None = None) -> int:
         elif args[0] == "listen":
             listen()
         else:
-            print(json.dumps(ping(int(args[1]), raw)), flush=True)
+            print(json.dumps(ping(int(args[1]), raw, listeners=int("listen" in args))),
+                  flush=True)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

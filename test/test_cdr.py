@@ -63,3 +63,53 @@ def test_truncated_message_is_an_error() -> None:
         read_joint_state(raw[:30])
     with pytest.raises(CdrError):
         read_float64_array(b"\x01\x00\x00\x00" + raw[4:])
+
+
+class _Logger:
+    def error(self, message: str) -> None:
+        pass
+
+
+class _Node:
+    def get_logger(self) -> _Logger:
+        return _Logger()
+
+
+def test_gate_fast_path_checks_what_the_full_check_does() -> None:
+    """Once the plant's layout is learned, JointStateGate takes messages of that layout by two
+    byte compares; non-finite values, stamps that do not increase and other names of the same
+    length still get rejected, and reordered names still go through the full check."""
+    from exo_ilc_ros.core.validation import Cause
+    from exo_ilc_ros.nodes.guard import JointStateGate, Rejections
+
+    names = ["j1", "j2", "j3"]
+    rejections = Rejections(_Node())  # type: ignore[arg-type]
+    gate = JointStateGate(names, rejections)
+    writer = JointStateWriter(names)
+    zero = np.zeros(3)
+
+    def raw(stamp: int, q: list[float], qd: list[float]) -> bytes:
+        return writer.write(stamp, np.array(q), np.array(qd), zero)
+
+    first = gate(raw(10, [0.1, 0.2, 0.3], [1.0, 2.0, 3.0]))  # full check, learns the layout
+    assert first is not None and gate.layout is not None
+    fast = gate(raw(20, [0.4, 0.5, 0.6], [4.0, 5.0, 6.0]))
+    assert fast is not None and fast[0] == 20
+    np.testing.assert_array_equal(fast[1], [0.4, 0.5, 0.6])
+    np.testing.assert_array_equal(fast[2], [4.0, 5.0, 6.0])
+    for bad in (raw(30, [0.1, np.nan, 0.3], [0.0, 0.0, 0.0]),
+                raw(31, [0.1, 0.2, 0.3], [0.0, np.inf, 0.0]),
+                raw(32, [1e308, 1e308, 0.0], [-np.inf, np.inf, 0.0]),
+                raw(20, [0.1, 0.2, 0.3], [0.0, 0.0, 0.0])):  # stamp not after the last
+        assert gate(bad) is None
+    assert rejections.log.counts[Cause.NON_FINITE] == 3
+    assert rejections.log.counts[Cause.NON_MONOTONIC_STAMP] == 1
+    huge = gate(raw(40, [1e308, 1e308, 0.0], [0.0, 0.0, 0.0]))  # sum overflows: full check
+    assert huge is not None and huge[0] == 40
+    other = JointStateWriter(["k1", "k2", "k3"]).write(50, zero, zero, zero)  # same length
+    assert gate(other) is None
+    swapped = JointStateWriter(["j2", "j1", "j3"]).write(60, np.array([2.0, 1.0, 3.0]), zero,
+                                                         zero)
+    reordered = gate(swapped)
+    assert reordered is not None
+    np.testing.assert_array_equal(reordered[1], [1.0, 2.0, 3.0])

@@ -21,7 +21,7 @@ from rclpy.node import Node
 
 from ..core.validation import Cause, LogOnce, Rejection, validate_joint_state
 from .cdr import (
-    _STAMP,
+    HEADER,
     CdrError,
     joint_state_offsets,
     names_segment,
@@ -29,6 +29,9 @@ from .cdr import (
     read_joint_state_full,
 )
 from .common import status
+
+_STAMP = struct.Struct("<iI")
+"""builtin_interfaces/Time right after the encapsulation header."""
 
 LEVEL_NAMES = {DiagnosticStatus.OK: "OK", DiagnosticStatus.WARN: "WARN",
                DiagnosticStatus.ERROR: "ERROR"}
@@ -76,7 +79,8 @@ class _Layout:
 
     @classmethod
     def of(cls, raw: bytes, n: int) -> _Layout | None:
-        """The layout of ``raw`` (n joints), or None if it is not the plain one."""
+        """The layout of ``raw``, a message already validated with n positions and n
+        velocities, or None if it cannot be decoded."""
         try:
             position, velocity = joint_state_offsets(raw)
         except CdrError:
@@ -105,7 +109,7 @@ class JointStateGate:
 
     def __call__(self, raw: bytes) -> tuple[int, np.ndarray, np.ndarray] | None:
         layout = self.layout
-        if layout is not None and len(raw) == layout.size and \
+        if layout is not None and len(raw) == layout.size and raw[:2] == HEADER[:2] and \
                 raw[layout.names] == layout.names_bytes and raw[layout.gap] == layout.gap_bytes:
             # The plant's own layout again: only the stamp and the values can differ.
             values = layout.doubles.unpack_from(raw, layout.position) + \

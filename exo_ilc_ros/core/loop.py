@@ -30,22 +30,6 @@ def _control_into(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np
 
 
 @njit(cache=True, error_model="numpy")
-def control_inputs(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
-                   qd: np.ndarray, kp: np.ndarray, kd: np.ndarray, nominal: tuple,
-                   effort_limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """u and effort at every sample of a trial from the sampled states, as the controller
-    formed them (one :func:`_control_into` per sample, in order)."""
-    n_samples, n = q.shape
-    u = np.empty((n_samples, n))
-    effort = np.empty((n_samples, n))
-    ws = workspace(n)
-    for i in range(n_samples):
-        _control_into(u_ff[i], q_ref[i], qd_ref[i], q[i], qd[i], kp, kd, nominal, effort_limit,
-                      ws, u[i], effort[i])
-    return u, effort
-
-
-@njit(cache=True, error_model="numpy")
 def _plant_period(effort: np.ndarray, limit: np.ndarray, saturated: np.ndarray, q: np.ndarray,
                   qd: np.ndarray, applied: np.ndarray, period: float, substeps: int,
                   plant: tuple, nominal: tuple, mode: int, ws: tuple, stage: np.ndarray,
@@ -53,7 +37,19 @@ def _plant_period(effort: np.ndarray, limit: np.ndarray, saturated: np.ndarray, 
     """The plant's period in one call: refuse a non-finite effort (-1, nothing changes), count
     saturation, clamp to +-limit into ``applied``, integrate (ZOH, RK4; eq (8)). Returns the
     number of joints beyond the limit."""
-    n = q.shape[0]
+    beyond = clamp_counted(effort, limit, saturated, applied)
+    if beyond >= 0:
+        _rk4_period(q, qd, applied, period, substeps, plant, nominal, mode, ws, stage, extra)
+    return beyond
+
+
+@njit(cache=True, error_model="numpy")
+def clamp_counted(effort: np.ndarray, limit: np.ndarray, saturated: np.ndarray,
+                  out: np.ndarray) -> int:
+    """``effort`` clamped to +-limit into ``out``, joints at or beyond the limit counted in
+    ``saturated``; returns how many were beyond it, or -1 (nothing written or counted) for a
+    non-finite effort."""
+    n = effort.shape[0]
     for j in range(n):
         if not np.isfinite(effort[j]):
             return -1
@@ -68,8 +64,7 @@ def _plant_period(effort: np.ndarray, limit: np.ndarray, saturated: np.ndarray, 
             elif x < -limit[j]:
                 x = -limit[j]
                 beyond += 1
-        applied[j] = x
-    _rk4_period(q, qd, applied, period, substeps, plant, nominal, mode, ws, stage, extra)
+        out[j] = x
     return beyond
 
 
@@ -164,25 +159,20 @@ def record_from_samples(experiment: Experiment, trial: int, feedforward: np.ndar
     u_ff = np.ascontiguousarray(feedforward, dtype=float)
     q = np.ascontiguousarray(position, dtype=float)
     qd = np.ascontiguousarray(velocity, dtype=float)
-    if aborted_at is None:
-        u, effort = control_inputs(u_ff, ref.position, ref.velocity, q, qd, experiment.kp,
-                                   experiment.kd, experiment.nominal.kernel_args,
-                                   experiment.effort_limit)
-    else:
-        u, effort = control_inputs_guarded(u_ff, ref.position, ref.velocity, q, qd,
-                                           experiment.kp, experiment.kd,
-                                           experiment.nominal.kernel_args,
-                                           experiment.effort_limit, int(aborted_at))
+    u, effort = control_inputs(u_ff, ref.position, ref.velocity, q, qd, experiment.kp,
+                               experiment.kd, experiment.nominal.kernel_args,
+                               experiment.effort_limit, -1 if aborted_at is None
+                               else int(aborted_at))
     return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels, aborted_at)
 
 
 @njit(cache=True, error_model="numpy")
-def control_inputs_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray,
-                           q: np.ndarray, qd: np.ndarray, kp: np.ndarray, kd: np.ndarray,
-                           nominal: tuple, effort_limit: np.ndarray, aborted_at: int
-                           ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`control_inputs` of a trial aborted at sample ``aborted_at`` (-1: not aborted):
-    from that sample on the safe hold around q[aborted_at], as the controller commanded it."""
+def control_inputs(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
+                   qd: np.ndarray, kp: np.ndarray, kd: np.ndarray, nominal: tuple,
+                   effort_limit: np.ndarray, aborted_at: int) -> tuple[np.ndarray, np.ndarray]:
+    """u and effort at every sample of a trial from the sampled states, as the controller
+    formed them (one :func:`_control_into` per sample, in order); from sample ``aborted_at``
+    on (-1: never) the safe hold around q[aborted_at]."""
     n_samples, n = q.shape
     u = np.empty((n_samples, n))
     effort = np.empty((n_samples, n))

@@ -16,6 +16,8 @@ import numpy as np
 
 HEADER = b"\x00\x01\x00\x00"
 """Encapsulation: CDR, little endian."""
+_NO_DIMS = b"\x00\x00\x00\x00"
+"""A Float64MultiArray layout without dims (what :func:`float64_array` writes)."""
 _U32 = struct.Struct("<I")
 _STAMP = struct.Struct("<iI")
 
@@ -119,33 +121,30 @@ def read_joint_state(raw: bytes) -> tuple[int, np.ndarray, np.ndarray]:
         raise CdrError(f"truncated JointState: {exc}") from None
 
 
-def _read_joint_state(raw: bytes) -> tuple[int, np.ndarray, np.ndarray]:
+def _names_span(raw: bytes) -> tuple[int, int]:
+    """Body offsets of a serialised JointState's ``name`` sequence: its start (just past the
+    frame_id) and its end (raises struct.error when truncated)."""
     _check_header(raw)
-    sec, nanosec = _STAMP.unpack_from(raw, 4)
-    offset = _skip_string(raw, 8)  # frame_id
-    (count,) = _U32.unpack_from(raw, 4 + _align(offset, 4))
-    offset = _align(offset, 4) + 4
+    start = _skip_string(raw, 8)  # past frame_id
+    (count,) = _U32.unpack_from(raw, 4 + _align(start, 4))
+    offset = _align(start, 4) + 4
     for _ in range(count):
         offset = _skip_string(raw, offset)
-    position, offset = _doubles(raw, offset)
+    return start, offset
+
+
+def _read_joint_state(raw: bytes) -> tuple[int, np.ndarray, np.ndarray]:
+    sec, nanosec = _STAMP.unpack_from(raw, 4)
+    position, offset = _doubles(raw, _names_span(raw)[1])
     velocity, offset = _doubles(raw, offset)
     return sec * 1_000_000_000 + nanosec, position, velocity
-
-
-_NO_DIMS = b"\x00\x00\x00\x00"
 
 
 def joint_state_offsets(raw: bytes) -> tuple[int, int]:
     """Byte offsets (in ``raw``) of the first position and the first velocity of a serialised
     sensor_msgs/JointState."""
     try:
-        _check_header(raw)
-        offset = _skip_string(raw, 8)
-        (count,) = _U32.unpack_from(raw, 4 + _align(offset, 4))
-        offset = _align(offset, 4) + 4
-        for _ in range(count):
-            offset = _skip_string(raw, offset)
-        position, offset = _doubles(raw, offset)
+        position, offset = _doubles(raw, _names_span(raw)[1])
         velocity, end = _doubles(raw, offset)
     except struct.error as exc:
         raise CdrError(f"truncated JointState: {exc}") from None
@@ -182,16 +181,10 @@ def names_segment(raw: bytes) -> bytes:
     """The bytes of a serialised JointState's ``name`` sequence (and the frame_id before it):
     equal segments mean equal names, so a node checks names once per layout."""
     try:
-        _check_header(raw)
-        offset = _skip_string(raw, 8)
-        start = offset
-        (count,) = _U32.unpack_from(raw, 4 + _align(offset, 4))
-        offset = _align(offset, 4) + 4
-        for _ in range(count):
-            offset = _skip_string(raw, offset)
+        start, end = _names_span(raw)
     except struct.error as exc:
         raise CdrError(f"truncated JointState: {exc}") from None
-    return bytes(raw[4 + start:4 + offset])
+    return bytes(raw[4 + start:4 + end])
 
 
 def read_joint_state_full(raw: bytes

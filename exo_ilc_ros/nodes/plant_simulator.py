@@ -29,7 +29,7 @@ from std_srvs.srv import Trigger
 from .. import topics
 from ..core import schema
 from ..core.experiment import Experiment
-from ..core.loop import PlantStepper, period_ns
+from ..core.loop import PlantStepper, clamp_counted, period_ns
 from ..core.safety import Watchdog, safe_hold_effort
 from ..core.validation import Cause, Rejection, validate_effort_command
 from .cdr import CdrError, JointStateWriter, read_float64_array
@@ -66,6 +66,8 @@ class PlantSimulator(Node):
         self.armed = False
         self.running = False
         self.held = np.zeros(config.joints)
+        self.unapplied = np.zeros(config.joints)
+        """Lock-step: where a command received between trials is clamped (never applied)."""
         self.timer: Timer | None = None
         self.limit = np.asarray(self.experiment.effort_limit, dtype=float)
         self.unbounded = np.full(config.joints, np.inf)
@@ -147,29 +149,25 @@ class PlantSimulator(Node):
             self.rejections.reject(Rejection(Cause.NOT_NUMERIC, f"{topics.EFFORT_COMMANDS}: "
                                              f"undecodable: {exc}"))
             return
+        if effort.shape != self.held.shape:
+            self._reject(effort)
+            return
         if self.lock_step and self.running:  # the hot path: check, count, clamp, step at once
             beyond = self.stepper.step(effort, self.saturated)
-            if beyond < 0:
-                self._reject(effort)
-                return
-            self.commands += 1
-            if beyond:
-                self.over_limit += 1
-            self._stepped()
-            return
-        if effort.shape[0] != self.held.shape[0] or not np.isfinite(effort).all():
+        else:  # real time: the command to hold; lock-step between trials: only checked
+            beyond = clamp_counted(effort, self.limit, self.saturated,
+                                   self.unapplied if self.lock_step else self.held)
+        if beyond < 0:
             self._reject(effort)
             return
         self.commands += 1
-        at_limit = np.abs(effort) >= self.limit
-        if at_limit.any():
-            self.saturated += at_limit
-            if (np.abs(effort) > self.limit).any():
-                self.over_limit += 1  # clamped below
-        if not self.lock_step:
-            self.held[:] = np.clip(effort, -self.limit, self.limit)
+        if beyond:
+            self.over_limit += 1
+        if self.lock_step:
             if self.running:
-                self.watchdog.feed(time.monotonic_ns())
+                self._stepped()
+        elif self.running:
+            self.watchdog.feed(time.monotonic_ns())
 
     def _reject(self, effort: np.ndarray) -> None:
         checked = validate_effort_command(effort.tolist(), self.unbounded.tolist())

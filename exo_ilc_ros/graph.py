@@ -119,7 +119,9 @@ class GraphSession:
         self.on_summary = on_summary
         self.summaries: list[TrialSummary] = []
         self.events: list[tuple[str, dict[str, str], float]] = []
-        self.finished = False
+        self._finished_after: int | None = None
+        """The last trial named by the supervisor's ``finished`` event (None: not yet)."""
+        self._resumed_after = 0
         self.started_at: float | None = None
         """Wall time of the first trial's start event."""
         self.finished_at: float | None = None
@@ -187,9 +189,21 @@ class GraphSession:
                 self.events.append((item.message, values, time.monotonic()))
                 if item.message == "start" and self.started_at is None:
                     self.started_at = time.monotonic()
+                if item.message == "resumed":
+                    self._resumed_after = _int_value(values, "trials")
                 if item.message == "finished":
-                    self.finished = True
+                    self._finished_after = _int_value(values, "trials")
                     self.finished_at = time.monotonic()
+
+    @property
+    def finished(self) -> bool:
+        """The supervisor finished and the summary of its last trial is here too. Summaries
+        and events are two topics, matched and delivered independently: a fast run can
+        report ``finished`` before this monitor received its summaries."""
+        last = self._finished_after
+        if last is None:
+            return False
+        return last <= self._resumed_after or any(s.trial == last for s in self.summaries)
 
     def spin_until(self, done: Callable[[], bool], timeout: float,
                    stall_timeout: float | None = None) -> None:
@@ -211,6 +225,11 @@ class GraphSession:
                 self.processes.check()
                 last_check = now
             self.executor.spin_once(timeout_sec=0.05)
+
+
+def _int_value(values: dict[str, str], key: str) -> int:
+    text = values.get(key, "0")
+    return int(text) if text.isdigit() else 0
 
 
 @dataclass

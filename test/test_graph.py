@@ -99,7 +99,9 @@ def test_live_threshold_changes_next_trial_and_bad_values_are_rejected() -> None
     run still equals in-process with the change applied at that boundary."""
     from exo_ilc_ros.graph import GraphSession
 
-    trials = 25
+    # 100 short trials take ~4 s: the run must still be going after the five SetParameters
+    # calls below (25 trials were over before the change on the faster graph, 5 runs in 14).
+    trials = 100
     config = _short_config(max_trials=trials)
     change = {"schedule.position.threshold_low": [0.0, 0.0, 0.0]}  # every sum > 0: level_mid
     with GraphSession(config) as session:

@@ -62,6 +62,7 @@ setup(
             "computed_torque_controller = exo_ilc_ros.nodes.computed_torque_controller:main",
             "ilc_supervisor = exo_ilc_ros.nodes.ilc_supervisor:main",
             "bag_recorder = exo_ilc_ros.nodes.bag_recorder:main",
+            "container = exo_ilc_ros.nodes.container:main",
         ],
     },
 )

@@ -3,8 +3,10 @@
 Run with ``.venv/bin/python -m bench.bag_bench [--trials K] [--analysis-trials N]``. Prints
 figures; asserts nothing (wall-clock timing is noisy on a shared 2-core machine).
 
-(a) The graph's lock-step control steps per second within trials without and with bag_recorder,
-    in one run (alternating; best and median of each). Target: the recorder costs at most 10 %.
+(a) The graph's lock-step control steps per second, within trials and overall, without
+    bag_recorder, with it in the supervisor's process (``exo-ilc run``'s default) and in a
+    process of its own (``--isolated-recorder``), in turn in one run; the medians. Target: the
+    recorder costs at most 10 %.
 (b) Analysing a 150-trial bag at 100 Hz (written in-process by ``write_run``, the same topics
     and messages as the recorder's): ``read_bag`` + the table. Target: under 5 s.
 (c) The middleware's own share of (a): the raw ping-pong of graph_bench with and without one
@@ -26,35 +28,49 @@ from exo_ilc_ros.bag import read_bag, write_run
 from exo_ilc_ros.core.config import Config, load_config
 from exo_ilc_ros.core.experiment import run_trials
 
+MODES = {"without": "no recorder", "supervisor": "recorder in the supervisor's process",
+         "isolated": "recorder in a process of its own"}
+"""(a)'s runs: what ``exo-ilc run --no-bag``, ``exo-ilc run`` and ``exo-ilc run
+--isolated-recorder`` start."""
 
-def graph_steps_per_second(config: Config, record: bool, bag_dir: Path) -> float:
-    """Lock-step control steps per second within trials (graph_bench's measure: trial start to
-    end events, the first three trials skipped), with or without bag_recorder."""
+
+def graph_steps_per_second(config: Config, mode: str, bag_dir: Path) -> dict[str, float]:
+    """Lock-step control steps per second within trials and overall (graph_bench's measure:
+    trial start to end events, the first three trials skipped), in one of :data:`MODES`."""
     from exo_ilc_ros.bag.recording import Recording
 
-    if not record:
-        return graph_rate(config)["steps_per_s_in_trial"]
+    if mode == "without":
+        return graph_rate(config)
     recorded = config.replace({"wait_for_recorder": True})
     with Recording(recorded, bag_dir) as recording:
-        return graph_rate(recorded, extra=[recording.spec])["steps_per_s_in_trial"]
+        return graph_rate(recorded, recording.graph_nodes(isolated=mode == "isolated"))
 
 
 def bench_recording(trials: int, repeats: int, bag_dir: Path) -> None:
-    """(a): alternate runs without and with the recorder."""
+    """(a): the three modes in turn, ``repeats`` times; the cost of each recording mode from
+    the medians."""
     config = load_config(overrides={"max_trials": trials})
-    bare: list[float] = []
-    recorded: list[float] = []
+    rates: dict[str, list[dict[str, float]]] = {mode: [] for mode in MODES}
     for _ in range(repeats):
-        bare.append(graph_steps_per_second(config, False, bag_dir))
-        recorded.append(graph_steps_per_second(config, True, bag_dir))
-        print(f"  graph steps/s: without recorder {bare[-1]:.0f}, with {recorded[-1]:.0f}")
-    best_bare, best_recorded = max(bare), max(recorded)
-    cost = 1.0 - best_recorded / best_bare
-    median_cost = 1.0 - float(np.median(recorded)) / float(np.median(bare))
-    print(f"(a) lock-step graph, {trials} trials x 501 samples, best of {repeats}: "
-          f"{best_bare:.0f} steps/s without the recorder, {best_recorded:.0f} with; "
-          f"recording costs {100 * cost:.1f} % (median of each: {100 * median_cost:.1f} %; "
-          "target <= 10 %)")
+        for mode in MODES:
+            rates[mode].append(graph_steps_per_second(config, mode, bag_dir))
+        print("  steps/s within trials (overall): " + ", ".join(
+            f"{MODES[mode]} {runs[-1]['steps_per_s_in_trial']:.0f} "
+            f"({runs[-1]['steps_per_s_overall']:.0f})" for mode, runs in rates.items()),
+            flush=True)
+    for key, label in (("steps_per_s_in_trial", "within trials"),
+                       ("steps_per_s_overall", "overall")):
+        median = {mode: float(np.median([r[key] for r in runs])) for mode, runs in rates.items()}
+        paired = {mode: float(np.median([1 - r[key] / b[key] for r, b in
+                                         zip(rates[mode], rates["without"], strict=True)]))
+                  for mode in ("supervisor", "isolated")}
+        costs = ", ".join(f"{MODES[mode]} {median[mode]:.0f} steps/s, costs "
+                          f"{100 * (1 - median[mode] / median['without']):.1f} % (median of "
+                          f"the rounds' costs {100 * paired[mode]:.1f} %)"
+                          for mode in ("supervisor", "isolated"))
+        print(f"(a) lock-step graph {label}, {trials} trials x 501 samples, medians of "
+              f"{repeats}: no recorder {median['without']:.0f} steps/s; {costs} "
+              "(target <= 10 %)")
 
 
 def bench_listener_floor(repeats: int, count: int = 8000) -> None:

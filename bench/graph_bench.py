@@ -26,7 +26,7 @@ import numpy as np
 from exo_ilc_ros import topics
 from exo_ilc_ros.core.config import Config, load_config
 from exo_ilc_ros.graph import GraphSession, run_graph
-from exo_ilc_ros.launcher import NodeSpec, claim_domain_id, graph_environment
+from exo_ilc_ros.launcher import GRAPH_NODES, NodeSpec, claim_domain_id, graph_environment
 
 
 def middleware_floor(count: int, raw: bool, listener: bool = False) -> dict[str, float]:
@@ -56,11 +56,11 @@ def middleware_floor(count: int, raw: bool, listener: bool = False) -> dict[str,
         claim.release()
 
 
-def graph_rate(config: Config, extra: Sequence[NodeSpec] = ()) -> dict[str, float]:
-    """(b): control steps per second through the graph (plus ``extra`` processes, e.g. the
-    recorder), within trials and overall."""
+def graph_rate(config: Config, nodes: Sequence[NodeSpec] = GRAPH_NODES) -> dict[str, float]:
+    """(b): control steps per second through the graph (``nodes``: its processes, e.g. with
+    the recorder), within trials and overall."""
     samples = int(round(config["trajectory.duration"] / config["control.period"])) + 1
-    with GraphSession(config, extra=extra) as session:
+    with GraphSession(config, nodes=nodes) as session:
         session.spin_until(lambda: session.finished, timeout=1800.0, stall_timeout=120.0)
     # Receipt times are wall times only once the monitor matched the supervisor: the trials
     # before arrive together from the transient-local history. Skip that burst (everything

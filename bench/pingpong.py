@@ -19,6 +19,7 @@ import array
 import json
 import sys
 import time
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -102,16 +103,22 @@ def ping(count: int, raw: bool, warmup: int = 200, timeout: float = 60.0,
         sent = time.perf_counter()
         want = replies[0] + 1
         if raw:
-            pub.publish(writer.write(i * 10_000_000, np.array([0.1 * i, 0.2, 0.3]), velocity,
-                                     effort))
+            message: Any = writer.write(i * 10_000_000, np.array([0.1 * i, 0.2, 0.3]),
+                                        velocity, effort)
         else:
             state.header.stamp.sec, state.header.stamp.nanosec = divmod(i * 10_000_000, 10**9)
             state.position = array.array("d", [0.1 * i, 0.2, 0.3])
             state.velocity = array.array("d", [0.0, 0.1, 0.2])
             state.effort = array.array("d", [1.0, 2.0, 3.0])
-            pub.publish(state)
+            message = state
+        pub.publish(message)
         while replies[0] < want:
-            executor.spin_once(timeout_sec=1.0)
+            executor.spin_once(timeout_sec=0.5)
+            if i < warmup and time.perf_counter() - sent > 1.0:
+                # pong's reply writer may not have matched our reader yet (discovery is per
+                # pair, in both directions): the reply was lost, ask again
+                pub.publish(message)
+                sent = time.perf_counter()
             if time.monotonic() > deadline + 600:
                 raise RuntimeError("lost a reply")
         if i >= warmup:

@@ -246,9 +246,11 @@ class GraphRun:
 def run_graph(config: Config, domain_id: int | None = None, extra: Sequence[NodeSpec] = (),
               on_summary: Callable[[TrialSummary], None] | None = None,
               timeout: float = 3600.0, stall_timeout: float = 90.0,
-              on_start: Callable[[GraphSession], None] | None = None) -> GraphRun:
-    """Run the graph until the supervisor finishes, then stop every process."""
-    with GraphSession(config, domain_id, extra, on_summary=on_summary) as session:
+              on_start: Callable[[GraphSession], None] | None = None,
+              nodes: Sequence[NodeSpec] = GRAPH_NODES) -> GraphRun:
+    """Run the graph (``nodes`` plus ``extra`` processes) until the supervisor finishes,
+    then stop every process."""
+    with GraphSession(config, domain_id, extra, on_summary=on_summary, nodes=nodes) as session:
         if on_start is not None:
             on_start(session)
         session.spin_until(lambda: session.finished, timeout, stall_timeout)

@@ -1,8 +1,9 @@
 """Start the node graph as separate processes on a ROS domain of its own, and stop it cleanly.
 
-:data:`GRAPH_NODES` is the one list of what ``exo-ilc run`` starts; another process (the bag
-recorder) is one more :class:`NodeSpec` passed in ``extra``. Every child gets the run's
-``ROS_DOMAIN_ID`` and, unless the user set it, ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``.
+:data:`GRAPH_NODES` is the one list of what ``exo-ilc run`` starts; the bag recorder runs
+in the supervisor's process (:func:`composed`) or as one more :class:`NodeSpec` of its own.
+Every child gets the run's ``ROS_DOMAIN_ID`` and, unless the user set it,
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``.
 """
 
 from __future__ import annotations
@@ -43,11 +44,29 @@ class NodeSpec:
     """Extra ROS arguments (``-p name:=value`` ...)."""
     executable: str | None = None
     """Run this file instead of ``python -m module`` (e.g. colcon's ``lib/exo_ilc_ros/<node>``)."""
+    program_arguments: tuple[str, ...] = ()
+    """Arguments before ``--ros-args`` (a container's node names)."""
 
     def command(self, params_file: Path | str) -> list[str]:
         """The command line of this node with ``params_file``."""
         program = [self.executable] if self.executable else [sys.executable, "-m", self.module]
-        return [*program, "--ros-args", "--params-file", str(params_file), *self.arguments]
+        return [*program, *self.program_arguments, "--ros-args", "--params-file",
+                str(params_file), *self.arguments]
+
+
+CONTAINER_MODULE = "exo_ilc_ros.nodes.container"
+
+
+def composed(specs: Sequence[NodeSpec]) -> NodeSpec:
+    """One process running the nodes of ``specs`` (``nodes/container.py``), named
+    ``a+b``. Their ROS arguments are joined and apply to every node of the process, so node
+    parameters must come in params files keyed by node name, not as ``-p``."""
+    for spec in specs:
+        if "-p" in spec.arguments or "--param" in spec.arguments:
+            raise ValueError(f"{spec.name}: -p would apply to every node of the container")
+    return NodeSpec("+".join(spec.name for spec in specs), CONTAINER_MODULE,
+                    tuple(arg for spec in specs for arg in spec.arguments),
+                    program_arguments=tuple(spec.name for spec in specs))
 
 
 GRAPH_NODES: tuple[NodeSpec, ...] = (

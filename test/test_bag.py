@@ -167,6 +167,103 @@ def test_writer_refuses_existing_bag_and_undeclared_topic(tmp_path: Path) -> Non
         read_bag(tmp_path)
 
 
+def test_batched_writes_give_the_same_file_as_one_by_one(tmp_path: Path) -> None:
+    """write_many (the recorder's path: MCAP records packed by us into rosbags' chunk) writes
+    the very bytes rosbags' own per-message write does, across chunk boundaries (> 1 MiB),
+    with topics interleaved and timestamps out of order; sqlite3 falls back to write."""
+    rng = np.random.default_rng(3)
+    messages = [(int(t), topic, rng.bytes(int(size)))
+                for t, topic, size in zip(rng.integers(10**9, 2 * 10**9, 12000),
+                                          rng.choice([topics.JOINT_STATES, topics.CLOCK,
+                                                      topics.EFFORT_COMMANDS], 12000),
+                                          rng.integers(0, 400, 12000), strict=True)]
+    for storage in ("mcap", "sqlite3"):
+        one, many = tmp_path / storage / "one" / "bag", tmp_path / storage / "many" / "bag"
+        for path in (one, many):
+            with BagWriter(path, storage=storage) as writer:
+                for topic in topics.TYPES:
+                    writer.add_topic(topic, topics.TYPES[topic])
+                if path == one:
+                    for t, topic, data in messages:
+                        writer.write(topic, t, data)
+                    writer.split()
+                    writer.write(topics.CLOCK, 5, b"x")
+                else:
+                    for start in range(0, len(messages), 997):  # batches of any size
+                        assert writer.write_many(messages[start:start + 997]) == \
+                            len(messages[start:start + 997])
+                    assert writer.write_many([]) == 0
+                    writer.split()
+                    writer.write_many([(5, topics.CLOCK, b"x")])
+        if storage == "mcap":
+            files = sorted(p.name for p in one.iterdir())
+            assert files == sorted(p.name for p in many.iterdir()) and len(files) == 3
+            for name in files:
+                assert (one / name).read_bytes() == (many / name).read_bytes(), name
+            assert len((one / files[0]).read_bytes()) > 2 * 2**20  # several chunks
+        from rosbags.highlevel import AnyReader
+
+        for path in (one, many):
+            with AnyReader([path]) as reader:
+                read = sorted((t, c.topic, bytes(d)) for c, t, d in reader.messages())
+            assert read == sorted([*messages, (5, topics.CLOCK, b"x")])
+    with BagWriter(tmp_path / "b") as writer, pytest.raises(BagWriteError, match="undeclared"):
+        writer.write_many([(1, "/nope", b"")])
+
+
+def test_metadata_from_cached_pieces_is_one_dump(tmp_path: Path) -> None:
+    """metadata.yaml (and each file's own metadata) are assembled from pieces dumped once; the
+    text equals one yaml.dump of the whole, split after split, with custom data that needs
+    quoting and spans lines, and custom data that changes."""
+    from exo_ilc_ros.bag.writer import INFO_KEY, _dump, _MetadataYaml
+
+    custom = {"config": "a: 1\nb: 'two'\n  c: \"3\"\n", "empty": "", "colon": "x: y # z"}
+    with BagWriter(tmp_path / "b", custom_data=custom) as writer:
+        for topic in topics.TYPES:
+            writer.add_topic(topic, topics.TYPES[topic])
+        pieces, whole = _MetadataYaml(INFO_KEY), _MetadataYaml(None)
+        for k in range(6):
+            writer.write(topics.CLOCK, 10 * k + 1, b"c")
+            if k % 2:
+                writer.write(topics.JOINT_STATES, 10 * k + 2, b"j")
+            writer.set_custom_data("trials_completed", str(k))
+            writer.split()
+            info = writer._metadata(writer._files, {t.name: t.count
+                                                    for t in writer._topics.values()},
+                                    writer.custom_data)
+            text = (tmp_path / "b" / "metadata.yaml").read_text()
+            assert text == _dump({INFO_KEY: info}) == pieces.dump(info)
+            assert whole.dump(info) == _dump(info)
+            assert yaml.safe_load(text)[INFO_KEY]["custom_data"]["config"] == custom["config"]
+        assert _MetadataYaml(None).dump({"files": [], "custom_data": None}) == \
+            _dump({"files": [], "custom_data": None})
+
+
+def test_recording_runs_the_recorder_in_the_supervisors_process(tmp_path: Path,
+                                                                config: Config) -> None:
+    """By default the recorder joins ilc_supervisor's process (one container, its parameters
+    from a params file of its own so they reach no other node); isolated, it is one more
+    process. -p arguments cannot be composed (they would reach every node of the process)."""
+    from exo_ilc_ros.bag.recording import Recording
+    from exo_ilc_ros.launcher import GRAPH_NODES, NodeSpec, composed
+
+    with Recording(config, tmp_path, "r") as recording:
+        names = [spec.name for spec in recording.graph_nodes()]
+        assert names == ["plant_simulator", "computed_torque_controller",
+                         "ilc_supervisor+bag_recorder"]
+        command = recording.graph_nodes()[-1].command("graph.yaml")
+        assert command[1:5] == ["-m", "exo_ilc_ros.nodes.container", "ilc_supervisor",
+                                "bag_recorder"]
+        assert command[5:] == ["--ros-args", "--params-file", "graph.yaml", "--params-file",
+                               str(recording.params_file)]
+        params = yaml.safe_load(Path(str(recording.params_file)).read_text())
+        assert params["bag_recorder"]["ros__parameters"]["bag_path"] == str(recording.path)
+        isolated = recording.graph_nodes(isolated=True)
+        assert isolated[:3] == list(GRAPH_NODES) and isolated[3].name == "bag_recorder"
+    with pytest.raises(ValueError, match="every node"):
+        composed([GRAPH_NODES[2], NodeSpec("bag_recorder", "m", ("-p", "a:=1"))])
+
+
 def test_killed_writer_leaves_every_finished_trial(tmp_path: Path, config: Config,
                                                    result: RunResult) -> None:
     """SIGKILL in the middle of trial 4 (no close, no metadata update): trials 1-3 analyse."""

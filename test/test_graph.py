@@ -215,7 +215,7 @@ def test_colcon_build_gives_ros2_run_executables(tmp_path: Path) -> None:
     assert build.returncode == 0, build.stdout[-2000:] + build.stderr[-2000:]
     prefix = tmp_path / "install" / "exo_ilc_ros"
     names = ("plant_simulator", "computed_torque_controller", "ilc_supervisor")
-    for name in names:
+    for name in (*names, "bag_recorder", "container"):
         exe = prefix / "lib" / "exo_ilc_ros" / name
         assert exe.is_file() and os.access(exe, os.X_OK), exe
     site = next((prefix / "lib").glob("python3*/site-packages"))
@@ -239,6 +239,10 @@ def test_colcon_build_gives_ros2_run_executables(tmp_path: Path) -> None:
                              timeout=120, stdin=subprocess.DEVNULL, check=False)
         assert bad.returncode == 2, bad.stdout + bad.stderr
         assert "control.period: must be > 0" in bad.stdout + bad.stderr
+    unknown = subprocess.run([str(prefix / "lib/exo_ilc_ros/container"), "ilc_supervisor",
+                              "plant", "--ros-args"], env=env, capture_output=True, text=True,
+                             timeout=120, stdin=subprocess.DEVNULL, check=False)
+    assert unknown.returncode == 2 and "unknown node 'plant'" in unknown.stderr, unknown.stderr
     # ... and one comes up with the installed config and stops cleanly on SIGINT.
     params = prefix / "share/exo_ilc_ros/config/exo_ilc.yaml"
     plant = subprocess.Popen([str(prefix / "lib/exo_ilc_ros/plant_simulator"), "--ros-args",

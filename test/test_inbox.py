@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 import pytest
@@ -53,3 +54,71 @@ def test_inbox_drains_two_topics_in_receive_order_and_is_never_spun() -> None:
         owner.destroy_node()
     finally:
         rclpy.try_shutdown()
+
+
+def test_inboxes_of_one_process_share_one_subscription_per_topic() -> None:
+    """Two inboxes (the supervisor's and the recorder's in one container) on the same topic
+    and QoS: one DDS subscription, each inbox gets every message exactly once whichever drains,
+    the first destroyed leaves the second reading, and the last destroys the subscription."""
+    from rclpy.node import Node
+    from std_msgs.msg import Float64MultiArray
+
+    from exo_ilc_ros.nodes.cdr import float64_array, read_float64_array
+    from exo_ilc_ros.nodes.common import INBOX_QOS, Inbox
+
+    def values(taken: list[tuple[int, str, bytes]]) -> list[float]:
+        return [float(read_float64_array(raw)[0]) for _, _, raw in taken]
+
+    def wait(condition: Any) -> None:
+        deadline = time.monotonic() + 10.0
+        while not condition():
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+
+    rclpy.init()
+    try:
+        owner = Node("shared_owner")
+        first, second = Inbox(Node("first")), Inbox(Node("second"))
+        sub = first.subscribe(Float64MultiArray, "/inbox_shared", INBOX_QOS)
+        assert second.subscribe(Float64MultiArray, "/inbox_shared", INBOX_QOS) is sub
+        other = second.subscribe(Float64MultiArray, "/inbox_other", INBOX_QOS)
+        assert other is not sub
+        pub = owner.create_publisher(Float64MultiArray, "/inbox_shared", 10)
+        wait(lambda: pub.get_subscription_count() >= 1)
+        time.sleep(0.2)
+        assert pub.get_subscription_count() == 1
+        for i in range(10):
+            pub.publish(float64_array(np.array([float(i)])))
+        got_first: list[float] = []
+        wait(lambda: len(got_first.__iadd__(values(first.take()))) >= 10)
+        assert got_first == [float(i) for i in range(10)]
+        assert values(second.take()) == got_first  # its copy, taken once from DDS
+        assert first.take() == [] and second.take() == []
+        first.destroy()
+        assert "first_inbox" in owner.get_node_names()  # still carries second's subscription
+        pub.publish(float64_array(np.array([10.0])))
+        got_second: list[float] = []
+        wait(lambda: len(got_second.__iadd__(values(second.take()))) >= 1)
+        assert got_second == [10.0]
+        second.destroy()
+        wait(lambda: pub.get_subscription_count() == 0)
+        wait(lambda: not {"first_inbox", "second_inbox"} & set(owner.get_node_names()))
+    finally:
+        rclpy.try_shutdown()
+
+
+def test_container_refuses_unknown_repeated_or_no_nodes(capsys: pytest.CaptureFixture[str]
+                                                        ) -> None:
+    """`container NODE ...` exits 2 with the usage before starting ROS for a name the package
+    does not have, a node named twice, or no node; every name it lists can be built."""
+    from exo_ilc_ros.nodes import container
+
+    for argv, problem in ((["container"], "no node named"),
+                          (["container", "ilc_supervisor", "plant", "--ros-args"],
+                           "unknown node 'plant'"),
+                          (["container", "bag_recorder", "bag_recorder"], "named twice")):
+        assert container.main(argv) == 2
+        err = capsys.readouterr().err
+        assert problem in err and "usage: container NODE" in err
+    for name in container.NODES:
+        assert callable(container.node_factory(name))

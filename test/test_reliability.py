@@ -525,15 +525,20 @@ def test_kill_9_the_supervisor_then_exo_ilc_run_resume(tmp_path: Path) -> None:
     assert g["iterations_to_bound"] == r["iterations_to_bound"]
 
 
-def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(tmp_path: Path
-                                                                       ) -> None:
-    """`exo-ilc run --store DIR --bag-dir B`: kill -9 of bag_recorder in the middle of trial 3
-    (after it filed trial 2) stops the graph with the node named and the resume command
-    (exit 3). `--resume` finishes the run into a second bag; its JSON equals run_trials'
-    exactly, and the two bags together (the first up to the kill, the second from the resumed
-    trial on) hold every trial exactly once, with run_trials' max |e|. Trial 3 may end before
-    the graph is stopped (the death is polled every 0.5 s), but the supervisor stores a trial
-    only once the recorder filed it, so trial 3 is never stored and is run again."""
+@pytest.mark.parametrize(("flags", "process_name"), [
+    ([], "ilc_supervisor+bag_recorder"), (["--isolated-recorder"], "bag_recorder")],
+    ids=["in_the_supervisors_process", "isolated"])
+def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(
+        tmp_path: Path, flags: list[str], process_name: str) -> None:
+    """`exo-ilc run --store DIR --bag-dir B`: kill -9 of the process running bag_recorder (by
+    default the supervisor's, which dies with it; or its own with --isolated-recorder) in the
+    middle of trial 3 (after it filed trial 2) stops the graph with the process named and the
+    resume command (exit 3). `--resume` finishes the run into a second bag; its JSON equals
+    run_trials' exactly, and the two bags together (the first up to the kill, the second from
+    the resumed trial on) hold every trial exactly once, with run_trials' max |e|. Isolated,
+    trial 3 may end before the graph is stopped (the death is polled every 0.5 s), but the
+    supervisor stores a trial only once the recorder filed it, so trial 3 is never stored and
+    is run again."""
     from exo_ilc_ros.bag import read_bag, trials_filed
     from exo_ilc_ros.report import RunSummary
 
@@ -543,7 +548,7 @@ def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(tmp_path:
     trials = 5
     common = [sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--quiet", "--config",
               str(config_file), "--trials", str(trials), "--store", str(store), "--bag-dir",
-              str(bags)]
+              str(bags), *flags]
     process = subprocess.Popen(common, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                stdin=subprocess.DEVNULL, text=True)
     try:
@@ -565,7 +570,7 @@ def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(tmp_path:
         if process.poll() is None:
             process.kill()
             process.wait()
-    _assert_stopped_for_resume(process, err, "bag_recorder", store)
+    _assert_stopped_for_resume(process, err, process_name, store)
     stored_after = len(json.loads(next(store.glob("*/index.json")).read_text())["trials"])
     assert stored_at_kill == 2 and stored_after >= 2, (stored_at_kill, stored_after)
 

@@ -1,4 +1,11 @@
-"""The bag recorder as one more process of ``exo-ilc run`` (a :class:`launcher.NodeSpec`)."""
+"""The bag recorder of ``exo-ilc run``: in the supervisor's process (default) or its own.
+
+In the supervisor's process (``nodes/container.py``) the recorder shares the supervisor's DDS
+participant and its /joint_states subscription (:class:`~exo_ilc_ros.nodes.common.Inbox`), so
+the control loop's samples reach one process fewer; a recorder process of its own
+(``isolated``) costs the lock-step loop two to three times as much (``bench/bag_bench.py``) but
+survives the supervisor and vice versa.
+"""
 
 from __future__ import annotations
 
@@ -6,11 +13,14 @@ import tempfile
 from pathlib import Path
 from types import TracebackType
 
+import yaml
+
 from ..core.config import Config
-from ..launcher import NodeSpec
+from ..launcher import GRAPH_NODES, NodeSpec, composed
 from .run_writer import run_name, unique_path
 
 RECORDER_MODULE = "exo_ilc_ros.nodes.bag_recorder"
+SUPERVISOR = "ilc_supervisor"
 
 
 class Recording:
@@ -25,11 +35,18 @@ class Recording:
         self.split_every = split_every
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
         self.config_file: Path | None = None
+        self.params_file: Path | None = None
+        """The recorder's own parameters (a params file: in a container, ``-p`` would reach
+        every node of the process)."""
 
     def __enter__(self) -> Recording:
         self._tmp = tempfile.TemporaryDirectory(prefix="exo_ilc_bag_")
         self.config_file = Path(self._tmp.name) / "effective.yaml"
         self.config_file.write_text(self.config.to_ros_yaml(f"run {self.name}"))
+        self.params_file = Path(self._tmp.name) / "bag_recorder.yaml"
+        self.params_file.write_text(yaml.safe_dump({"bag_recorder": {"ros__parameters": {
+            "bag_path": str(self.path), "run_name": self.name,
+            "config_file": str(self.config_file), "split_every": self.split_every}}}))
         self.path.parent.mkdir(parents=True, exist_ok=True)
         return self
 
@@ -41,9 +58,16 @@ class Recording:
 
     @property
     def spec(self) -> NodeSpec:
-        """The recorder process (for ``run_graph(..., extra=[recording.spec])``)."""
-        if self.config_file is None:
+        """The recorder as a process of its own (``run_graph(..., extra=[recording.spec])``)."""
+        if self.params_file is None:
             raise RuntimeError("Recording.spec outside its with-block")
-        return NodeSpec("bag_recorder", RECORDER_MODULE, (
-            "-p", f"bag_path:={self.path}", "-p", f"run_name:={self.name}",
-            "-p", f"config_file:={self.config_file}", "-p", f"split_every:={self.split_every}"))
+        return NodeSpec("bag_recorder", RECORDER_MODULE, ("--params-file", str(self.params_file)))
+
+    def graph_nodes(self, isolated: bool = False,
+                    nodes: tuple[NodeSpec, ...] = GRAPH_NODES) -> list[NodeSpec]:
+        """The graph's processes with the recorder: in the supervisor's process, or
+        (``isolated``) one more process (``run_graph(..., nodes=recording.graph_nodes())``)."""
+        if isolated:
+            return [*nodes, self.spec]
+        return [composed([node, self.spec]) if node.name == SUPERVISOR else node
+                for node in nodes]

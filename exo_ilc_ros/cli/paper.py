@@ -64,8 +64,8 @@ def paper(args: argparse.Namespace) -> int:
 
                 run_config = run_config.replace({"wait_for_recorder": True})
                 with Recording(run_config, args.bag_dir) as recording:
-                    run_graph(run_config, args.domain_id, extra=[recording.spec],
-                              on_summary=progress)
+                    run_graph(run_config, args.domain_id, on_summary=progress,
+                              nodes=recording.graph_nodes())
                 bags.append(recording.path)
         print(f"bag: {bags[-1]}", file=sys.stderr)
     return analyze(argparse.Namespace(bags=[str(b) for b in bags], plot=args.plot, trial=None,

@@ -25,9 +25,10 @@ def register(sub: Any) -> None:
     parser = sub.add_parser(
         "run", help="run the experiment through the ROS 2 node graph",
         description="Start plant_simulator, computed_torque_controller and ilc_supervisor as "
-        "separate processes on a ROS domain of their own (discovery limited to this machine "
-        "unless ROS_AUTOMATIC_DISCOVERY_RANGE is set), run K trials per mass uncertainty and "
-        "print the same table and JSON as `exo-ilc simulate`.")
+        "separate processes (bag_recorder in the supervisor's) on a ROS domain of their own "
+        "(discovery limited to this machine unless ROS_AUTOMATIC_DISCOVERY_RANGE is set), run "
+        "K trials per mass uncertainty and print the same table and JSON as `exo-ilc "
+        "simulate`.")
     add_config_arguments(parser)
     parser.add_argument("--domain-id", type=int, help="ROS domain id of the graph (default: "
                         "a free one, claimed with a lock file)")
@@ -39,6 +40,10 @@ def register(sub: Any) -> None:
                         "<bag-dir>/<run-name>/, rosbag2 MCAP)")
     parser.add_argument("--bag-dir", default="bags", metavar="DIR",
                         help="where the bags go (default: bags)")
+    parser.add_argument("--isolated-recorder", action="store_true",
+                        help="run bag_recorder in a process of its own (default: in "
+                        "ilc_supervisor's process, which costs the control loop less; a "
+                        "process of its own survives the supervisor and vice versa)")
     parser.add_argument("--store", metavar="DIR",
                         help="save every completed trial and the feed-forward it led to under "
                         "DIR (default: a new .exo-ilc/runs/<date-time>-<pid>/store per run)")
@@ -133,7 +138,7 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
         else:
             run_config = run_config.replace({"wait_for_recorder": True})
             with Recording(run_config, args.bag_dir) as recording:
-                result = run_graph(run_config, args.domain_id, extra=[recording.spec],
-                                   on_summary=progress)
+                result = run_graph(run_config, args.domain_id, on_summary=progress,
+                                   nodes=recording.graph_nodes(args.isolated_recorder))
             bar.write(f"bag: {recording.path}", file=sys.stderr)
     return result.summary

@@ -4,7 +4,10 @@ Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.topics.TYPES` (
 ``RECORDER_DEPTH``; the feed-forward transient local, as published) and stores the CDR bytes
 untouched, stamped with the wall-clock time DDS received them (what ``ros2 bag record`` does
 without ``--use-sim-time``). The subscriptions are an :class:`~.common.Inbox` drained every
-``INBOX_PERIOD``, so the recorder does not wake once per message next to the control loop.
+``INBOX_PERIOD``, so the recorder does not wake once per message next to the control loop; the
+samples between two trial events go to the bag as one batch (``BagWriter.write_many``).
+``exo-ilc run`` starts it in the supervisor's process (``container ilc_supervisor
+bag_recorder``), where it shares the supervisor's /joint_states subscription.
 A new storage file starts after each trial (``split_every`` trials), so a SIGKILL loses at most
 the trial being recorded; Ctrl-C / SIGTERM close the bag normally. ``custom_data`` holds the
 run's provenance and every parameter change with the trial it took effect at.
@@ -19,9 +22,7 @@ from __future__ import annotations
 
 import importlib
 import json
-import signal
 import sys
-import time
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -33,7 +34,6 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 
 from .. import topics
-from ..bag.errors import BagError
 from ..bag.provenance import (
     RECORDED_BY,
     RUN_NAME,
@@ -46,13 +46,15 @@ from ..bag.provenance import (
 from ..bag.qos import RECORDER_DEPTH, TRANSIENT_LOCAL_TOPICS, offered_qos
 from ..bag.writer import BagWriter
 from ..core.config import load_config
-from ..core.errors import ConfigError
-from .common import EVENTS_QOS, INBOX_PERIOD, Inbox, diagnostic_array, status, wall_clock
+from .common import EVENTS_QOS, Inbox, diagnostic_array, run_nodes, status, wall_clock
 
 NAME = "bag_recorder"
 READY_TOPICS = (topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
                 topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY)
 """Topics whose publishers must be matched before the recorder reports ``ready``."""
+PROTOCOL_TOPICS = frozenset({topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.PARAMETER_EVENTS})
+"""Topics the recorder reads as well as writes (trial boundaries, parameter changes); the rest
+are written in batches."""
 
 
 def message_class(msgtype: str) -> Any:
@@ -72,6 +74,9 @@ def subscription_qos(topic: str) -> QoSProfile:
 
 class BagRecorder(Node):
     """Writes the graph's topics into a bag, one storage file per trial."""
+
+    DRAINS_ON_STOP = True
+    """On SIGINT/SIGTERM :func:`~.common.run_nodes` polls on until the last messages are in."""
 
     def __init__(self) -> None:
         super().__init__(NAME)
@@ -134,8 +139,15 @@ class BagRecorder(Node):
         """Write every message waiting in the inbox, in the order DDS received them; returns
         how many."""
         taken = self.inbox.take()
-        for received_ns, topic, raw in taken:
-            self.on_message(topic, raw, received_ns)
+        samples: list[tuple[int, str, bytes]] = []  # written as one batch up to an event
+        for item in taken:
+            if item[1] in PROTOCOL_TOPICS:
+                self.messages += self.writer.write_many(samples)
+                samples = []
+                self.on_message(item[1], item[2], item[0])
+            else:
+                samples.append(item)
+        self.messages += self.writer.write_many(samples)
         return len(taken)
 
     def on_message(self, topic: str, raw: bytes, received_ns: int) -> None:
@@ -235,54 +247,10 @@ class BagRecorder(Node):
         super().destroy_node()
 
 
-DRAIN_IDLE = 0.3
-DRAIN_MAX = 3.0
-"""On SIGINT/SIGTERM: keep receiving until no message came for DRAIN_IDLE s (at most DRAIN_MAX
-s), so what the graph published before it was told to stop is in the bag."""
-
-
 def main(args: list[str] | None = None) -> int:
-    """Entry point: ``ros2 run exo_ilc_ros bag_recorder``. SIGINT and SIGTERM stop it cleanly
-    (the queued messages are written, then the bag is closed)."""
-    import rclpy
-    from rclpy.experimental import EventsExecutor
-    from rclpy.signals import SignalHandlerOptions
-
-    stop: list[int] = []
-
-    def on_signal(signum: int, frame: Any) -> None:
-        stop.append(signum)
-
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
-    node: BagRecorder | None = None
-    try:
-        node = BagRecorder()
-        executor = EventsExecutor()
-        executor.add_node(node)
-        while not stop and rclpy.ok():
-            executor.spin_once(timeout_sec=INBOX_PERIOD)
-            node.poll()
-        deadline = time.monotonic() + DRAIN_MAX
-        last_count, last_change = node.messages, time.monotonic()
-        while rclpy.ok() and time.monotonic() < deadline and \
-                time.monotonic() - last_change < DRAIN_IDLE:
-            executor.spin_once(timeout_sec=INBOX_PERIOD)
-            node.poll()
-            if node.messages != last_count:
-                last_count, last_change = node.messages, time.monotonic()
-    except (BagError, ConfigError) as exc:
-        print(f"{NAME}: error: {exc}", file=sys.stderr, flush=True)
-        return 2
-    except KeyboardInterrupt:
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-    return 0
+    """Entry point: ``ros2 run exo_ilc_ros bag_recorder``. SIGINT and SIGTERM stop it cleanly:
+    what was published before is still taken and written, then the bag is closed."""
+    return run_nodes([BagRecorder], args)
 
 
 if __name__ == "__main__":

@@ -4,6 +4,9 @@ QoS profiles, diagnostics helpers and the spin loop."""
 from __future__ import annotations
 
 import array
+import signal
+import sys
+import time
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
@@ -17,10 +20,11 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 
 from ..core import schema
 from ..core.config import Config, load_config
-from ..core.errors import ConfigError
+from ..core.errors import ConfigError, ExoIlcError
 
 SAMPLES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                          reliability=ReliabilityPolicy.RELIABLE,
@@ -159,42 +163,96 @@ class Inbox:
     :meth:`take` drains them (``rcl_take`` until empty). The owner calls it from its spin loop
     (``poll``, at least every :data:`INBOX_PERIOD`) and before acting on an event that must
     see every earlier message. Messages come back in the order DDS received them.
+
+    Inboxes of one process (nodes composed in one container) share one subscription per
+    topic, type and QoS: the sample is taken from DDS once, and every inbox of the topic gets
+    it once from whichever drains first.
     """
 
     def __init__(self, owner: Node) -> None:
         self.node = Node(f"{owner.get_name()}_inbox", namespace=owner.get_namespace(),
                          parameter_overrides=[Parameter("use_sim_time", value=False)],
                          start_parameter_services=False, enable_rosout=False)
-        self._subscriptions: list[Any] = []
-        self._topics: list[str] = []
+        self._readers: list[_SharedReader] = []
+        self._pending: list[tuple[int, str, bytes]] = []
 
     def subscribe(self, msg_type: Any, topic: str, qos: QoSProfile = INBOX_QOS) -> Any:
         """A raw subscription drained by :meth:`take` (returned for its publisher count)."""
-        sub = self.node.create_subscription(msg_type, topic, _never_called, qos, raw=True)
-        self._subscriptions.append(sub)
-        self._topics.append(sub.topic_name)
-        return sub
+        name = topic if topic.startswith("/") else \
+            f"{self.node.get_namespace().rstrip('/')}/{topic}"
+        key = (name, msg_type, qos.history, qos.depth, qos.reliability, qos.durability)
+        readers = _SHARED_READERS.setdefault(self.node.context, {})
+        reader = readers.get(key)
+        if reader is None:
+            sub = self.node.create_subscription(msg_type, topic, _never_called, qos, raw=True)
+            reader = readers[key] = _SharedReader(sub, self.node, key)
+        if self not in reader.inboxes:  # the same topic twice in one inbox: read once
+            reader.inboxes.append(self)
+            self._readers.append(reader)
+        return reader.subscription
 
     def take(self) -> list[tuple[int, str, bytes]]:
         """Every waiting message as (DDS receive time in ns, topic, CDR bytes), in receive
         order."""
-        out: list[tuple[int, str, bytes]] = []
-        for sub, topic in zip(self._subscriptions, self._topics, strict=True):
-            handle = sub.handle
-            with handle:
-                while True:
-                    taken = handle.take_message(sub.msg_type, True)
-                    if taken is None:
-                        break
-                    raw, info = taken
-                    out.append((int(info["received_timestamp"]), topic, raw))
-        if len(self._subscriptions) > 1:
+        for reader in self._readers:
+            reader.drain()
+        out, self._pending = self._pending, []
+        if len(self._readers) > 1:
             out.sort(key=_receive_time)
         return out
 
     def destroy(self) -> None:
-        """Destroy the companion node."""
-        self.node.destroy_node()
+        """Leave the shared subscriptions (the last inbox of one destroys it), then destroy
+        the companion node once no other inbox reads through a subscription on it."""
+        for reader in self._readers:
+            reader.leave(self)
+        self._readers.clear()
+        self._pending.clear()
+        _RETIRED.append(self)
+        live = {id(r.node) for readers in _SHARED_READERS.values() for r in readers.values()}
+        for inbox in [i for i in _RETIRED if id(i.node) not in live]:
+            _RETIRED.remove(inbox)
+            inbox.node.destroy_node()
+
+
+class _SharedReader:
+    """One raw subscription of a process and the inboxes that read it."""
+
+    def __init__(self, subscription: Any, node: Node, key: tuple[Any, ...]) -> None:
+        self.subscription = subscription
+        self.node = node
+        self.key = key
+        self.topic: str = subscription.topic_name
+        self.inboxes: list[Inbox] = []
+
+    def drain(self) -> None:
+        """Take every waiting message and hand it to each inbox of the topic."""
+        sub, topic = self.subscription, self.topic
+        taken: list[tuple[int, str, bytes]] = []
+        handle = sub.handle
+        with handle:
+            while True:
+                message = handle.take_message(sub.msg_type, True)
+                if message is None:
+                    break
+                raw, info = message
+                taken.append((int(info["received_timestamp"]), topic, raw))
+        if taken:
+            for inbox in self.inboxes:
+                inbox._pending.extend(taken)
+
+    def leave(self, inbox: Inbox) -> None:
+        """``inbox`` reads no more; the last one out destroys the subscription."""
+        self.inboxes.remove(inbox)
+        if not self.inboxes:
+            _SHARED_READERS.get(self.node.context, {}).pop(self.key, None)
+            self.node.destroy_subscription(self.subscription)
+
+
+_SHARED_READERS: dict[Any, dict[tuple[Any, ...], _SharedReader]] = {}
+"""Per rclpy context: the inbox subscriptions by (topic, type, QoS)."""
+_RETIRED: list[Inbox] = []
+"""Destroyed inboxes whose companion node still carries a subscription other inboxes read."""
 
 
 def _never_called(raw: bytes) -> None:  # pragma: no cover - inbox subscriptions are not spun
@@ -205,38 +263,86 @@ def _receive_time(item: tuple[int, str, bytes]) -> int:
     return item[0]
 
 
-def spin(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
-    """Init, build the node, spin it with the EventsExecutor until shutdown or Ctrl-C.
+DRAIN_IDLE = 0.3
+DRAIN_MAX = 3.0
+"""After a stop (SIGINT/SIGTERM, or a node's fatal error), a node with ``DRAINS_ON_STOP`` is
+spun on until its ``poll()`` handled nothing for DRAIN_IDLE s (at most DRAIN_MAX s), so what the
+graph published before it was told to stop is still taken (the recorder writes it)."""
 
-    A node with a ``poll()`` method (an :class:`Inbox` owner) has it called after every event
-    and at least every :data:`INBOX_PERIOD`. Returns the exit code: 0, 2 for a configuration
-    error, or the node's ``exit_code`` once it sets one (a fatal error it already logged and
-    reported on /diagnostics).
+
+def spin(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
+    """Init, build the node, spin it until SIGINT/SIGTERM; its exit code (see
+    :func:`run_nodes`)."""
+    return run_nodes([make_node], args)
+
+
+def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = None) -> int:
+    """Init, build the nodes in order and spin them in this one process with one
+    EventsExecutor (``spin_once`` in a loop, never ``spin()``) until SIGINT/SIGTERM.
+
+    Nodes of one process share one DDS participant, so a topic several of them read crosses
+    the process boundary once (ROS 2 composition). A node with a ``poll()`` method (an
+    :class:`Inbox` owner) has it called after every event and at least every
+    :data:`INBOX_PERIOD`. On stop, nodes without ``DRAINS_ON_STOP`` are destroyed first, the
+    others drained (:data:`DRAIN_IDLE`) and then destroyed (the recorder closes its bag).
+    Returns the exit code: 0, 2 for a configuration or bag error, or the first ``exit_code``
+    a node sets (a fatal error it already logged and reported on /diagnostics).
     """
-    rclpy.init(args=args)
-    node: Node | None = None
+    stop: list[int] = []
+
+    def on_signal(signum: int, frame: Any) -> None:
+        stop.append(signum)
+
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    nodes: list[Node] = []
     code = 0
     try:
-        node = make_node()
         executor = EventsExecutor()
-        executor.add_node(node)
-        poll: Callable[[], None] | None = getattr(node, "poll", None)
-        timeout = 0.1 if poll is None else INBOX_PERIOD
-        while rclpy.ok():
+        for make_node in factories:
+            nodes.append(make_node())
+            executor.add_node(nodes[-1])
+        polls = [poll for poll in (getattr(node, "poll", None) for node in nodes)
+                 if poll is not None]
+        timeout = INBOX_PERIOD if polls else 0.1
+        while not stop and rclpy.ok():
             executor.spin_once(timeout_sec=timeout)
-            if poll is not None:
+            for poll in polls:
                 poll()
-            stop = getattr(node, "exit_code", None)  # a node that must stop (fatal error)
-            if stop is not None:
-                code = int(stop)
+            codes = [c for c in (getattr(node, "exit_code", None) for node in nodes)
+                     if c is not None]
+            if codes:  # a node that must stop (fatal error)
+                code = int(codes[0])
                 break
-    except ConfigError as exc:
-        print(f"error: {exc}", flush=True)
+        draining = [node for node in nodes if getattr(node, "DRAINS_ON_STOP", False)]
+        for node in [n for n in nodes if n not in draining]:
+            executor.remove_node(node)
+            nodes.remove(node)
+            node.destroy_node()
+        _drain(executor, [poll for poll in (getattr(node, "poll", None) for node in draining)
+                          if poll is not None])
+    except ExoIlcError as exc:
+        print(f"error: {exc}", file=sys.stderr, flush=True)
         code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        if node is not None:
+        for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     return code
+
+
+def _drain(executor: EventsExecutor, polls: Sequence[Callable[[], int | None]]) -> None:
+    """Spin and call ``polls`` until none took a message for DRAIN_IDLE s (at most DRAIN_MAX)."""
+    if not polls:
+        return
+    now = time.monotonic()
+    deadline, last_message = now + DRAIN_MAX, now
+    while rclpy.ok() and time.monotonic() < deadline and \
+            time.monotonic() - last_message < DRAIN_IDLE:
+        executor.spin_once(timeout_sec=INBOX_PERIOD)
+        if sum(int(poll() or 0) for poll in polls):
+            last_message = time.monotonic()

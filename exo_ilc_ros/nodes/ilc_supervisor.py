@@ -13,7 +13,10 @@ controller aborted (error envelope) is rebuilt with the safe hold from the abort
 its feed-forward, exactly as ``run_trials`` in-process. A trial with a watchdog trip is run
 again. With ``store.directory`` every accepted trial and the feed-forward it led to are saved
 (core.store.RunStore, atomic) before the next trial starts; with ``store.resume`` the run
-continues after the last stored trial. Invalid /joint_states are rejected and counted.
+continues after the last stored trial. With ``wait_for_recorder`` a trial is stored only once
+bag_recorder filed it; the next trial is prepared meanwhile (plant reset, feed-forward pushed
+and acknowledged) and started after the store (WAIT_RECORDER). Invalid /joint_states are
+rejected and counted.
 """
 
 from __future__ import annotations
@@ -103,8 +106,13 @@ class IlcSupervisor(Node):
         self.recorder_trials = 0
         """Trials bag_recorder has received completely (its status on /diagnostics)."""
         self.recorder_lost = False
-        self.unsaved: tuple[TrialRecord, FeedforwardUpdate] | None = None
-        """The ended trial waiting for bag_recorder to file it before it is stored."""
+        self.unsaved: tuple[TrialRecord, FeedforwardUpdate, Config] | None = None
+        """The ended trial waiting for bag_recorder to file it before it is stored (with the
+        configuration it ran with); the next trial is prepared meanwhile but not started."""
+        self.unsaved_trial = 0
+        self.unsaved_since = 0.0
+        self.after_save: str | None = None
+        """In WAIT_RECORDER: ``start`` (the next trial is acknowledged) or ``finish``."""
         self.start_future: Future | None = None
         self.t0_ns_end = 0
         self.rejections = Rejections(self)
@@ -159,12 +167,12 @@ class IlcSupervisor(Node):
                     self._prepare()
                     return
                 self._reset()
-        elif self.phase is Phase.WAIT_RECORDER and \
-                time.monotonic() - self.phase_since > RECORDER_TIMEOUT:
+        elif self.unsaved is not None and \
+                time.monotonic() - self.unsaved_since > RECORDER_TIMEOUT:
             self.get_logger().error(f"bag_recorder silent for {RECORDER_TIMEOUT:g} s; going "
                                     "on without waiting for it")
             self.recorder_lost = True
-            self._save_trial()
+            self._store_unsaved()
         elif self.phase is not Phase.FINISHED and \
                 time.monotonic() - self.phase_since > STEP_TIMEOUT:
             self.get_logger().error(f"trial {self.trial}: no progress in {self.phase.value} for "
@@ -216,8 +224,8 @@ class IlcSupervisor(Node):
                 received = values_of(item).get("trials_received", "0")
                 self.recorder_trials = max(self.recorder_trials,
                                            int(received) if received.isdigit() else 0)
-        if self.phase is Phase.WAIT_RECORDER and self.recorder_trials >= self.trial:
-            self._save_trial()
+        if self.unsaved is not None and self.recorder_trials >= self.unsaved_trial:
+            self._store_unsaved()
             return
         if self.phase is Phase.RUNNING:
             for item in msg.status:
@@ -236,10 +244,17 @@ class IlcSupervisor(Node):
             values = values_of(item)
             if values.get("trial") == str(self.trial) and \
                     values.get("t0_ns") == str(self.t0_ns):
-                self._event("start", [("trial", str(self.trial))], self.t0_ns)
-                self._enter(Phase.STARTING)
-                self._start()
+                if self.unsaved is not None:  # the previous trial is not in the bag yet
+                    self.after_save = "start"
+                    self._enter(Phase.WAIT_RECORDER)
+                    return
+                self._begin_trial()
                 return
+
+    def _begin_trial(self) -> None:
+        self._event("start", [("trial", str(self.trial))], self.t0_ns)
+        self._enter(Phase.STARTING)
+        self._start()
 
     def _start(self) -> None:
         future = self.start_client.call_async(Trigger.Request())
@@ -327,27 +342,40 @@ class IlcSupervisor(Node):
                                     ("aborted_at", str(aborted))], self.t0_ns_end)
         self.summary_pub.publish(diagnostic_array(self, [summary], self.t0_ns_end))
         self._event("end", [(kv.key, kv.value) for kv in summary.values], self.t0_ns_end)
-        self.unsaved = (record, update)
-        if self.active["wait_for_recorder"] and not self.recorder_lost and \
-                self.recorder_trials < self.trial:
-            self._enter(Phase.WAIT_RECORDER)  # stored only once the bag holds it too
-        else:
-            self._save_trial()
+        self.unsaved = (record, update, self._store_config())
+        self.unsaved_trial, self.unsaved_since = self.trial, time.monotonic()
+        if not (self.active["wait_for_recorder"] and not self.recorder_lost and
+                self.recorder_trials < self.trial) and not self._save_trial():
+            return
+        # With a recorder the trial is stored only once the bag holds it too; the next trial
+        # is prepared meanwhile (plant reset, feed-forward pushed) and starts after the store.
+        self._after_trial(record, update)
 
-    def _save_trial(self) -> None:
-        """The ended trial into the store, then on to the next. With ``wait_for_recorder``
-        this runs only after bag_recorder filed the trial, so a stored trial is always in a
-        bag: if the recorder dies first, the trial is not stored and a resume runs it again."""
+    def _save_trial(self) -> bool:
+        """The ended trial into the store (False: it could not be saved; the run stopped).
+        With ``wait_for_recorder`` this runs only after bag_recorder filed the trial, so a
+        stored trial is always in a bag: if the recorder dies first, the trial is not stored
+        and a resume runs it again."""
         assert self.unsaved is not None
-        record, update = self.unsaved
-        self.unsaved = None
+        record, update, config = self.unsaved
+        trial, self.unsaved = self.unsaved_trial, None
         if self.store is not None:
             try:
-                self.store.save(record, update, self._store_config())
+                self.store.save(record, update, config)
             except (ExoIlcError, OSError) as exc:
-                self._fail(f"trial {self.trial}: cannot save to the store: {exc}")
-                return
-        self._after_trial(record, update)
+                self._fail(f"trial {trial}: cannot save to the store: {exc}", trial - 1)
+                return False
+        return True
+
+    def _store_unsaved(self) -> None:
+        """The recorder filed the waiting trial (or went silent): store it, then start the
+        next trial or finish if that was waiting for it."""
+        if not self._save_trial() or self.phase is not Phase.WAIT_RECORDER:
+            return
+        if self.after_save == "finish":
+            self._finish(self.trial)
+        else:
+            self._begin_trial()
 
     def _after_trial(self, record: TrialRecord, update: FeedforwardUpdate) -> None:
         bound = self.active["error_bound"]
@@ -356,7 +384,11 @@ class IlcSupervisor(Node):
         settled = self.active["stop_when_settled"]
         if self.trial >= self.active["max_trials"] or \
                 (settled > 0 and self.within_streak >= settled):
-            self._finish(self.trial)
+            if self.unsaved is not None:  # finished once the last trial is stored
+                self.after_save = "finish"
+                self._enter(Phase.WAIT_RECORDER)
+            else:
+                self._finish(self.trial)
             return
         if self.params.pending is not self.active:  # the trial boundary: live changes apply
             self._apply_pending()
@@ -442,11 +474,13 @@ class IlcSupervisor(Node):
         self._event("finished", [("trials", str(trials)), *values], self.t0_ns_end or None)
         self.get_logger().info(f"finished after {trials} trials")
 
-    def _fail(self, message: str, code: int = 1) -> None:
-        """Stop running trials: ERROR on /diagnostics, ``finished`` with the error."""
+    def _fail(self, message: str, completed: int | None = None, code: int = 1) -> None:
+        """Stop running trials: ERROR on /diagnostics, ``finished`` with the error after
+        ``completed`` trials (default: those before the current one)."""
         self.error = message
         self.get_logger().error(message)
-        self._finish(self.trial - 1, [("error", message)])
+        self._finish(self.trial - 1 if completed is None else completed,
+                     [("error", message)])
         self.on_health_timer()
         self.exit_code = code
 

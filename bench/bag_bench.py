@@ -9,8 +9,9 @@ figures; asserts nothing (wall-clock timing is noisy on a shared 2-core machine)
     recorder costs at most 10 %.
 (b) Analysing a 150-trial bag at 100 Hz (written in-process by ``write_run``, the same topics
     and messages as the recorder's): ``read_bag`` + the table. Target: under 5 s.
-(c) The middleware's own share of (a): the raw ping-pong of graph_bench with and without one
-    more, silent subscriber process on both topics (what any recorder adds to the round trip).
+(c) Why a recorder process of its own costs more: the raw ping-pong of graph_bench with and
+    without one more, silent subscriber process on both topics (what such a process adds to
+    the round trip).
 """
 
 from __future__ import annotations
@@ -76,7 +77,7 @@ def bench_recording(trials: int, repeats: int, bag_dir: Path) -> None:
 def bench_listener_floor(repeats: int, count: int = 8000) -> None:
     """(c): what one more subscriber process costs the middleware alone: the raw ping-pong
     with and without a third process subscribed to both topics (drained every 10 ms, no
-    per-message wake-up, nothing written): the floor under (a)."""
+    per-message wake-up, nothing written): the floor under (a)'s isolated recorder."""
     bare: list[float] = []
     heard: list[float] = []
     for _ in range(repeats):
@@ -84,8 +85,8 @@ def bench_listener_floor(repeats: int, count: int = 8000) -> None:
         heard.append(middleware_floor(count, True, listener=True)["round_trips_per_s"])
         print(f"  ping-pong round trips/s: alone {bare[-1]:.0f}, with a listener {heard[-1]:.0f}")
     cost = 1.0 - float(np.median(heard)) / float(np.median(bare))
-    print(f"(c) middleware floor of (a): one more subscriber process on both topics costs the "
-          f"raw ping-pong {100 * cost:.1f} % (medians of {repeats})")
+    print(f"(c) middleware floor of (a)'s isolated recorder: one more subscriber process on "
+          f"both topics costs the raw ping-pong {100 * cost:.1f} % (medians of {repeats})")
 
 
 def bench_analysis(trials: int, bag_dir: Path) -> None:

@@ -15,12 +15,12 @@ from types import TracebackType
 
 import yaml
 
+from ..core import schema
 from ..core.config import Config
 from ..launcher import GRAPH_NODES, NodeSpec, composed
 from .run_writer import run_name, unique_path
 
 RECORDER_MODULE = "exo_ilc_ros.nodes.bag_recorder"
-SUPERVISOR = "ilc_supervisor"
 
 
 class Recording:
@@ -69,5 +69,5 @@ class Recording:
         (``isolated``) one more process (``run_graph(..., nodes=recording.graph_nodes())``)."""
         if isolated:
             return [*nodes, self.spec]
-        return [composed([node, self.spec]) if node.name == SUPERVISOR else node
+        return [composed([node, self.spec]) if node.name == schema.SUPERVISOR else node
                 for node in nodes]

@@ -19,7 +19,9 @@ HEADER = b"\x00\x01\x00\x00"
 _NO_DIMS = b"\x00\x00\x00\x00"
 """A Float64MultiArray layout without dims (what :func:`float64_array` writes)."""
 _U32 = struct.Struct("<I")
-_STAMP = struct.Struct("<iI")
+STAMP = struct.Struct("<iI")
+"""builtin_interfaces/Time (sec, nanosec), right after the encapsulation header in a
+stamped message."""
 
 
 class CdrError(ValueError):
@@ -76,7 +78,7 @@ class JointStateWriter:
               effort: np.ndarray) -> bytes:
         """The serialised message with this stamp and state."""
         sec, nanosec = divmod(stamp_ns, 1_000_000_000)
-        _STAMP.pack_into(self._buffer, 4, sec, nanosec)
+        STAMP.pack_into(self._buffer, 4, sec, nanosec)
         self._fields[0][:] = position
         self._fields[1][:] = velocity
         self._fields[2][:] = effort
@@ -134,7 +136,7 @@ def _names_span(raw: bytes) -> tuple[int, int]:
 
 
 def _read_joint_state(raw: bytes) -> tuple[int, np.ndarray, np.ndarray]:
-    sec, nanosec = _STAMP.unpack_from(raw, 4)
+    sec, nanosec = STAMP.unpack_from(raw, 4)
     position, offset = _doubles(raw, _names_span(raw)[1])
     velocity, offset = _doubles(raw, offset)
     return sec * 1_000_000_000 + nanosec, position, velocity
@@ -193,7 +195,7 @@ def read_joint_state_full(raw: bytes
     (the slow path for messages of another layout than the plant's)."""
     try:
         _check_header(raw)
-        sec, nanosec = _STAMP.unpack_from(raw, 4)
+        sec, nanosec = STAMP.unpack_from(raw, 4)
         offset = _skip_string(raw, 8)
         (count,) = _U32.unpack_from(raw, 4 + _align(offset, 4))
         offset = _align(offset, 4) + 4

@@ -22,6 +22,7 @@ from rclpy.node import Node
 from ..core.validation import Cause, LogOnce, Rejection, validate_joint_state
 from .cdr import (
     HEADER,
+    STAMP,
     CdrError,
     joint_state_offsets,
     names_segment,
@@ -29,9 +30,6 @@ from .cdr import (
     read_joint_state_full,
 )
 from .common import status
-
-_STAMP = struct.Struct("<iI")
-"""builtin_interfaces/Time right after the encapsulation header."""
 
 LEVEL_NAMES = {DiagnosticStatus.OK: "OK", DiagnosticStatus.WARN: "WARN",
                DiagnosticStatus.ERROR: "ERROR"}
@@ -114,7 +112,7 @@ class JointStateGate:
             # The plant's own layout again: only the stamp and the values can differ.
             values = layout.doubles.unpack_from(raw, layout.position) + \
                 layout.doubles.unpack_from(raw, layout.velocity)
-            sec, nanosec = _STAMP.unpack_from(raw, 4)
+            sec, nanosec = STAMP.unpack_from(raw, 4)
             stamp = sec * 1_000_000_000 + nanosec
             if isfinite(sum(values)) and (self.last_stamp_ns is None or
                                           stamp > self.last_stamp_ns):

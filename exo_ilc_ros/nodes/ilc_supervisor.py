@@ -109,7 +109,6 @@ class IlcSupervisor(Node):
         self.unsaved: tuple[TrialRecord, FeedforwardUpdate, Config] | None = None
         """The ended trial waiting for bag_recorder to file it before it is stored (with the
         configuration it ran with); the next trial is prepared meanwhile but not started."""
-        self.unsaved_trial = 0
         self.unsaved_since = 0.0
         self.after_save: str | None = None
         """In WAIT_RECORDER: ``start`` (the next trial is acknowledged) or ``finish``."""
@@ -224,7 +223,7 @@ class IlcSupervisor(Node):
                 received = values_of(item).get("trials_received", "0")
                 self.recorder_trials = max(self.recorder_trials,
                                            int(received) if received.isdigit() else 0)
-        if self.unsaved is not None and self.recorder_trials >= self.unsaved_trial:
+        if self.unsaved is not None and self.recorder_trials >= self.unsaved[0].trial:
             self._store_unsaved()
             return
         if self.phase is Phase.RUNNING:
@@ -343,7 +342,7 @@ class IlcSupervisor(Node):
         self.summary_pub.publish(diagnostic_array(self, [summary], self.t0_ns_end))
         self._event("end", [(kv.key, kv.value) for kv in summary.values], self.t0_ns_end)
         self.unsaved = (record, update, self._store_config())
-        self.unsaved_trial, self.unsaved_since = self.trial, time.monotonic()
+        self.unsaved_since = time.monotonic()
         if not (self.active["wait_for_recorder"] and not self.recorder_lost and
                 self.recorder_trials < self.trial) and not self._save_trial():
             return
@@ -358,7 +357,7 @@ class IlcSupervisor(Node):
         and a resume runs it again."""
         assert self.unsaved is not None
         record, update, config = self.unsaved
-        trial, self.unsaved = self.unsaved_trial, None
+        trial, self.unsaved = record.trial, None
         if self.store is not None:
             try:
                 self.store.save(record, update, config)

@@ -11,6 +11,7 @@ from typing import Any
 
 from ..bag import BagReadError, BagRun, read_bag
 from ..report import RunSummary, format_iterations, format_trial_table, write_json
+from .arguments import figure_path, integer, json_file
 
 
 def register(sub: Any) -> None:
@@ -21,16 +22,17 @@ def register(sub: Any) -> None:
         "--bag`, or `ros2 bag record` of the same topics) and print per bag the max |e| per "
         "trial and joint and the iterations to the bound beside the paper's numbers.")
     parser.add_argument("bags", nargs="+", metavar="BAG", help="rosbag2 bag directories")
-    parser.add_argument("--plot", metavar="OUT.png",
+    parser.add_argument("--plot", metavar="OUT.png", type=figure_path,
                         help="the paper's Figures 5-7: max |e| per iteration, one curve per bag")
-    parser.add_argument("--trial", type=int, metavar="K",
+    parser.add_argument("--trial", type=integer(1), metavar="K",
                         help="also a tracking figure of trial K (q vs q_d, error, effort, "
                         "feed-forward), written beside --plot as <OUT>_trial<K>.png (default "
                         "trial<K>.png)")
-    parser.add_argument("--csv", metavar="OUT", help="write the per-trial table as CSV")
-    parser.add_argument("--json", metavar="OUT",
+    parser.add_argument("--csv", metavar="OUT", type=json_file,
+                        help="write the per-trial table as CSV")
+    parser.add_argument("--json", metavar="OUT", type=json_file,
                         help="write the tables as JSON (the shape of `exo-ilc simulate --json`)")
-    parser.add_argument("--config-out", metavar="FILE",
+    parser.add_argument("--config-out", metavar="FILE", type=json_file,
                         help="write the first bag's effective config (rerun it with "
                         "`exo-ilc simulate --config FILE`)")
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")

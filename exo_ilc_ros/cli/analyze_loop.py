@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..core.config import load_config
 from ..core.convergence import analyze_loop, format_analysis, plot_analysis
+from .arguments import config_with_flags, figure_file, input_file, integer, parameter
 
 
 def register(sub: Any) -> None:
@@ -17,30 +17,33 @@ def register(sub: Any) -> None:
         "control period) around the reference and print, per joint, the worst trial-to-trial "
         "factor |F| of the learning law and the band where |F| > 1 (the learned input grows "
         "there), without and with the Q-filter. See README, 'Convergence and the Q-filter'.")
-    parser.add_argument("--config", help="ROS parameter YAML laid over the shipped "
-                        "config/exo_ilc.yaml (any subset of keys)")
+    parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
+                        "shipped config/exo_ilc.yaml (any subset of keys)")
     parser.add_argument("--law", choices=("sign", "linear"),
                         help="learning law (default: the config's law)")
-    parser.add_argument("--mass-uncertainty", type=float, nargs="+", metavar="D",
+    parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
+                        metavar="D",
                         help="plant mass uncertainty delta, one analysis each (default: the "
                         "config's)")
-    parser.add_argument("--cutoff", type=float, metavar="HZ",
+    parser.add_argument("--cutoff", type=parameter("q_filter.cutoff_hz"), metavar="HZ",
                         help="analyse with this Q-filter cut-off (Hz) instead of the config's, "
                         "enabling the filter")
-    parser.add_argument("--lifted", type=int, metavar="K", default=0,
+    parser.add_argument("--lifted", type=integer(0), metavar="K", default=0,
                         help="also check the finite trial exactly: spectral radius and growth "
                         "over K trials of the lifted (N+1)x(N+1) map (slower)")
-    parser.add_argument("--plot", metavar="OUT.png", help="plot |F| against frequency (PNG); "
-                        "with several uncertainties, one file each (OUT_d0.05.png, ...)")
+    parser.add_argument("--plot", metavar="OUT.png", type=figure_file, help="plot |F| against "
+                        "frequency (PNG); with several uncertainties, one file each "
+                        "(OUT_d0.05.png, ...)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Analyse, print and plot."""
-    overrides: dict[str, Any] = {}
+    flags: dict[str, tuple[str, Any]] = {}
     if args.cutoff is not None:
-        overrides.update({"q_filter.enabled": True, "q_filter.cutoff_hz": args.cutoff})
-    config = load_config(args.config, overrides)
+        flags.update({"q_filter.enabled": ("--cutoff", True),
+                      "q_filter.cutoff_hz": ("--cutoff", args.cutoff)})
+    config = config_with_flags(args.config, flags)
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     worst = 0.0
     for i, delta in enumerate(deltas):

@@ -10,9 +10,10 @@ from typing import Any
 from tqdm import tqdm
 
 from ..comparison import Variant, format_comparison, plot_comparison, run_comparison
-from ..core.config import config_dir, load_config, read_yaml
+from ..core.config import config_dir, read_yaml
 from ..core.errors import ConfigError
 from ..report import RunSummary, write_json
+from .arguments import config_with_flags, figure_file, input_file, integer, json_file, parameter
 from .tune import default_jobs
 
 TUNED_NAME = "tuned.yaml"
@@ -33,27 +34,28 @@ def register(sub: Any) -> None:
         description="Run the paper's hand-tuned sign law, the tuned sign law (from --tuned, or "
         "config/tuned.yaml if there is one) and the linear law at each mass uncertainty; print "
         "one table and write one figure.")
-    parser.add_argument("--config", help="ROS parameter YAML laid over the shipped config (the "
-                        "paper's law and the linear law run with it)")
-    parser.add_argument("--tuned", help="tuned YAML laid over --config (default: "
-                        "config/tuned.yaml if found)")
+    parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
+                        "shipped config (the paper's law and the linear law run with it)")
+    parser.add_argument("--tuned", type=input_file, help="tuned YAML laid over --config "
+                        "(default: config/tuned.yaml if found)")
     parser.add_argument("--no-tuned", action="store_true", help="leave the tuned law out")
-    parser.add_argument("--mass-uncertainty", type=float, nargs="+", metavar="D",
-                        default=[0.05, 0.10, 0.15], help="default: 0.05 0.10 0.15")
-    parser.add_argument("--trials", type=int, help="trials per run (default: max_trials)")
-    parser.add_argument("--plot", default="compare.png", help="figure (default: compare.png)")
-    parser.add_argument("--json", metavar="OUT", help="also write the per-trial tables as JSON")
-    parser.add_argument("--jobs", type=int, default=default_jobs(),
+    parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
+                        metavar="D", default=[0.05, 0.10, 0.15], help="default: 0.05 0.10 0.15")
+    parser.add_argument("--trials", type=parameter("max_trials"),
+                        help="trials per run (default: max_trials)")
+    parser.add_argument("--plot", default="compare.png", type=figure_file,
+                        help="figure (default: compare.png)")
+    parser.add_argument("--json", metavar="OUT", type=json_file,
+                        help="also write the per-trial tables as JSON")
+    parser.add_argument("--jobs", type=integer(1), default=default_jobs(),
                         help="parallel worker processes (default: the CPUs available)")
     parser.set_defaults(func=compare)
 
 
 def compare(args: argparse.Namespace) -> int:
     """Run the variants, print the table, write the figure."""
-    overrides: dict[str, Any] = {}
-    if args.trials is not None:
-        overrides["max_trials"] = args.trials
-    base = load_config(args.config, overrides)
+    base = config_with_flags(args.config, {} if args.trials is None else
+                             {"max_trials": ("--trials", args.trials)})
     trials = int(base["max_trials"])
     variants = [Variant("sign (paper)", base.replace({"law": "sign"}), "sign")]
     tuned_path = None if args.no_tuned else (Path(args.tuned) if args.tuned else find_tuned())
@@ -62,7 +64,10 @@ def compare(args: argparse.Namespace) -> int:
             raise ConfigError("--tuned", "no such file", str(tuned_path))
         tuned_values = read_yaml(tuned_path)
         tuned_values.pop("max_trials", None)
-        tuned = base.replace(tuned_values)
+        try:
+            tuned = base.replace(tuned_values)
+        except ConfigError as exc:  # the tuned file's fault, not --config's
+            raise ConfigError(exc.key, exc.rule, str(tuned_path)) from None
         variants.append(Variant("sign (tuned)", tuned.replace({"law": "sign"}), "sign"))
     variants.append(Variant("linear", base.replace({"law": "linear"}), "linear"))
     deltas = args.mass_uncertainty

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -37,6 +38,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"exo-ilc {args.command}: interrupted", file=sys.stderr)
         return 130
+    except OSError as exc:  # a file named on the command line cannot be read or written
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"exo-ilc {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # a bug, not the user's input: one line, the traceback on demand
+        if os.environ.get("EXO_ILC_TRACEBACK"):
+            raise
+        print(f"exo-ilc {args.command}: internal error: {type(exc).__name__}: {exc}\n"
+              "This is a bug in exo-ilc, not in what you typed; please report it with the command "
+              "line (EXO_ILC_TRACEBACK=1 shows the traceback).", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -10,8 +10,16 @@ from typing import Any
 
 from tqdm import tqdm
 
-from ..core.config import load_config
 from .analyze import analyze
+from .arguments import (
+    config_with_flags,
+    directory,
+    domain_id,
+    figure_path,
+    input_file,
+    json_file,
+    parameter,
+)
 
 PAPER_UNCERTAINTIES = (0.05, 0.10, 0.15)
 
@@ -23,25 +31,29 @@ def register(sub: Any) -> None:
         description="Run the experiment at 5, 10 and 15 %% mass uncertainty through the ROS 2 "
         "graph (each run recorded by bag_recorder), then analyse the three bags: the "
         "per-trial table, iterations to the bound beside the paper's, Figures 5-7.")
-    parser.add_argument("--config", help="ROS parameter YAML laid over the shipped config")
-    parser.add_argument("--trials", type=int, help="trials per run (default: max_trials)")
-    parser.add_argument("--bag-dir", default="bags", metavar="DIR", help="default: bags")
+    parser.add_argument("--config", type=input_file,
+                        help="ROS parameter YAML laid over the shipped config")
+    parser.add_argument("--trials", type=parameter("max_trials"),
+                        help="trials per run (default: max_trials)")
+    parser.add_argument("--bag-dir", default="bags", metavar="DIR", type=directory,
+                        help="default: bags")
     parser.add_argument("--plot", default="paper_figures.png", metavar="OUT.png",
+                        type=figure_path,
                         help="the figure (default: paper_figures.png)")
-    parser.add_argument("--json", metavar="OUT", help="the tables as JSON")
-    parser.add_argument("--csv", metavar="OUT", help="the per-trial table as CSV")
+    parser.add_argument("--json", metavar="OUT", type=json_file, help="the tables as JSON")
+    parser.add_argument("--csv", metavar="OUT", type=json_file, help="the per-trial table as CSV")
     parser.add_argument("--in-process", action="store_true",
                         help="run in-process (exo-ilc simulate --bag) instead of the graph; "
                         "the bags hold the same topics")
-    parser.add_argument("--domain-id", type=int, help="ROS domain id of the graph")
+    parser.add_argument("--domain-id", type=domain_id, help="ROS domain id of the graph")
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")
     parser.set_defaults(func=paper)
 
 
 def paper(args: argparse.Namespace) -> int:
     """Three runs, three bags, then ``analyze`` on them."""
-    overrides = {"max_trials": args.trials} if args.trials is not None else {}
-    config = load_config(args.config, overrides)
+    config = config_with_flags(args.config, {} if args.trials is None else
+                               {"max_trials": ("--trials", args.trials)})
     trials = config["max_trials"]
     bags: list[Path] = []
     for delta in PAPER_UNCERTAINTIES:

@@ -4,6 +4,7 @@ standard parameter services (rcl_interfaces GetParameters / SetParameters / List
 from __future__ import annotations
 
 import argparse
+import difflib
 import os
 import sys
 from typing import Any
@@ -11,6 +12,7 @@ from typing import Any
 import yaml
 
 from ..core.errors import ExoIlcError
+from .arguments import domain_id, number
 
 
 class ParamError(ExoIlcError):
@@ -28,10 +30,9 @@ def register(sub: Any) -> None:
     parser.add_argument("name", nargs="?", help="parameter name (get, set), e.g. "
                         "schedule.position.threshold_low")
     parser.add_argument("value", nargs="?", help="new value as YAML, e.g. '[1.0, 2.0, 1.0]'")
-    parser.add_argument("--domain-id", type=int,
-                        default=int(os.environ.get("ROS_DOMAIN_ID", "0") or 0),
+    parser.add_argument("--domain-id", type=domain_id,
                         help="ROS domain id of the graph (default: $ROS_DOMAIN_ID or 0)")
-    parser.add_argument("--timeout", type=float, default=10.0,
+    parser.add_argument("--timeout", type=number(strictly_positive=True), default=10.0,
                         help="seconds to wait for the node (default 10)")
     parser.set_defaults(func=param)
 
@@ -39,7 +40,26 @@ def register(sub: Any) -> None:
 def parse_value(text: str) -> Any:
     """A command-line VALUE as a ROS parameter value (YAML, like ``ros2 param set``); a list of
     numbers with any float in it becomes all floats."""
-    value = yaml.safe_load(text)
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at character {mark.column + 1}" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or "not valid YAML"
+        raise ParamError(f"VALUE {text!r} is not a valid YAML value ({problem}{where}); give "
+                         "e.g. 1.5, true, text or [1.0, 2.0, 1.0]") from None
+    if isinstance(value, dict):
+        raise ParamError(f"VALUE {text!r} is a mapping; a ROS parameter is a number, bool, "
+                         "string or a list of one of these")
+    if isinstance(value, list) and any(isinstance(v, (list, dict)) for v in value):
+        raise ParamError(f"VALUE {text!r} nests lists or mappings; a ROS parameter list is flat")
+    if isinstance(value, list) and len({_list_kind(v) for v in value}) > 1:
+        raise ParamError(f"VALUE {text!r} mixes types; a ROS parameter list holds numbers, "
+                         "bools or strings, one kind")
+    if isinstance(value, int) and not isinstance(value, bool) and not -2**63 <= value < 2**63:
+        raise ParamError(f"VALUE {text!r} does not fit a 64-bit integer")
+    if value is None:
+        raise ParamError(f"VALUE {text!r} is empty (null); ROS parameters cannot be unset here")
     if isinstance(value, list) and value and \
             all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value) and \
             any(isinstance(v, float) for v in value):
@@ -53,6 +73,13 @@ def param(args: argparse.Namespace) -> int:
         raise ParamError(f"param {args.action} needs a parameter NAME")
     if args.action == "set" and args.value is None:
         raise ParamError("param set needs a VALUE")
+    if args.action == "list" and args.name is not None:
+        raise ParamError(f"param list takes no NAME, got {args.name!r}")
+    if args.action == "get" and args.value is not None:
+        raise ParamError(f"param get takes no VALUE, got {args.value!r}")
+    value = parse_value(args.value) if args.action == "set" else None
+    domain = args.domain_id if args.domain_id is not None else _environment_domain_id()
+    node_name = _node_name(args.node)
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
@@ -60,14 +87,14 @@ def param(args: argparse.Namespace) -> int:
 
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=args.domain_id)
+    rclpy.init(context=context, domain_id=domain)
     node = rclpy.create_node("exo_ilc_param", context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     try:
-        client = AsyncParameterClient(node, args.node.lstrip("/"))
+        client = AsyncParameterClient(node, node_name)
         if not client.wait_for_services(timeout_sec=args.timeout):
-            raise ParamError(f"node {args.node} not found on ROS domain {args.domain_id} within "
+            raise ParamError(f"node {args.node} not found on ROS domain {domain} within "
                              f"{args.timeout:g} s")
 
         def wait(future: Any) -> Any:
@@ -76,28 +103,76 @@ def param(args: argparse.Namespace) -> int:
                 raise ParamError(f"node {args.node} did not answer within {args.timeout:g} s")
             return future.result()
 
+        names = sorted(wait(client.list_parameters()).result.names)
         if args.action == "list":
-            for name in sorted(wait(client.list_parameters()).result.names):
+            for name in names:
                 print(name)
             return 0
+        if args.name not in names:
+            raise ParamError(unknown_parameter(args.node, args.name, names))
         if args.action == "get":
             values = wait(client.get_parameters([args.name])).values
             if not values or values[0].type == 0:
-                raise ParamError(f"{args.node} has no parameter {args.name}")
+                raise ParamError(unknown_parameter(args.node, args.name, names))
             print(_value_of(values[0]))
             return 0
-        result = wait(client.set_parameters([Parameter(args.name,
-                                                       value=parse_value(args.value))]))
+        result = wait(client.set_parameters([Parameter(args.name, value=value)]))
         outcome = result.results[0]
         if outcome.successful:
             print("Set parameter successful")
             return 0
-        print(f"Setting parameter failed: {outcome.reason}", file=sys.stderr)
+        print(f"Setting parameter failed: {args.name} = {args.value}: {outcome.reason}",
+              file=sys.stderr)
         return 1
     finally:
         executor.remove_node(node)
         node.destroy_node()
         context.try_shutdown()
+
+
+def unknown_parameter(node: str, name: str, names: list[str]) -> str:
+    """What to tell a user who named a parameter ``node`` does not have."""
+    close = difflib.get_close_matches(name, names, n=3, cutoff=0.6)
+    suggestion = f"; did you mean {' or '.join(close)}?" if close else ""
+    return (f"{node} has no parameter {name!r}{suggestion} Its parameters: {', '.join(names)} "
+            f"(exo-ilc param list {node})")
+
+
+def _list_kind(value: Any) -> str:
+    """The ROS array type an item of a list value asks for (ints and floats mix: doubles)."""
+    if isinstance(value, bool):
+        return "bool"
+    if isinstance(value, (int, float)):
+        return "number"
+    return type(value).__name__
+
+
+def _environment_domain_id() -> int:
+    """$ROS_DOMAIN_ID (0 when unset), checked like --domain-id."""
+    text = os.environ.get("ROS_DOMAIN_ID", "") or "0"
+    try:
+        return domain_id(text)
+    except argparse.ArgumentTypeError as exc:
+        raise ParamError(f"environment variable ROS_DOMAIN_ID: {exc} (or give --domain-id)") \
+            from None
+
+
+def _node_name(text: str) -> str:
+    """NODE as the node name (or /namespace/name) its parameter services are under."""
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+    from rclpy.validate_node_name import validate_node_name
+
+    name = text.lstrip("/")
+    try:
+        if "/" in name:
+            validate_full_topic_name("/" + name)
+            validate_node_name(name.rsplit("/", 1)[1])
+        else:
+            validate_node_name(name)
+    except Exception as exc:  # rclpy's Invalid*Exception: says what is wrong and where
+        raise ParamError(f"NODE {text!r} is not a valid node name: "
+                         f"{str(exc).splitlines()[0]}") from None
+    return name
 
 
 def _value_of(message: Any) -> Any:

@@ -17,6 +17,7 @@ from ..core.errors import ConfigError
 from ..report import (
     RunSummary,
 )
+from .arguments import directory, domain_id
 from .simulate import add_config_arguments, config_from_args, print_report
 
 
@@ -30,7 +31,7 @@ def register(sub: Any) -> None:
         "K trials per mass uncertainty and print the same table and JSON as `exo-ilc "
         "simulate`.")
     add_config_arguments(parser)
-    parser.add_argument("--domain-id", type=int, help="ROS domain id of the graph (default: "
+    parser.add_argument("--domain-id", type=domain_id, help="ROS domain id of the graph (default: "
                         "a free one, claimed with a lock file)")
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")
     parser.add_argument("--learned", action="store_true", help="also print per-trial tables "
@@ -38,13 +39,13 @@ def register(sub: Any) -> None:
     parser.add_argument("--no-bag", action="store_true",
                         help="do not start bag_recorder (default: each run is recorded to "
                         "<bag-dir>/<run-name>/, rosbag2 MCAP)")
-    parser.add_argument("--bag-dir", default="bags", metavar="DIR",
+    parser.add_argument("--bag-dir", default="bags", metavar="DIR", type=directory,
                         help="where the bags go (default: bags)")
     parser.add_argument("--isolated-recorder", action="store_true",
                         help="run bag_recorder in a process of its own (default: in "
                         "ilc_supervisor's process, which costs the control loop less; a "
                         "process of its own survives the supervisor and vice versa)")
-    parser.add_argument("--store", metavar="DIR",
+    parser.add_argument("--store", metavar="DIR", type=directory,
                         help="save every completed trial and the feed-forward it led to under "
                         "DIR (default: a new .exo-ilc/runs/<date-time>-<pid>/store per run)")
     parser.add_argument("--resume", action="store_true",

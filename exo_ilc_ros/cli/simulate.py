@@ -8,7 +8,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from ..core.config import Config, load_config
+from ..core.config import Config
 from ..core.experiment import run_trials
 from ..report import (
     RunSummary,
@@ -17,29 +17,32 @@ from ..report import (
     format_trial_table,
     write_json,
 )
+from .arguments import config_with_flags, directory, input_file, json_file, parameter
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
     """--config, --mass-uncertainty, --trials, --law: shared by simulate and run."""
-    parser.add_argument("--config", help="ROS parameter YAML laid over the shipped "
-                        "config/exo_ilc.yaml (any subset of keys)")
-    parser.add_argument("--mass-uncertainty", type=float, nargs="+", metavar="D",
-                        help="plant mass uncertainty delta, one run each (default: the "
-                        "config's plant_simulator mass_uncertainty)")
-    parser.add_argument("--trials", type=int, help="trials per run (default: max_trials)")
+    parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
+                        "shipped config/exo_ilc.yaml (any subset of keys)")
+    parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
+                        metavar="D", help="plant mass uncertainty delta, one run each (default: "
+                        "the config's plant_simulator mass_uncertainty)")
+    parser.add_argument("--trials", type=parameter("max_trials"),
+                        help="trials per run (default: max_trials)")
     parser.add_argument("--law", choices=("sign", "linear"), help="learning law "
                         "(default: the config's law)")
-    parser.add_argument("--json", metavar="OUT", help="write the per-trial table as JSON")
+    parser.add_argument("--json", metavar="OUT", type=json_file,
+                        help="write the per-trial table as JSON")
 
 
 def config_from_args(args: argparse.Namespace) -> Config:
     """The config the arguments name, with --law and --trials applied."""
-    overrides: dict[str, Any] = {}
+    flags: dict[str, tuple[str, Any]] = {}
     if args.law:
-        overrides["law"] = args.law
+        flags["law"] = ("--law", args.law)
     if args.trials is not None:
-        overrides["max_trials"] = args.trials
-    return load_config(args.config, overrides)
+        flags["max_trials"] = ("--trials", args.trials)
+    return config_with_flags(args.config, flags)
 
 
 def register(sub: Any) -> None:
@@ -51,10 +54,12 @@ def register(sub: Any) -> None:
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")
     parser.add_argument("--learned", action="store_true", help="also print per-trial tables "
                         "of max |u_ff| (learned feed-forward) and max |effort| per joint")
-    parser.add_argument("--bag", metavar="DIR", help="also write each run as a rosbag2 bag "
-                        "DIR/<run-name>/ with the graph's topics (what bag_recorder records)")
-    parser.add_argument("--store", metavar="DIR", help="save every trial and the learned "
-                        "feed-forward to DIR (atomic writes, keyed by trajectory + config)")
+    parser.add_argument("--bag", metavar="DIR", type=directory, help="also write each run as "
+                        "a rosbag2 bag DIR/<run-name>/ with the graph's topics (what "
+                        "bag_recorder records)")
+    parser.add_argument("--store", metavar="DIR", type=directory, help="save every trial and "
+                        "the learned feed-forward to DIR (atomic writes, keyed by trajectory + "
+                        "config)")
     parser.add_argument("--resume", action="store_true", help="with --store: continue each "
                         "run after the last trial stored (bit-identical to an uninterrupted run)")
     parser.set_defaults(func=simulate)

@@ -15,6 +15,17 @@ from tqdm import tqdm
 from ..core.config import load_config
 from ..core.errors import ConfigError
 from ..tuning import RunScore, TuningProblem, TuningResult, best_result, optimize
+from .arguments import (
+    at_least_two_trials,
+    input_file,
+    integer,
+    nonempty,
+    number,
+    parameter,
+    seed,
+    storage,
+    yaml_out,
+)
 
 DEFAULT_STORAGE = ".exo-ilc/tune.journal"
 
@@ -35,30 +46,33 @@ def register(sub: Any) -> None:
         "the trial from which every joint stays within the bound, worst case over the mass "
         "uncertainties, plus a penalty for peak error. Resumable; several machines can share "
         "one study through --storage.")
-    parser.add_argument("--config", help="ROS parameter YAML laid over the shipped config; its "
-                        "schedules are the starting point (trial 0)")
-    parser.add_argument("--mass-uncertainty", type=float, nargs="+", metavar="D",
+    parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
+                        "shipped config; its schedules are the starting point (trial 0)")
+    parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
+                        metavar="D",
                         default=[0.05, 0.10, 0.15], help="uncertainties scored at once "
                         "(default: 0.05 0.10 0.15)")
-    parser.add_argument("--trials", type=int, help="trials per run (default: max_trials)")
-    parser.add_argument("--budget", type=int, default=60,
+    parser.add_argument("--trials", type=parameter("max_trials", at_least_two_trials),
+                        help="trials per run (default: max_trials)")
+    parser.add_argument("--budget", type=integer(0), default=60,
                         help="Optuna trials to add to the study in this call (default: 60)")
-    parser.add_argument("--out", default="config/tuned.yaml",
+    parser.add_argument("--out", default="config/tuned.yaml", type=yaml_out,
                         help="tuned ROS parameter YAML (default: config/tuned.yaml)")
-    parser.add_argument("--storage", default=DEFAULT_STORAGE,
+    parser.add_argument("--storage", default=DEFAULT_STORAGE, type=storage,
                         help="Optuna storage: a journal file path (default: "
                         f"{DEFAULT_STORAGE}) or an RDB URL (sqlite:///f.db, "
                         "postgresql://user@host/db)")
-    parser.add_argument("--study-name", help="study to create or resume (default: a digest of "
-                        "the problem, so the same command resumes the same study)")
-    parser.add_argument("--jobs", type=int, default=default_jobs(),
+    parser.add_argument("--study-name", type=nonempty, help="study to create or resume "
+                        "(default: a digest of the problem, so the same command resumes the "
+                        "same study)")
+    parser.add_argument("--jobs", type=integer(1), default=default_jobs(),
                         help="parallel worker processes (default: the CPUs available)")
-    parser.add_argument("--peak-weight", type=float, default=20.0,
+    parser.add_argument("--peak-weight", type=number(0.0), default=20.0,
                         help="iterations charged per 100%% of peak error above trial 1's "
                         "(default: 20)")
     parser.add_argument("--aggregate", choices=("max", "mean"), default="max",
                         help="combine the uncertainties' scores by worst case or mean")
-    parser.add_argument("--seed", type=int, help="sampler seed (reproducible with --jobs 1)")
+    parser.add_argument("--seed", type=seed, help="sampler seed (reproducible with --jobs 1)")
     parser.set_defaults(func=tune)
 
 

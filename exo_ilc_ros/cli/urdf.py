@@ -9,13 +9,15 @@ from typing import Any
 from ..core.config import load_config
 from ..core.experiment import build_arm
 from ..core.urdf import arm_urdf
+from .arguments import input_file, json_file
 
 
 def register(sub: Any) -> None:
     """Add the sub-command."""
     parser = sub.add_parser("urdf", help="write the arm's URDF from the config")
-    parser.add_argument("--config", help="ROS parameter YAML over the shipped config")
-    parser.add_argument("--out", help="output file (default: standard output)")
+    parser.add_argument("--config", type=input_file,
+                        help="ROS parameter YAML over the shipped config")
+    parser.add_argument("--out", type=json_file, help="output file (default: standard output)")
     parser.set_defaults(func=write_urdf)
 
 

@@ -224,13 +224,13 @@ def _yaml_value(value: Any) -> str:
 
 def load_config(path: Path | str | None = None,
                 overrides: Mapping[str, Any] | None = None) -> Config:
-    """The shipped defaults, then ``path`` (any subset of keys), then ``overrides``."""
+    """The shipped defaults, then ``path`` (any subset of keys), then ``overrides``; the
+    defaults and ``path`` are validated before ``overrides`` replace any of their values."""
     default = default_config_path()
     values = read_yaml(default)
     source = str(default)
     if path is not None and Path(path).resolve() != default.resolve():
         values.update(read_yaml(path))
         source = str(path)
-    if overrides:
-        values.update(overrides)
-    return Config(values, source)
+    config = Config(values, source)  # the files are checked whole, whatever overrides them
+    return config.replace(overrides) if overrides else config

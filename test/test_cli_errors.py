@@ -1,0 +1,283 @@
+"""Every bad command-line value of every ``exo-ilc`` sub-command is refused where it is given,
+with a message naming the flag, the value and the rule, and no traceback (issue 18).
+
+The checks run in-process (``main([...])``): a value that got past them would start the run,
+so each case also bounds how long the command may take.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pytest
+
+from exo_ilc_ros.cli.main import main
+from exo_ilc_ros.cli.param import ParamError, parse_value, unknown_parameter
+
+SHIPPED = Path(__file__).resolve().parents[1] / "config" / "exo_ilc.yaml"
+
+# (argv, what the message must contain: the flag, the value, the rule). "{tmp}" is a scratch
+# directory, "{file}" an existing plain file in it, "{bad_trials}" a YAML with max_trials: "3".
+CONFIG_FLAGS = [
+    (["--trials", "0"], ["argument --trials", "0", "must be > 0", "max_trials"]),
+    (["--trials", "-5"], ["argument --trials", "-5", "must be > 0"]),
+    (["--trials", "abc"], ["argument --trials", "'abc'", "must be an integer"]),
+    (["--trials", "2.5"], ["argument --trials", "2.5", "must be an integer"]),
+    (["--mass-uncertainty", "-2"], ["argument --mass-uncertainty", "-2", "must be >= -0.9",
+                                    "mass_uncertainty"]),
+    (["--mass-uncertainty", "0.1", "nan"], ["argument --mass-uncertainty", "nan", "finite"]),
+    (["--mass-uncertainty", "ten"], ["argument --mass-uncertainty", "'ten'", "must be a number"]),
+    (["--config", "{tmp}/missing.yaml"], ["argument --config", "missing.yaml", "no such file"]),
+    (["--config", "{tmp}"], ["argument --config", "{tmp}", "must be a file"]),
+    (["--config", "{bad_trials}", "--trials", "3"], ["bad_trials.yaml", "max_trials",
+                                                     "must be an integer", "'3'"]),
+    (["--config", "{bad_yaml}"], ["bad_yaml.yaml", "invalid YAML"]),
+    (["--json", "{tmp}/no/such/dir/out.json"], ["argument --json", "out.json",
+                                                "does not exist"]),
+    (["--json", "{tmp}"], ["argument --json", "{tmp}", "directory"]),
+]
+
+CASES: list[tuple[list[str], list[str]]] = []
+for command in ("simulate", "run"):
+    CASES += [([command, *argv], expected) for argv, expected in CONFIG_FLAGS]
+    CASES += [([command, "--law", "fast"], ["argument --law", "'fast'", "invalid choice"])]
+CASES += [
+    (["simulate", "--bag", "{file}"], ["argument --bag", "file.txt", "must be a directory"]),
+    (["simulate", "--store", "{file}"], ["argument --store", "file.txt", "must be a directory"]),
+    (["simulate", "--resume"], ["--resume", "--store"]),
+    (["run", "--domain-id", "-1"], ["argument --domain-id", "-1", "from 0 to 232"]),
+    (["run", "--domain-id", "300"], ["argument --domain-id", "300", "from 0 to 232"]),
+    (["run", "--domain-id", "x"], ["argument --domain-id", "'x'", "must be an integer"]),
+    (["run", "--bag-dir", "{file}"], ["argument --bag-dir", "file.txt", "must be a directory"]),
+    (["run", "--store", "{file}"], ["argument --store", "file.txt", "must be a directory"]),
+    (["run", "--no-store", "--store", "{tmp}/s"], ["--no-store", "cannot be combined"]),
+    (["run", "--resume"], ["--resume", "needs --store"]),
+    (["compare", "--trials", "0"], ["argument --trials", "0", "must be > 0"]),
+    (["compare", "--mass-uncertainty", "-2"], ["argument --mass-uncertainty", "-2",
+                                               "must be >= -0.9"]),
+    (["compare", "--jobs", "0"], ["argument --jobs", "0", ">= 1"]),
+    (["compare", "--plot", "{tmp}/fig.xyz"], ["argument --plot", "fig.xyz", ".png"]),
+    (["compare", "--plot", "{tmp}"], ["argument --plot", "directory"]),
+    (["compare", "--tuned", "{tmp}/none.yaml"], ["argument --tuned", "none.yaml",
+                                                 "no such file"]),
+    (["compare", "--tuned", "{bad_level}", "--trials", "2"], ["bad_level.yaml",
+                                                              "level_low", "must be >= 0"]),
+    (["compare", "--config", "{tmp}/none.yaml"], ["argument --config", "no such file"]),
+    (["compare", "--json", "{tmp}/no/dir/x.json"], ["argument --json", "does not exist"]),
+    (["compare", "--plot", "{tmp}/no/dir/x.png"], ["argument --plot", "does not exist"]),
+    (["paper", "--trials", "0"], ["argument --trials", "0", "must be > 0"]),
+    (["paper", "--domain-id", "300"], ["argument --domain-id", "300", "from 0 to 232"]),
+    (["paper", "--plot", "{tmp}/fig.txt"], ["argument --plot", "fig.txt", ".png"]),
+    (["paper", "--csv", "{tmp}/no/dir/t.csv"], ["argument --csv", "t.csv", "does not exist"]),
+    (["paper", "--json", "{tmp}"], ["argument --json", "directory"]),
+    (["paper", "--bag-dir", "{file}"], ["argument --bag-dir", "must be a directory"]),
+    (["paper", "--config", "{tmp}/none.yaml"], ["argument --config", "no such file"]),
+    (["paper", "--config", "{bad_trials}", "--trials", "3"], ["bad_trials.yaml", "max_trials"]),
+    (["tune", "--mass-uncertainty", "-2"], ["argument --mass-uncertainty", "-2",
+                                            "must be >= -0.9"]),
+    (["tune", "--trials", "0"], ["argument --trials", "0", "must be > 0"]),
+    (["tune", "--trials", "1"], ["argument --trials", "1", "must be >= 2"]),
+    (["tune", "--budget", "-1"], ["argument --budget", "-1", ">= 0"]),
+    (["tune", "--jobs", "0"], ["argument --jobs", "0", ">= 1"]),
+    (["tune", "--peak-weight", "-1"], ["argument --peak-weight", "-1", ">= 0"]),
+    (["tune", "--peak-weight", "inf"], ["argument --peak-weight", "inf", "finite"]),
+    (["tune", "--seed", "-1"], ["argument --seed", "-1", "from 0 to"]),
+    (["tune", "--aggregate", "median"], ["argument --aggregate", "'median'", "invalid choice"]),
+    (["tune", "--out", "{tmp}/tuned.txt"], ["argument --out", "tuned.txt", ".yaml"]),
+    (["tune", "--out", "{tmp}"], ["argument --out", "directory"]),
+    (["tune", "--storage", "nosuchdb://u@h/db"], ["argument --storage", "nosuchdb",
+                                                  "database URL"]),
+    (["tune", "--storage", "mysql+mysqldb://u@h/db"], ["argument --storage", "mysqldb",
+                                                       "not installed"]),
+    (["tune", "--storage", "{file}/tune.journal"], ["argument --storage", "not a directory"]),
+    (["tune", "--study-name", " "], ["argument --study-name", "must not be empty"]),
+    (["tune", "--config", "{tmp}/none.yaml"], ["argument --config", "no such file"]),
+    (["analyze-loop", "--mass-uncertainty", "-2"], ["argument --mass-uncertainty", "-2",
+                                                    "must be >= -0.9"]),
+    (["analyze-loop", "--cutoff", "0"], ["argument --cutoff", "0", "must be > 0"]),
+    (["analyze-loop", "--cutoff", "60"], ["argument --cutoff", "60", "Nyquist"]),
+    (["analyze-loop", "--cutoff", "fast"], ["argument --cutoff", "'fast'", "must be a number"]),
+    (["analyze-loop", "--lifted", "-1"], ["argument --lifted", "-1", ">= 0"]),
+    (["analyze-loop", "--law", "x"], ["argument --law", "invalid choice"]),
+    (["analyze-loop", "--plot", "{tmp}/f.doc"], ["argument --plot", "f.doc", ".png"]),
+    (["analyze-loop", "--config", "{tmp}/none.yaml"], ["argument --config", "no such file"]),
+    (["analyze", "{tmp}/nobag"], ["nobag"]),
+    (["analyze", "{file}"], ["file.txt"]),
+    (["analyze", "{tmp}", "--trial", "0"], ["argument --trial", "0", ">= 1"]),
+    (["analyze", "{tmp}", "--trial", "x"], ["argument --trial", "'x'", "must be an integer"]),
+    (["analyze", "{tmp}", "--plot", "{tmp}/f.txt"], ["argument --plot", "f.txt", ".png"]),
+    (["analyze", "{tmp}", "--csv", "{tmp}"], ["argument --csv", "directory"]),
+    (["analyze", "{tmp}", "--json", "{tmp}/no/dir/a.json"], ["argument --json",
+                                                             "does not exist"]),
+    (["analyze", "{tmp}", "--config-out", "{tmp}/no/dir/c.yaml"], ["argument --config-out",
+                                                                   "does not exist"]),
+    (["param", "set", "ilc_supervisor", "schedule.position.threshold_low", "[1.0, 2.0"],
+     ["VALUE", "'[1.0, 2.0'", "not a valid YAML value"]),
+    (["param", "set", "ilc_supervisor", "law", "{a: 1}"], ["VALUE", "{a: 1}", "mapping"]),
+    (["param", "set", "ilc_supervisor", "law", "[1, [2]]"], ["VALUE", "[1, [2]]", "flat"]),
+    (["param", "set", "ilc_supervisor", "law", "[1, true]"], ["VALUE", "[1, true]", "mixes"]),
+    (["param", "set", "ilc_supervisor", "law", ""], ["VALUE", "''", "empty"]),
+    (["param", "set", "ilc_supervisor", "law"], ["needs a VALUE"]),
+    (["param", "get", "ilc_supervisor"], ["needs a parameter NAME"]),
+    (["param", "get", "ilc_supervisor", "law", "sign"], ["takes no VALUE", "'sign'"]),
+    (["param", "list", "ilc_supervisor", "law"], ["takes no NAME", "'law'"]),
+    (["param", "list", "bad node!"], ["NODE", "'bad node!'", "not a valid node name"]),
+    (["param", "frob", "ilc_supervisor"], ["argument action", "'frob'", "invalid choice"]),
+    (["param", "list", "ilc_supervisor", "--timeout", "0"], ["argument --timeout", "0",
+                                                             "must be > 0"]),
+    (["param", "list", "ilc_supervisor", "--domain-id", "-3"], ["argument --domain-id", "-3"]),
+    (["urdf", "--config", "{tmp}/none.yaml"], ["argument --config", "no such file"]),
+    (["urdf", "--out", "{tmp}/no/dir/arm.urdf"], ["argument --out", "arm.urdf",
+                                                  "does not exist"]),
+    (["urdf", "--out", "{tmp}"], ["argument --out", "directory"]),
+    (["frobnicate"], ["invalid choice", "'frobnicate'"]),
+]
+
+
+def _ids() -> list[str]:
+    return [" ".join(argv)[:60] for argv, _ in CASES]
+
+
+def _fill(text: str, scratch: dict[str, str]) -> str:
+    for key, value in scratch.items():
+        text = text.replace("{" + key + "}", value)
+    return text
+
+
+@pytest.fixture
+def scratch(tmp_path: Path) -> dict[str, str]:
+    plain = tmp_path / "file.txt"
+    plain.write_text("not a bag, not a directory\n")
+    bad_trials = tmp_path / "bad_trials.yaml"
+    bad_trials.write_text('ilc_supervisor:\n  ros__parameters:\n    max_trials: "3"\n')
+    bad_yaml = tmp_path / "bad_yaml.yaml"
+    bad_yaml.write_text("ilc_supervisor:\n  ros__parameters: [1, 2\n")
+    bad_level = tmp_path / "bad_level.yaml"
+    bad_level.write_text("ilc_supervisor:\n  ros__parameters:\n    schedule:\n      position:\n"
+                         "        level_low: [-1.0, 0.0, 0.0]\n")
+    return {"tmp": str(tmp_path), "file": str(plain), "bad_trials": str(bad_trials),
+            "bad_yaml": str(bad_yaml), "bad_level": str(bad_level)}
+
+
+@pytest.mark.parametrize(("argv", "expected"), CASES, ids=_ids())
+def test_bad_input_is_refused_with_flag_value_and_rule(
+        argv: list[str], expected: list[str], scratch: dict[str, str],
+        capsys: pytest.CaptureFixture[str]) -> None:
+    argv = [_fill(a, scratch) for a in argv]
+    started = time.monotonic()
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse
+        code = exc.code
+    out, err = capsys.readouterr()
+    text = out + err
+    assert code == 2, text
+    assert "Traceback" not in text and "internal error" not in text, text
+    assert f"exo-ilc {argv[0]}" in err or "exo-ilc: error" in err, err
+    for piece in expected:
+        assert _fill(piece, scratch) in err, f"{piece!r} not in:\n{err}"
+    assert time.monotonic() - started < 20  # refused up front, nothing was run
+
+
+def test_one_rule_one_message(capsys: pytest.CaptureFixture[str]) -> None:
+    """The same bad value gets the same message from every command that takes the flag."""
+    messages = set()
+    for command in ("simulate", "run", "compare", "tune", "analyze-loop"):
+        with pytest.raises(SystemExit):
+            main([command, "--mass-uncertainty", "-2"])
+        err = capsys.readouterr().err
+        messages.add(err.strip().splitlines()[-1].split(": error: ", 1)[1])
+    assert len(messages) == 1, messages
+    messages.clear()
+    for command in ("simulate", "run", "compare", "paper"):
+        with pytest.raises(SystemExit):
+            main([command, "--trials", "0"])
+        messages.add(capsys.readouterr().err.strip().splitlines()[-1].split(": error: ", 1)[1])
+    assert messages == {"argument --trials: must be > 0, got '0' (the rule of parameter "
+                        "max_trials)"}, messages
+
+
+def test_flag_values_that_pass_still_run(tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """The checks do not refuse what is fine: a valid --trials on a valid file, written
+    outputs in new directories where the writer makes them."""
+    short = tmp_path / "short.yaml"
+    short.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 0.5\n')
+    out = tmp_path / "run.json"
+    assert main(["simulate", "--config", str(short), "--trials", "2", "--quiet",
+                 "--mass-uncertainty", "-0.9", "--json", str(out)]) == 0
+    assert out.is_file()
+    plot = tmp_path / "f.png"
+    assert main(["analyze-loop", "--cutoff", "5", "--mass-uncertainty", "0.1",
+                 "--plot", str(plot)]) == 0
+    assert plot.is_file()
+    capsys.readouterr()
+
+
+def test_a_file_is_validated_whole_whatever_the_flags(tmp_path: Path) -> None:
+    """A wrong-typed key of --config is an error even when a flag overrides it."""
+    from exo_ilc_ros.core.config import load_config
+    from exo_ilc_ros.core.errors import ConfigError
+
+    bad = tmp_path / "bad.yaml"
+    bad.write_text('ilc_supervisor:\n  ros__parameters:\n    max_trials: "3"\n')
+    with pytest.raises(ConfigError) as info:
+        load_config(bad, {"max_trials": 5})
+    assert info.value.key == "max_trials" and info.value.source == str(bad)
+
+
+def test_a_bug_is_one_line_not_a_traceback(monkeypatch: pytest.MonkeyPatch,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """Whatever escapes the checks reaches the user as one line, not as a traceback."""
+    import exo_ilc_ros.cli.urdf as urdf
+
+    def broken(*args: object) -> str:
+        raise ZeroDivisionError("float division by zero")
+
+    monkeypatch.setattr(urdf, "arm_urdf", broken)
+    assert main(["urdf"]) == 1
+    err = capsys.readouterr().err
+    assert "internal error: ZeroDivisionError: float division by zero" in err
+    assert "Traceback" not in err
+
+
+def test_os_error_is_one_line(monkeypatch: pytest.MonkeyPatch,
+                              capsys: pytest.CaptureFixture[str]) -> None:
+    """A file that cannot be written after all (permissions, disk full): its name and why."""
+    import exo_ilc_ros.cli.urdf as urdf
+
+    def refused(*args: object) -> str:
+        raise PermissionError(13, "Permission denied", "arm.urdf")
+
+    monkeypatch.setattr(urdf, "arm_urdf", refused)
+    assert main(["urdf"]) == 2
+    err = capsys.readouterr().err
+    assert "exo-ilc urdf: error: arm.urdf: Permission denied" in err and "Traceback" not in err
+
+
+def test_param_value_parsing() -> None:
+    assert parse_value("[1, 2.5]") == [1.0, 2.5]
+    assert parse_value("[1, 2]") == [1, 2]
+    assert parse_value("sign") == "sign"
+    with pytest.raises(ParamError, match=r"'\[1.0, 2.0' is not a valid YAML value"):
+        parse_value("[1.0, 2.0")
+    with pytest.raises(ParamError, match="64-bit"):
+        parse_value(str(2**70))
+
+
+def test_unknown_parameter_message_suggests_names() -> None:
+    names = ["law", "max_trials", "schedule.position.threshold_low"]
+    text = unknown_parameter("ilc_supervisor", "schedule.position.treshold_low", names)
+    assert "'schedule.position.treshold_low'" in text
+    assert "did you mean schedule.position.threshold_low?" in text
+    assert "law, max_trials" in text
+    assert "did you mean" not in unknown_parameter("ilc_supervisor", "zzz", names)
+
+
+def test_environment_domain_id_is_checked(monkeypatch: pytest.MonkeyPatch,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setenv("ROS_DOMAIN_ID", "lots")
+    assert main(["param", "list", "ilc_supervisor"]) == 2
+    err = capsys.readouterr().err
+    assert "ROS_DOMAIN_ID" in err and "'lots'" in err and "Traceback" not in err

@@ -7,6 +7,10 @@ so each case also bounds how long the command may take.
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -271,8 +275,9 @@ def test_unknown_parameter_message_suggests_names() -> None:
     text = unknown_parameter("ilc_supervisor", "schedule.position.treshold_low", names)
     assert "'schedule.position.treshold_low'" in text
     assert "did you mean schedule.position.threshold_low?" in text
-    assert "law, max_trials" in text
-    assert "did you mean" not in unknown_parameter("ilc_supervisor", "zzz", names)
+    assert "exo-ilc param list ilc_supervisor" in text
+    text = unknown_parameter("ilc_supervisor", "zzz", names)
+    assert "did you mean" not in text and "law, max_trials, schedule" in text
 
 
 def test_environment_domain_id_is_checked(monkeypatch: pytest.MonkeyPatch,
@@ -281,3 +286,87 @@ def test_environment_domain_id_is_checked(monkeypatch: pytest.MonkeyPatch,
     assert main(["param", "list", "ilc_supervisor"]) == 2
     err = capsys.readouterr().err
     assert "ROS_DOMAIN_ID" in err and "'lots'" in err and "Traceback" not in err
+
+
+# --- ROS arguments: later overrides win; `exo-ilc param` against a running node -------------
+def test_command_line_parameters_later_wins(tmp_path: Path) -> None:
+    from exo_ilc_ros.nodes.common import command_line_parameters
+
+    node_file = tmp_path / "node.yaml"
+    node_file.write_text("ilc_supervisor:\n  ros__parameters:\n    max_trials: 7\n"
+                         "    schedule:\n      position:\n        level_low: [1, 2, 3]\n")
+    wild = tmp_path / "wild.yaml"
+    wild.write_text('"/**":\n  ros__parameters:\n    max_trials: 9\n'
+                    "/other_node:\n  ros__parameters:\n    max_trials: 11\n")
+    fqn = "/ilc_supervisor"
+
+    def value(*ros: str) -> object:
+        given = command_line_parameters(["prog", "--ros-args", *ros], fqn)
+        return given["max_trials"][0] if "max_trials" in given else None
+
+    f, w = str(node_file), str(wild)
+    assert value("--params-file", f, "-p", "max_trials:=3") == 3
+    assert value("-p", "max_trials:=3", "--params-file", f) == 7
+    assert value("--params-file", f, "--params-file", w) == 9  # a later /** beats a node key
+    assert value("--params-file", w, "--params-file", f) == 7
+    assert value("--params-file", f, "-p", "ilc_supervisor:max_trials:=4") == 4
+    assert value("--params-file", f, "-p", "other:max_trials:=4") == 7
+    assert value("-r", "__ns:=/x", "--params-file", w, "--", "-p", "max_trials:=1") == 9
+    assert value() is None
+    given = command_line_parameters(["prog", "--ros-args", "--params-file", f], fqn)
+    assert given["schedule.position.level_low"] == ([1, 2, 3], f)
+
+
+def _start_supervisor(ros_args: list[str]) -> subprocess.Popen[str]:
+    return subprocess.Popen([sys.executable, "-m", "exo_ilc_ros.nodes.ilc_supervisor",
+                             "--ros-args", *ros_args], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True)
+
+
+def _stop(process: subprocess.Popen[str]) -> str:
+    process.send_signal(signal.SIGINT)
+    try:
+        out, _ = process.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        out, _ = process.communicate()
+    return out
+
+
+def _param(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    code = main(["param", *argv, "--domain-id", os.environ["ROS_DOMAIN_ID"], "--timeout", "30"])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_param_against_a_running_node(capsys: pytest.CaptureFixture[str]) -> None:
+    """`-p` after `--params-file` wins at the node (and before it loses); `exo-ilc param` names
+    an unknown parameter with suggestions, refuses bad values with the rule, no traceback."""
+    node = _start_supervisor(["--params-file", str(SHIPPED), "-p", "max_trials:=3"])
+    try:
+        assert _param(capsys, "get", "ilc_supervisor", "max_trials")[:2] == (0, "3\n")
+        code, _, err = _param(capsys, "set", "ilc_supervisor", "schedule.position.treshold_low",
+                              "[1.0, 2.0, 1.0]")
+        assert code == 2, err
+        assert "has no parameter 'schedule.position.treshold_low'" in err
+        assert "did you mean schedule.position.threshold_low" in err
+        assert "undeclared" not in err
+        code, _, err = _param(capsys, "get", "ilc_supervisor", "no_such")
+        assert code == 2 and "has no parameter 'no_such'" in err, err
+        code, _, err = _param(capsys, "set", "ilc_supervisor", "max_trials", "5")
+        assert code == 1 and "max_trials = 5" in err and "cannot change while" in err, err
+        code, _, err = _param(capsys, "set", "ilc_supervisor", "error_bound", "-1")
+        assert code == 1 and "error_bound = -1" in err and "must be > 0" in err, err
+        code, _, err = _param(capsys, "set", "ilc_supervisor", "law", "[1, 2]")
+        assert code == 1 and "law" in err and "must be a string, got [1, 2]" in err, err
+        code, out, err = _param(capsys, "set", "ilc_supervisor", "error_bound", "0.004")
+        assert code == 0 and "successful" in out, err
+    finally:
+        log = _stop(node)
+    assert "Traceback" not in log, log
+    node = _start_supervisor(["-p", "max_trials:=3", "--params-file", str(SHIPPED)])
+    try:
+        code, out, err = _param(capsys, "get", "ilc_supervisor", "max_trials")
+        assert code == 0 and out.strip() != "3", (out, err)  # the later file wins
+    finally:
+        _stop(node)

@@ -133,9 +133,10 @@ def param(args: argparse.Namespace) -> int:
 def unknown_parameter(node: str, name: str, names: list[str]) -> str:
     """What to tell a user who named a parameter ``node`` does not have."""
     close = difflib.get_close_matches(name, names, n=3, cutoff=0.6)
-    suggestion = f"; did you mean {' or '.join(close)}?" if close else ""
-    return (f"{node} has no parameter {name!r}{suggestion} Its parameters: {', '.join(names)} "
-            f"(exo-ilc param list {node})")
+    if close:
+        return (f"{node} has no parameter {name!r}; did you mean {' or '.join(close)}? "
+                f"(`exo-ilc param list {node}` lists all {len(names)})")
+    return f"{node} has no parameter {name!r}; its parameters: {', '.join(names)}"
 
 
 def _list_kind(value: Any) -> str:

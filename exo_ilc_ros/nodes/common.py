@@ -4,14 +4,17 @@ QoS profiles, diagnostics helpers and the spin loop."""
 from __future__ import annotations
 
 import array
+import re
 import signal
 import sys
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import rclpy
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
@@ -60,8 +63,10 @@ class SchemaParameters:
     """Declares the schema's parameters of one node and guards changes to them.
 
     Every parameter of ``schema.parameters_of(section)`` is declared with the shipped YAML's
-    value as default, so ``--params-file`` and ``-p`` override it. Types are dynamic and every
-    value goes through the schema's ``coerce`` (a user writing ``0`` for a double is fine).
+    value as default, so ``--params-file`` and ``-p`` override it, the later of them on the
+    command line winning (:func:`command_line_parameters`; rclpy alone would let a params
+    file's ``<node>:`` section beat a later ``-p``). Types are dynamic and every value goes
+    through the schema's ``coerce`` (a user writing ``0`` for a double is fine).
     Changes at runtime: ``live`` parameters are validated with the schema (and the rules
     between parameters) and accepted into :attr:`pending`; any other change is rejected with the
     reason. The node decides when :attr:`pending` takes effect.
@@ -71,9 +76,18 @@ class SchemaParameters:
         self._node = node
         self._params = {p.name: p for p in schema.parameters_of(section)}
         defaults = load_config()
+        given = command_line_parameters(_command_line(), node.get_fully_qualified_name())
         for p in self._params.values():
             descriptor = ParameterDescriptor(description=p.description, dynamic_typing=True)
-            node.declare_parameter(p.name, defaults[p.name], descriptor)
+            if p.name in given:  # the last value the command line gives, as ROS intends
+                value, origin = given[p.name]
+                try:
+                    value = schema.coerce(p, value)
+                except ConfigError as exc:
+                    raise ConfigError(exc.key, exc.rule, origin) from None
+                node.declare_parameter(p.name, value, descriptor, ignore_override=True)
+            else:
+                node.declare_parameter(p.name, defaults[p.name], descriptor)
         values = defaults.values
         values.update({name: node.get_parameter(name).value for name in self._params})
         self.config: Config = Config(values, f"parameters of node {node.get_name()}")
@@ -96,7 +110,8 @@ class SchemaParameters:
                 return SetParametersResult(
                     successful=False, reason=f"{spec.name}: cannot change while the graph runs "
                     "(restart the node with the new value)")
-            changes[spec.name] = parameter.value
+            value = parameter.value  # arrays come as array.array: a list reads better
+            changes[spec.name] = value.tolist() if isinstance(value, array.array) else value
         if not changes:
             return SetParametersResult(successful=True)
         try:
@@ -107,6 +122,90 @@ class SchemaParameters:
         for listener in self.listeners:
             listener(updated)
         return SetParametersResult(successful=True)
+
+
+_ARGV: list[str] | None = None
+"""The command line :func:`run_nodes` initialised ROS with (None: not started by it)."""
+
+_ROS_FLAGS_WITH_VALUE = frozenset({"-r", "--remap", "-e", "--enclave", "--log-level",
+                                   "--log-config-file", "--log-file-name"})
+"""ROS arguments (besides ``-p`` and ``--params-file``) that take the next argument."""
+
+
+def _command_line() -> list[str]:
+    return list(_ARGV) if _ARGV is not None else []
+
+
+def _node_pattern(pattern: str) -> re.Pattern[str]:
+    """A params-file node key or ``-p`` node prefix (``/**``, ``ns/*``, ``name``) as a regex
+    over fully qualified node names."""
+    parts = [p for p in pattern.strip("/").split("/") if p]
+    regex = "".join("(/[^/]+)*" if p == "**" else "/[^/]*" if p == "*" else "/" + re.escape(p)
+                    for p in parts)
+    return re.compile(regex or "/")
+
+
+def _params_file_sections(document: Any, path: tuple[str, ...] = ()
+                          ) -> Iterator[tuple[str, Mapping[str, Any]]]:
+    """(node key, ros__parameters) of a params file, in file order (namespaces nested)."""
+    if not isinstance(document, Mapping):
+        return
+    for key, body in document.items():
+        if key == "ros__parameters" and isinstance(body, Mapping):
+            yield "/".join(path), body
+        elif isinstance(body, Mapping):
+            yield from _params_file_sections(body, (*path, str(key)))
+
+
+def _flat(tree: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str, Any]]:
+    for key, value in tree.items():
+        if isinstance(value, Mapping):
+            yield from _flat(value, f"{prefix}{key}.")
+        else:
+            yield f"{prefix}{key}", value
+
+
+def command_line_parameters(argv: Sequence[str], node_fqn: str) -> dict[str, tuple[Any, str]]:
+    """The parameter values the ROS arguments in ``argv`` give node ``node_fqn``, each with
+    where it came from, the later overriding the earlier: ``--params-file`` sections that match
+    the node (its name, ``/**``, wildcards) in file order, ``-p [node:]name:=value`` rules, all
+    in command-line order (ROS's rule: later overrides win)."""
+    out: dict[str, tuple[Any, str]] = {}
+    in_ros, i = False, 0
+    args = list(argv)
+    while i < len(args):
+        arg = args[i]
+        i += 1
+        if arg == "--ros-args":
+            in_ros = True
+            continue
+        if not in_ros:
+            continue
+        if arg == "--":
+            in_ros = False
+        elif arg in _ROS_FLAGS_WITH_VALUE:
+            i += 1
+        elif arg == "--params-file" and i < len(args):
+            path, i = args[i], i + 1
+            try:
+                document = yaml.safe_load(Path(path).read_text())
+            except (OSError, yaml.YAMLError) as exc:
+                raise ConfigError("--params-file", f"cannot read: {exc}", path) from None
+            for key, body in _params_file_sections(document):
+                if _node_pattern(key).fullmatch(node_fqn):
+                    out.update((name, (value, path)) for name, value in _flat(body))
+        elif arg in ("-p", "--param") and i < len(args):
+            rule, i = args[i], i + 1
+            target, sep, text = rule.partition(":=")
+            node_key, _, name = target.rpartition(":")
+            if not sep or (node_key and not _node_pattern(node_key).fullmatch(node_fqn)):
+                continue
+            try:
+                value = yaml.safe_load(text)
+            except yaml.YAMLError:
+                value = text
+            out[name] = (value, f"-p {rule}")
+    return out
 
 
 def status(name: str, message: str, values: Iterable[tuple[str, str]] = (),
@@ -293,6 +392,8 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     def on_signal(signum: int, frame: Any) -> None:
         stop.append(signum)
 
+    global _ARGV
+    _ARGV = list(sys.argv if args is None else args)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     nodes: list[Node] = []

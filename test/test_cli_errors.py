@@ -370,3 +370,22 @@ def test_param_against_a_running_node(capsys: pytest.CaptureFixture[str]) -> Non
         assert code == 0 and out.strip() != "3", (out, err)  # the later file wins
     finally:
         _stop(node)
+
+
+def test_rerun_note_says_what_happened_in_plain_words() -> None:
+    """The note `analyze`/`paper`/`run` print for a trial that was run again."""
+    from exo_ilc_ros.bag.reader import PROTOCOL_STEPS, STEP_TIMEOUT_S, rerun_note
+    from exo_ilc_ros.nodes.ilc_supervisor import STEP_TIMEOUT, Phase
+
+    assert STEP_TIMEOUT == STEP_TIMEOUT_S
+    assert {p.value for p in Phase} - {"finished"} <= set(PROTOCOL_STEPS)
+    note = rerun_note(108, {"trial": "108", "phase": "running"})
+    assert note.startswith("trial 108 was aborted once and run again")
+    assert "made no progress for 30 s" in note and "no new joint sample" in note
+    assert "same feed-forward" in note and "results are unaffected" in note
+    assert "nothing is learned from a discarded attempt" in note
+    assert "{" not in note  # no raw dict
+    note = rerun_note(4, {"trial": "4", "reason": "watchdog", "watchdog_trips": "2"})
+    assert "(watchdog: the controller went without /joint_states" in note and "(2x)" in note
+    assert "samples of the attempt never arrived" in rerun_note(5, {"reason": "lost",
+                                                                    "lost": "3"})

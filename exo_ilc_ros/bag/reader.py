@@ -324,6 +324,43 @@ ENVELOPE_REASON = "error_envelope"
 ``aborted`` events (watchdog, a stuck protocol step), that trial is not run again."""
 
 
+STEP_TIMEOUT_S = 30
+"""``ilc_supervisor.STEP_TIMEOUT``: wall seconds a protocol step may make no progress before
+the supervisor aborts the attempt (not imported: the reader needs no node code)."""
+
+PROTOCOL_STEPS = {
+    "wait_graph": "waiting for the plant and the controller",
+    "resetting": "moving the plant back to the start pose",
+    "wait_ack": "waiting for the controller to take the trial's feed-forward",
+    "starting": "starting the trial",
+    "running": "running the trial (no new joint sample arrived)",
+    "wait_recorder": "waiting for bag_recorder to file the trial",
+}
+"""What the supervisor was doing in each protocol step (``Phase`` in ilc_supervisor)."""
+
+
+def rerun_note(trial: int, values: dict[str, str]) -> str:
+    """Plain words for an ``aborted`` event that was not the error envelope's: why the attempt
+    was dropped, and why the results do not change."""
+    reason = values.get("reason")
+    if reason == "watchdog":
+        cause = (f"watchdog: the controller went without /joint_states for longer than its "
+                 f"watchdog allows and held the arm safe ({values.get('watchdog_trips', '?')}x)")
+    elif reason == "lost":
+        cause = f"lost: {values.get('lost', 'some')} joint samples of the attempt never arrived"
+    elif reason:
+        cause = reason
+    else:
+        phase = values.get("phase", "?")
+        cause = (f"stuck: the protocol step {phase!r} ({PROTOCOL_STEPS.get(phase, 'unknown')}) "
+                 f"made no progress for {STEP_TIMEOUT_S} s, which happens when the machine is "
+                 "busy")
+    return (f"trial {trial} was aborted once and run again ({cause}); the supervisor "
+            "discarded that attempt and ran the trial again from the same feed-forward. The "
+            "results are unaffected: nothing is learned from a discarded attempt, and the "
+            "tables and figures use the attempt that completed.")
+
+
 def _assign_commands(windows: Sequence[tuple[int, int, TrialData]], cmd_log: np.ndarray,
                      commands: Sequence[bytes], decode: Callable[[bytes, str], Any],
                      notes: list[str]) -> None:
@@ -415,7 +452,7 @@ def read_bag(path: Path | str) -> BagRun:
             else:
                 reason = values.get("reason") or values.get("phase") or "?"
                 reruns.setdefault(k, []).append(reason)
-                notes.append(f"trial {k} was aborted once and run again ({reason}: {values})")
+                notes.append(rerun_note(k, values))
         if status.message == "start":
             starts[k] = stamp  # a retried trial starts again: the last start counts
             start_logs[k] = log

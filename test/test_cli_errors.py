@@ -342,7 +342,8 @@ def _param(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, st
 def test_param_against_a_running_node(capsys: pytest.CaptureFixture[str]) -> None:
     """`-p` after `--params-file` wins at the node (and before it loses); `exo-ilc param` names
     an unknown parameter with suggestions, refuses bad values with the rule, no traceback."""
-    node = _start_supervisor(["--params-file", str(SHIPPED), "-p", "max_trials:=3"])
+    node = _start_supervisor(["--params-file", str(SHIPPED), "-p", "max_trials:=3",
+                              "-p", "max_trial:=4"])
     try:
         assert _param(capsys, "get", "ilc_supervisor", "max_trials")[:2] == (0, "3\n")
         code, _, err = _param(capsys, "set", "ilc_supervisor", "schedule.position.treshold_low",
@@ -364,12 +365,22 @@ def test_param_against_a_running_node(capsys: pytest.CaptureFixture[str]) -> Non
     finally:
         log = _stop(node)
     assert "Traceback" not in log, log
+    assert "-p max_trial:=4: max_trial: not a parameter of exo_ilc_ros, ignored (did you mean " \
+        "max_trials?)" in log, log
     node = _start_supervisor(["-p", "max_trials:=3", "--params-file", str(SHIPPED)])
     try:
         code, out, err = _param(capsys, "get", "ilc_supervisor", "max_trials")
         assert code == 0 and out.strip() != "3", (out, err)  # the later file wins
     finally:
         _stop(node)
+    node = _start_supervisor(["-p", "max_trials:=abc"])
+    try:
+        code = node.wait(timeout=60)
+    finally:
+        log = _stop(node) if node.returncode is None else (node.stdout.read() if node.stdout
+                                                           else "")
+    assert code == 2 and "-p max_trials:=abc: max_trials: must be an integer" in log, log
+    assert "Traceback" not in log, log
 
 
 def test_rerun_note_says_what_happened_in_plain_words() -> None:

@@ -4,6 +4,7 @@ QoS profiles, diagnostics helpers and the spin loop."""
 from __future__ import annotations
 
 import array
+import difflib
 import re
 import signal
 import sys
@@ -77,6 +78,12 @@ class SchemaParameters:
         self._params = {p.name: p for p in schema.parameters_of(section)}
         defaults = load_config()
         given = command_line_parameters(_command_line(), node.get_fully_qualified_name())
+        for name, (_, origin) in given.items():
+            if name not in schema.BY_NAME and name not in schema.ROS_BUILTIN:
+                close = difflib.get_close_matches(name, list(self._params), n=1)
+                node.get_logger().warning(f"{origin}: {name}: not a parameter of exo_ilc_ros, "
+                                          "ignored" + (f" (did you mean {close[0]}?)"
+                                                       if close else ""))
         for p in self._params.values():
             descriptor = ParameterDescriptor(description=p.description, dynamic_typing=True)
             if p.name in given:  # the last value the command line gives, as ROS intends

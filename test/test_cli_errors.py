@@ -37,6 +37,8 @@ CONFIG_FLAGS = [
     (["--config", "{bad_trials}", "--trials", "3"], ["bad_trials.yaml", "max_trials",
                                                      "must be an integer", "'3'"]),
     (["--config", "{bad_yaml}"], ["bad_yaml.yaml", "invalid YAML"]),
+    (["--config", "{binary}"], ["binary.yaml", "not a text (UTF-8) file"]),
+    (["--config", "{bad_key}"], ["bad_key.yaml", "max_trial", "unknown parameter"]),
     (["--json", "{tmp}/no/such/dir/out.json"], ["argument --json", "out.json",
                                                 "does not exist"]),
     (["--json", "{tmp}"], ["argument --json", "{tmp}", "directory"]),
@@ -157,11 +159,16 @@ def scratch(tmp_path: Path) -> dict[str, str]:
     bad_trials.write_text('ilc_supervisor:\n  ros__parameters:\n    max_trials: "3"\n')
     bad_yaml = tmp_path / "bad_yaml.yaml"
     bad_yaml.write_text("ilc_supervisor:\n  ros__parameters: [1, 2\n")
+    binary = tmp_path / "binary.yaml"
+    binary.write_bytes(b"\x00\x01\xff")
+    bad_key = tmp_path / "bad_key.yaml"
+    bad_key.write_text("ilc_supervisor:\n  ros__parameters:\n    max_trial: 3\n")
     bad_level = tmp_path / "bad_level.yaml"
     bad_level.write_text("ilc_supervisor:\n  ros__parameters:\n    schedule:\n      position:\n"
                          "        level_low: [-1.0, 0.0, 0.0]\n")
     return {"tmp": str(tmp_path), "file": str(plain), "bad_trials": str(bad_trials),
-            "bad_yaml": str(bad_yaml), "bad_level": str(bad_level)}
+            "bad_yaml": str(bad_yaml), "bad_level": str(bad_level), "binary": str(binary),
+            "bad_key": str(bad_key)}
 
 
 @pytest.mark.parametrize(("argv", "expected"), CASES, ids=_ids())

@@ -232,8 +232,8 @@ def storage(text: str) -> str:
 
 
 def seed(text: str) -> int:
-    """argparse type: a random seed numpy accepts."""
-    return integer(0, 2**32 - 1, " (a numpy random seed)")(text)
+    """argparse type: a random seed numpy accepts, also after adding a worker's number."""
+    return integer(0, 2**31 - 1, " (a random seed)")(text)
 
 
 def at_least_two_trials(value: Any) -> str | None:

@@ -129,6 +129,9 @@ def read_yaml(path: Path | str) -> dict[str, Any]:
         text = path.read_text()
     except OSError as exc:
         raise ConfigError("<file>", f"cannot read: {exc.strerror}", str(path)) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError("<file>", f"not a text (UTF-8) file: byte {exc.start} is "
+                          f"{exc.object[exc.start:exc.start + 1]!r}", str(path)) from None
     try:
         document = yaml.safe_load(text)
     except yaml.YAMLError as exc:

@@ -407,3 +407,21 @@ def test_rerun_note_says_what_happened_in_plain_words() -> None:
     assert "(watchdog: the controller went without /joint_states" in note and "(2x)" in note
     assert "samples of the attempt never arrived" in rerun_note(5, {"reason": "lost",
                                                                     "lost": "3"})
+
+
+@pytest.mark.parametrize(("ros_args", "expected"), [
+    (["--params-file", "/nonexistent/params.yaml"], ["/nonexistent/params.yaml",
+                                                     "Error opening YAML file"]),
+    (["-p", "max_trials"], ["'-p max_trials'", "a rule is -p name:=value"]),
+])
+def test_node_refuses_bad_ros_arguments(ros_args: list[str], expected: list[str]) -> None:
+    """A node started with a bad --ros-args value: rcl's reason in one line, exit code 2."""
+    node = subprocess.run([sys.executable, "-m", "exo_ilc_ros.nodes.ilc_supervisor",
+                           "--ros-args", *ros_args], capture_output=True, text=True, timeout=120,
+                          stdin=subprocess.DEVNULL, check=False)
+    out = node.stdout + node.stderr
+    assert node.returncode == 2, out
+    assert "Traceback" not in out and "error: invalid ROS arguments: " in out, out
+    for piece in expected:
+        assert piece in out, out
+    assert "/project/src" not in out, out

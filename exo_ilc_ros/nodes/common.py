@@ -21,6 +21,7 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -29,6 +30,8 @@ from rclpy.signals import SignalHandlerOptions
 from ..core import schema
 from ..core.config import Config, load_config
 from ..core.errors import ConfigError, ExoIlcError
+
+RCLError = rclpy_implementation.RCLError
 
 SAMPLES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                          reliability=ReliabilityPolicy.RELIABLE,
@@ -213,6 +216,15 @@ def command_line_parameters(argv: Sequence[str], node_fqn: str) -> dict[str, tup
                 value = text
             out[name] = (value, f"-p {rule}")
     return out
+
+
+def rcl_message(exc: Exception) -> str:
+    """An RCLError's text without rcl's prefix and C source locations."""
+    text = str(exc).removeprefix("failed to initialize rcl: ")
+    text = re.sub(r",? at /[^,]*?:\d+", "", text).strip()
+    if "parameter override rule" in text:
+        text += " (a rule is -p name:=value, e.g. -p max_trials:=3)"
+    return text
 
 
 def status(name: str, message: str, values: Iterable[tuple[str, str]] = (),
@@ -401,7 +413,11 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
 
     global _ARGV
     _ARGV = list(sys.argv if args is None else args)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except RCLError as exc:  # a bad --ros-args value: rcl says which and why
+        print(f"error: invalid ROS arguments: {rcl_message(exc)}", file=sys.stderr, flush=True)
+        return 2
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     nodes: list[Node] = []
     code = 0

@@ -70,6 +70,8 @@ CASES += [
     (["compare", "--tuned", "{bad_level}", "--trials", "2"], ["bad_level.yaml",
                                                               "level_low", "must be >= 0"]),
     (["compare", "--config", "{tmp}/none.yaml"], ["argument --config", "no such file"]),
+    (["compare", "--no-tuned", "--tuned", "{file}"], ["--no-tuned", "--tuned", "file.txt",
+                                                      "cannot be combined"]),
     (["compare", "--json", "{tmp}/no/dir/x.json"], ["argument --json", "does not exist"]),
     (["compare", "--plot", "{tmp}/no/dir/x.png"], ["argument --plot", "does not exist"]),
     (["paper", "--trials", "0"], ["argument --trials", "0", "must be > 0"]),

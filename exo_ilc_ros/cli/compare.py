@@ -54,6 +54,8 @@ def register(sub: Any) -> None:
 
 def compare(args: argparse.Namespace) -> int:
     """Run the variants, print the table, write the figure."""
+    if args.no_tuned and args.tuned:
+        raise ConfigError("--no-tuned", f"cannot be combined with --tuned {args.tuned}")
     base = config_with_flags(args.config, {} if args.trials is None else
                              {"max_trials": ("--trials", args.trials)})
     trials = int(base["max_trials"])

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from .core.config import Config
-from .core.experiment import run_trials
+from .core.session import run_trials
 from .report import RunSummary
 
 

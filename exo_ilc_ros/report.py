@@ -10,8 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from .core.experiment import IterationsToBound, RunResult, iterations_to_bound
+from .core.experiment import IterationsToBound, iterations_to_bound
 from .core.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth, format_growth
+from .core.session import RunResult
 
 PAPER_FIRST_JOINT1 = {0.05: 35, 0.10: 96, 0.15: 101}
 """Iterations to the 0.005 rad bound the paper reports for joint 1; joints 2-3: within 20."""

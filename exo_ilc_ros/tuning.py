@@ -44,8 +44,8 @@ import optuna
 
 from .core.config import Config
 from .core.errors import ExoIlcError
-from .core.experiment import run_trials
 from .core.laws import TrialRecord
+from .core.session import run_trials
 
 TERMS = ("position", "velocity", "acceleration")
 """The three step schedules: M (by |s e|), M' (by |s e_dot|), M'' (by |s e_ddot|)."""

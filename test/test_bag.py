@@ -31,7 +31,7 @@ from exo_ilc_ros.bag import (
 from exo_ilc_ros.bag.provenance import read_provenance
 from exo_ilc_ros.cli.main import main as exo_ilc
 from exo_ilc_ros.core.config import Config, load_config
-from exo_ilc_ros.core.experiment import RunResult, run_trials
+from exo_ilc_ros.core.session import RunResult, run_trials
 from exo_ilc_ros.figures import convergence_figure, tracking_figure
 from exo_ilc_ros.report import RunSummary
 
@@ -272,7 +272,7 @@ def test_killed_writer_leaves_every_finished_trial(tmp_path: Path, config: Confi
         import os, signal
         from exo_ilc_ros.bag import run_writer
         from exo_ilc_ros.core.config import load_config
-        from exo_ilc_ros.core.experiment import run_trials
+        from exo_ilc_ros.core.session import run_trials
         real = run_writer.messages.trial_event
         def event(ns, kind, trial, values=()):
             if kind == "start" and trial == 4:

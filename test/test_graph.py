@@ -21,7 +21,8 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.core.config import Config, load_config
-from exo_ilc_ros.core.experiment import Experiment, build_law, run_trials
+from exo_ilc_ros.core.experiment import Experiment, build_law
+from exo_ilc_ros.core.session import run_trials
 from exo_ilc_ros.launcher import claim_domain_id
 
 pytestmark = pytest.mark.graph
@@ -274,3 +275,91 @@ def test_colcon_build_gives_ros2_run_executables(tmp_path: Path) -> None:
         if plant.poll() is None:
             plant.kill()
             plant.wait()
+
+
+def test_stop_when_settled_is_the_same_in_process_and_in_the_graph() -> None:
+    """``stop_when_settled: 3`` at 5 %: the graph stops after the same trial as `simulate`
+    (the session's rule, written once) with the same table."""
+    from exo_ilc_ros.graph import run_graph
+
+    config = _short_config(max_trials=40, stop_when_settled=3, mass_uncertainty=0.05)
+    local = run_trials(config)
+    assert local.stop is not None and local.stop.value == "settled"
+    assert len(local.records) < 40
+    graph = run_graph(config, timeout=300.0)
+    assert [s.trial for s in graph.summaries] == [r.trial for r in local.records]
+    np.testing.assert_allclose(graph.summary.max_abs_error, local.max_abs_errors,
+                               rtol=0.0, atol=1e-9)
+    assert graph.summary.mass_uncertainty == 0.05
+
+
+def test_recorded_live_change_replays_in_process_exactly(tmp_path: Path) -> None:
+    """A graph run recorded to a bag, its threshold changed mid-run: `exo-ilc simulate
+    --replay BAG` reproduces every trial summary of the bag, and the change took effect at the
+    trial the summaries name."""
+    from exo_ilc_ros.bag import read_bag
+    from exo_ilc_ros.bag.recording import Recording
+    from exo_ilc_ros.cli.main import main as exo_ilc
+    from exo_ilc_ros.graph import GraphSession
+
+    config = _short_config(max_trials=60, wait_for_recorder=True)
+    change = {"schedule.position.threshold_low": [0.0, 0.0, 0.0]}
+    with Recording(config, tmp_path / "bags") as recording, \
+            GraphSession(config, nodes=recording.graph_nodes()) as session:
+        session.spin_until(lambda: len(session.summaries) >= 3, timeout=120.0)
+        assert _set(session, "schedule.position.threshold_low", [0.0, 0.0, 0.0]).successful
+        session.spin_until(lambda: session.finished, timeout=180.0, stall_timeout=60.0)
+    marked = [s.trial for s in session.summaries if "parameters_changed" in s.values]
+    assert len(marked) == 1, "exactly one trial boundary applied the change"
+    assert json.loads(session.summaries[marked[0] - 1].values["parameters_changed"]) == change
+    run = read_bag(recording.path)
+    assert max(run.completed) == 60
+    out = tmp_path / "replay.json"
+    code = exo_ilc(["simulate", "--replay", str(recording.path), "--quiet", "--json", str(out)])
+    assert code == 0, "the replay equals the recording"
+    replayed = json.loads(out.read_text())["runs"][0]["trials"]
+    graph = [s.row("max_abs_error", config["joint_names"]) for s in session.summaries]
+    np.testing.assert_array_equal([t["max_abs_error"] for t in replayed], graph)
+    without = run_trials(config)
+    assert not np.array_equal(without.max_abs_errors, np.array(graph)), "the change mattered"
+
+
+@pytest.mark.parametrize(("store", "bag"), [(False, False), (False, True), (True, False),
+                                            (True, True)])
+def test_run_reports_the_mass_uncertainty_it_ran(tmp_path: Path, store: bool,
+                                                 bag: bool) -> None:
+    """`exo-ilc run --mass-uncertainty 0.15`: the table, the JSON, the bag (provenance, run
+    name, `analyze`), the store key and the supervisor's summaries all say 0.15, with or
+    without a store and a bag (the supervisor once labelled a run without a store 0.05)."""
+    config_file = tmp_path / "short.yaml"
+    config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n')
+    out = tmp_path / "run.json"
+    args = ["run", "--config", str(config_file), "--mass-uncertainty", "0.15", "--trials", "2",
+            "--json", str(out)]
+    args += ["--store", str(tmp_path / "store")] if store else ["--no-store"]
+    args += ["--bag-dir", str(tmp_path / "bags")] if bag else ["--no-bag"]
+    result = _exo_ilc(*args, timeout=150, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert json.loads(out.read_text())["runs"][0]["mass_uncertainty"] == 0.15
+    table_rows = [line for line in result.stdout.splitlines() if line.startswith("sign ")]
+    assert table_rows and all(line.split()[1] == "0.150" for line in table_rows), table_rows
+    assert " 0.050" not in result.stdout
+    local = run_trials(load_config(str(config_file)), 0.15, 2)
+    np.testing.assert_allclose(json.loads(out.read_text())["runs"][0]["trials"][-1]
+                               ["max_abs_error"], local.max_abs_errors[-1], rtol=0, atol=1e-9)
+    if store:
+        (meta,) = (tmp_path / "store").glob("*/meta.json")
+        assert json.loads(meta.read_text())["keyed"]["mass_uncertainty"] == 0.15
+    if bag:
+        from exo_ilc_ros.bag import read_bag
+
+        (path,) = (tmp_path / "bags").iterdir()
+        assert "_d0.15_" in path.name
+        run = read_bag(path)
+        assert run.mass_uncertainty == 0.15
+        assert all(v["mass_uncertainty"] == "0.15" for v in run.summaries.values())
+        analyzed = tmp_path / "analyze.json"
+        report = _exo_ilc("analyze", str(path), "--quiet", "--json", str(analyzed),
+                          timeout=60)
+        assert report.returncode == 0, report.stderr
+        assert json.loads(analyzed.read_text())["runs"][0]["mass_uncertainty"] == 0.15

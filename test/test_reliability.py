@@ -22,8 +22,9 @@ import pytest
 
 from exo_ilc_ros import topics
 from exo_ilc_ros.core.config import Config, load_config
-from exo_ilc_ros.core.experiment import Experiment, run_trials
+from exo_ilc_ros.core.experiment import Experiment
 from exo_ilc_ros.core.loop import record_from_samples
+from exo_ilc_ros.core.session import LearningSession, run_trials
 from exo_ilc_ros.launcher import GraphError
 
 pytestmark = pytest.mark.graph
@@ -120,6 +121,7 @@ def test_nodes_reject_bad_input_keep_running_and_report_it() -> None:
     from exo_ilc_ros.nodes.computed_torque_controller import ComputedTorqueController
     from exo_ilc_ros.nodes.ilc_supervisor import IlcSupervisor
     from exo_ilc_ros.nodes.plant_simulator import PlantSimulator
+    from exo_ilc_ros.nodes.protocol import feedforward_message
 
     rclpy.init()
     try:
@@ -129,13 +131,18 @@ def test_nodes_reject_bad_input_keep_running_and_report_it() -> None:
         published: list[bytes] = []
         controller.command_pub.publish = lambda msg: published.append(msg)  # type: ignore
         # The supervisor's own feed-forward message for trial 1 at t0 = 10 ms.
-        supervisor.t0_ns = 10_000_000
-        good_ff = supervisor._feedforward_message()
-        nan_ff = supervisor._feedforward_message()
+        first = LearningSession(supervisor.params.config)
+
+        def trial_1_message() -> JointTrajectory:
+            return feedforward_message(supervisor.reference, first.feedforward, 1, 10_000_000,
+                                       supervisor.samples.step_ns, supervisor.joint_names)
+
+        good_ff = trial_1_message()
+        nan_ff = trial_1_message()
         nan_ff.points[5].accelerations[1] = float("nan")
-        renamed = supervisor._feedforward_message()
+        renamed = trial_1_message()
         renamed.joint_names = ["a", "b", "c"]
-        short = supervisor._feedforward_message()
+        short = trial_1_message()
         short.points = short.points[:-1]
         for bad in (nan_ff, renamed, short, JointTrajectory()):
             controller.on_feedforward(bad)

@@ -15,8 +15,9 @@ import pytest
 
 from exo_ilc_ros.core import load_config, run_trials
 from exo_ilc_ros.core.errors import StoreError
-from exo_ilc_ros.core.experiment import RunResult, build_reference
+from exo_ilc_ros.core.experiment import build_reference
 from exo_ilc_ros.core.laws import TrialRecord
+from exo_ilc_ros.core.session import RunResult
 from exo_ilc_ros.core.store import RunStore, learning_key
 
 CONFIG = load_config()

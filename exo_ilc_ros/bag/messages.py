@@ -7,6 +7,7 @@ Serialisation goes through ``typestore.serialize_cdr`` (exact sizes); never thro
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterable, Mapping, Sequence
 from functools import cache
 from typing import Any
@@ -14,6 +15,8 @@ from typing import Any
 import numpy as np
 
 from .. import topics
+
+PARAMETERS_CHANGED = "parameters_changed"
 
 """The rows of a trial's levels, as the summary's ``level/<name>/<joint>`` keys name them."""
 
@@ -132,8 +135,11 @@ def trial_summary(ns: int, values: Sequence[tuple[str, str]], within_bound: bool
 
 def summary_values(trial: int, mass_uncertainty: float, law: str, names: Sequence[str],
                    max_abs_error: Any, max_abs_feedforward: Any, max_abs_effort: Any,
-                   levels: Any | None) -> list[tuple[str, str]]:
-    """The key-values of a trial summary (floats as ``repr`` so they parse back exactly)."""
+                   levels: Any | None, aborted_at: int | None = None,
+                   changed: Mapping[str, Any] | None = None) -> list[tuple[str, str]]:
+    """The key-values of a trial summary (floats as ``repr`` so they parse back exactly):
+    ``aborted_at`` for a trial the envelope aborted, ``parameters_changed`` (JSON) for the
+    live changes the session applied at this trial's end (in effect from the next trial)."""
     out = [("trial", str(trial)), ("mass_uncertainty", repr(float(mass_uncertainty))),
            ("law", law)]
     for key, row in (("max_abs_error", max_abs_error),
@@ -144,7 +150,21 @@ def summary_values(trial: int, mass_uncertainty: float, law: str, names: Sequenc
         for level_name, row in zip(topics.LEVEL_SYMBOLS, np.asarray(levels), strict=False):
             out += [(f"level/{level_name}/{n}", repr(float(x)))
                     for n, x in zip(names, row, strict=True)]
+    if aborted_at is not None:
+        out.append(("aborted_at", str(aborted_at)))
+    if changed:
+        out.append((PARAMETERS_CHANGED, json.dumps(dict(changed), sort_keys=True)))
     return out
+
+
+def parameters_changed(values: Mapping[str, str]) -> dict[str, Any]:
+    """The live changes a trial summary says took effect at its trial's end ({} if none or
+    unparsable)."""
+    try:
+        changed = json.loads(values.get(PARAMETERS_CHANGED, "{}"))
+    except ValueError:
+        return {}
+    return changed if isinstance(changed, dict) else {}
 
 
 def key_values(status: Any) -> dict[str, str]:

@@ -19,7 +19,7 @@ import numpy as np
 
 from .. import topics
 from ..core.config import Config
-from ..core.experiment import RunResult
+from ..core.session import RunResult
 from . import messages
 from .provenance import TRIALS_COMPLETED, provenance_data
 from .writer import BagWriter
@@ -87,7 +87,7 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
             values = messages.summary_values(
                 k, result.mass_uncertainty, result.law, names, record.max_abs_error,
                 np.max(np.abs(record.feedforward), axis=0), np.max(np.abs(record.effort), axis=0),
-                record.levels)
+                record.levels, record.aborted_at, result.applied.get(k + 1))
             within = bool(np.all(record.max_abs_error <= result.error_bound))
             writer.write(topics.TRIAL_SUMMARY, end, messages.trial_summary(end, values, within))
             writer.write(topics.TRIAL_EVENTS, end, messages.trial_event(end, "end", k, values))

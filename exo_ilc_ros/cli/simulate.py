@@ -9,7 +9,7 @@ from typing import Any
 from tqdm import tqdm
 
 from ..core.config import Config
-from ..core.experiment import run_trials
+from ..core.session import run_trials
 from ..report import (
     RunSummary,
     format_iterations,
@@ -62,11 +62,56 @@ def register(sub: Any) -> None:
                         "config)")
     parser.add_argument("--resume", action="store_true", help="with --store: continue each "
                         "run after the last trial stored (bit-identical to an uninterrupted run)")
+    parser.add_argument("--replay", metavar="BAG", help="run a recorded run again in-process: "
+                        "the bag's config, mass uncertainty, trial count and live parameter "
+                        "changes (at the trials they took effect), then compare every trial "
+                        "with the bag (exit 1 if any differs)")
     parser.set_defaults(func=simulate)
+
+
+REPLAY_EXCLUDES = ("config", "mass_uncertainty", "trials", "law", "store", "bag")
+
+
+def replay_bag(args: argparse.Namespace) -> int:
+    """--replay BAG: the recorded run again, the report, and the comparison with the bag."""
+    from ..bag import BagError, read_bag
+    from ..bag.replay import replay
+
+    given = [f"--{name.replace('_', '-')}" for name in REPLAY_EXCLUDES
+             if getattr(args, name) not in (None, False)]
+    if given:
+        print(f"exo-ilc simulate: error: --replay takes the run from the bag; drop "
+              f"{', '.join(given)}", file=sys.stderr)
+        return 2
+    try:
+        run = read_bag(args.replay)
+        with tqdm(total=max(run.completed, default=0), desc=f"replay {run.path.name}",
+                  unit="trial", file=sys.stderr, disable=None) as bar:
+            replayed = replay(run, on_trial=lambda record: bar.update(1))
+    except BagError as exc:
+        print(f"exo-ilc simulate: error: --replay {args.replay}: {exc}", file=sys.stderr)
+        return 2
+    plan = replayed.plan
+    for note in plan.notes:
+        print(f"note: {note}", file=sys.stderr)
+    for trial, values in sorted(plan.changes.items()):
+        print(f"live change from trial {trial}: " + ", ".join(
+            f"{name} = {value}" for name, value in sorted(values.items())), file=sys.stderr)
+    print_report(args, plan.config, [RunSummary.from_result(replayed.result)])
+    print()
+    if replayed.identical:
+        print(f"replay of {run.path}: {replayed.compared} trials compared, identical to the "
+              "recording (max |e|, max |u_ff|, max |effort| of every trial)")
+        return 0
+    print(f"replay of {run.path}: differs from the recording from trial "
+          f"{replayed.first_different} on (largest difference {replayed.worst:.3e})")
+    return 1
 
 
 def simulate(args: argparse.Namespace) -> int:
     """Run and report."""
+    if args.replay:
+        return replay_bag(args)
     if args.resume and not args.store:
         print("exo-ilc simulate: error: --resume needs --store DIR", file=sys.stderr)
         return 2

@@ -10,12 +10,10 @@ from .errors import ConfigError, ExoIlcError, ModelError
 from .experiment import (
     Experiment,
     IterationsToBound,
-    RunResult,
     build_arm,
     build_law,
     build_reference,
     iterations_to_bound,
-    run_trials,
 )
 from .growth import GrowthFit, fit_growth
 from .integrator import (
@@ -41,15 +39,16 @@ from .laws import (
 )
 from .model import ArmModel
 from .qfilter import QFilter, QFilteredLaw
+from .session import LearningSession, RunResult, StopReason, TrialConclusion, run_trials
 from .trajectory import QuinticTrajectory, SampledReference
 
 __all__ = [
     "ArmModel", "Config", "ConfigError", "ErrorSum", "ExoIlcError", "Experiment",
     "FeedforwardUpdate", "GrowthFit", "InitialFeedforward", "IterationsToBound", "LearningLaw",
-    "LinearLaw", "LoopAnalysis", "Memory", "ModelError", "PlantDynamics", "QFilter",
-    "QFilteredLaw", "QuinticTrajectory", "RunResult", "SampledReference", "ScheduleIndex",
-    "SignLaw", "StepSchedule", "TrialRecord", "analyze_loop", "build_arm", "build_law",
-    "build_reference", "computed_torque_kernel", "config_dir", "default_config_path", "error_sums",
-    "feedback_input", "fit_growth", "integrate_period", "iterations_to_bound", "load_config",
-    "run_trials", "sgn", "simulate_trial",
+    "LearningSession", "LinearLaw", "LoopAnalysis", "Memory", "ModelError", "PlantDynamics",
+    "QFilter", "QFilteredLaw", "QuinticTrajectory", "RunResult", "SampledReference",
+    "ScheduleIndex", "SignLaw", "StepSchedule", "StopReason", "TrialConclusion", "TrialRecord",
+    "analyze_loop", "build_arm", "build_law", "build_reference", "computed_torque_kernel",
+    "config_dir", "default_config_path", "error_sums", "feedback_input", "fit_growth",
+    "integrate_period", "iterations_to_bound", "load_config", "run_trials", "sgn", "simulate_trial",
 ]

@@ -1,19 +1,17 @@
-"""The paper's experiment in-process: config -> models, reference and law -> K trials -> results."""
+"""The paper's experiment in-process: config -> nominal model, plant, reference and law; one
+trial of the closed loop (:class:`Experiment`). The trial-to-trial loop is ``core.session``."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 
 from .config import Config
-from .errors import SafetyError, StoreError
+from .errors import SafetyError
 from .integrator import PlantDynamics
 from .laws import (
     ErrorSum,
-    FeedforwardUpdate,
     InitialFeedforward,
     LearningLaw,
     LinearLaw,
@@ -26,7 +24,6 @@ from .laws import (
 from .model import ArmModel
 from .qfilter import QFilteredLaw, feedforward_limit_of, qfilter_of
 from .safety import simulate_trial_guarded
-from .store import RunStore
 from .trajectory import QuinticTrajectory, SampledReference
 
 
@@ -143,91 +140,3 @@ class Experiment:
             self.error_envelope)
         return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels,
                            None if abort < 0 else int(abort))
-
-
-@dataclass
-class RunResult:
-    """Every trial of one run and what was learned."""
-
-    mass_uncertainty: float
-    law: str
-    error_bound: float
-    records: list[TrialRecord] = field(default_factory=list)
-    final: FeedforwardUpdate | None = None
-    """The feed-forward learned from the last trial (what trial K+1 would use)."""
-    resumed: int = 0
-    """Trials restored from the store rather than run (0: none)."""
-
-    @property
-    def aborted(self) -> list[int]:
-        """Trial numbers aborted by the error envelope (nothing learned from them)."""
-        return [r.trial for r in self.records if r.aborted]
-
-    @property
-    def max_abs_errors(self) -> np.ndarray:
-        """(K, joints) table of max |e| per trial and joint."""
-        return np.array([r.max_abs_error for r in self.records])
-
-    @property
-    def max_abs_feedforward(self) -> np.ndarray:
-        """(K, joints) table of max |u_ff| per trial and joint."""
-        return np.array([np.max(np.abs(r.feedforward), axis=0) for r in self.records])
-
-    @property
-    def max_abs_effort(self) -> np.ndarray:
-        """(K, joints) table of max |effort| per trial and joint."""
-        return np.array([np.max(np.abs(r.effort), axis=0) for r in self.records])
-
-    def iterations_to_bound(self) -> IterationsToBound:
-        """First and settled trial per joint within ``error_bound``."""
-        return iterations_to_bound(self.max_abs_errors, self.error_bound)
-
-
-def run_trials(config: Config, mass_uncertainty: float | None = None,
-               trials: int | None = None, law: str | None = None,
-               on_trial: Callable[[TrialRecord], None] | None = None,
-               learning_law: LearningLaw | None = None,
-               store: Path | str | None = None, resume: bool = False) -> RunResult:
-    """Run K trials of the experiment in-process, learning between trials.
-
-    ``law`` names a law of the config (``sign``/``linear``); ``learning_law`` passes any other
-    :class:`LearningLaw`. ``on_trial`` is called after each trial run now (progress, logging).
-    A trial aborted by the error envelope is kept (marked) but not learned from: the next trial
-    reuses its feed-forward. With ``store`` (a root directory, :class:`RunStore`) every trial
-    and the feed-forward it led to are saved before the next trial starts; with ``resume`` the
-    trials already stored under this run's learning key are restored (bit for bit) and the run
-    continues after the last one. A store that already holds trials without ``resume`` is an
-    error (nothing is overwritten).
-    """
-    experiment = Experiment(config, mass_uncertainty)
-    chosen = learning_law or build_law(config, law)
-    count = int(trials if trials is not None else config["max_trials"])
-    result = RunResult(experiment.mass_uncertainty, law or config["law"],
-                       float(config["error_bound"]))
-    update = FeedforwardUpdate(chosen.initial_feedforward(experiment.reference), None)
-    run_store: RunStore | None = None
-    if store is not None:
-        effective = config.replace({"mass_uncertainty": experiment.mass_uncertainty,
-                                    "law": result.law})
-        run_store = RunStore(store, effective, experiment.reference)
-        if run_store.completed and not resume:
-            raise StoreError(f"{run_store.directory}: already holds {run_store.completed} "
-                             "trials of this run; resume it or use another store")
-        for stored in run_store.load()[:count]:
-            result.records.append(stored.record)
-            update = stored.next_update
-        result.resumed = len(result.records)
-    for k in range(len(result.records) + 1, count + 1):
-        record = experiment.run_trial(update.feedforward, k, update.levels)
-        if not record.aborted:
-            update = chosen.update(record)
-            if not np.all(np.isfinite(update.feedforward)):
-                raise SafetyError(f"trial {k}: the learning law produced a non-finite "
-                                  "feed-forward; it was not stored or used")
-        if run_store is not None:
-            run_store.save(record, update)
-        result.records.append(record)
-        if on_trial is not None:
-            on_trial(record)
-    result.final = update
-    return result

@@ -129,8 +129,8 @@ class BagRecorder(Node):
                    if self.count_publishers(topic) < 1]
         message = "waiting" if missing else "ready"
         values = [("bag", str(self.writer.path)), ("messages", str(self.messages)),
-                  ("trials_received", str(self.received)),
-                  ("trials_filed", str(self.completed))]
+                  ("trials_received", str(self.completed)),
+                  ("trials_filed", str(self.received))]
         values += [("waiting_for", topic) for topic in missing]
         self.status_pub.publish(diagnostic_array(
             self, [status(topics.RECORDER_STATUS, message, values, hardware_id=NAME)]))

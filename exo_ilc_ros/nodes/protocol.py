@@ -1,0 +1,48 @@
+"""The trial protocol's messages as ilc_supervisor sends them (topics.py describes them)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from builtin_interfaces.msg import Duration
+from diagnostic_msgs.msg import DiagnosticStatus
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from .. import topics
+from ..bag.messages import summary_values
+from ..core.schema import SUPERVISOR
+from ..core.session import TrialConclusion
+from ..core.trajectory import SampledReference
+from .common import doubles, status
+
+
+def feedforward_message(reference: SampledReference, feedforward: np.ndarray, trial: int,
+                        t0_ns: int, step_ns: int, joint_names: Sequence[str]) -> JointTrajectory:
+    """``/ilc/feedforward`` of trial ``trial`` starting at ``t0_ns``: frame ``trial:<k>``, one
+    point per sample (positions, velocities: the reference; accelerations: u_ff)."""
+    msg = JointTrajectory()
+    msg.header.frame_id = f"{topics.FEEDFORWARD_FRAME_PREFIX}{trial}"
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t0_ns, 1_000_000_000)
+    msg.joint_names = list(joint_names)
+    points = []
+    for i in range(reference.samples):
+        sec, nanosec = divmod(i * step_ns, 1_000_000_000)
+        points.append(JointTrajectoryPoint(
+            positions=doubles(reference.position[i]), velocities=doubles(reference.velocity[i]),
+            accelerations=doubles(feedforward[i]),
+            time_from_start=Duration(sec=sec, nanosec=nanosec)))
+    msg.points = points
+    return msg
+
+
+def trial_summary(conclusion: TrialConclusion, joint_names: Sequence[str]) -> DiagnosticStatus:
+    """``/ilc/trial_summary`` of a concluded trial: OK within the bound, else WARN."""
+    record, config = conclusion.record, conclusion.config
+    values = summary_values(record.trial, config["mass_uncertainty"], config["law"],
+                            joint_names, record.max_abs_error,
+                            np.max(np.abs(record.feedforward), axis=0),
+                            np.max(np.abs(record.effort), axis=0), record.levels,
+                            record.aborted_at, conclusion.applied)
+    level = DiagnosticStatus.OK if conclusion.within_bound else DiagnosticStatus.WARN
+    return status(topics.SUMMARY_STATUS, f"trial {record.trial}", values, level, SUPERVISOR)

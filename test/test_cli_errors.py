@@ -405,6 +405,7 @@ def test_rerun_note_says_what_happened_in_plain_words() -> None:
     assert "same feed-forward" in note and "results are unaffected" in note
     assert "nothing is learned from a discarded attempt" in note
     assert "{" not in note  # no raw dict
+    assert rerun_note(108, {"trial": "108", "reason": "timeout", "phase": "running"}) == note
     note = rerun_note(4, {"trial": "4", "reason": "watchdog", "watchdog_trips": "2"})
     assert "(watchdog: the controller went without /joint_states" in note and "(2x)" in note
     assert "samples of the attempt never arrived" in rerun_note(5, {"reason": "lost",

@@ -348,9 +348,9 @@ def rerun_note(trial: int, values: dict[str, str]) -> str:
                  f"watchdog allows and held the arm safe ({values.get('watchdog_trips', '?')}x)")
     elif reason == "lost":
         cause = f"lost: {values.get('lost', 'some')} joint samples of the attempt never arrived"
-    elif reason:
+    elif reason and reason != "timeout":
         cause = reason
-    else:
+    else:  # "timeout" (older bags: no reason, only the phase)
         phase = values.get("phase", "?")
         cause = (f"stuck: the protocol step {phase!r} ({PROTOCOL_STEPS.get(phase, 'unknown')}) "
                  f"made no progress for {STEP_TIMEOUT_S} s, which happens when the machine is "

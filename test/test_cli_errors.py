@@ -52,6 +52,8 @@ CASES += [
     (["simulate", "--bag", "{file}"], ["argument --bag", "file.txt", "must be a directory"]),
     (["simulate", "--store", "{file}"], ["argument --store", "file.txt", "must be a directory"]),
     (["simulate", "--resume"], ["--resume", "--store"]),
+    (["simulate", "--replay", "{tmp}/nobag"], ["--replay", "nobag"]),
+    (["simulate", "--replay", "{tmp}/nobag", "--trials", "3"], ["--replay", "--trials"]),
     (["run", "--domain-id", "-1"], ["argument --domain-id", "-1", "from 0 to 232"]),
     (["run", "--domain-id", "300"], ["argument --domain-id", "300", "from 0 to 232"]),
     (["run", "--domain-id", "x"], ["argument --domain-id", "'x'", "must be an integer"]),

@@ -325,7 +325,9 @@ def test_command_line_parameters_later_wins(tmp_path: Path) -> None:
     assert value("-r", "__ns:=/x", "--params-file", w, "--", "-p", "max_trials:=1") == 9
     assert value() is None
     given = command_line_parameters(["prog", "--ros-args", "--params-file", f], fqn)
-    assert given["schedule.position.level_low"] == ([1, 2, 3], f)
+    assert given["schedule.position.level_low"] == ([1, 2, 3], f, False)
+    given = command_line_parameters(["prog", "--ros-args", "--params-file", w], fqn)
+    assert given["max_trials"] == (9, w, True)
 
 
 def _start_supervisor(ros_args: list[str]) -> subprocess.Popen[str]:
@@ -376,8 +378,8 @@ def test_param_against_a_running_node(capsys: pytest.CaptureFixture[str]) -> Non
     finally:
         log = _stop(node)
     assert "Traceback" not in log, log
-    assert "-p max_trial:=4: max_trial: not a parameter of exo_ilc_ros, ignored (did you mean " \
-        "max_trials?)" in log, log
+    assert "-p max_trial:=4: max_trial: ilc_supervisor has no such parameter; ignored (did " \
+        "you mean max_trials?)" in log, log
     node = _start_supervisor(["-p", "max_trials:=3", "--params-file", str(SHIPPED)])
     try:
         code, out, err = _param(capsys, "get", "ilc_supervisor", "max_trials")
@@ -430,3 +432,18 @@ def test_node_refuses_bad_ros_arguments(ros_args: list[str], expected: list[str]
     for piece in expected:
         assert piece in out, out
     assert "/project/src" not in out, out
+
+
+def test_exponent_floats_read_as_rcl_reads_them(tmp_path: Path) -> None:
+    """`1e-3` is a float for rcl (YAML 1.2); --config and the nodes read it the same way."""
+    from exo_ilc_ros.core.config import load_config, load_ros_yaml
+    from exo_ilc_ros.nodes.common import command_line_parameters
+
+    assert load_ros_yaml("[1e-3, 2E1, -1.5e+2, 1_0]") == [0.001, 20.0, -150.0, 10]
+    assert load_ros_yaml("v1e5") == "v1e5"
+    path = tmp_path / "exp.yaml"
+    path.write_text("plant_simulator:\n  ros__parameters:\n    integration_step: 1e-3\n")
+    assert load_config(path)["integration_step"] == 0.001
+    given = command_line_parameters(["n", "--ros-args", "--params-file", str(path), "-p",
+                                     "real_time_rate:=2e0"], "/plant_simulator")
+    assert given["integration_step"].value == 0.001 and given["real_time_rate"].value == 2.0

@@ -11,6 +11,7 @@ from typing import Any
 
 import yaml
 
+from ..core.config import load_ros_yaml
 from ..core.errors import ExoIlcError
 from .arguments import domain_id, number
 
@@ -41,7 +42,7 @@ def parse_value(text: str) -> Any:
     """A command-line VALUE as a ROS parameter value (YAML, like ``ros2 param set``); a list of
     numbers with any float in it becomes all floats."""
     try:
-        value = yaml.safe_load(text)
+        value = load_ros_yaml(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at character {mark.column + 1}" if mark is not None else ""

@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import sys
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -48,6 +49,22 @@ def config_dir() -> Path:
 def default_config_path() -> Path:
     """The shipped ``exo_ilc.yaml`` (the paper's experiment under the canonical reading)."""
     return config_dir() / DEFAULT_CONFIG_NAME
+
+
+class RosYamlLoader(yaml.SafeLoader):
+    """PyYAML's safe loader that also reads ``1e-5`` as a float, as rcl's parameter parser
+    (YAML 1.2) does; PyYAML alone (YAML 1.1) would make it the string '1e-5'."""
+
+
+RosYamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"))
+
+
+def load_ros_yaml(text: str) -> Any:
+    """A ROS parameter YAML document (or ``-p`` value) read as rcl types it."""
+    return yaml.load(text, Loader=RosYamlLoader)
 
 
 def flatten_ros_yaml(document: Any, source: str) -> dict[str, Any]:
@@ -133,7 +150,7 @@ def read_yaml(path: Path | str) -> dict[str, Any]:
         raise ConfigError("<file>", f"not a text (UTF-8) file: byte {exc.start} is "
                           f"{exc.object[exc.start:exc.start + 1]!r}", str(path)) from None
     try:
-        document = yaml.safe_load(text)
+        document = load_ros_yaml(text)
     except yaml.YAMLError as exc:
         raise ConfigError("<file>", f"invalid YAML: {exc}", str(path)) from None
     return flatten_ros_yaml(document, str(path))

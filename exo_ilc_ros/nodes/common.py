@@ -11,7 +11,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import rclpy
@@ -28,7 +28,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 
 from ..core import schema
-from ..core.config import Config, load_config
+from ..core.config import Config, load_config, load_ros_yaml
 from ..core.errors import ConfigError, ExoIlcError
 
 RCLError = rclpy_implementation.RCLError
@@ -81,20 +81,20 @@ class SchemaParameters:
         self._params = {p.name: p for p in schema.parameters_of(section)}
         defaults = load_config()
         given = command_line_parameters(_command_line(), node.get_fully_qualified_name())
-        for name, (_, origin) in given.items():
-            if name not in schema.BY_NAME and name not in schema.ROS_BUILTIN:
+        for name, item in given.items():
+            if name not in self._params and name not in schema.ROS_BUILTIN and \
+                    not item.wildcard:  # a /** key may be meant for another node
                 close = difflib.get_close_matches(name, list(self._params), n=1)
-                node.get_logger().warning(f"{origin}: {name}: not a parameter of exo_ilc_ros, "
-                                          "ignored" + (f" (did you mean {close[0]}?)"
-                                                       if close else ""))
+                node.get_logger().warning(f"{item.origin}: {name}: {node.get_name()} has no "
+                                          "such parameter; ignored" +
+                                          (f" (did you mean {close[0]}?)" if close else ""))
         for p in self._params.values():
             descriptor = ParameterDescriptor(description=p.description, dynamic_typing=True)
             if p.name in given:  # the last value the command line gives, as ROS intends
-                value, origin = given[p.name]
                 try:
-                    value = schema.coerce(p, value)
+                    value = schema.coerce(p, given[p.name].value)
                 except ConfigError as exc:
-                    raise ConfigError(exc.key, exc.rule, origin) from None
+                    raise ConfigError(exc.key, exc.rule, given[p.name].origin) from None
                 node.declare_parameter(p.name, value, descriptor, ignore_override=True)
             else:
                 node.declare_parameter(p.name, defaults[p.name], descriptor)
@@ -175,12 +175,21 @@ def _flat(tree: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str, Any]
             yield f"{prefix}{key}", value
 
 
-def command_line_parameters(argv: Sequence[str], node_fqn: str) -> dict[str, tuple[Any, str]]:
+class GivenValue(NamedTuple):
+    """A parameter value from the command line, where it came from, and whether it came from a
+    wildcard section (``/**``) rather than one naming the node."""
+
+    value: Any
+    origin: str
+    wildcard: bool = False
+
+
+def command_line_parameters(argv: Sequence[str], node_fqn: str) -> dict[str, GivenValue]:
     """The parameter values the ROS arguments in ``argv`` give node ``node_fqn``, each with
     where it came from, the later overriding the earlier: ``--params-file`` sections that match
     the node (its name, ``/**``, wildcards) in file order, ``-p [node:]name:=value`` rules, all
     in command-line order (ROS's rule: later overrides win)."""
-    out: dict[str, tuple[Any, str]] = {}
+    out: dict[str, GivenValue] = {}
     in_ros, i = False, 0
     args = list(argv)
     while i < len(args):
@@ -198,12 +207,14 @@ def command_line_parameters(argv: Sequence[str], node_fqn: str) -> dict[str, tup
         elif arg == "--params-file" and i < len(args):
             path, i = args[i], i + 1
             try:
-                document = yaml.safe_load(Path(path).read_text())
+                document = load_ros_yaml(Path(path).read_text())
             except (OSError, yaml.YAMLError) as exc:
                 raise ConfigError("--params-file", f"cannot read: {exc}", path) from None
             for key, body in _params_file_sections(document):
                 if _node_pattern(key).fullmatch(node_fqn):
-                    out.update((name, (value, path)) for name, value in _flat(body))
+                    wildcard = "*" in key
+                    out.update((name, GivenValue(value, path, wildcard))
+                               for name, value in _flat(body))
         elif arg in ("-p", "--param") and i < len(args):
             rule, i = args[i], i + 1
             target, sep, text = rule.partition(":=")
@@ -211,10 +222,10 @@ def command_line_parameters(argv: Sequence[str], node_fqn: str) -> dict[str, tup
             if not sep or (node_key and not _node_pattern(node_key).fullmatch(node_fqn)):
                 continue
             try:
-                value = yaml.safe_load(text)
+                value = load_ros_yaml(text)
             except yaml.YAMLError:
                 value = text
-            out[name] = (value, f"-p {rule}")
+            out[name] = GivenValue(value, f"-p {rule}", "*" in node_key)
     return out
 
 

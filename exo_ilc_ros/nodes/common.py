@@ -428,6 +428,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:  # a bad --ros-args value: rcl says which and why
         print(f"error: invalid ROS arguments: {rcl_message(exc)}", file=sys.stderr, flush=True)
+        _ARGV = None
         return 2
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     nodes: list[Node] = []
@@ -467,6 +468,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         rclpy.try_shutdown()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+        _ARGV = None
     return code
 
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import yaml
 
-from ..core.config import load_ros_yaml
+from ..core.config import load_ros_yaml, yaml_problem
 from ..core.errors import ExoIlcError
 from .arguments import domain_id, number
 
@@ -44,11 +44,8 @@ def parse_value(text: str) -> Any:
     try:
         value = load_ros_yaml(text)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at character {mark.column + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or "not valid YAML"
-        raise ParamError(f"VALUE {text!r} is not a valid YAML value ({problem}{where}); give "
-                         "e.g. 1.5, true, text or [1.0, 2.0, 1.0]") from None
+        raise ParamError(f"VALUE {text!r} is not a valid YAML value ({yaml_problem(exc)}); "
+                         "give e.g. 1.5, true, text or [1.0, 2.0, 1.0]") from None
     if isinstance(value, dict):
         raise ParamError(f"VALUE {text!r} is a mapping; a ROS parameter is a number, bool, "
                          "string or a list of one of these")

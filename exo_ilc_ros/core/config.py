@@ -152,8 +152,19 @@ def read_yaml(path: Path | str) -> dict[str, Any]:
     try:
         document = load_ros_yaml(text)
     except yaml.YAMLError as exc:
-        raise ConfigError("<file>", f"invalid YAML: {exc}", str(path)) from None
+        raise ConfigError("<file>", f"invalid YAML: {yaml_problem(exc)}", str(path)) from None
     return flatten_ros_yaml(document, str(path))
+
+
+def yaml_problem(exc: yaml.YAMLError) -> str:
+    """A PyYAML error in one line: what is wrong and where (line and column, from 1)."""
+    problem = getattr(exc, "problem", None)
+    mark = getattr(exc, "problem_mark", None)
+    if not problem:
+        return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    context = getattr(exc, "context", None)
+    where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+    return f"{problem}{where}" + (f" ({context})" if context else "")
 
 
 class Config:

@@ -102,6 +102,8 @@ CASES += [
                                                        "not installed"]),
     (["tune", "--storage", "{file}/tune.journal"], ["argument --storage", "not a directory"]),
     (["tune", "--study-name", " "], ["argument --study-name", "must not be empty"]),
+    (["tune", "--storage", "sqlite:///{tmp}/no/dir/t.db"], ["argument --storage", "t.db",
+                                                            "does not exist"]),
     (["tune", "--config", "{tmp}/none.yaml"], ["argument --config", "no such file"]),
     (["analyze-loop", "--mass-uncertainty", "-2"], ["argument --mass-uncertainty", "-2",
                                                     "must be >= -0.9"]),
@@ -447,3 +449,22 @@ def test_exponent_floats_read_as_rcl_reads_them(tmp_path: Path) -> None:
     given = command_line_parameters(["n", "--ros-args", "--params-file", str(path), "-p",
                                      "real_time_rate:=2e0"], "/plant_simulator")
     assert given["integration_step"].value == 0.001 and given["real_time_rate"].value == 2.0
+
+
+def test_a_database_that_fails_names_storage(monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """A storage that passes the checks but fails when used (server down, no permission)."""
+    from sqlalchemy.exc import OperationalError
+
+    import exo_ilc_ros.cli.tune as tune
+
+    def down(*args: object, **kwargs: object) -> None:
+        raise OperationalError("connect", {}, ConnectionRefusedError("connection refused"))
+
+    monkeypatch.setattr(tune, "optimize", down)
+    url = f"sqlite:///{tmp_path}/t.db"
+    assert main(["tune", "--storage", url, "--trials", "2", "--out",
+                 str(tmp_path / "t.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert f"argument --storage: cannot use the database {url!r}: connection refused" in err
+    assert "Traceback" not in err and "internal error" not in err

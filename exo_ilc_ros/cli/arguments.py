@@ -219,6 +219,8 @@ def storage(text: str) -> str:
     except (ArgumentError, NoSuchModuleError, ValueError) as exc:
         raise argparse.ArgumentTypeError(f"must be a journal file path or a database URL "
                                          f"SQLAlchemy knows ({exc}), got {text!r}") from None
+    if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
+        output_file(make_parents=False)(url.database)  # sqlite makes the file, not its directory
     try:
         dialect.import_dbapi()
     except ImportError as exc:

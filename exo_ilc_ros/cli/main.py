@@ -45,6 +45,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:  # a bug, not the user's input: one line, the traceback on demand
         if os.environ.get("EXO_ILC_TRACEBACK"):
             raise
+        if type(exc).__module__.startswith("sqlalchemy") and \
+                getattr(args, "storage", None) is not None:  # the database of tune --storage
+            reason = str(getattr(exc, "orig", None) or exc).splitlines()[0]
+            print(f"exo-ilc {args.command}: error: argument --storage: cannot use the database "
+                  f"{args.storage!r}: {reason}", file=sys.stderr)
+            return 2
         print(f"exo-ilc {args.command}: internal error: {type(exc).__name__}: {exc}\n"
               "This is a bug in exo-ilc, not in what you typed; please report it with the command "
               "line (EXO_ILC_TRACEBACK=1 shows the traceback).", file=sys.stderr)

@@ -100,3 +100,6 @@ again (the commands it got are not the ones the record would assume)."""
 PLANT_HEALTH_STATUS = "plant_simulator/health"
 SUPERVISOR_HEALTH_STATUS = "ilc_supervisor/health"
 T0_PREFIX = "t0_ns="
+ENVELOPE_REASON = "error_envelope"
+"""``reason`` of the ``aborted`` event of a trial the error envelope aborted (kept, not learned
+from); other reasons (``watchdog``, ``lost``, ``timeout``) mean the trial was run again."""

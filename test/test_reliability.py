@@ -134,8 +134,9 @@ def test_nodes_reject_bad_input_keep_running_and_report_it() -> None:
         first = LearningSession(supervisor.params.config)
 
         def trial_1_message() -> JointTrajectory:
-            return feedforward_message(supervisor.reference, first.feedforward, 1, 10_000_000,
-                                       supervisor.samples.step_ns, supervisor.joint_names)
+            return feedforward_message(supervisor.protocol.reference, first.feedforward, 1,
+                                       10_000_000, supervisor.protocol.samples.step_ns,
+                                       supervisor.joint_names)
 
         good_ff = trial_1_message()
         nan_ff = trial_1_message()

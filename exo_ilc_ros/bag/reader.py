@@ -319,7 +319,6 @@ def _trial_number(values: dict[str, str], key: str = "trial") -> int | None:
         return None
 
 
-ENVELOPE_REASON = "error_envelope"
 """``reason`` of the ``aborted`` event of a trial the error envelope aborted: unlike the other
 ``aborted`` events (watchdog, a stuck protocol step), that trial is not run again."""
 
@@ -443,7 +442,7 @@ def read_bag(path: Path | str) -> BagRun:
             notes.append(f"trial event {status.message!r} at {stamp} ns without a trial number")
             continue
         if status.message == "aborted":
-            if values.get("reason") == ENVELOPE_REASON:
+            if values.get("reason") == topics.ENVELOPE_REASON:
                 at = _trial_number(values, "aborted_at")
                 aborted_at[k] = -1 if at is None else at
                 notes.append(f"trial {k} was aborted by the error envelope at sample "

@@ -1,0 +1,355 @@
+"""The trial protocol of a graph run, ROS-free: how a :class:`LearningSession`'s trials are run
+on a plant that is reached through messages and services (the ``ilc_supervisor`` node is its
+ROS binding; tests drive it by hand).
+
+Per trial: reset the plant (it answers with the stamp t0 of the trial's first sample), push the
+session's feed-forward, wait for the controller's acknowledgement, start the plant, collect the
+N+1 samples (:class:`TrialSamples`), and, once the controller reported the trial ``done``,
+conclude it in the session. A trial with a watchdog trip, lost samples or a step that made no
+progress for :data:`STEP_TIMEOUT` is discarded and run again with the same feed-forward. With a
+recorder (``wait_for_recorder``) a concluded trial is stored only once the recorder filed it;
+the next trial is prepared meanwhile and started after the store (``WAIT_RECORDER``), so a
+stored trial is always in a bag.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from enum import Enum
+from typing import Any, Protocol
+
+import numpy as np
+
+from .config import Config
+from .errors import ExoIlcError
+from .experiment import Experiment
+from .loop import record_from_samples
+from .samples import TrialSamples
+from .session import LIVE, LearningSession, TrialConclusion
+from .store import RunStore
+
+STEP_TIMEOUT = 30.0
+"""Wall seconds a protocol step may take before the trial is discarded and run again."""
+RECORDER_TIMEOUT = 5.0
+"""Wall seconds to wait for the recorder to file a trial before going on without it."""
+
+
+class Phase(Enum):
+    """Where the protocol is."""
+
+    WAIT_GRAPH = "wait_graph"
+    RESETTING = "resetting"
+    WAIT_ACK = "wait_ack"
+    STARTING = "starting"
+    RUNNING = "running"
+    WAIT_RECORDER = "wait_recorder"
+    FINISHED = "finished"
+
+
+class GraphPort(Protocol):
+    """What the protocol asks of the graph; answers come back as ``on_*`` calls."""
+
+    def reset(self) -> None:
+        """Put the plant at x_d(0); answered by :meth:`TrialProtocol.on_reset`."""
+
+    def start(self) -> None:
+        """Release the plant; answered by :meth:`TrialProtocol.on_started`."""
+
+    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray) -> None:
+        """Send the trial's feed-forward to the controller (it acknowledges it)."""
+
+    def publish_conclusion(self, conclusion: TrialConclusion, end_ns: int) -> None:
+        """The trial summary and the ``end`` event (and ``aborted`` for an envelope abort)."""
+
+    def event(self, message: str, values: Sequence[tuple[str, str]],
+              stamp_ns: int | None = None) -> None:
+        """A trial event (start, aborted, resumed, finished)."""
+
+    def log(self, error: bool, text: str) -> None:
+        """A line for the user (``error``: something went wrong)."""
+
+
+class TrialProtocol:
+    """The protocol's state; every input is a method call, every output a port call."""
+
+    def __init__(self, config: Config, port: GraphPort,
+                 live: Callable[[], Config] | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.config = config
+        self.port = port
+        self.live = live or (lambda: config)
+        """The node's parameters now (accepted live changes are staged at the boundary)."""
+        self.seen = config
+        self.clock = clock
+        self.reference = Experiment(config).reference
+        self.samples = TrialSamples(self.reference)
+        self.session: LearningSession | None = None
+        """Created by :meth:`open` once the plant's parameters are known."""
+        self.experiment: Experiment | None = None
+        self.store: RunStore | None = None
+        self.phase = Phase.WAIT_GRAPH
+        self.phase_since = clock()
+        self.done_report: Mapping[str, str] | None = None
+        self.starting = False
+        """A start request is out."""
+        self.refused = False
+        """The plant refused a start of this trial (logged once)."""
+        self.recorder_filed = 0
+        self.recorder_lost = False
+        self.unsaved: TrialConclusion | None = None
+        self.unsaved_since = 0.0
+        self.after_save = ""
+        """In WAIT_RECORDER: ``start`` or ``finish``."""
+        self.end_ns = 0
+        self.error: str | None = None
+        self.exit_code: int | None = None
+
+    @property
+    def trial(self) -> int:
+        """The trial running or next."""
+        return 1 if self.session is None else self.session.trial
+
+    @property
+    def completed(self) -> int:
+        """Trials concluded."""
+        return 0 if self.session is None else self.session.completed
+
+    def _enter(self, phase: Phase) -> None:
+        self.phase = phase
+        self.phase_since = self.clock()
+
+    # --- start-up -----------------------------------------------------------------------------
+    def open(self, plant: Mapping[str, Any]) -> None:
+        """The plant's parameters are known (they label the summaries and key the store): the
+        session, resumed from the store if the config asks. A store error stops the run."""
+        config = self.config.replace(dict(plant))
+        try:
+            session = LearningSession(config)
+            if config["store.directory"]:
+                self.store, _ = session.open_store(config["store.directory"],
+                                                   config["store.resume"])
+        except ExoIlcError as exc:
+            self.fail(str(exc), code=2)
+            return
+        self.experiment = Experiment(config)
+        self.session = session
+        if self.store is not None:
+            if session.completed:
+                self.port.log(False, f"resumed from {self.store.directory}: trials 1.."
+                              f"{session.completed} restored, continuing with trial "
+                              f"{session.trial}")
+                self.port.event("resumed", [("trials", str(session.completed))])
+            else:
+                self.port.log(False, f"saving every trial to {self.store.directory}")
+        if session.finished:
+            self._finish()
+
+    # --- inputs ---------------------------------------------------------------------------------
+    def tick(self, graph_ready: bool) -> None:
+        """Periodic: start once the graph is up; store without a silent recorder; discard a
+        stuck trial; retry a refused start."""
+        now = self.clock()
+        if self.phase is Phase.WAIT_GRAPH:
+            if graph_ready and self.session is not None and not self.session.finished:
+                self._reset()
+        elif self.unsaved is not None and now - self.unsaved_since > RECORDER_TIMEOUT:
+            self.port.log(True, f"the recorder has not filed trial {self.unsaved.record.trial} "
+                          f"for {RECORDER_TIMEOUT:g} s; going on without waiting for it")
+            self.recorder_lost = True
+            self._store_unsaved()
+        elif self.phase is not Phase.FINISHED and now - self.phase_since > STEP_TIMEOUT:
+            self.port.log(True, f"trial {self.trial}: no progress in {self.phase.value} for "
+                          f"{STEP_TIMEOUT:g} s; discarding the trial and running it again "
+                          "with the same feed-forward")
+            self._retry("timeout", [("phase", self.phase.value)])
+        elif self.phase is Phase.STARTING and not self.starting:
+            self._start()
+
+    def on_reset(self, t0_ns: int | None, message: str = "") -> None:
+        """The plant is at x_d(0), its next sample stamped ``t0_ns`` (None: refused)."""
+        if self.phase is not Phase.RESETTING or self.session is None:
+            return
+        if t0_ns is None:
+            self.port.log(True, f"plant reset failed: {message}")
+            return
+        self.samples.start(t0_ns)
+        self.done_report = None
+        self._enter(Phase.WAIT_ACK)
+        self.port.push_feedforward(self.trial, t0_ns, self.session.feedforward)
+
+    def on_acknowledged(self, trial: int, t0_ns: int) -> None:
+        """The controller loaded the feed-forward of ``trial`` at ``t0_ns``."""
+        if self.phase is not Phase.WAIT_ACK or (trial, t0_ns) != (self.trial,
+                                                                  self.samples.t0_ns):
+            return
+        if self.unsaved is not None:  # the previous trial is not filed yet
+            self.after_save = "start"
+            self._enter(Phase.WAIT_RECORDER)
+        else:
+            self._begin_trial()
+
+    def on_started(self, success: bool, message: str = "") -> None:
+        """The plant's answer to :meth:`GraphPort.start` (refused: retried by :meth:`tick`).
+        The reply may come after the trial's samples and ``done`` (a reliable reply resent
+        after a lost packet): those are kept, and the trial ends here then."""
+        self.starting = False
+        if self.phase is not Phase.STARTING:
+            return
+        if success:
+            self._enter(Phase.RUNNING)
+            self._maybe_end_trial()
+        elif not self.refused:
+            self.refused = True
+            self.port.log(False, f"plant refused start: {message}; retrying")
+
+    def on_sample(self, stamp_ns: int, position: np.ndarray, velocity: np.ndarray) -> None:
+        """A checked sample of the arm; the trial's last one may end it."""
+        if not self.samples.add(stamp_ns, position, velocity):
+            return
+        if self.phase is Phase.STARTING and self.samples.received[1:].any():
+            self._enter(Phase.RUNNING)  # the plant steps: it started, whatever its reply
+        self.phase_since = self.clock()  # progress: a slow real-time trial is not stuck
+        if not self.samples.last_in:
+            return
+        if self.samples.missing:
+            missing = self.samples.missing
+            self.port.log(True, f"trial {self.trial}: {missing} samples lost; running the "
+                          "trial again")
+            self._retry("lost", [("lost", str(missing))])
+            return
+        self._maybe_end_trial()
+
+    def on_done(self, trial: int, t0_ns: int, report: Mapping[str, str]) -> None:
+        """The controller's end of ``trial`` (abort index, watchdog trips); kept until the
+        plant's start is confirmed (by its reply or its samples)."""
+        if self.phase in (Phase.STARTING, Phase.RUNNING) and \
+                (trial, t0_ns) == (self.trial, self.samples.t0_ns):
+            self.done_report = report
+            self._maybe_end_trial()
+
+    def on_recorder_filed(self, trials: int) -> None:
+        """The recorder's count of trials filed (in the bag, files closed)."""
+        self.recorder_filed = max(self.recorder_filed, trials)
+        if self.unsaved is not None and self.recorder_filed >= self.unsaved.record.trial:
+            self._store_unsaved()
+
+    # --- steps ----------------------------------------------------------------------------------
+    def _reset(self) -> None:
+        self._enter(Phase.RESETTING)
+        self.samples.stop()
+        self.port.reset()
+
+    def _begin_trial(self) -> None:
+        self.port.event("start", [("trial", str(self.trial))], self.samples.t0_ns)
+        self.refused = False
+        self._enter(Phase.STARTING)
+        self._start()
+
+    def _start(self) -> None:
+        self.starting = True
+        self.port.start()
+
+    def _retry(self, reason: str, values: Sequence[tuple[str, str]]) -> None:
+        assert self.session is not None
+        self.session.discard(reason)
+        self.port.event("aborted", [("trial", str(self.trial)), ("reason", reason), *values])
+        self._reset()
+
+    def _maybe_end_trial(self) -> None:
+        report = self.done_report
+        if self.phase is not Phase.RUNNING or not self.samples.running or report is None \
+                or not self.samples.last_in:
+            return
+        trips = int(report.get("watchdog_trips", "0"))
+        if trips:
+            self.port.log(True, f"trial {self.trial}: the controller's watchdog tripped "
+                          f"{trips}x (safe hold); running the trial again")
+            self._retry("watchdog", [("watchdog_trips", str(trips))])
+            return
+        self._end_trial(int(report.get("aborted_at", "-1")))
+
+    def _end_trial(self, aborted: int) -> None:
+        """Conclude the trial in the session; store it (once the recorder filed it) and go on
+        with the next one, or finish."""
+        session, experiment = self.session, self.experiment
+        assert session is not None and experiment is not None
+        self.end_ns = self.samples.end_ns
+        self.samples.stop()
+        record = record_from_samples(experiment, session.trial, session.feedforward,
+                                     self.samples.position, self.samples.velocity,
+                                     session.levels, experiment.reference,
+                                     aborted if aborted >= 0 else None)
+        self._stage_live_changes()
+        try:
+            conclusion = session.conclude(record)
+        except ExoIlcError as exc:
+            self.fail(str(exc))
+            return
+        if conclusion.applied:
+            changed = ", ".join(f"{k} = {v}" for k, v in sorted(conclusion.applied.items()))
+            self.port.log(False, f"parameters changed; applied from trial {session.trial}: "
+                          f"{changed}")
+        if record.aborted:
+            self.port.log(True, f"trial {record.trial} aborted by the error envelope at "
+                          f"sample {aborted}; not learned from")
+        self.port.publish_conclusion(conclusion, self.end_ns)
+        self.unsaved, self.unsaved_since = conclusion, self.clock()
+        if self.config["wait_for_recorder"] and not self.recorder_lost \
+                and self.recorder_filed < record.trial:
+            # Stored once the bag holds it; the next trial is prepared meanwhile.
+            if session.finished:
+                self.after_save = "finish"
+                self._enter(Phase.WAIT_RECORDER)
+            else:
+                self._reset()
+        elif self._save():
+            if session.finished:
+                self._finish()
+            else:
+                self._reset()
+
+    def _stage_live_changes(self) -> None:
+        assert self.session is not None
+        live = self.live()
+        if live is self.seen:
+            return
+        changed = {name: live[name] for name in sorted(LIVE) if live[name] != self.seen[name]}
+        self.seen = live
+        self.session.stage(changed)
+
+    def _save(self) -> bool:
+        """The concluded trial into the store (False: it could not be saved; run stopped)."""
+        assert self.unsaved is not None
+        conclusion, self.unsaved = self.unsaved, None
+        if self.store is not None:
+            try:
+                self.store.save(conclusion.record, conclusion.update, conclusion.config)
+            except (ExoIlcError, OSError) as exc:
+                trial = conclusion.record.trial
+                self.fail(f"trial {trial}: cannot save to the store: {exc}", trial - 1)
+                return False
+        return True
+
+    def _store_unsaved(self) -> None:
+        if not self._save() or self.phase is not Phase.WAIT_RECORDER:
+            return
+        if self.after_save == "finish":
+            self._finish()
+        else:
+            self._begin_trial()
+
+    def _finish(self, completed: int | None = None,
+                values: Sequence[tuple[str, str]] = ()) -> None:
+        trials = self.completed if completed is None else completed
+        self._enter(Phase.FINISHED)
+        self.port.event("finished", [("trials", str(trials)), *values], self.end_ns or None)
+        self.port.log(False, f"finished after {trials} trials")
+
+    def fail(self, message: str, completed: int | None = None, code: int = 1) -> None:
+        """Stop running trials: ``finished`` with the error after ``completed`` trials
+        (default: those concluded); the node exits with ``code``."""
+        self.error = message
+        self.port.log(True, message)
+        self._finish(completed, [("error", message)])
+        self.exit_code = code

@@ -1,0 +1,235 @@
+"""The trial protocol without ROS: a fake graph port that runs each trial with the in-process
+kernel and answers like the plant, the controller and the recorder would. The protocol must give
+run_trials' numbers, run a discarded trial again with the same feed-forward, store a trial only
+once the recorder filed it, and stop on a store error."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from exo_ilc_ros.core import Experiment, load_config, run_trials
+from exo_ilc_ros.core.protocol import STEP_TIMEOUT, Phase, TrialProtocol
+from exo_ilc_ros.core.session import TrialConclusion
+from exo_ilc_ros.core.store import RunStore
+
+SHORT = {"trajectory.duration": 1.0}
+PLANT = {"mass_uncertainty": 0.1}
+
+
+class FakeGraph:
+    """Plant, controller and recorder answering at once (``auto``) or when told."""
+
+    def __init__(self, config: Any, auto_file: bool = True) -> None:
+        self.experiment = Experiment(config, PLANT["mass_uncertainty"])
+        self.protocol: TrialProtocol | None = None
+        self.t0 = 1_000_000_000
+        self.pushed: list[tuple[int, np.ndarray]] = []
+        self.conclusions: list[TrialConclusion] = []
+        self.events: list[tuple[str, dict[str, str]]] = []
+        self.errors: list[str] = []
+        self.auto_file = auto_file
+        self.drop_sample: int | None = None
+        self.watchdog_once = False
+        self.pending_start = False
+        self.now = 0.0
+
+    # GraphPort
+    def reset(self) -> None:
+        self.t0 += 10_000_000_000
+        assert self.protocol is not None
+        self.protocol.on_reset(self.t0)
+
+    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray) -> None:
+        self.pushed.append((trial, feedforward.copy()))
+        assert self.protocol is not None
+        self.protocol.on_acknowledged(trial, t0_ns)
+
+    def start(self) -> None:
+        self.pending_start = True
+
+    def publish_conclusion(self, conclusion: TrialConclusion, end_ns: int) -> None:
+        self.conclusions.append(conclusion)
+
+    def event(self, message: str, values: Sequence[tuple[str, str]],
+              stamp_ns: int | None = None) -> None:
+        self.events.append((message, dict(values)))
+
+    def log(self, error: bool, text: str) -> None:
+        if error:
+            self.errors.append(text)
+
+    # driving
+    def run_started_trial(self) -> None:
+        """The plant runs the trial that was started: samples, then the controller's done."""
+        protocol = self.protocol
+        assert protocol is not None and protocol.session is not None and self.pending_start
+        self.pending_start = False
+        protocol.on_started(True)
+        trial, ff = self.pushed[-1]
+        record = self.experiment.run_trial(ff, trial, protocol.session.levels)
+        step = protocol.samples.step_ns
+        for i in range(record.position.shape[0]):
+            if i == self.drop_sample:
+                self.drop_sample = None
+                continue
+            protocol.on_sample(self.t0 + i * step, record.position[i], record.velocity[i])
+        trips = "1" if self.watchdog_once else "0"
+        self.watchdog_once = False
+        aborted = "-1" if record.aborted_at is None else str(record.aborted_at)
+        protocol.on_done(trial, self.t0, {"watchdog_trips": trips, "aborted_at": aborted})
+        if self.auto_file:
+            protocol.on_recorder_filed(trial)
+
+    def clock(self) -> float:
+        return self.now
+
+
+def _protocol(graph: FakeGraph, **overrides: Any) -> TrialProtocol:
+    config = load_config(overrides={**SHORT, **overrides})
+    protocol = TrialProtocol(config, graph, clock=graph.clock)
+    graph.protocol = protocol
+    protocol.open(PLANT)
+    protocol.tick(graph_ready=True)
+    return protocol
+
+
+def _run_to_end(graph: FakeGraph, protocol: TrialProtocol, limit: int = 100) -> None:
+    for _ in range(limit):
+        if protocol.phase is Phase.FINISHED:
+            return
+        graph.run_started_trial()
+    raise AssertionError("the protocol did not finish")
+
+
+def test_protocol_gives_run_trials_numbers() -> None:
+    config = load_config(overrides={**SHORT, "max_trials": 5})
+    graph = FakeGraph(config)
+    protocol = _protocol(graph, max_trials=5)
+    _run_to_end(graph, protocol)
+    local = run_trials(config, PLANT["mass_uncertainty"])
+    np.testing.assert_array_equal([c.record.max_abs_error for c in graph.conclusions],
+                                  local.max_abs_errors)
+    assert [c.config["mass_uncertainty"] for c in graph.conclusions] == [0.1] * 5
+    assert graph.events[-1] == ("finished", {"trials": "5"})
+
+
+@pytest.mark.parametrize("fault", ["watchdog", "lost"])
+def test_a_discarded_trial_runs_again_with_the_same_feedforward(fault: str) -> None:
+    config = load_config(overrides={**SHORT, "max_trials": 3})
+    graph = FakeGraph(config)
+    protocol = _protocol(graph, max_trials=3)
+    graph.run_started_trial()
+    if fault == "watchdog":
+        graph.watchdog_once = True
+    else:
+        graph.drop_sample = 50
+    graph.run_started_trial()  # trial 2, discarded
+    assert [trial for trial, _ in graph.pushed] == [1, 2, 2]
+    np.testing.assert_array_equal(graph.pushed[1][1], graph.pushed[2][1])
+    _run_to_end(graph, protocol)
+    assert protocol.session is not None and protocol.session.retried == [(2, fault)]
+    local = run_trials(config, PLANT["mass_uncertainty"])
+    np.testing.assert_array_equal([c.record.max_abs_error for c in graph.conclusions],
+                                  local.max_abs_errors)
+
+
+def test_a_stuck_step_is_discarded_after_the_timeout() -> None:
+    graph = FakeGraph(load_config(overrides=SHORT))
+    protocol = _protocol(graph)
+    graph.pending_start = False
+    protocol.on_started(True)  # running, but no sample ever comes
+    graph.now += STEP_TIMEOUT + 1
+    protocol.tick(graph_ready=True)
+    assert ("aborted", {"trial": "1", "reason": "timeout", "phase": "running"}) in graph.events
+    assert [trial for trial, _ in graph.pushed] == [1, 1]
+
+
+def test_stored_only_after_the_recorder_filed_it(tmp_path: Path) -> None:
+    config = load_config(overrides={**SHORT, "max_trials": 2})
+    graph = FakeGraph(config, auto_file=False)
+    protocol = _protocol(graph, max_trials=2, wait_for_recorder=True,
+                         **{"store.directory": str(tmp_path)})
+    graph.run_started_trial()
+    assert protocol.store is not None and protocol.store.completed == 0
+    assert protocol.phase is Phase.WAIT_RECORDER, "trial 2 prepared, not started"
+    assert not graph.pending_start
+    protocol.on_recorder_filed(1)
+    assert protocol.store.completed == 1 and graph.pending_start
+    graph.run_started_trial()
+    assert protocol.phase is Phase.WAIT_RECORDER and protocol.store.completed == 1
+    protocol.on_recorder_filed(2)
+    assert protocol.phase is Phase.FINISHED and protocol.store.completed == 2
+
+
+def test_a_silent_recorder_does_not_hold_the_run(tmp_path: Path) -> None:
+    graph = FakeGraph(load_config(overrides=SHORT), auto_file=False)
+    protocol = _protocol(graph, max_trials=2, wait_for_recorder=True)
+    graph.run_started_trial()
+    graph.now += 6.0
+    protocol.tick(graph_ready=True)
+    assert protocol.recorder_lost and graph.pending_start
+    assert any("has not filed trial 1" in e for e in graph.errors)
+
+
+def test_a_store_that_cannot_save_stops_the_run(tmp_path: Path) -> None:
+    graph = FakeGraph(load_config(overrides=SHORT))
+    protocol = _protocol(graph, **{"store.directory": str(tmp_path)})
+    assert protocol.store is not None
+
+    def broken(*args: Any) -> None:
+        raise OSError("disk full")
+
+    protocol.store.save = broken  # type: ignore[method-assign]
+    graph.run_started_trial()
+    assert protocol.exit_code == 1 and protocol.phase is Phase.FINISHED
+    message, values = graph.events[-1]
+    assert message == "finished" and values["trials"] == "0" and "disk full" in values["error"]
+
+
+def test_resume_continues_after_the_stored_trials(tmp_path: Path) -> None:
+    config = load_config(overrides={**SHORT, "max_trials": 4})
+    run_trials(config, PLANT["mass_uncertainty"], 2, store=tmp_path)
+    graph = FakeGraph(config)
+    protocol = _protocol(graph, max_trials=4, **{"store.directory": str(tmp_path),
+                                                 "store.resume": True})
+    assert graph.events[0] == ("resumed", {"trials": "2"})
+    _run_to_end(graph, protocol)
+    assert [c.record.trial for c in graph.conclusions] == [3, 4]
+    whole = run_trials(config, PLANT["mass_uncertainty"])
+    np.testing.assert_array_equal([c.record.max_abs_error for c in graph.conclusions],
+                                  whole.max_abs_errors[2:])
+    assert RunStore(tmp_path, config.replace(PLANT), protocol.reference).completed == 4
+
+
+def test_a_store_holding_trials_without_resume_stops_before_trial_1(tmp_path: Path) -> None:
+    config = load_config(overrides=SHORT)
+    run_trials(config, PLANT["mass_uncertainty"], 1, store=tmp_path)
+    graph = FakeGraph(config)
+    protocol = _protocol(graph, **{"store.directory": str(tmp_path)})
+    assert protocol.exit_code == 2 and graph.pushed == []
+    assert "already holds 1 trials" in graph.events[-1][1]["error"]
+
+
+def test_a_late_start_reply_does_not_lose_the_trial() -> None:
+    """The plant's start reply can arrive after the whole trial (a reliable reply resent after a
+    lost packet): the samples prove the plant started, the controller's done is kept, and the
+    trial ends (before, it waited for the 30 s timeout and was run again)."""
+    config = load_config(overrides={**SHORT, "max_trials": 2})
+    graph = FakeGraph(config)
+    protocol = _protocol(graph, max_trials=2)
+    assert protocol.phase is Phase.STARTING
+    trial, ff = graph.pushed[-1]
+    record = graph.experiment.run_trial(ff, trial)
+    step = protocol.samples.step_ns
+    protocol.on_done(trial, graph.t0, {"watchdog_trips": "0", "aborted_at": "-1"})
+    for i in range(record.position.shape[0]):
+        protocol.on_sample(graph.t0 + i * step, record.position[i], record.velocity[i])
+    assert [c.record.trial for c in graph.conclusions] == [1]
+    protocol.on_started(True)  # the late reply changes nothing
+    assert [trial for trial, _ in graph.pushed] == [1, 2]
+    assert protocol.session is not None and protocol.session.retried == []

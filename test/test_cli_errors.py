@@ -400,10 +400,10 @@ def test_param_against_a_running_node(capsys: pytest.CaptureFixture[str]) -> Non
 
 def test_rerun_note_says_what_happened_in_plain_words() -> None:
     """The note `analyze`/`paper`/`run` print for a trial that was run again."""
-    from exo_ilc_ros.bag.reader import PROTOCOL_STEPS, STEP_TIMEOUT_S, rerun_note
-    from exo_ilc_ros.nodes.ilc_supervisor import STEP_TIMEOUT, Phase
+    from exo_ilc_ros.bag.reader import PROTOCOL_STEPS, rerun_note
+    from exo_ilc_ros.core.protocol import STEP_TIMEOUT, Phase
 
-    assert STEP_TIMEOUT == STEP_TIMEOUT_S
+    assert STEP_TIMEOUT == 30.0
     assert {p.value for p in Phase} - {"finished"} <= set(PROTOCOL_STEPS)
     note = rerun_note(108, {"trial": "108", "phase": "running"})
     assert note.startswith("trial 108 was aborted once and run again")

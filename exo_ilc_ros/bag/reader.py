@@ -30,6 +30,7 @@ import yaml
 
 from .. import topics
 from ..core.experiment import build_reference
+from ..core.protocol import STEP_TIMEOUT
 from ..report import RunSummary
 from . import messages
 from .cdr import joint_states
@@ -323,10 +324,6 @@ def _trial_number(values: dict[str, str], key: str = "trial") -> int | None:
 ``aborted`` events (watchdog, a stuck protocol step), that trial is not run again."""
 
 
-STEP_TIMEOUT_S = 30
-"""``ilc_supervisor.STEP_TIMEOUT``: wall seconds a protocol step may make no progress before
-the supervisor aborts the attempt (not imported: the reader needs no node code)."""
-
 PROTOCOL_STEPS = {
     "wait_graph": "waiting for the plant and the controller",
     "resetting": "moving the plant back to the start pose",
@@ -335,7 +332,7 @@ PROTOCOL_STEPS = {
     "running": "running the trial (no new joint sample arrived)",
     "wait_recorder": "waiting for bag_recorder to file the trial",
 }
-"""What the supervisor was doing in each protocol step (``Phase`` in ilc_supervisor)."""
+"""What the supervisor was doing in each protocol step (``core.protocol.Phase``)."""
 
 
 def rerun_note(trial: int, values: dict[str, str]) -> str:
@@ -352,7 +349,7 @@ def rerun_note(trial: int, values: dict[str, str]) -> str:
     else:  # "timeout" (older bags: no reason, only the phase)
         phase = values.get("phase", "?")
         cause = (f"stuck: the protocol step {phase!r} ({PROTOCOL_STEPS.get(phase, 'unknown')}) "
-                 f"made no progress for {STEP_TIMEOUT_S} s, which happens when the machine is "
+                 f"made no progress for {STEP_TIMEOUT:g} s, which happens when the machine is "
                  "busy")
     return (f"trial {trial} was aborted once and run again ({cause}); the supervisor "
             "discarded that attempt and ran the trial again from the same feed-forward. The "

@@ -1,0 +1,92 @@
+"""Packaging: package.xml declares what setup.py installs (so `rosdep install` gives a working
+package on a ROS machine)."""
+
+from __future__ import annotations
+
+import ast
+import re
+import runpy
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import pytest
+import setuptools
+
+ROOT = Path(__file__).resolve().parents[1]
+
+ROSDEP_KEYS: dict[str, str] = {
+    "setuptools": "python3-setuptools",
+    "numpy": "python3-numpy",
+    "numba": "python3-numba",
+    "scipy": "python3-scipy",
+    "pyyaml": "python3-yaml",
+    "tqdm": "python3-tqdm",
+    "matplotlib": "python3-matplotlib",
+    "rosbags": "python3-rosbags-pip",
+    "mcap": "python3-mcap-pip",
+    "mcap-ros2-support": "mcap-ros2-support",
+    "optuna": "python3-optuna-pip",
+}
+"""pip name -> rosdep key (rosdistro's rosdep/python.yaml: the system package where there is
+one, a ``-pip`` key otherwise; ``mcap-ros2-support`` is that key's own name there)."""
+ROS_PREFIX = "ros-jazzy-"
+"""A ROS package's wheel: ``ros-jazzy-sensor-msgs`` -> the package ``sensor_msgs``."""
+ROS_EXTRAS: dict[str, str] = {"fastrtps": "rmw_fastrtps_cpp"}
+"""Extras of the ROS wheels -> the ROS package they pull in."""
+
+
+def setup_arguments() -> dict[str, Any]:
+    """The keyword arguments setup.py passes to ``setuptools.setup`` (run, not parsed)."""
+    captured: dict[str, Any] = {}
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(setuptools, "setup", lambda **kwargs: captured.update(kwargs))
+        patch.chdir(ROOT)
+        runpy.run_path(str(ROOT / "setup.py"), run_name="__main__")
+    return captured
+
+
+def rosdep_keys(requirement: str) -> list[str]:
+    """The rosdep keys that install one ``install_requires`` entry."""
+    match = re.fullmatch(r"([A-Za-z0-9_.-]+)(?:\[([^\]]*)\])?\s*(?:[<>=!~].*)?", requirement)
+    assert match, f"cannot parse the requirement {requirement!r}"
+    name = match.group(1).lower().replace("_", "-")
+    extras = [e.strip() for e in (match.group(2) or "").split(",") if e.strip()]
+    if name.startswith(ROS_PREFIX):
+        keys = [name[len(ROS_PREFIX):].replace("-", "_")]
+    else:
+        assert name in ROSDEP_KEYS, (f"setup.py requires {name!r}: add its rosdep key to "
+                                     "ROSDEP_KEYS here and an <exec_depend> to package.xml")
+        keys = [ROSDEP_KEYS[name]]
+    for extra in extras:
+        assert extra in ROS_EXTRAS, f"{requirement}: add the extra {extra!r} to ROS_EXTRAS"
+        keys.append(ROS_EXTRAS[extra])
+    return keys
+
+
+def declared_run_dependencies() -> set[str]:
+    """``<exec_depend>`` and ``<depend>`` keys of package.xml."""
+    root = ET.parse(ROOT / "package.xml").getroot()
+    return {e.text.strip() for tag in ("exec_depend", "depend") for e in root.iter(tag)
+            if e.text}
+
+
+def test_package_xml_declares_every_install_requirement() -> None:
+    requires = setup_arguments()["install_requires"]
+    assert "numba>=0.60" in requires  # really read setup.py's list
+    declared = declared_run_dependencies()
+    missing = {(r, k) for r in requires for k in rosdep_keys(r) if k not in declared}
+    assert not missing, f"package.xml lacks <exec_depend> for {sorted(missing)}"
+
+
+def test_package_xml_declares_the_launch_files_imports() -> None:
+    declared = declared_run_dependencies()
+    for launch_file in (ROOT / "launch").glob("*.py"):
+        tree = ast.parse(launch_file.read_text())
+        imported = {alias.name.split(".")[0] for node in ast.walk(tree)
+                    if isinstance(node, ast.Import) for alias in node.names}
+        imported |= {node.module.split(".")[0] for node in ast.walk(tree)
+                     if isinstance(node, ast.ImportFrom) and node.module and not node.level}
+        ros = imported - set(sys.stdlib_module_names) - {"exo_ilc_ros"}
+        assert ros <= declared, f"{launch_file.name} imports {sorted(ros - declared)}"

@@ -90,3 +90,30 @@ def test_package_xml_declares_the_launch_files_imports() -> None:
                      if isinstance(node, ast.ImportFrom) and node.module and not node.level}
         ros = imported - set(sys.stdlib_module_names) - {"exo_ilc_ros"}
         assert ros <= declared, f"{launch_file.name} imports {sorted(ros - declared)}"
+
+
+DOCUMENTS = ("*.md", "docs/*.md", "bags/*.md", "config/*.yaml", "launch/*.py", "setup.py")
+LINK = re.compile(r"\]\(([^)\s]+)\)")
+UPWARD = re.compile(r"(?<![\w.])(\.\./[^\s`'\")\]]*)")
+
+
+def test_links_stay_inside_the_repository() -> None:
+    """Every relative Markdown link resolves to a file of the repository, and no path written
+    with ``../`` leaves it (a reader of a clone or a copy has nothing else)."""
+    root = ROOT.resolve()
+    checked = 0
+    for pattern in DOCUMENTS:
+        for document in sorted(ROOT.glob(pattern)):
+            text = document.read_text()
+            for target in LINK.findall(text):
+                if re.match(r"[a-z]+:", target) or target.startswith("#"):
+                    continue
+                path = (document.parent / target.split("#")[0]).resolve()
+                assert path.is_relative_to(root) and path.exists(), \
+                    f"{document.relative_to(ROOT)}: link {target} does not resolve in the repo"
+                checked += 1
+            for target in UPWARD.findall(text):
+                path = (document.parent / target).resolve()
+                assert path.is_relative_to(root), \
+                    f"{document.relative_to(ROOT)}: {target} points outside the repository"
+    assert checked >= 2  # README -> docs/paper-reading.md and its figure at least

@@ -117,3 +117,9 @@ def test_links_stay_inside_the_repository() -> None:
                 assert path.is_relative_to(root), \
                     f"{document.relative_to(ROOT)}: {target} points outside the repository"
     assert checked >= 2  # README -> docs/paper-reading.md and its figure at least
+
+
+def test_the_package_ships_its_type_hints() -> None:
+    """PEP 561: ``py.typed`` is in the package and installed with it."""
+    assert (ROOT / "exo_ilc_ros" / "py.typed").is_file()
+    assert "py.typed" in setup_arguments()["package_data"]["exo_ilc_ros"]

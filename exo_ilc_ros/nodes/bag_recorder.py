@@ -76,7 +76,8 @@ class BagRecorder(Node):
     """Writes the graph's topics into a bag, one storage file per trial."""
 
     DRAINS_ON_STOP = True
-    """On SIGINT/SIGTERM :func:`~.common.run_nodes` polls on until the last messages are in."""
+    """On SIGINT/SIGTERM :func:`~.common.run_nodes` polls on until the last messages are in
+    (a :class:`~.common.DrainingNode`)."""
 
     def __init__(self) -> None:
         super().__init__(NAME)
@@ -114,6 +115,8 @@ class BagRecorder(Node):
         self.summarised: set[int] = set()
         self.changes: list[ParameterChange] = []
         self.messages = 0
+        self.exit_code: int | None = None
+        """Never set: the recorder has no fatal error of its own (a bag error raises)."""
 
         self.inbox = Inbox(self)  # every topic, drained in batches (see Inbox)
         for topic, msgtype in topics.TYPES.items():

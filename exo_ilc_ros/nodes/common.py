@@ -8,7 +8,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
-from typing import Any
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 import rclpy
@@ -270,6 +270,29 @@ spun on until its ``poll()`` handled nothing for DRAIN_IDLE s (at most DRAIN_MAX
 graph published before it was told to stop is still taken (the recorder writes it)."""
 
 
+@runtime_checkable
+class PollingNode(Protocol):
+    """A node :func:`run_nodes` polls (an :class:`Inbox` owner)."""
+
+    exit_code: int | None
+    """Not None: the node hit a fatal error (already logged and reported on /diagnostics) and
+    the process must stop with this code."""
+
+    def poll(self) -> int | None:
+        """Handle what waits in the inbox; returns how many messages (None: not counted).
+        Called after every executor event and at least every :data:`INBOX_PERIOD`."""
+        ...
+
+
+@runtime_checkable
+class DrainingNode(PollingNode, Protocol):
+    """A :class:`PollingNode` that is polled on after a stop until its inbox is quiet
+    (:data:`DRAIN_IDLE`) and destroyed last (the bag recorder: what the graph published before
+    the stop still reaches the bag)."""
+
+    DRAINS_ON_STOP: ClassVar[bool]
+
+
 def spin(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
     """Init, build the node, spin it until SIGINT/SIGTERM; its exit code (see
     :func:`run_nodes`)."""
@@ -281,12 +304,11 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     EventsExecutor (``spin_once`` in a loop, never ``spin()``) until SIGINT/SIGTERM.
 
     Nodes of one process share one DDS participant, so a topic several of them read crosses
-    the process boundary once (ROS 2 composition). A node with a ``poll()`` method (an
-    :class:`Inbox` owner) has it called after every event and at least every
-    :data:`INBOX_PERIOD`. On stop, nodes without ``DRAINS_ON_STOP`` are destroyed first, the
-    others drained (:data:`DRAIN_IDLE`) and then destroyed (the recorder closes its bag).
-    Returns the exit code: 0, 2 for a configuration or bag error, or the first ``exit_code``
-    a node sets (a fatal error it already logged and reported on /diagnostics).
+    the process boundary once (ROS 2 composition). A :class:`PollingNode` has its ``poll()``
+    called after every event and at least every :data:`INBOX_PERIOD`. On stop, every node but
+    the :class:`DrainingNode` ones is destroyed first, those are drained (:data:`DRAIN_IDLE`)
+    and then destroyed (the recorder closes its bag). Returns the exit code: 0, 2 for a
+    configuration or bag error, or the first ``exit_code`` a polling node sets.
     """
     stop: list[int] = []
 
@@ -302,25 +324,23 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         for make_node in factories:
             nodes.append(make_node())
             executor.add_node(nodes[-1])
-        polls = [poll for poll in (getattr(node, "poll", None) for node in nodes)
-                 if poll is not None]
-        timeout = INBOX_PERIOD if polls else 0.1
+        polling = [node for node in nodes if isinstance(node, PollingNode)]
+        timeout = INBOX_PERIOD if polling else 0.1
         while not stop and rclpy.ok():
             executor.spin_once(timeout_sec=timeout)
-            for poll in polls:
-                poll()
-            codes = [c for c in (getattr(node, "exit_code", None) for node in nodes)
-                     if c is not None]
+            for node in polling:
+                node.poll()
+            codes = [node.exit_code for node in polling if node.exit_code is not None]
             if codes:  # a node that must stop (fatal error)
                 code = int(codes[0])
                 break
-        draining = [node for node in nodes if getattr(node, "DRAINS_ON_STOP", False)]
+        draining = [node for node in polling
+                    if isinstance(node, DrainingNode) and node.DRAINS_ON_STOP]
         for node in [n for n in nodes if n not in draining]:
             executor.remove_node(node)
             nodes.remove(node)
             node.destroy_node()
-        _drain(executor, [poll for poll in (getattr(node, "poll", None) for node in draining)
-                          if poll is not None])
+        _drain(executor, [node.poll for node in draining])
     except ExoIlcError as exc:
         print(f"error: {exc}", file=sys.stderr, flush=True)
         code = 2

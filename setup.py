@@ -1,10 +1,15 @@
 """ament_python package: `colcon build` on a ROS install, or `pip install -e .[test]` here."""
 
+import os
+import runpy
 from glob import glob
 
 from setuptools import find_packages, setup
 
 package_name = "exo_ilc_ros"
+HERE = os.path.dirname(os.path.abspath(__file__))
+REGISTRY = runpy.run_path(os.path.join(HERE, package_name, "nodes", "registry.py"))
+"""The node registry (plain data: read without importing the package)."""
 
 ROS_DEPENDENCIES = [
     "ros-jazzy-rclpy[fastrtps]",
@@ -59,11 +64,7 @@ setup(
     entry_points={
         "console_scripts": [
             "exo-ilc = exo_ilc_ros.cli.main:main",
-            "plant_simulator = exo_ilc_ros.nodes.plant_simulator:main",
-            "computed_torque_controller = exo_ilc_ros.nodes.computed_torque_controller:main",
-            "ilc_supervisor = exo_ilc_ros.nodes.ilc_supervisor:main",
-            "bag_recorder = exo_ilc_ros.nodes.bag_recorder:main",
-            "container = exo_ilc_ros.nodes.container:main",
+            *REGISTRY["console_scripts"](),
         ],
     },
 )

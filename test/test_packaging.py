@@ -7,6 +7,7 @@ import ast
 import re
 import runpy
 import sys
+import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
@@ -123,3 +124,100 @@ def test_the_package_ships_its_type_hints() -> None:
     """PEP 561: ``py.typed`` is in the package and installed with it."""
     assert (ROOT / "exo_ilc_ros" / "py.typed").is_file()
     assert "py.typed" in setup_arguments()["package_data"]["exo_ilc_ros"]
+
+
+def test_setup_installs_the_registrys_executables() -> None:
+    from exo_ilc_ros.nodes import registry
+
+    scripts = setup_arguments()["entry_points"]["console_scripts"]
+    assert scripts == ["exo-ilc = exo_ilc_ros.cli.main:main", *registry.console_scripts()]
+    assert {s.split(" = ")[0] for s in scripts} >= {n.name for n in registry.NODES}
+
+
+def test_one_node_registry() -> None:
+    """The launcher, the container, the recorder's spec and the nodes' own names agree with
+    the registry, and every registry entry points at a real node class and main."""
+    import importlib
+
+    from exo_ilc_ros.bag.recording import RECORDER_MODULE
+    from exo_ilc_ros.core import schema
+    from exo_ilc_ros.launcher import GRAPH_NODES
+    from exo_ilc_ros.nodes import container, registry
+
+    assert [(s.name, s.module) for s in GRAPH_NODES] == \
+        [(n.name, n.module) for n in registry.GRAPH]
+    assert [n.name for n in registry.GRAPH] == [schema.PLANT, schema.CONTROLLER,
+                                               schema.SUPERVISOR]
+    assert {n.name: f"{n.module}:{n.cls}" for n in registry.NODES} == container.NODES
+    assert registry.RECORDER.module == RECORDER_MODULE
+    for node in registry.NODES:
+        module = importlib.import_module(node.module)
+        assert node.name == module.NAME
+        assert callable(module.main) and isinstance(getattr(module, node.cls), type)
+
+
+class _Stub:
+    """Records the arguments it was built with (stands in for launch's classes)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        self.args = args
+        self.kwargs = kwargs
+
+
+class _LaunchConfiguration:
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def perform(self, context: dict[str, str]) -> str:
+        return context[self.name]
+
+
+def _launched(monkeypatch: pytest.MonkeyPatch, **arguments: str) -> list[dict[str, Any]]:
+    """The nodes the launch file starts with these launch arguments (launch and launch_ros
+    stubbed: they are not on PyPI)."""
+    import types
+
+    import ament_index_python.packages
+
+    contents: dict[str, dict[str, Any]] = {
+        "launch": {"LaunchDescription": list},
+        "launch.actions": {"DeclareLaunchArgument": _Stub, "OpaqueFunction": _Stub},
+        "launch.launch_context": {"LaunchContext": dict},
+        "launch.substitutions": {"LaunchConfiguration": _LaunchConfiguration},
+        "launch_ros": {},
+        "launch_ros.actions": {"Node": _Stub},
+    }
+    modules = {name: types.ModuleType(name) for name in contents}
+    for name, module in modules.items():
+        vars(module).update(contents[name])
+    for name, module in modules.items():
+        monkeypatch.setitem(sys.modules, name, module)
+    monkeypatch.setattr(ament_index_python.packages, "get_package_share_directory",
+                        lambda package: str(ROOT))
+    launch_file = runpy.run_path(str(ROOT / "launch" / "exo_ilc.launch.py"))
+    description = launch_file["generate_launch_description"]()
+    context = {a.args[0]: a.kwargs["default_value"] for a in description if "default_value"
+               in a.kwargs}
+    assert set(arguments) <= set(context)
+    context.update(arguments)
+    (opaque,) = [a for a in description if "function" in a.kwargs]
+    return [node.kwargs for node in opaque.kwargs["function"](context)]
+
+
+def test_launch_file_starts_the_graph_and_the_recorder(monkeypatch: pytest.MonkeyPatch,
+                                                       tmp_path: Path) -> None:
+    from exo_ilc_ros.core.config import load_config
+    from exo_ilc_ros.nodes import registry
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    nodes = _launched(monkeypatch, mass_uncertainty="0.1", bag_path=str(tmp_path / "bag"))
+    assert [n["executable"] for n in nodes] == [n.name for n in (*registry.GRAPH,
+                                                                 registry.RECORDER)]
+    assert all(n["name"] == n["executable"] for n in nodes)
+    assert nodes[0]["parameters"][-1] == {"mass_uncertainty": 0.1}
+    assert nodes[1]["parameters"] == [str(ROOT / "config" / "exo_ilc.yaml")]
+    (recorder,) = nodes[3]["parameters"]
+    assert recorder["bag_path"] == str(tmp_path / "bag")
+    assert load_config(recorder["config_file"])["mass_uncertainty"] == 0.1
+    assert [n["executable"] for n in _launched(monkeypatch, record="false")] == \
+        [n.name for n in registry.GRAPH]

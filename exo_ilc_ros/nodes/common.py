@@ -25,6 +25,7 @@ from rclpy.signals import SignalHandlerOptions
 from ..core import schema
 from ..core.config import Config, load_config
 from ..core.errors import ConfigError, ExoIlcError
+from ..core.validation import validate_update
 
 SAMPLES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                          reliability=ReliabilityPolicy.RELIABLE,
@@ -62,13 +63,17 @@ class SchemaParameters:
     Every parameter of ``schema.parameters_of(section)`` is declared with the shipped YAML's
     value as default, so ``--params-file`` and ``-p`` override it. Types are dynamic and every
     value goes through the schema's ``coerce`` (a user writing ``0`` for a double is fine).
-    Changes at runtime: ``live`` parameters are validated with the schema (and the rules
-    between parameters) and accepted into :attr:`pending`; any other change is rejected with the
-    reason. The node decides when :attr:`pending` takes effect.
+    Changes at runtime, the way rclpy's demos do it: the on-set callback validates (``live``
+    parameters only, the schema and the rules between parameters:
+    :func:`~exo_ilc_ros.core.validation.validate_update`, the one validation path) and changes
+    nothing; a refused change returns the key and the rule. The post-set callback, called once
+    rclpy has stored the values, applies them to :attr:`pending` and tells the
+    :attr:`listeners`. The node decides when :attr:`pending` takes effect.
     """
 
     def __init__(self, node: Node, section: str) -> None:
         self._node = node
+        self._section = section
         self._params = {p.name: p for p in schema.parameters_of(section)}
         defaults = load_config()
         for p in self._params.values():
@@ -81,32 +86,32 @@ class SchemaParameters:
         self.pending: Config = self.config
         """The configuration including accepted live changes."""
         self.listeners: list[Callable[[Config], None]] = []
-        node.add_on_set_parameters_callback(self._on_set_parameters)
+        """Called with the new :attr:`pending` after every accepted change."""
+        node.add_on_set_parameters_callback(self.on_set_parameters)
+        node.add_post_set_parameters_callback(self.on_parameters_set)
 
-    def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        changes: dict[str, Any] = {}
-        for parameter in parameters:
-            spec = self._params.get(parameter.name)
-            if spec is None:
-                if parameter.name in schema.ROS_BUILTIN:
-                    continue
-                return SetParametersResult(successful=False,
-                                           reason=f"{parameter.name}: unknown parameter")
-            if not spec.live:
-                return SetParametersResult(
-                    successful=False, reason=f"{spec.name}: cannot change while the graph runs "
-                    "(restart the node with the new value)")
-            changes[spec.name] = parameter.value
-        if not changes:
-            return SetParametersResult(successful=True)
-        try:
-            updated = self.pending.replace(changes)
-        except ConfigError as exc:
-            return SetParametersResult(successful=False, reason=f"{exc.key}: {exc.rule}")
+    def _update(self, parameters: list[Parameter]) -> Config | ConfigError:
+        return validate_update(self.pending, {p.name: p.value for p in parameters},
+                               node=self._section)
+
+    def on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Validate a change (nothing changes here: another callback may still refuse it)."""
+        checked = self._update(parameters)
+        if isinstance(checked, ConfigError):
+            return SetParametersResult(successful=False, reason=f"{checked.key}: {checked.rule}")
+        return SetParametersResult(successful=True)
+
+    def on_parameters_set(self, parameters: list[Parameter]) -> None:
+        """Apply a change rclpy has stored: into :attr:`pending`, then the listeners."""
+        updated = self._update(parameters)
+        if isinstance(updated, ConfigError):  # validated by on_set_parameters on this state
+            self._node.get_logger().error(f"parameter change not applied: {updated}")
+            return
+        if updated is self.pending:
+            return
         self.pending = updated
         for listener in self.listeners:
             listener(updated)
-        return SetParametersResult(successful=True)
 
 
 def status(name: str, message: str, values: Iterable[tuple[str, str]] = (),

@@ -279,9 +279,11 @@ graph published before it was told to stop is still taken (the recorder writes i
 class PollingNode(Protocol):
     """A node :func:`run_nodes` polls (an :class:`Inbox` owner)."""
 
-    exit_code: int | None
-    """Not None: the node hit a fatal error (already logged and reported on /diagnostics) and
-    the process must stop with this code."""
+    @property
+    def exit_code(self) -> int | None:
+        """Not None: the node hit a fatal error (already logged and reported on /diagnostics)
+        and the process must stop with this code."""
+        ...
 
     def poll(self) -> int | None:
         """Handle what waits in the inbox; returns how many messages (None: not counted).

@@ -136,7 +136,7 @@ def test_tune_never_overwrites_the_shipped_tuned_yaml(
     assert load_config(written)["law"] == "sign"
     assert (tmp_path / "config" / "tuned.yaml").read_bytes() == shipped.read_bytes()
     assert hashlib.sha256(shipped.read_bytes()).hexdigest() == before
-    assert "/.exo-ilc/" in (ROOT / ".gitignore").read_text().replace(".exo-ilc/", "/.exo-ilc/")
+    assert ".exo-ilc/" in (ROOT / ".gitignore").read_text().split()  # where it went: ignored
 
 
 def _fake(path: Path, size: int, age_days: float, bag: bool = True) -> Path:

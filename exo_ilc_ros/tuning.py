@@ -339,6 +339,37 @@ def make_sampler(seed: int | None) -> optuna.samplers.BaseSampler:
                                       n_startup_trials=10)
 
 
+CREATE_ATTEMPTS = 5
+"""Tries at creating/loading a study on a database: processes starting together on an empty
+one race to create Optuna's tables (PostgreSQL: 'duplicate key value violates unique
+constraint "pg_type_typname_nsp_index"'); the loser retries and finds them."""
+
+
+def _create_study(storage: str, name: str, seed: int | None) -> optuna.Study:
+    """``optuna.create_study(..., load_if_exists=True)``; a database error other than a lost
+    race is one line (TuningError), not a traceback."""
+    for attempt in range(1, CREATE_ATTEMPTS + 1):
+        try:
+            return optuna.create_study(storage=open_storage(storage), study_name=name,
+                                       direction="minimize", sampler=make_sampler(seed),
+                                       load_if_exists=True)
+        except ImportError as exc:  # a driver's own dependency (check_database_driver)
+            raise TuningError(f"--storage {storage}: {exc}") from None
+        except Exception as exc:
+            from sqlalchemy.exc import IntegrityError, ProgrammingError, SQLAlchemyError
+
+            if not isinstance(exc, SQLAlchemyError):
+                raise
+            if isinstance(exc, IntegrityError | ProgrammingError) and \
+                    attempt < CREATE_ATTEMPTS:
+                time.sleep(0.2 * attempt)  # another process is creating the tables
+                continue
+            reason = str(getattr(exc, "orig", None) or exc).strip().splitlines()[0]
+            raise TuningError(f"--storage {storage}: cannot open the database ({reason})") \
+                from None
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
 def open_study(problem: TuningProblem, storage: str, study_name: str | None = None,
                seed: int | None = None) -> optuna.Study:
     """Create or resume the study; a new one gets the base config's schedules as trial 0.
@@ -347,26 +378,15 @@ def open_study(problem: TuningProblem, storage: str, study_name: str | None = No
     """
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     name = study_name or problem.default_study_name()
-    try:
-        study = optuna.create_study(storage=open_storage(storage), study_name=name,
-                                    direction="minimize", sampler=make_sampler(seed),
-                                    load_if_exists=True)
-    except ImportError as exc:  # a driver's own dependency; check_database_driver did the rest
-        raise TuningError(f"--storage {storage}: {exc}") from None
-    except Exception as exc:
-        from sqlalchemy.exc import SQLAlchemyError
-
-        if not isinstance(exc, SQLAlchemyError):
-            raise
-        reason = str(getattr(exc, "orig", None) or exc).strip().splitlines()[0]
-        raise TuningError(f"--storage {storage}: cannot open the database ({reason})") \
-            from None
+    study = _create_study(storage, name, seed)
     stored = study.user_attrs.get("problem_fixed")
     if stored is None:
+        # "problem_fixed" last: a process starting on the same study meanwhile (the README's
+        # "same command on every machine") reads either none of these or all of them.
         study.set_user_attr("problem_digest", problem.digest())
-        study.set_user_attr("problem_fixed", problem.fixed_values())
         study.set_user_attr("problem", problem.settings())
         study.set_user_attr("base_schedules", schedule_values(problem.config))
+        study.set_user_attr("problem_fixed", problem.fixed_values())
     else:
         conflicts = problem.conflicts(stored, study.user_attrs.get("problem", {}))
         if conflicts:

@@ -62,7 +62,8 @@ def postgres_url() -> Iterator[str]:
         except KeyError:
             pytest.skip("running as root and there is no 'postgres' user to run the server as")
         as_user = ["runuser", "-u", "postgres", "--"]
-    root = Path(tempfile.mkdtemp(prefix="exo_ilc_pg_"))
+    # As root, under /tmp: the postgres user must reach it (TMPDIR may sit under /root).
+    root = Path(tempfile.mkdtemp(prefix="exo_ilc_pg_", dir="/tmp" if as_user else None))
     if as_user:
         os.chown(root, owner.pw_uid, owner.pw_gid)
     data, log = root / "data", root / "server.log"
@@ -107,7 +108,7 @@ def test_two_tuner_processes_share_one_study_on_postgres(tmp_path: Path,
         assert "wrote" in out and "Traceback" not in out
     study = optuna.load_study(study_name="shared", storage=postgres_url)
     done = [t for t in study.trials if t.state == optuna.trial.TrialState.COMPLETE]
-    assert len(done) == 6  # 3 from each process, one study
+    assert len(done) == 6, [t.state for t in study.trials]  # 3 from each process, one study
     best = tmp_path / "best.yaml"
     assert main([*common, "--budget", "0", "--out", str(best)]) == 0
     assert f"Objective {study.best_value:.1f}" in best.read_text()
@@ -127,3 +128,37 @@ def test_missing_database_driver_is_one_line(tmp_path: Path, monkeypatch: pytest
     assert code == 2
     assert "the database driver 'psycopg'" in err and "pip install 'psycopg[binary]'" in err
     assert "Traceback" not in err and not (tmp_path / "t.yaml").exists()
+
+
+def test_a_lost_race_to_create_the_tables_is_retried(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two tuners starting together on an empty database: the one whose CREATE TABLE loses
+    (PostgreSQL: duplicate key in pg_type) tries again and finds the tables; a connection
+    failure is not retried and is one line."""
+    from sqlalchemy.exc import IntegrityError, OperationalError
+
+    from exo_ilc_ros import tuning
+
+    calls: list[int] = []
+    real = optuna.create_study
+
+    def flaky(**kwargs: object) -> optuna.Study:
+        calls.append(1)
+        if len(calls) == 1:
+            raise IntegrityError("CREATE TABLE studies", {}, Exception(
+                'duplicate key value violates unique constraint "pg_type_typname_nsp_index"'))
+        return real(**kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(tuning.optuna, "create_study", flaky)
+    study = tuning._create_study("sqlite:///:memory:", "s", None)
+    assert study.study_name == "s" and len(calls) == 2
+
+    def down(**kwargs: object) -> optuna.Study:
+        calls.append(1)
+        raise OperationalError("connect", {}, Exception("connection refused\nmore"))
+
+    monkeypatch.setattr(tuning.optuna, "create_study", down)
+    calls.clear()
+    with pytest.raises(tuning.TuningError, match=r"cannot open the database \(connection "
+                       r"refused\)$"):
+        tuning._create_study("sqlite:///:memory:", "s", None)
+    assert len(calls) == 1

@@ -53,7 +53,9 @@ setup(
     ],
     extras_require={
         "test": ["pytest>=8", "hypothesis>=6.100", "pin>=3", "ruff>=0.6", "mypy>=1.10",
-                 "types-PyYAML", "colcon-core", "colcon-ros"],
+                 "types-PyYAML", "colcon-core", "colcon-ros", "psycopg[binary]>=3.1"],
+        # `exo-ilc tune --storage postgresql://...`: SQLAlchemy 2.x opens it with psycopg 3.
+        "postgres": ["psycopg[binary]>=3.1"],
     },
     zip_safe=False,
     maintainer="exo_ilc_ros developers",

@@ -12,9 +12,17 @@ export ROS_LOG_DIR ?= $(CURDIR)/.ros_log
 
 .PHONY: venv demo test lint bench clean
 
+# The first run in a fresh environment (or after the kernels changed) compiles the numba kernels
+# (~20 s, silent) and caches them (exo_ilc_ros/core/_numba_cache.py).
+NUMBA_CACHE := $(or $(NUMBA_CACHE_DIR),$(or $(XDG_CACHE_HOME),$(HOME)/.cache)/exo_ilc_ros/numba)
+NUMBA_NOTE := echo "make: (the first run in a fresh environment compiles the numba kernels, \
+about 20 s without output, and caches them under $(NUMBA_CACHE))"
+
 $(STAMP): setup.py setup.cfg package.xml
 	@$(PYTHON) -c 'import sys; assert sys.version_info[:2] == (3, 11), \
 	  "the ros-jazzy wheels need CPython 3.11; set PYTHON=/path/to/python3.11"'
+	@echo "make: installing exo_ilc_ros and its dependencies from PyPI into $(VENV) (about 1 GB;"
+	@echo "make: 1-2 min the first time, quiet until done; later only when setup.py changes)"
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -qq --upgrade pip
 	$(BIN)/pip install -qq -e '.[test]'
@@ -23,6 +31,8 @@ $(STAMP): setup.py setup.cfg package.xml
 venv: $(STAMP)
 
 demo: $(STAMP)
+	@echo "make: the paper's experiment in-process, 150 trials at 5, 10 and 15 % (a few seconds)"
+	@$(NUMBA_NOTE)
 	$(BIN)/exo-ilc simulate --mass-uncertainty 0.05 0.10 0.15
 
 lint: $(STAMP)
@@ -30,6 +40,9 @@ lint: $(STAMP)
 	$(BIN)/mypy
 
 test: lint
+	@$(NUMBA_NOTE)
+	@echo "make: running the whole test suite (7-10 min on 2 cores, about 5 min of it real"
+	@echo "make: ROS 2 graphs over DDS and 1 min a colcon build); pytest prints a dot per test"
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)

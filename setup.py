@@ -1,10 +1,15 @@
 """ament_python package: `colcon build` on a ROS install, or `pip install -e .[test]` here."""
 
+import os
+import runpy
 from glob import glob
 
 from setuptools import find_packages, setup
 
 package_name = "exo_ilc_ros"
+HERE = os.path.dirname(os.path.abspath(__file__))
+REGISTRY = runpy.run_path(os.path.join(HERE, package_name, "nodes", "registry.py"))
+"""The node registry (plain data: read without importing the package)."""
 
 ROS_DEPENDENCIES = [
     "ros-jazzy-rclpy[fastrtps]",
@@ -22,6 +27,7 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "bench"]),
+    package_data={package_name: ["py.typed"]},  # PEP 561: the package ships its type hints
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
@@ -47,7 +53,9 @@ setup(
     ],
     extras_require={
         "test": ["pytest>=8", "hypothesis>=6.100", "pin>=3", "ruff>=0.6", "mypy>=1.10",
-                 "types-PyYAML", "colcon-core", "colcon-ros"],
+                 "types-PyYAML", "colcon-core", "colcon-ros", "psycopg[binary]>=3.1"],
+        # `exo-ilc tune --storage postgresql://...`: SQLAlchemy 2.x opens it with psycopg 3.
+        "postgres": ["psycopg[binary]>=3.1"],
     },
     zip_safe=False,
     maintainer="exo_ilc_ros developers",
@@ -58,11 +66,7 @@ setup(
     entry_points={
         "console_scripts": [
             "exo-ilc = exo_ilc_ros.cli.main:main",
-            "plant_simulator = exo_ilc_ros.nodes.plant_simulator:main",
-            "computed_torque_controller = exo_ilc_ros.nodes.computed_torque_controller:main",
-            "ilc_supervisor = exo_ilc_ros.nodes.ilc_supervisor:main",
-            "bag_recorder = exo_ilc_ros.nodes.bag_recorder:main",
-            "container = exo_ilc_ros.nodes.container:main",
+            *REGISTRY["console_scripts"](),
         ],
     },
 )

@@ -13,7 +13,7 @@ import numpy as np
 
 from exo_ilc_ros.core import Experiment, load_config, run_trials
 from exo_ilc_ros.core.dynamics import workspace
-from exo_ilc_ros.core.integrator import _rk4_period
+from exo_ilc_ros.core.plant import rk4_period
 
 
 def plant_step_times(experiment: Experiment, repeats: int = 2000) -> list[float]:
@@ -31,7 +31,7 @@ def plant_step_times(experiment: Experiment, repeats: int = 2000) -> list[float]
         for _ in range(repeats):
             q[:] = ref.position[1]  # the same state each time: no drift
             qd[:] = ref.velocity[1]
-            _rk4_period(q, qd, effort, *args)
+            rk4_period(q, qd, effort, *args)
         times.append((time.perf_counter() - start) / repeats)
     return times
 

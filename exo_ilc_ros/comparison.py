@@ -88,15 +88,16 @@ def _fmt(x: int | None) -> str:
 def format_comparison(runs: Sequence[ComparedRun], joint_names: Sequence[str]) -> str:
     """One row per (law, uncertainty): first / settled per joint, floor, peak, learned input."""
     width = max([len(r.label) for r in runs] + [5]) + 2
+    cell = max([len(name) + 2 for name in joint_names] + [18])  # whole joint names
     header = (f"{'law':<{width}}{'delta':>6}  "
-              + "".join(f"{name[:16]:>18}" for name in joint_names)
+              + "".join(f"{name:>{cell}}" for name in joint_names)
               + f"{'floor':>11}{'peak':>11}{'max|u_ff|':>11}")
     lines = ["First within / settled within the bound (trial, per joint); floor = max|e| of the "
              "last trial, peak = max|e| over all trials (rad); max|u_ff| of the last trial",
              header, "-" * len(header)]
     for r in runs:
         its = r.summary.iterations_to_bound()
-        cells = "".join(f"{_fmt(f) + ' / ' + _fmt(s):>18}"
+        cells = "".join(f"{_fmt(f) + ' / ' + _fmt(s):>{cell}}"
                         for f, s in zip(its.first, its.settled, strict=True))
         ff = r.final_feedforward
         lines.append(f"{r.label:<{width}}{r.summary.mass_uncertainty:>6.2f}  {cells}"
@@ -118,8 +119,9 @@ def plot_comparison(runs: Sequence[ComparedRun], joint_names: Sequence[str],
     deltas = sorted({r.summary.mass_uncertainty for r in runs})
     labels = list(dict.fromkeys(r.label for r in runs))
     joints = len(joint_names)
-    fig, axes = plt.subplots(len(deltas), joints, figsize=(4.2 * joints, 2.8 * len(deltas)),
-                             sharex=True, squeeze=False)
+    fig, axes = plt.subplots(len(deltas), joints,
+                             figsize=(4.2 * joints, 2.8 * len(deltas) + 0.4),
+                             sharex=True, squeeze=False, layout="constrained")
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for row, delta in enumerate(deltas):
         for j in range(joints):
@@ -140,8 +142,9 @@ def plot_comparison(runs: Sequence[ComparedRun], joint_names: Sequence[str],
                 ax.set_ylabel(f"max |e| (rad), δ = {delta:.0%}")
             if row == len(deltas) - 1:
                 ax.set_xlabel("trial")
-    axes[0][0].legend(fontsize=8)
+    # One legend below the panels, never over a curve.
+    fig.legend(*axes[0][0].get_legend_handles_labels(), loc="outside lower center",
+               ncols=len(labels) + 1, fontsize=8, frameon=False)
     fig.suptitle("Max tracking error per trial: paper's sign law, tuned sign law, linear law")
-    fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

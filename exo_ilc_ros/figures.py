@@ -27,7 +27,9 @@ def convergence_figure(runs: Sequence[RunSummary], joint_names: Sequence[str],
     run, the bound drawn (dashed), log y axis."""
     labels = list(labels) if labels is not None else [run_label(r) for r in runs]
     n = len(joint_names)
-    fig = Figure(figsize=(6.4, 2.6 * n), layout="constrained")
+    columns = 1 if max((len(label) for label in labels), default=0) > 40 else 2
+    legend_rows = -(-(len(runs) + 1) // columns)
+    fig = Figure(figsize=(6.4, 2.6 * n + 0.2 * legend_rows + 0.2), layout="constrained")
     axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
     bound = runs[0].error_bound if runs else 0.005
     for j, ax in enumerate(axes):
@@ -43,13 +45,16 @@ def convergence_figure(runs: Sequence[RunSummary], joint_names: Sequence[str],
         ax.set_ylabel(f"max |e{j + 1}| (rad)")
         ax.grid(True, which="both", linewidth=0.3)
     axes[-1].set_xlabel("iteration (trial)")
-    axes[0].legend(fontsize=7, loc="upper right")
+    # Below the panels, never over a curve (one entry per run, so runs can be told apart).
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncols=columns,
+               fontsize=7, frameon=False)
     return fig
 
 
-def tracking_figure(trial: TrialData, joint_names: Sequence[str], title: str = "") -> Figure:
-    """One trial: q vs q_d, the error, the effort commanded and the feed-forward, one column
-    per joint."""
+def tracking_figure(trial: TrialData, joint_names: Sequence[str], title: str = "",
+                    bound: float | None = None) -> Figure:
+    """One trial: q vs q_d, the error (with the bound +-``bound`` dashed, if given), the effort
+    commanded and the feed-forward, one column per joint."""
     n = len(joint_names)
     fig = Figure(figsize=(3.4 * n, 8.0), layout="constrained")
     axes = fig.subplots(4, n, sharex=True, squeeze=False)
@@ -61,7 +66,11 @@ def tracking_figure(trial: TrialData, joint_names: Sequence[str], title: str = "
         ax.plot(t, trial.reference_position[:, j], "k--", linewidth=1.0, label="q_d")
         ax.plot(t, trial.position[:, j], linewidth=1.0, label="q")
         ax.set_title(name, fontsize=9)
-        axes[1, j].plot(t, trial.error[:, j], linewidth=1.0)
+        axes[1, j].plot(t, trial.error[:, j], linewidth=1.0, label="e")
+        if bound is not None:
+            for sign in (1, -1):
+                axes[1, j].axhline(sign * bound, color="k", linestyle="--", linewidth=0.8,
+                                   label=f"bound ±{bound:g} rad" if sign > 0 else None)
         axes[2, j].plot(t, effort[:, j], linewidth=1.0)
         if trial.feedforward is not None:
             axes[3, j].plot(t, trial.feedforward[:, j], linewidth=1.0)
@@ -69,6 +78,8 @@ def tracking_figure(trial: TrialData, joint_names: Sequence[str], title: str = "
         for row in axes[:, j]:
             row.grid(True, linewidth=0.3)
     axes[0, 0].legend(fontsize=7)
+    if bound is not None:
+        axes[1, 0].legend(fontsize=7, loc="best")
     for row, label in enumerate(("q (rad)", "e = q_d - q (rad)", "effort (N m)",
                                  "u_ff (rad/s^2)")):
         axes[row, 0].set_ylabel(label)

@@ -23,6 +23,7 @@ from types import TracebackType
 from typing import IO
 
 from .core.errors import ExoIlcError
+from .nodes import registry
 
 DOMAIN_IDS = range(1, 101)
 LOCK_PATTERN = ".exo_ilc_ros_domain_{}.lock"
@@ -54,7 +55,7 @@ class NodeSpec:
                 str(params_file), *self.arguments]
 
 
-CONTAINER_MODULE = "exo_ilc_ros.nodes.container"
+CONTAINER_MODULE = registry.CONTAINER_MODULE
 
 
 def composed(specs: Sequence[NodeSpec]) -> NodeSpec:
@@ -69,12 +70,9 @@ def composed(specs: Sequence[NodeSpec]) -> NodeSpec:
                     program_arguments=tuple(spec.name for spec in specs))
 
 
-GRAPH_NODES: tuple[NodeSpec, ...] = (
-    NodeSpec("plant_simulator", "exo_ilc_ros.nodes.plant_simulator"),
-    NodeSpec("computed_torque_controller", "exo_ilc_ros.nodes.computed_torque_controller"),
-    NodeSpec("ilc_supervisor", "exo_ilc_ros.nodes.ilc_supervisor"),
-)
-"""The processes ``exo-ilc run`` starts, in this order."""
+GRAPH_NODES: tuple[NodeSpec, ...] = tuple(NodeSpec(node.name, node.module)
+                                          for node in registry.GRAPH)
+"""The processes ``exo-ilc run`` starts, in this order (:data:`.nodes.registry.GRAPH`)."""
 
 
 @dataclass

@@ -99,31 +99,34 @@ def _table_of(run: RunSummary, quantity: str) -> np.ndarray | None:
 
 
 def format_trial_table(runs: Sequence[RunSummary], joint_names: Sequence[str],
-                       quantity: str = "error") -> str:
+                       quantity: str = "error", labels: Sequence[str] | None = None) -> str:
     """Max |e| (rad) per trial: one column group per run, one column per joint.
 
-    ``quantity`` "feedforward" or "effort" shows max |u_ff| or max |effort| instead."""
+    ``quantity`` "feedforward" or "effort" shows max |u_ff| or max |effort| instead. ``labels``
+    (e.g. bag names) head the column groups instead of law and uncertainty."""
     prefix, title_q = TABLE_QUANTITIES[quantity]
     tables = [_table_of(r, quantity) for r in runs]
     n = len(joint_names)
     head1 = f"{'trial':>5} "
     head2 = f"{'':>5} "
-    for r in runs:
-        title = f"{r.law} d={r.mass_uncertainty:g}"
-        head1 += f"| {title:^{n * 11}}"
-        head2 += "| " + "".join(f"{prefix + str(j + 1):>10} " for j in range(n))
+    titles = [labels[i] if labels is not None else f"{r.law} d={r.mass_uncertainty:g}"
+              for i, r in enumerate(runs)]
+    widths = [max(n * 11, len(title)) for title in titles]  # a whole label over each group
+    for title, width in zip(titles, widths, strict=True):
+        head1 += f"| {title:^{width}}"
+        head2 += "| " + "".join(f"{prefix + str(j + 1):>10} " for j in range(n)).ljust(width)
     lines = ([title_q] if quantity != "error" else []) + [head1, head2, "-" * len(head2)]
     count = max(len(r.max_abs_error) for r in runs)
     for k in range(count):
         line = f"{k + 1:>5} "
-        for r, table in zip(runs, tables, strict=True):
+        for r, table, width in zip(runs, tables, widths, strict=True):
             if table is not None and k < len(table):
                 flag = quantity == "error"
                 cells = [f"{x:10.3e}" + ("*" if flag and x > r.error_bound else " ")
                          for x in table[k]]
-                line += "| " + "".join(cells)
+                line += "| " + "".join(cells).ljust(width)
             else:
-                line += "| " + " " * (n * 11)
+                line += "| " + " " * width
         lines.append(line)
     if quantity == "error":
         lines.append("(* above the bound)")
@@ -153,17 +156,24 @@ def format_long_run(runs: Sequence[RunSummary], joint_names: Sequence[str],
     return "\n".join(lines)
 
 
-def format_iterations(runs: Sequence[RunSummary], joint_names: Sequence[str]) -> str:
-    """Iterations to the bound per joint (first / settled) beside the paper's numbers."""
+def format_iterations(runs: Sequence[RunSummary], joint_names: Sequence[str],
+                      labels: Sequence[str] | None = None) -> str:
+    """Iterations to the bound per joint (first / settled) beside the paper's numbers;
+    ``labels`` (e.g. bag names) in a first column, one per run."""
     lines = [f"Iterations to the bound, first within / settled within (paper: joint 1 "
              f"35/96/101 at 5/10/15 %, joints 2-3 within {PAPER_OTHER_JOINTS_WITHIN})"]
-    header = f"{'law':<8}{'delta':>7}  " + "".join(f"{name[:18]:>20}" for name in joint_names)
+    cell = max([len(name) + 2 for name in joint_names] + [20])
+    first = max([len(label) + 2 for label in labels] + [5]) if labels is not None else 0
+    header = (f"{'bag' if labels is not None else '':<{first}}{'law':<8}{'delta':>7}  "
+              + "".join(f"{name:>{cell}}" for name in joint_names))
     lines += [header + f"{'paper joint 1':>15}", "-" * (len(header) + 15)]
-    for r in runs:
+    for i, r in enumerate(runs):
         its = r.iterations_to_bound()
-        cells = "".join(f"{_fmt(f) + ' / ' + _fmt(s):>20}"
+        cells = "".join(f"{_fmt(f) + ' / ' + _fmt(s):>{cell}}"
                         for f, s in zip(its.first, its.settled, strict=True))
         paper = PAPER_FIRST_JOINT1.get(round(r.mass_uncertainty, 4))
-        lines.append(f"{r.law:<8}{r.mass_uncertainty:>7.3f}  {cells}{_fmt(paper):>15}")
+        label = labels[i] if labels is not None else ""
+        lines.append(f"{label:<{first}}{r.law:<8}{r.mass_uncertainty:>7.3f}  {cells}"
+                     f"{_fmt(paper):>15}")
     lines.append("('-': never within the bound / not within at the last trial)")
     return "\n".join(lines)

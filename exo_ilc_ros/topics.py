@@ -88,8 +88,11 @@ LEVEL_SYMBOLS = ("M", "M'", "M''")
 FEEDFORWARD_FRAME_PREFIX = "trial:"
 FEEDFORWARD_ACK_STATUS = "computed_torque_controller/feedforward"
 RECORDER_STATUS = "bag_recorder/status"
-"""bag_recorder's status on /diagnostics (every 0.2 s): message ``ready`` once it is subscribed
-to a publisher of every topic it records, else ``waiting``."""
+"""bag_recorder's status on /diagnostics (every 0.2 s, and at once when a trial is filed):
+message ``ready`` once it is subscribed to a publisher of every topic it records, else
+``waiting``; values ``bag``, ``messages``, ``trials_received`` (the last trial whose end event
+is recorded) and ``trials_filed`` (the last trial whose end event and summary are written and
+whose storage file is finished: a kill -9 from then on loses nothing of it)."""
 CONTROLLER_HEALTH_STATUS = "computed_torque_controller/health"
 CONTROLLER_TRIAL_STATUS = "computed_torque_controller/trial"
 """Sent by the controller on /diagnostics after the last sample of each trial: message

@@ -294,9 +294,39 @@ class Objective:
 
 # --- storage and studies ------------------------------------------------------------------------
 
+DRIVER_PACKAGES = {"psycopg": "'psycopg[binary]' (or pip install -e '.[postgres]')",
+                   "psycopg2": "psycopg2-binary", "pymysql": "pymysql",
+                   "MySQLdb": "mysqlclient"}
+"""What to ``pip install`` for a database driver SQLAlchemy names (by its module)."""
+
+
+def check_database_driver(url: str) -> None:
+    """Raise TuningError (one line, no traceback) when the RDB URL is not one SQLAlchemy can
+    use or its driver is not installed. SQLAlchemy 2.1 opens ``postgresql://`` with psycopg 3
+    (``postgresql+psycopg2://`` asks for psycopg2)."""
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError, NoSuchModuleError
+
+    try:
+        dialect = make_url(url).get_dialect()
+    except (ArgumentError, NoSuchModuleError, ValueError) as exc:
+        raise TuningError(f"--storage {url}: not a database URL SQLAlchemy knows ({exc})") \
+            from None
+    try:
+        dialect.import_dbapi()
+    except ImportError as exc:
+        module = exc.name or str(exc)
+        package = DRIVER_PACKAGES.get(module.split(".")[0], module)
+        raise TuningError(f"--storage {url}: the database driver {module!r} "
+                          f"({dialect.name}+{dialect.driver}) is not installed; install it "
+                          f"with: pip install {package}") from None
+
+
 def open_storage(url: str) -> optuna.storages.BaseStorage | str:
-    """An RDB URL (contains ``://``) as is; anything else is a journal file path."""
+    """An RDB URL (contains ``://``) as is, once its driver is known to be installed; anything
+    else is a journal file path."""
     if "://" in url:
+        check_database_driver(url)
         return url
     path = Path(url)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -309,6 +339,37 @@ def make_sampler(seed: int | None) -> optuna.samplers.BaseSampler:
                                       n_startup_trials=10)
 
 
+CREATE_ATTEMPTS = 5
+"""Tries at creating/loading a study on a database: processes starting together on an empty
+one race to create Optuna's tables (PostgreSQL: 'duplicate key value violates unique
+constraint "pg_type_typname_nsp_index"'); the loser retries and finds them."""
+
+
+def _create_study(storage: str, name: str, seed: int | None) -> optuna.Study:
+    """``optuna.create_study(..., load_if_exists=True)``; a database error other than a lost
+    race is one line (TuningError), not a traceback."""
+    for attempt in range(1, CREATE_ATTEMPTS + 1):
+        try:
+            return optuna.create_study(storage=open_storage(storage), study_name=name,
+                                       direction="minimize", sampler=make_sampler(seed),
+                                       load_if_exists=True)
+        except ImportError as exc:  # a driver's own dependency (check_database_driver)
+            raise TuningError(f"--storage {storage}: {exc}") from None
+        except Exception as exc:
+            from sqlalchemy.exc import IntegrityError, ProgrammingError, SQLAlchemyError
+
+            if not isinstance(exc, SQLAlchemyError):
+                raise
+            if isinstance(exc, IntegrityError | ProgrammingError) and \
+                    attempt < CREATE_ATTEMPTS:
+                time.sleep(0.2 * attempt)  # another process is creating the tables
+                continue
+            reason = str(getattr(exc, "orig", None) or exc).strip().splitlines()[0]
+            raise TuningError(f"--storage {storage}: cannot open the database ({reason})") \
+                from None
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
 def open_study(problem: TuningProblem, storage: str, study_name: str | None = None,
                seed: int | None = None) -> optuna.Study:
     """Create or resume the study; a new one gets the base config's schedules as trial 0.
@@ -317,15 +378,15 @@ def open_study(problem: TuningProblem, storage: str, study_name: str | None = No
     """
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     name = study_name or problem.default_study_name()
-    study = optuna.create_study(storage=open_storage(storage), study_name=name,
-                                direction="minimize", sampler=make_sampler(seed),
-                                load_if_exists=True)
+    study = _create_study(storage, name, seed)
     stored = study.user_attrs.get("problem_fixed")
     if stored is None:
+        # "problem_fixed" last: a process starting on the same study meanwhile (the README's
+        # "same command on every machine") reads either none of these or all of them.
         study.set_user_attr("problem_digest", problem.digest())
-        study.set_user_attr("problem_fixed", problem.fixed_values())
         study.set_user_attr("problem", problem.settings())
         study.set_user_attr("base_schedules", schedule_values(problem.config))
+        study.set_user_attr("problem_fixed", problem.fixed_values())
     else:
         conflicts = problem.conflicts(stored, study.user_attrs.get("problem", {}))
         if conflicts:

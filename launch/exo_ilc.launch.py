@@ -1,15 +1,21 @@
-"""Launch the exo_ilc_ros graph: plant_simulator, computed_torque_controller, ilc_supervisor.
+"""Launch the exo_ilc_ros graph: plant_simulator, computed_torque_controller, ilc_supervisor,
+and bag_recorder beside them.
 
     ros2 launch exo_ilc_ros exo_ilc.launch.py
     ros2 launch exo_ilc_ros exo_ilc.launch.py params_file:=my.yaml mass_uncertainty:=0.10
+    ros2 launch exo_ilc_ros exo_ilc.launch.py bag_path:=bags/today record:=false
 
 Every node reads the shipped config/exo_ilc.yaml, then ``params_file`` (any subset of keys,
-same layout) if given. Without launch_ros (a PyPI-only install), ``exo-ilc run`` does the same.
+same layout) if given. The nodes are those of ``exo_ilc_ros/nodes/registry.py``. The recorder
+(a process of its own here) writes ``bag_path`` (default ``bags/<run_name>`` under the working
+directory) and copies the run's effective config (written to a temporary file) into the bag.
+Without launch_ros (a PyPI-only install), ``exo-ilc run`` does the same.
 """
 
 from __future__ import annotations
 
 import os
+import tempfile
 
 from ament_index_python.packages import get_package_share_directory
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
@@ -17,35 +23,55 @@ from launch.launch_context import LaunchContext
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+from exo_ilc_ros.nodes import registry
 from launch import LaunchDescription
 
-NODES = ("plant_simulator", "computed_torque_controller", "ilc_supervisor")
+PACKAGE = "exo_ilc_ros"
 
 
 def _nodes(context: LaunchContext) -> list[Node]:
-    shipped = os.path.join(get_package_share_directory("exo_ilc_ros"), "config",
-                           "exo_ilc.yaml")
+    shipped = os.path.join(get_package_share_directory(PACKAGE), "config", "exo_ilc.yaml")
     params: list[object] = [shipped]
     user = LaunchConfiguration("params_file").perform(context)
     if user:
         params.append(user)
     delta = LaunchConfiguration("mass_uncertainty").perform(context)
     nodes = []
-    for name in NODES:
+    for entry in registry.GRAPH:
         node_params = list(params)
-        if name == "plant_simulator" and delta:
+        if entry.name == registry.PLANT.name and delta:
             node_params.append({"mass_uncertainty": float(delta)})
-        nodes.append(Node(package="exo_ilc_ros", executable=name, name=name,
+        nodes.append(Node(package=PACKAGE, executable=entry.name, name=entry.name,
                           parameters=node_params, output="screen", emulate_tty=True))
+    if LaunchConfiguration("record").perform(context).lower() in ("true", "1", "yes"):
+        nodes.append(_recorder(user, delta, LaunchConfiguration("bag_path").perform(context)))
     return nodes
 
 
+def _recorder(user: str, delta: str, bag_path: str) -> Node:
+    from exo_ilc_ros.core.config import load_config
+
+    config = load_config(user or None, {"mass_uncertainty": float(delta)} if delta else None)
+    config_file = os.path.join(tempfile.mkdtemp(prefix="exo_ilc_launch_"), "effective.yaml")
+    with open(config_file, "w") as out:
+        out.write(config.to_ros_yaml("effective config of ros2 launch exo_ilc_ros"))
+    params: dict[str, object] = {"config_file": config_file}
+    if bag_path:
+        params["bag_path"] = bag_path
+    return Node(package=PACKAGE, executable=registry.RECORDER.name, name=registry.RECORDER.name,
+                parameters=[params], output="screen", emulate_tty=True)
+
+
 def generate_launch_description() -> LaunchDescription:
-    """The three nodes with the shipped parameters (and the user's file on top)."""
+    """The graph's nodes with the shipped parameters (and the user's file on top), recorded."""
     return LaunchDescription([
         DeclareLaunchArgument("params_file", default_value="",
                               description="ROS parameter YAML laid over config/exo_ilc.yaml"),
         DeclareLaunchArgument("mass_uncertainty", default_value="",
                               description="plant mass uncertainty delta (default: the YAML's)"),
+        DeclareLaunchArgument("record", default_value="true",
+                              description="start bag_recorder (true/false)"),
+        DeclareLaunchArgument("bag_path", default_value="",
+                              description="the bag's directory (default: bags/<run_name>)"),
         OpaqueFunction(function=_nodes),
     ])

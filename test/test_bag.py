@@ -396,6 +396,42 @@ def _spin_until(session: Any, done: Any, timeout: float) -> None:
 
 
 @pytest.mark.graph
+def test_recorder_status_reports_received_then_filed(tmp_path: Path) -> None:
+    """``trials_received``: the trial's end event is recorded; ``trials_filed``: its summary
+    too and its file is finished (what the supervisor waits for before storing the trial)."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from rclpy.serialization import serialize_message
+
+    from exo_ilc_ros.nodes.bag_recorder import BagRecorder
+
+    def message(name: str, text: str, trial: int) -> bytes:
+        item = DiagnosticStatus(name=name, message=text,
+                                values=[KeyValue(key="trial", value=str(trial))])
+        return bytes(serialize_message(DiagnosticArray(status=[item])))
+
+    rclpy.init(args=["--ros-args", "-p", f"bag_path:={tmp_path / 'bag'}"])
+    try:
+        recorder = BagRecorder()
+        try:
+            def status() -> dict[str, str]:
+                return dict(recorder.status_values())
+
+            assert status()["trials_received"] == status()["trials_filed"] == "0"
+            recorder.on_message(topics.TRIAL_EVENTS, message(topics.TRIAL_STATUS, "start", 1), 1)
+            recorder.on_message(topics.TRIAL_EVENTS, message(topics.TRIAL_STATUS, "end", 1), 2)
+            assert (status()["trials_received"], status()["trials_filed"]) == ("1", "0")
+            recorder.on_message(topics.TRIAL_SUMMARY,
+                                message(topics.SUMMARY_STATUS, "summary", 1), 3)
+            assert (status()["trials_received"], status()["trials_filed"]) == ("1", "1")
+            assert trials_filed(tmp_path / "bag") == 1
+        finally:
+            recorder.destroy_node()
+    finally:
+        rclpy.try_shutdown()
+
+
+@pytest.mark.graph
 def test_recorder_sigkill_leaves_the_filed_trials(tmp_path: Path) -> None:
     """The real recorder on the real graph, killed with SIGKILL once it has filed trial 2 while
     the run goes on: its bag holds those trials, equal to the in-process run to 1e-12, and the
@@ -453,6 +489,8 @@ def test_run_records_a_bag_that_analyses_to_its_table(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr[-3000:]
     (bag,) = (tmp_path / "bags").iterdir()
     assert f"bag: {bag}" in proc.stderr
+    # At start, for `exo-ilc param` from another terminal (README), with a bag too.
+    assert "graph on ROS_DOMAIN_ID=" in proc.stderr and f"recording to bag: {bag}" in proc.stderr
     assert exo_ilc(["analyze", str(bag), "--quiet", "--json", str(bag_json)]) == 0
     (graph,) = json.loads(run_json.read_text())["runs"]
     (recorded,) = json.loads(bag_json.read_text())["runs"]

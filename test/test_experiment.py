@@ -108,3 +108,13 @@ def test_cli_rejects_a_bad_config_with_the_key(tmp_path: Path) -> None:
                           capture_output=True, text=True, timeout=120, check=False)
     assert proc.returncode == 2
     assert "error_bound" in proc.stderr and "> 0" in proc.stderr
+
+
+def test_every_kernel_module_keys_the_numba_cache() -> None:
+    """A compiled kernel that calls one of another module is cached stale unless every module
+    with kernels is hashed into the cache directory (``core/_numba_cache.py``)."""
+    from exo_ilc_ros.core import _numba_cache
+
+    core = Path(_numba_cache.__file__).parent
+    with_kernels = {p.name for p in core.glob("*.py") if "@njit" in p.read_text()}
+    assert with_kernels == set(_numba_cache.KERNEL_MODULES)

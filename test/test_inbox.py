@@ -122,3 +122,57 @@ def test_container_refuses_unknown_repeated_or_no_nodes(capsys: pytest.CaptureFi
         assert problem in err and "usage: container NODE" in err
     for name in container.NODES:
         assert callable(container.node_factory(name))
+
+
+def test_run_nodes_polls_stops_on_exit_code_and_drains_last() -> None:
+    """run_nodes by protocol: a PollingNode is polled until it sets ``exit_code`` (the
+    process's code), a DrainingNode is polled on after the stop and destroyed last, a plain
+    node is neither polled nor drained."""
+    from rclpy.node import Node
+
+    from exo_ilc_ros.nodes import common
+
+    log: list[str] = []
+
+    class Plain(Node):
+        def __init__(self) -> None:
+            super().__init__("run_nodes_plain")
+
+        def destroy_node(self) -> None:
+            log.append("plain destroyed")
+            super().destroy_node()
+
+    class Failing(Node):
+        def __init__(self) -> None:
+            super().__init__("run_nodes_failing")
+            self.exit_code: int | None = None
+            self.polls = 0
+
+        def poll(self) -> None:
+            self.polls += 1
+            if self.polls == 3:
+                self.exit_code = 7
+
+        def destroy_node(self) -> None:
+            log.append(f"failing destroyed after {self.polls} polls")
+            super().destroy_node()
+
+    class Draining(Node):
+        DRAINS_ON_STOP = True
+
+        def __init__(self) -> None:
+            super().__init__("run_nodes_draining")
+            self.exit_code: int | None = None
+            self.polls = 0
+
+        def poll(self) -> int:
+            self.polls += 1
+            return 0
+
+        def destroy_node(self) -> None:
+            log.append(f"draining destroyed after {self.polls} polls")
+            super().destroy_node()
+
+    assert common.run_nodes([Plain, Failing, Draining], ["run_nodes"]) == 7
+    assert log[:2] == ["plain destroyed", "failing destroyed after 3 polls"]
+    assert log[2].startswith("draining destroyed") and int(log[2].split()[3]) > 3

@@ -23,8 +23,8 @@ import pytest
 from exo_ilc_ros import topics
 from exo_ilc_ros.core.config import Config, load_config
 from exo_ilc_ros.core.experiment import Experiment
-from exo_ilc_ros.core.loop import record_from_samples
 from exo_ilc_ros.core.session import LearningSession, run_trials
+from exo_ilc_ros.core.trial import record_from_samples
 from exo_ilc_ros.launcher import GraphError
 
 pytestmark = pytest.mark.graph
@@ -231,7 +231,7 @@ def test_plant_watchdog_in_real_time_mode_stops_holding_the_last_command(tmp_pat
     from std_msgs.msg import Float64MultiArray
     from std_srvs.srv import Trigger
 
-    from exo_ilc_ros.core.safety import safe_hold_effort
+    from exo_ilc_ros.core.controller import safe_hold_effort
     from exo_ilc_ros.nodes.cdr import float64_array
     from exo_ilc_ros.nodes.common import DIAGNOSTICS_QOS, SAMPLES_QOS
     from exo_ilc_ros.nodes.plant_simulator import PlantSimulator

@@ -7,18 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from exo_ilc_ros.core import load_config, run_trials, simulate_trial
+from exo_ilc_ros.core import load_config, run_trials
+from exo_ilc_ros.core.controller import outside_envelope, safe_hold_effort
 from exo_ilc_ros.core.errors import SafetyError
 from exo_ilc_ros.core.experiment import Experiment
-from exo_ilc_ros.core.safety import (
-    SaturationReport,
-    Watchdog,
-    WatchdogState,
-    clamp_effort,
-    outside_envelope,
-    safe_hold_effort,
-    saturation_counts,
-)
+from exo_ilc_ros.core.plant import clamp_counted, saturation_counts
+from exo_ilc_ros.core.safety import Watchdog, WatchdogState
+from exo_ilc_ros.core.trial import simulate_trial
 
 CONFIG = load_config()
 TIGHT = CONFIG.replace({"safety.error_envelope": [0.1, 0.1, 0.1]})
@@ -91,10 +86,12 @@ def test_nan_feedforward_is_refused() -> None:
 
 def test_outside_envelope() -> None:
     env = np.array([0.3, 0.3, 0.3])
-    assert not outside_envelope(np.array([0.3, -0.3, 0.0]), env)
-    assert outside_envelope(np.array([0.0, -0.31, 0.0]), env)
-    assert outside_envelope(np.array([math.nan, 0.0, 0.0]), env)
-    assert outside_envelope(np.array([0.0, math.inf, 0.0]), env)
+    zero = np.zeros(3)
+    assert not outside_envelope(np.array([0.3, -0.3, 0.0]), zero, env)
+    assert outside_envelope(np.array([0.0, -0.31, 0.0]), zero, env)
+    assert outside_envelope(zero, np.array([0.0, 0.31, 0.0]), env)
+    assert outside_envelope(np.array([math.nan, 0.0, 0.0]), zero, env)
+    assert outside_envelope(zero, np.array([0.0, math.inf, 0.0]), env)
 
 
 def test_effort_never_exceeds_the_limit_even_for_a_diverging_feedforward() -> None:
@@ -105,16 +102,20 @@ def test_effort_never_exceeds_the_limit_even_for_a_diverging_feedforward() -> No
     assert saturation_counts(record.effort, e.effort_limit).min() >= 1
 
 
-def test_plant_clamp_and_saturation_report() -> None:
+def test_plant_clamp_and_saturation_count() -> None:
+    """The plant's clamp: beyond the limit clamped and counted as beyond, at the limit only
+    counted as saturated, a non-finite command refused without writing or counting."""
     limit = np.array([40.0, 40.0, 20.0])
-    clipped, mask = clamp_effort(np.array([50.0, -10.0, -20.0]), limit)
-    assert clipped.tolist() == [40.0, -10.0, -20.0]
-    assert mask.tolist() == [True, False, True]
-    report = SaturationReport(limit)
-    report.apply(np.array([50.0, 0.0, 0.0]))
-    report.apply(np.array([0.0, 0.0, 0.0]))
-    assert report.samples == 2 and report.saturated.tolist() == [1, 0, 0]
-    assert ("saturated/a", "1") in report.as_values(["a", "b", "c"])
+    saturated = np.zeros(3, dtype=np.int64)
+    out = np.zeros(3)
+    assert clamp_counted(np.array([50.0, -10.0, -20.0]), limit, saturated, out) == 1
+    assert out.tolist() == [40.0, -10.0, -20.0]
+    assert saturated.tolist() == [1, 0, 1]
+    assert clamp_counted(np.array([0.0, -math.inf, 0.0]), limit, saturated, out) == -1
+    assert clamp_counted(np.array([math.nan, 0.0, 0.0]), limit, saturated, out) == -1
+    assert out.tolist() == [40.0, -10.0, -20.0] and saturated.tolist() == [1, 0, 1]
+    log = np.array([[50.0, -10.0, -20.0], [0.0, -41.0, 19.0]])
+    assert saturation_counts(log, limit).tolist() == [1, 1, 1]
 
 
 def test_watchdog_trips_after_the_timeout_and_latches() -> None:

@@ -344,6 +344,11 @@ def test_update_rejections_name_the_rule() -> None:
     restarted = validate_update(BASE, {"mass_uncertainty": 0.1}, live_only=False)
     assert isinstance(restarted, Config) and restarted["mass_uncertainty"] == 0.1
     assert validate_update(BASE, {"use_sim_time": True}) is BASE
+    out = validate_update(BASE, {"error_bound": 0.006}, node="plant_simulator")
+    assert isinstance(out, ConfigError) and out.key == "error_bound" and out.rule == \
+        "unknown parameter"  # the supervisor's, not the plant's
+    assert validate_update(BASE, {"error_bound": 0.006}, node="ilc_supervisor")["error_bound"] \
+        == 0.006
 
 
 @pytest.mark.parametrize("envelope", [[0.0, 1.0, 1.0], [-0.1, 1.0, 1.0], [1.0, 1.0],

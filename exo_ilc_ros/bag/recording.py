@@ -18,9 +18,10 @@ import yaml
 from ..core import schema
 from ..core.config import Config
 from ..launcher import GRAPH_NODES, NodeSpec, composed
+from ..nodes.registry import RECORDER
 from .run_writer import run_name, unique_path
 
-RECORDER_MODULE = "exo_ilc_ros.nodes.bag_recorder"
+RECORDER_MODULE = RECORDER.module
 
 
 class Recording:
@@ -43,8 +44,8 @@ class Recording:
         self._tmp = tempfile.TemporaryDirectory(prefix="exo_ilc_bag_")
         self.config_file = Path(self._tmp.name) / "effective.yaml"
         self.config_file.write_text(self.config.to_ros_yaml(f"run {self.name}"))
-        self.params_file = Path(self._tmp.name) / "bag_recorder.yaml"
-        self.params_file.write_text(yaml.safe_dump({"bag_recorder": {"ros__parameters": {
+        self.params_file = Path(self._tmp.name) / f"{RECORDER.name}.yaml"
+        self.params_file.write_text(yaml.safe_dump({RECORDER.name: {"ros__parameters": {
             "bag_path": str(self.path), "run_name": self.name,
             "config_file": str(self.config_file), "split_every": self.split_every}}}))
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -61,7 +62,7 @@ class Recording:
         """The recorder as a process of its own (``run_graph(..., extra=[recording.spec])``)."""
         if self.params_file is None:
             raise RuntimeError("Recording.spec outside its with-block")
-        return NodeSpec("bag_recorder", RECORDER_MODULE, ("--params-file", str(self.params_file)))
+        return NodeSpec(RECORDER.name, RECORDER_MODULE, ("--params-file", str(self.params_file)))
 
     def graph_nodes(self, isolated: bool = False,
                     nodes: tuple[NodeSpec, ...] = GRAPH_NODES) -> list[NodeSpec]:

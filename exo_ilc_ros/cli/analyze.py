@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -84,9 +85,37 @@ def trial_figure_path(plot: str | None, trial: int, bag: Path, several: bool) ->
     return out.with_stem(f"{out.stem}{middle}_trial{trial}")
 
 
+def bag_paths(paths: Sequence[str]) -> list[Path]:
+    """The rosbag2 bag directories among ``paths`` (a directory with a ``metadata.yaml``);
+    anything else (``bags/*`` also matches ``bags/README.md``) is skipped with a note. A
+    recording killed before its first trial was filed has no ``metadata.yaml`` yet and is
+    skipped too."""
+    found = []
+    for given in paths:
+        path = Path(given)
+        if (path / "metadata.yaml").is_file():
+            found.append(path)
+            continue
+        why = ("no such file or directory" if not path.exists() else
+               "not a directory" if not path.is_dir() else "no metadata.yaml")
+        print(f"exo-ilc analyze: note: skipping {given}: not a rosbag2 bag ({why})",
+              file=sys.stderr)
+    if not found:
+        raise BagReadError(Path(paths[0]), "no rosbag2 bag directory among the arguments "
+                           f"({', '.join(paths[:5])}{', ...' if len(paths) > 5 else ''})")
+    return found
+
+
+def bag_labels(runs: Sequence[BagRun]) -> list[str]:
+    """One label per bag: its directory name, or its whole path where two names are equal."""
+    names = [run.path.name for run in runs]
+    return [str(run.path) if names.count(name) > 1 else name
+            for run, name in zip(runs, names, strict=True)]
+
+
 def analyze(args: argparse.Namespace) -> int:
-    """Read, report, export, plot."""
-    bag_runs = [read_bag(path) for path in args.bags]
+    """Read every bag and check every request first, then report, export, plot."""
+    bag_runs = [read_bag(path) for path in bag_paths(args.bags)]
     names = bag_runs[0].joint_names
     for run in bag_runs[1:]:
         if len(run.joint_names) != len(names):
@@ -94,41 +123,69 @@ def analyze(args: argparse.Namespace) -> int:
                                f"{bag_runs[0].path} has {len(names)}")
     for run in bag_runs:
         print(describe(run))
+    labels = bag_labels(bag_runs)
     runs = [run.summary() for run in bag_runs]
-    usable = [r for r in runs if len(r.max_abs_error)]
+    usable = [(r, label) for r, label in zip(runs, labels, strict=True)
+              if len(r.max_abs_error)]
     if not usable:
         raise BagReadError(bag_runs[0].path, "no completed trial in any bag")
+    # Every check before anything is written.
+    config_text = bag_runs[0].provenance.config_yaml
+    if args.config_out and not config_text:
+        raise BagReadError(bag_runs[0].path, "has no config in custom_data (--config-out)")
+    with_trial = bag_runs
+    if args.trial is not None:
+        with_trial = [run for run in bag_runs if args.trial in run.trials]
+        if not with_trial:
+            raise BagReadError(bag_runs[0].path if len(bag_runs) == 1 else
+                               Path(args.bags[0]).parent,
+                               f"no bag has trial {args.trial} (--trial; recorded: "
+                               + "; ".join(f"{label}: {_trial_span(run)}" for run, label
+                                           in zip(bag_runs, labels, strict=True)) + ")")
+    summaries = [r for r, _ in usable]
+    usable_labels = [label for _, label in usable]
     print()
     if not args.quiet:
-        print(format_trial_table(usable, names))
+        print(format_trial_table(summaries, names, labels=usable_labels))
         print()
-    print(format_iterations(usable, names))
+    print(format_iterations(summaries, names, labels=usable_labels))
     if args.csv:
-        write_csv(args.csv, usable, names)
+        write_csv(args.csv, summaries, names)
         print(f"wrote {args.csv}")
     if args.json:
         config = bag_runs[0].provenance.config_values or {}
-        write_json(args.json, config, usable)
+        write_json(args.json, config, summaries)
         print(f"wrote {args.json}")
     if args.config_out:
-        text = bag_runs[0].provenance.config_yaml
-        if not text:
-            raise BagReadError(bag_runs[0].path, "has no config in custom_data")
-        Path(args.config_out).write_text(text)
+        Path(args.config_out).write_text(config_text or "")
         print(f"wrote {args.config_out}")
     if args.plot or args.trial is not None:
         from ..figures import convergence_figure, save, tracking_figure
 
         if args.plot:
-            print(f"wrote {save(convergence_figure(usable, names), args.plot)}")
+            plot_labels = [f"{label} ({r.law}, {100 * r.mass_uncertainty:g} %)"
+                           for r, label in usable]
+            print(f"wrote {save(convergence_figure(summaries, names, plot_labels), args.plot)}")
         if args.trial is not None:
-            for run in bag_runs:
-                trial = run.trials.get(args.trial)
-                if trial is None:
-                    raise BagReadError(run.path, f"has no trial {args.trial} (recorded: "
-                                       f"{sorted(run.trials)})")
-                title = f"{run.path.name}: trial {args.trial}, {run.law}, mass uncertainty " \
+            for run, label in zip(bag_runs, labels, strict=True):
+                if run not in with_trial:
+                    print(f"exo-ilc analyze: note: no tracking figure for {label}: it has no "
+                          f"trial {args.trial} (recorded: {_trial_span(run)})", file=sys.stderr)
+                    continue
+                title = f"{label}: trial {args.trial}, {run.law}, mass uncertainty " \
                         f"{run.mass_uncertainty:g}"
                 path = trial_figure_path(args.plot, args.trial, run.path, len(bag_runs) > 1)
-                print(f"wrote {save(tracking_figure(trial, run.joint_names, title), path)}")
+                figure = tracking_figure(run.trials[args.trial], run.joint_names, title,
+                                         bound=run.error_bound)
+                print(f"wrote {save(figure, path)}")
     return 0
+
+
+def _trial_span(run: BagRun) -> str:
+    """``trials 1-5`` or ``no trial``."""
+    trials = sorted(run.trials)
+    if not trials:
+        return "no trial"
+    if trials == list(range(trials[0], trials[-1] + 1)):
+        return f"trials {trials[0]}-{trials[-1]}" if len(trials) > 1 else f"trial {trials[0]}"
+    return "trials " + ", ".join(map(str, trials))

@@ -7,6 +7,7 @@ import os
 import shlex
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -119,6 +120,18 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def announce_graph(bar: Any, bag: Path | None) -> Callable[[Any], None]:
+    """``on_start`` of a graph run: the domain id (for ``exo-ilc param`` from another terminal)
+    and where the bag goes, printed once the nodes are up and before trial 1."""
+    def on_start(session: Any) -> None:
+        bar.write(f"graph on ROS_DOMAIN_ID={session.domain_id} (from another terminal: export "
+                  f"ROS_DOMAIN_ID={session.domain_id}, then exo-ilc param ...)", file=sys.stderr)
+        if bag is not None:
+            bar.write(f"recording to bag: {bag}", file=sys.stderr)
+        sys.stderr.flush()
+    return on_start
+
+
 def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
              trials: int) -> RunSummary:
     """One graph run (one mass uncertainty)."""
@@ -134,12 +147,12 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
             bar.set_postfix_str("max|e| " + " ".join(f"{x:.1e}" for x in errors))
         if args.no_bag:
             result = run_graph(run_config, args.domain_id, on_summary=progress,
-                           on_start=lambda s: print(f"graph on ROS_DOMAIN_ID={s.domain_id}",
-                                                    file=sys.stderr, flush=True))
+                               on_start=announce_graph(bar, None))
         else:
             run_config = run_config.replace({"wait_for_recorder": True})
             with Recording(run_config, args.bag_dir) as recording:
                 result = run_graph(run_config, args.domain_id, on_summary=progress,
-                                   nodes=recording.graph_nodes(args.isolated_recorder))
+                                   nodes=recording.graph_nodes(args.isolated_recorder),
+                                   on_start=announce_graph(bar, recording.path))
             bar.write(f"bag: {recording.path}", file=sys.stderr)
     return result.summary

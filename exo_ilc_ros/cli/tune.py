@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -28,6 +29,16 @@ from .arguments import (
 )
 
 DEFAULT_STORAGE = ".exo-ilc/tune.journal"
+DEFAULT_OUT_DIR = ".exo-ilc/tuned"
+"""Where a tuning result goes without ``--out``: under the git-ignored ``.exo-ilc/``, never over
+the tracked ``config/tuned.yaml`` (which ``exo-ilc compare`` shows by default)."""
+
+
+def default_out(study_name: str) -> Path:
+    """``.exo-ilc/tuned/<study-name>.yaml`` (characters other than letters, digits, ``._-``
+    replaced by ``_``)."""
+    safe = re.sub(r"[^A-Za-z0-9._-]", "_", study_name).lstrip(".") or "study"
+    return Path(DEFAULT_OUT_DIR) / f"{safe}.yaml"
 
 
 def default_jobs() -> int:
@@ -56,8 +67,10 @@ def register(sub: Any) -> None:
                         help="trials per run (default: max_trials)")
     parser.add_argument("--budget", type=integer(0), default=60,
                         help="Optuna trials to add to the study in this call (default: 60)")
-    parser.add_argument("--out", default="config/tuned.yaml", type=yaml_out,
-                        help="tuned ROS parameter YAML (default: config/tuned.yaml)")
+    parser.add_argument("--out", metavar="FILE", type=yaml_out,
+                        help="tuned ROS parameter YAML (default: "
+                        f"{DEFAULT_OUT_DIR}/<study-name>.yaml, which git ignores; the shipped "
+                        "config/tuned.yaml is only written when named here)")
     parser.add_argument("--storage", default=DEFAULT_STORAGE, type=storage,
                         help="Optuna storage: a journal file path (default: "
                         f"{DEFAULT_STORAGE}) or an RDB URL (sqlite:///f.db, "
@@ -82,14 +95,15 @@ def _fmt(x: int | None) -> str:
 
 def format_before_after(result: TuningResult, joint_names: Sequence[str]) -> str:
     """Scores of the starting schedules (trial 0) and of the best, per uncertainty."""
-    header = (f"{'':<8}{'delta':>6}  " + "".join(f"{n[:16]:>18}" for n in joint_names)
+    cell = max([len(n) + 2 for n in joint_names] + [18])  # whole joint names
+    header = (f"{'':<8}{'delta':>6}  " + "".join(f"{n:>{cell}}" for n in joint_names)
               + f"{'peak':>10}{'floor':>10}{'score':>8}")
     lines = ["First within / settled within the bound (trial, per joint), peak and final "
              "max |e| (rad), score", header, "-" * len(header)]
 
     def rows(label: str, runs: list[RunScore]) -> None:
         for r in runs:
-            cells = "".join(f"{_fmt(f) + ' / ' + _fmt(s):>18}"
+            cells = "".join(f"{_fmt(f) + ' / ' + _fmt(s):>{cell}}"
                             for f, s in zip(r.first, r.settled, strict=True))
             lines.append(f"{label:<8}{r.mass_uncertainty:>6.2f}  {cells}{r.peak_error:>10.2e}"
                          f"{r.floor:>10.2e}{r.score:>8.1f}" + ("  diverged" if r.diverged else ""))
@@ -130,7 +144,7 @@ def tune(args: argparse.Namespace) -> int:
     result = best_result(study, problem)
     print(format_before_after(result, config["joint_names"]))
     tuned = result.config.replace({"law": "sign"})
-    out = Path(args.out)
+    out = Path(args.out) if args.out else default_out(name)
     out.parent.mkdir(parents=True, exist_ok=True)
     deltas = " ".join(f"{d:g}" for d in problem.mass_uncertainties)
     header = (f"Sign-law schedules tuned by `exo-ilc tune` (Optuna study {name}, storage "
@@ -146,4 +160,5 @@ def tune(args: argparse.Namespace) -> int:
         raise ConfigError("<file>", "the written tuned config does not read back unchanged",
                           str(out))
     print(f"wrote {out}")
+    print(f"use it with: exo-ilc simulate --config {out}; exo-ilc compare --tuned {out}")
     return 0

@@ -1,12 +1,19 @@
-"""The paper's mathematics, ROS-free: arm model, reference, computed torque, ILC laws, integrator
-and an in-process trial runner. Nothing here imports rclpy."""
+"""The paper's mathematics, ROS-free: arm model, reference, ILC laws, the learning session (the
+in-process runner, and the logic the supervisor node runs) and its store. Nothing here imports
+rclpy.
+
+What a user or a node needs is importable from here. The compiled kernels live in their own
+modules, by role: :mod:`.plant` (RK4 with ZOH effort, eq (8); the effort clamp and saturation),
+:mod:`.controller` (PD eq (11), computed torque eqs (9)/(16), error envelope, safe hold) and
+:mod:`.trial` (one trial in-process, a graph trial rebuilt from its samples).
+"""
 
 from __future__ import annotations
 
 from . import _numba_cache  # noqa: F401  (must run before the kernels are compiled)
 from .config import Config, config_dir, default_config_path, load_config
 from .convergence import LoopAnalysis, analyze_loop
-from .errors import ConfigError, ExoIlcError, ModelError
+from .errors import ConfigError, ExoIlcError, ModelError, SafetyError, StoreError
 from .experiment import (
     Experiment,
     IterationsToBound,
@@ -16,13 +23,6 @@ from .experiment import (
     iterations_to_bound,
 )
 from .growth import GrowthFit, fit_growth
-from .integrator import (
-    PlantDynamics,
-    computed_torque_kernel,
-    feedback_input,
-    integrate_period,
-    simulate_trial,
-)
 from .laws import (
     ErrorSum,
     FeedforwardUpdate,
@@ -38,17 +38,19 @@ from .laws import (
     sgn,
 )
 from .model import ArmModel
+from .plant import PlantDynamics
 from .qfilter import QFilter, QFilteredLaw
 from .session import LearningSession, RunResult, StopReason, TrialConclusion, run_trials
+from .store import RunStore
 from .trajectory import QuinticTrajectory, SampledReference
 
 __all__ = [
     "ArmModel", "Config", "ConfigError", "ErrorSum", "ExoIlcError", "Experiment",
     "FeedforwardUpdate", "GrowthFit", "InitialFeedforward", "IterationsToBound", "LearningLaw",
     "LearningSession", "LinearLaw", "LoopAnalysis", "Memory", "ModelError", "PlantDynamics",
-    "QFilter", "QFilteredLaw", "QuinticTrajectory", "RunResult", "SampledReference",
-    "ScheduleIndex", "SignLaw", "StepSchedule", "StopReason", "TrialConclusion", "TrialRecord",
-    "analyze_loop", "build_arm", "build_law", "build_reference", "computed_torque_kernel",
-    "config_dir", "default_config_path", "error_sums", "feedback_input", "fit_growth",
-    "integrate_period", "iterations_to_bound", "load_config", "run_trials", "sgn", "simulate_trial",
+    "QFilter", "QFilteredLaw", "QuinticTrajectory", "RunResult", "RunStore", "SafetyError",
+    "SampledReference", "ScheduleIndex", "SignLaw", "StepSchedule", "StopReason", "StoreError",
+    "TrialConclusion", "TrialRecord", "analyze_loop", "build_arm", "build_law", "build_reference",
+    "config_dir", "default_config_path", "error_sums", "fit_growth", "iterations_to_bound",
+    "load_config", "run_trials", "sgn",
 ]

@@ -9,7 +9,6 @@ import numpy as np
 
 from .config import Config
 from .errors import SafetyError
-from .integrator import PlantDynamics
 from .laws import (
     ErrorSum,
     InitialFeedforward,
@@ -22,9 +21,10 @@ from .laws import (
     TrialRecord,
 )
 from .model import ArmModel
+from .plant import PlantDynamics
 from .qfilter import QFilteredLaw, feedforward_limit_of, qfilter_of
-from .safety import simulate_trial_guarded
 from .trajectory import QuinticTrajectory, SampledReference
+from .trial import simulate_trial_guarded
 
 
 def build_arm(config: Config) -> ArmModel:

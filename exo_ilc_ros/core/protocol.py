@@ -24,10 +24,10 @@ import numpy as np
 from .config import Config
 from .errors import ExoIlcError
 from .experiment import Experiment
-from .loop import record_from_samples
 from .samples import TrialSamples
 from .session import LIVE, LearningSession, TrialConclusion
 from .store import RunStore
+from .trial import record_from_samples
 
 STEP_TIMEOUT = 30.0
 """Wall seconds a protocol step may take before the trial is discarded and run again."""

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .loop import period_ns, sample_index
 from .trajectory import SampledReference
+from .trial import period_ns, sample_index
 
 
 class TrialSamples:

@@ -40,7 +40,7 @@ from . import schema
 from .config import Config
 from .errors import StoreError
 from .laws import FeedforwardUpdate, TrialRecord
-from .safety import saturation_counts
+from .plant import saturation_counts
 from .trajectory import SampledReference
 
 STORE_VERSION = 1

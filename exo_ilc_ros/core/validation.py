@@ -250,17 +250,20 @@ class LogOnce:
             self.counts.items(), key=lambda item: item[0].value)]
 
 
-def validate_update(current: Config, changes: Mapping[str, Any],
-                    live_only: bool = True) -> Config | ConfigError:
-    """The set-parameters path: ``changes`` (dotted names) merged into ``current``, the whole
-    validated. Returns the new Config, or the ConfigError naming the key and the rule. With
-    ``live_only``, a change to a parameter that is not ``live`` is refused (restart needed).
-    ROS's own parameters (``use_sim_time``) are ignored."""
+def validate_update(current: Config, changes: Mapping[str, Any], live_only: bool = True,
+                    node: str | None = None) -> Config | ConfigError:
+    """The set-parameters path (what a node's on-set-parameters callback runs): ``changes``
+    (dotted names) merged into ``current``, the whole validated. Returns the new Config
+    (``current`` itself if nothing changes), or the ConfigError naming the key and the rule.
+    With ``live_only``, a change to a parameter that is not ``live`` is refused (restart
+    needed); with ``node``, a parameter that node does not declare is unknown. ROS's own
+    parameters (``use_sim_time``) are ignored."""
+    known = schema.BY_NAME if node is None else {p.name: p for p in schema.parameters_of(node)}
     filtered: dict[str, Any] = {}
     for name, value in changes.items():
         if name in schema.ROS_BUILTIN:
             continue
-        spec = schema.BY_NAME.get(name)
+        spec = known.get(name)
         if spec is None:
             return ConfigError(str(name), "unknown parameter")
         if live_only and not spec.live:

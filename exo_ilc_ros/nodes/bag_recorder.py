@@ -76,7 +76,8 @@ class BagRecorder(Node):
     """Writes the graph's topics into a bag, one storage file per trial."""
 
     DRAINS_ON_STOP = True
-    """On SIGINT/SIGTERM :func:`~.common.run_nodes` polls on until the last messages are in."""
+    """On SIGINT/SIGTERM :func:`~.common.run_nodes` polls on until the last messages are in
+    (a :class:`~.common.DrainingNode`)."""
 
     def __init__(self) -> None:
         super().__init__(NAME)
@@ -105,13 +106,17 @@ class BagRecorder(Node):
         self.running: int | None = None
         """The trial between its start and end events, else None."""
         self.completed = 0
-        self.received = 0
-        """The last trial whose end event and summary are written."""
+        """The last trial whose end event is recorded (``trials_received``)."""
+        self.filed = 0
+        """The last trial filed: its end event and summary written and its storage file
+        finished (``trials_filed``; the supervisor stores a trial only once it is filed)."""
         self.ended: int | None = None
         """A trial that ended but whose summary has not arrived yet."""
         self.summarised: set[int] = set()
         self.changes: list[ParameterChange] = []
         self.messages = 0
+        self.exit_code: int | None = None
+        """Never set: the recorder has no fatal error of its own (a bag error raises)."""
 
         self.inbox = Inbox(self)  # every topic, drained in batches (see Inbox)
         for topic, msgtype in topics.TYPES.items():
@@ -128,12 +133,15 @@ class BagRecorder(Node):
         missing = [topic for topic in READY_TOPICS
                    if self.count_publishers(topic) < 1]
         message = "waiting" if missing else "ready"
-        values = [("bag", str(self.writer.path)), ("messages", str(self.messages)),
-                  ("trials_received", str(self.completed)),
-                  ("trials_filed", str(self.received))]
-        values += [("waiting_for", topic) for topic in missing]
+        values = [*self.status_values(), *(("waiting_for", topic) for topic in missing)]
         self.status_pub.publish(diagnostic_array(
             self, [status(topics.RECORDER_STATUS, message, values, hardware_id=NAME)]))
+
+    def status_values(self) -> list[tuple[str, str]]:
+        """The status key-values (:data:`topics.RECORDER_STATUS`): the bag, messages written,
+        the last trial whose end was recorded and the last trial filed."""
+        return [("bag", str(self.writer.path)), ("messages", str(self.messages)),
+                ("trials_received", str(self.completed)), ("trials_filed", str(self.filed))]
 
     def poll(self) -> int:
         """Write every message waiting in the inbox, in the order DDS received them; returns
@@ -231,7 +239,7 @@ class BagRecorder(Node):
         if trial is not None:
             # Only now (the trial's file is finished and listed) tell the supervisor, which
             # waits for this before the next trial: a kill -9 from here on loses no ended trial.
-            self.received = max(self.received, trial)
+            self.filed = max(self.filed, trial)
             self.on_status_timer()
 
     def destroy_node(self) -> None:

@@ -11,7 +11,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 import rclpy
@@ -30,6 +30,7 @@ from rclpy.signals import SignalHandlerOptions
 from ..core import schema
 from ..core.config import Config, load_config, load_ros_yaml
 from ..core.errors import ConfigError, ExoIlcError
+from ..core.validation import validate_update
 
 RCLError = rclpy_implementation.RCLError
 
@@ -71,13 +72,17 @@ class SchemaParameters:
     command line winning (:func:`command_line_parameters`; rclpy alone would let a params
     file's ``<node>:`` section beat a later ``-p``). Types are dynamic and every value goes
     through the schema's ``coerce`` (a user writing ``0`` for a double is fine).
-    Changes at runtime: ``live`` parameters are validated with the schema (and the rules
-    between parameters) and accepted into :attr:`pending`; any other change is rejected with the
-    reason. The node decides when :attr:`pending` takes effect.
+    Changes at runtime, the way rclpy's demos do it: the on-set callback validates (``live``
+    parameters only, the schema and the rules between parameters:
+    :func:`~exo_ilc_ros.core.validation.validate_update`, the one validation path) and changes
+    nothing; a refused change returns the key and the rule. The post-set callback, called once
+    rclpy has stored the values, applies them to :attr:`pending` and tells the
+    :attr:`listeners`. The node decides when :attr:`pending` takes effect.
     """
 
     def __init__(self, node: Node, section: str) -> None:
         self._node = node
+        self._section = section
         self._params = {p.name: p for p in schema.parameters_of(section)}
         defaults = load_config()
         given = command_line_parameters(_command_line(), node.get_fully_qualified_name())
@@ -105,33 +110,38 @@ class SchemaParameters:
         self.pending: Config = self.config
         """The configuration including accepted live changes."""
         self.listeners: list[Callable[[Config], None]] = []
-        node.add_on_set_parameters_callback(self._on_set_parameters)
+        """Called with the new :attr:`pending` after every accepted change."""
+        node.add_on_set_parameters_callback(self.on_set_parameters)
+        node.add_post_set_parameters_callback(self.on_parameters_set)
 
-    def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        changes: dict[str, Any] = {}
-        for parameter in parameters:
-            spec = self._params.get(parameter.name)
-            if spec is None:
-                if parameter.name in schema.ROS_BUILTIN:
-                    continue
-                return SetParametersResult(successful=False,
-                                           reason=f"{parameter.name}: unknown parameter")
-            if not spec.live:
-                return SetParametersResult(
-                    successful=False, reason=f"{spec.name}: cannot change while the graph runs "
-                    "(restart the node with the new value)")
-            value = parameter.value  # arrays come as array.array: a list reads better
-            changes[spec.name] = value.tolist() if isinstance(value, array.array) else value
-        if not changes:
-            return SetParametersResult(successful=True)
-        try:
-            updated = self.pending.replace(changes)
-        except ConfigError as exc:
-            return SetParametersResult(successful=False, reason=f"{exc.key}: {exc.rule}")
+    def _update(self, parameters: list[Parameter]) -> Config | ConfigError:
+        return validate_update(self.pending, {p.name: _plain(p.value) for p in parameters},
+                               node=self._section)
+
+    def on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Validate a change (nothing changes here: another callback may still refuse it)."""
+        checked = self._update(parameters)
+        if isinstance(checked, ConfigError):
+            return SetParametersResult(successful=False, reason=f"{checked.key}: {checked.rule}")
+        return SetParametersResult(successful=True)
+
+    def on_parameters_set(self, parameters: list[Parameter]) -> None:
+        """Apply a change rclpy has stored: into :attr:`pending`, then the listeners."""
+        updated = self._update(parameters)
+        if isinstance(updated, ConfigError):  # validated by on_set_parameters on this state
+            self._node.get_logger().error(f"parameter change not applied: {updated}")
+            return
+        if updated is self.pending:
+            return
         self.pending = updated
         for listener in self.listeners:
             listener(updated)
-        return SetParametersResult(successful=True)
+
+
+def _plain(value: Any) -> Any:
+    """A parameter value as the schema reads it: arrays come as array.array, lists read better
+    in a refusal ("got [1, 2]")."""
+    return value.tolist() if isinstance(value, array.array) else value
 
 
 _ARGV: list[str] | None = None
@@ -399,6 +409,31 @@ spun on until its ``poll()`` handled nothing for DRAIN_IDLE s (at most DRAIN_MAX
 graph published before it was told to stop is still taken (the recorder writes it)."""
 
 
+@runtime_checkable
+class PollingNode(Protocol):
+    """A node :func:`run_nodes` polls (an :class:`Inbox` owner)."""
+
+    @property
+    def exit_code(self) -> int | None:
+        """Not None: the node hit a fatal error (already logged and reported on /diagnostics)
+        and the process must stop with this code."""
+        ...
+
+    def poll(self) -> int | None:
+        """Handle what waits in the inbox; returns how many messages (None: not counted).
+        Called after every executor event and at least every :data:`INBOX_PERIOD`."""
+        ...
+
+
+@runtime_checkable
+class DrainingNode(PollingNode, Protocol):
+    """A :class:`PollingNode` that is polled on after a stop until its inbox is quiet
+    (:data:`DRAIN_IDLE`) and destroyed last (the bag recorder: what the graph published before
+    the stop still reaches the bag)."""
+
+    DRAINS_ON_STOP: ClassVar[bool]
+
+
 def spin(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
     """Init, build the node, spin it until SIGINT/SIGTERM; its exit code (see
     :func:`run_nodes`)."""
@@ -410,12 +445,11 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     EventsExecutor (``spin_once`` in a loop, never ``spin()``) until SIGINT/SIGTERM.
 
     Nodes of one process share one DDS participant, so a topic several of them read crosses
-    the process boundary once (ROS 2 composition). A node with a ``poll()`` method (an
-    :class:`Inbox` owner) has it called after every event and at least every
-    :data:`INBOX_PERIOD`. On stop, nodes without ``DRAINS_ON_STOP`` are destroyed first, the
-    others drained (:data:`DRAIN_IDLE`) and then destroyed (the recorder closes its bag).
-    Returns the exit code: 0, 2 for a configuration or bag error, or the first ``exit_code``
-    a node sets (a fatal error it already logged and reported on /diagnostics).
+    the process boundary once (ROS 2 composition). A :class:`PollingNode` has its ``poll()``
+    called after every event and at least every :data:`INBOX_PERIOD`. On stop, every node but
+    the :class:`DrainingNode` ones is destroyed first, those are drained (:data:`DRAIN_IDLE`)
+    and then destroyed (the recorder closes its bag). Returns the exit code: 0, 2 for a
+    configuration or bag error, or the first ``exit_code`` a polling node sets.
     """
     stop: list[int] = []
 
@@ -438,25 +472,23 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         for make_node in factories:
             nodes.append(make_node())
             executor.add_node(nodes[-1])
-        polls = [poll for poll in (getattr(node, "poll", None) for node in nodes)
-                 if poll is not None]
-        timeout = INBOX_PERIOD if polls else 0.1
+        polling = [node for node in nodes if isinstance(node, PollingNode)]
+        timeout = INBOX_PERIOD if polling else 0.1
         while not stop and rclpy.ok():
             executor.spin_once(timeout_sec=timeout)
-            for poll in polls:
-                poll()
-            codes = [c for c in (getattr(node, "exit_code", None) for node in nodes)
-                     if c is not None]
+            for node in polling:
+                node.poll()
+            codes = [node.exit_code for node in polling if node.exit_code is not None]
             if codes:  # a node that must stop (fatal error)
                 code = int(codes[0])
                 break
-        draining = [node for node in nodes if getattr(node, "DRAINS_ON_STOP", False)]
+        draining = [node for node in polling
+                    if isinstance(node, DrainingNode) and node.DRAINS_ON_STOP]
         for node in [n for n in nodes if n not in draining]:
             executor.remove_node(node)
             nodes.remove(node)
             node.destroy_node()
-        _drain(executor, [poll for poll in (getattr(node, "poll", None) for node in draining)
-                          if poll is not None])
+        _drain(executor, [node.poll for node in draining])
     except ExoIlcError as exc:
         print(f"error: {exc}", file=sys.stderr, flush=True)
         code = 2

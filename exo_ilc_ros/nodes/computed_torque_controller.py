@@ -5,9 +5,9 @@ reference of /ilc/feedforward, then eq (16) with the nominal model, clamps to th
 and publishes on /effort_controller/commands (the ros2_control JointGroupEffortController
 convention). Acknowledges every feed-forward it loaded on /diagnostics.
 
-Safety (core.safety, the arithmetic of ``simulate_trial_guarded``): at the first sample whose
-|e_j| leaves ``safety.error_envelope`` the trial is aborted at once and the safe hold (gravity
-compensation and PD around the pose measured there) is commanded for the rest of it; the
+Safety (core.controller, the arithmetic of ``trial.simulate_trial_guarded``): at the first
+sample whose |e_j| leaves ``safety.error_envelope`` the trial is aborted at once and the safe hold
+(gravity compensation and PD around the pose measured there) is commanded for the rest of it; the
 watchdog (``safety.watchdog_periods`` control periods of wall time without /joint_states during
 a trial) commands the safe hold around the last pose received. Bad /joint_states or
 feed-forward messages are rejected (core.validation), logged once per cause and counted; no
@@ -28,9 +28,10 @@ from trajectory_msgs.msg import JointTrajectory
 
 from .. import topics
 from ..core import schema
+from ..core.controller import GuardedControlStep
 from ..core.experiment import Experiment
-from ..core.loop import GuardedControlStep, period_ns, sample_index
 from ..core.safety import Watchdog
+from ..core.trial import period_ns, sample_index
 from ..core.validation import Cause, Rejection, validate_feedforward
 from .cdr import float64_array
 from .common import (

@@ -19,16 +19,11 @@ from collections.abc import Callable
 
 from rclpy.node import Node
 
+from . import registry
 from .common import run_nodes
 
-NODES: dict[str, str] = {
-    "plant_simulator": "exo_ilc_ros.nodes.plant_simulator:PlantSimulator",
-    "computed_torque_controller":
-        "exo_ilc_ros.nodes.computed_torque_controller:ComputedTorqueController",
-    "ilc_supervisor": "exo_ilc_ros.nodes.ilc_supervisor:IlcSupervisor",
-    "bag_recorder": "exo_ilc_ros.nodes.bag_recorder:BagRecorder",
-}
-"""The nodes a container can run: name -> ``module:class``."""
+NODES: dict[str, str] = {node.name: node.factory for node in registry.NODES}
+"""The nodes a container can run (every node of :mod:`.registry`): name -> ``module:class``."""
 
 USAGE = f"usage: container NODE [NODE ...] [--ros-args ...]; NODE in {', '.join(NODES)}"
 

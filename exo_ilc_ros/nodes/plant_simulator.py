@@ -28,9 +28,11 @@ from std_srvs.srv import Trigger
 
 from .. import topics
 from ..core import schema
+from ..core.controller import safe_hold_effort
 from ..core.experiment import Experiment
-from ..core.loop import PlantStepper, clamp_counted, period_ns
-from ..core.safety import Watchdog, safe_hold_effort
+from ..core.plant import PlantStepper, clamp_counted
+from ..core.safety import Watchdog
+from ..core.trial import period_ns
 from ..core.validation import Cause, Rejection, validate_effort_command
 from .cdr import CdrError, JointStateWriter, read_float64_array
 from .common import (

@@ -1,0 +1,158 @@
+"""One trial of the closed loop in-process (controller + plant, compiled), and a trial run
+elsewhere (the graph) rebuilt from its samples with the same arithmetic.
+
+The trial is the controller of :mod:`.controller` and the plant of :mod:`.plant` called in the
+order the graph calls them (same kernels, same order, same doubles), so the in-process runner
+and the ROS graph agree bit for bit. Sample i of a trial that starts at simulated time ``t0_ns``
+is stamped ``t0_ns + i * period_ns`` (integer nanoseconds), so indices are recovered exactly
+from stamps (:func:`period_ns`, :func:`sample_index`).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numba import njit
+
+from .controller import control_into, outside_envelope, safe_hold_into
+from .dynamics import workspace
+from .laws import TrialRecord
+from .plant import clamp, rk4_period
+from .trajectory import SampledReference
+
+if TYPE_CHECKING:
+    from .experiment import Experiment
+
+
+@njit(cache=True, error_model="numpy")
+def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray,
+                           kp: np.ndarray, kd: np.ndarray, effort_limit: np.ndarray,
+                           period: float, substeps: int, plant: tuple, nominal: tuple, mode: int,
+                           envelope: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """One trial at the samples t_i = i * period, i = 0..N, guarded by the error envelope.
+
+    Starts at x_d(0) (assumption (ii), eq (21)). At each sample the controller reads
+    (q, qdot), forms u_i by eq (11) and the effort by eq (16) (:func:`controller.control_into`);
+    the plant applies its own limit (a no-op after the controller's clamp) and holds the effort
+    over [t_i, t_i+1) (eq (8), :func:`plant.rk4_period`). The command at t_N is recorded but
+    never applied. At the first sample outside the envelope the trial is aborted: that sample
+    and every later one command the safe hold around the pose measured there (the loop keeps
+    integrating so the record shows the hold). Returns q, qdot, u, effort and the abort index
+    (-1: not aborted).
+    """
+    n_samples, n = u_ff.shape
+    q_log = np.empty((n_samples, n))
+    qd_log = np.empty((n_samples, n))
+    u_log = np.empty((n_samples, n))
+    effort_log = np.empty((n_samples, n))
+    ws = workspace(n)
+    stage = np.empty((10, n))
+    extra = np.empty(2 * n)
+    applied = np.empty(n)
+    q = q_ref[0].copy()
+    qd = qd_ref[0].copy()
+    q_hold = q.copy()
+    abort = -1
+    for i in range(n_samples):
+        q_log[i] = q
+        qd_log[i] = qd
+        if abort < 0 and outside_envelope(q_ref[i], q, envelope):
+            abort = i
+            q_hold[:] = q
+        if abort < 0:
+            control_into(u_ff[i], q_ref[i], qd_ref[i], q, qd, kp, kd, nominal, effort_limit, ws,
+                         u_log[i], effort_log[i])
+        else:
+            safe_hold_into(q_hold, q, qd, kp, kd, nominal, effort_limit, ws, u_log[i],
+                           effort_log[i])
+        if i + 1 < n_samples:
+            for j in range(n):
+                applied[j] = clamp(effort_log[i, j], effort_limit[j])
+            rk4_period(q, qd, applied, period, substeps, plant, nominal, mode, ws, stage, extra)
+    return q_log, qd_log, u_log, effort_log, abort
+
+
+@njit(cache=True, error_model="numpy")
+def simulate_trial(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, kp: np.ndarray,
+                   kd: np.ndarray, effort_limit: np.ndarray, period: float, substeps: int,
+                   plant: tuple, nominal: tuple, mode: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Test oracle only (no runner uses it): the trial of :func:`simulate_trial_guarded` without
+    the error envelope and without the plant's second clamp, which must give the same doubles
+    while every |e_j| stays within the envelope. Returns sampled q, qdot, u and effort."""
+    n_samples, n = u_ff.shape
+    q_log = np.empty((n_samples, n))
+    qd_log = np.empty((n_samples, n))
+    u_log = np.empty((n_samples, n))
+    effort_log = np.empty((n_samples, n))
+    ws = workspace(n)
+    stage = np.empty((10, n))
+    extra = np.empty(2 * n)
+    q = q_ref[0].copy()
+    qd = qd_ref[0].copy()
+    for i in range(n_samples):
+        q_log[i] = q
+        qd_log[i] = qd
+        control_into(u_ff[i], q_ref[i], qd_ref[i], q, qd, kp, kd, nominal, effort_limit, ws,
+                     u_log[i], effort_log[i])
+        if i + 1 < n_samples:
+            rk4_period(q, qd, effort_log[i], period, substeps, plant, nominal, mode, ws, stage,
+                       extra)
+    return q_log, qd_log, u_log, effort_log
+
+
+@njit(cache=True, error_model="numpy")
+def control_inputs(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
+                   qd: np.ndarray, kp: np.ndarray, kd: np.ndarray, nominal: tuple,
+                   effort_limit: np.ndarray, aborted_at: int) -> tuple[np.ndarray, np.ndarray]:
+    """u and effort at every sample of a trial from the sampled states, as the controller
+    formed them (one :func:`controller.control_into` per sample, in order); from sample
+    ``aborted_at`` on (-1: never) the safe hold around q[aborted_at]."""
+    n_samples, n = q.shape
+    u = np.empty((n_samples, n))
+    effort = np.empty((n_samples, n))
+    ws = workspace(n)
+    for i in range(n_samples):
+        if aborted_at < 0 or i < aborted_at:
+            control_into(u_ff[i], q_ref[i], qd_ref[i], q[i], qd[i], kp, kd, nominal,
+                         effort_limit, ws, u[i], effort[i])
+        else:
+            safe_hold_into(q[aborted_at], q[i], qd[i], kp, kd, nominal, effort_limit, ws,
+                           u[i], effort[i])
+    return u, effort
+
+
+def record_from_samples(experiment: Experiment, trial: int, feedforward: np.ndarray,
+                        position: np.ndarray, velocity: np.ndarray,
+                        levels: np.ndarray | None = None,
+                        reference: SampledReference | None = None,
+                        aborted_at: int | None = None) -> TrialRecord:
+    """The :class:`TrialRecord` of a trial run elsewhere (the graph), from its sampled states:
+    u and effort are formed again exactly as the controller did (the safe hold from
+    ``aborted_at`` on, for a trial the error envelope aborted)."""
+    ref = reference or experiment.reference
+    u_ff = np.ascontiguousarray(feedforward, dtype=float)
+    q = np.ascontiguousarray(position, dtype=float)
+    qd = np.ascontiguousarray(velocity, dtype=float)
+    u, effort = control_inputs(u_ff, ref.position, ref.velocity, q, qd, experiment.kp,
+                               experiment.kd, experiment.nominal.kernel_args,
+                               experiment.effort_limit, -1 if aborted_at is None
+                               else int(aborted_at))
+    return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels, aborted_at)
+
+
+def period_ns(period: float) -> int:
+    """The control period in integer nanoseconds (the stamp step of the samples)."""
+    return int(round(period * 1e9))
+
+
+def sample_index(stamp_ns: int, t0_ns: int, step_ns: int, samples: int) -> int | None:
+    """Index i of the sample stamped ``stamp_ns`` in a trial starting at ``t0_ns``, or None if
+    the stamp is not one of the trial's ``samples`` sample times."""
+    offset = stamp_ns - t0_ns
+    if offset < 0 or offset % step_ns:
+        return None
+    i = offset // step_ns
+    return i if i < samples else None

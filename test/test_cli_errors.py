@@ -100,6 +100,8 @@ CASES += [
                                                   "database URL"]),
     (["tune", "--storage", "mysql+mysqldb://u@h/db"], ["argument --storage", "mysqldb",
                                                        "not installed"]),
+    (["tune", "--storage", "postgresql+psycopg2://me:secret@h/db"], [
+        "argument --storage", "psycopg2", "not installed", "'postgresql+psycopg2://me:***@h/db'"]),
     (["tune", "--storage", "{file}/tune.journal"], ["argument --storage", "not a directory"]),
     (["tune", "--study-name", " "], ["argument --study-name", "must not be empty"]),
     (["tune", "--storage", "sqlite:///{tmp}/no/dir/t.db"], ["argument --storage", "t.db",

@@ -207,30 +207,38 @@ def config_with_flags(path: str | None, flags: Mapping[str, tuple[str, Any]]) ->
 
 def storage(text: str) -> str:
     """argparse type: an Optuna storage, a journal file path or an RDB URL whose SQLAlchemy
-    dialect and database driver are installed (checked without connecting)."""
+    dialect and database driver are installed (``tuning.check_database_driver``, checked
+    without connecting)."""
     if "://" not in text:
         return output_file(make_parents=True)(text)
     from sqlalchemy.engine import make_url
-    from sqlalchemy.exc import ArgumentError, NoSuchModuleError
+    from sqlalchemy.exc import ArgumentError
+
+    from ..tuning import TuningError, check_database_driver
 
     try:
+        check_database_driver(text)
+    except TuningError as exc:
+        rule = str(exc).removeprefix(f"--storage {text}: ")
+        raise argparse.ArgumentTypeError(f"{rule}, got {hide_password(text)!r}") from None
+    try:
         url = make_url(text)
-        dialect = url.get_dialect()
-    except (ArgumentError, NoSuchModuleError, ValueError) as exc:
-        raise argparse.ArgumentTypeError(f"must be a journal file path or a database URL "
-                                         f"SQLAlchemy knows ({exc}), got {text!r}") from None
+    except ArgumentError:  # pragma: no cover - check_database_driver parsed it already
+        return text
     if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
         output_file(make_parents=False)(url.database)  # sqlite makes the file, not its directory
-    try:
-        dialect.import_dbapi()
-    except ImportError as exc:
-        driver = url.get_driver_name()
-        hint = " (pip install 'psycopg[binary]')" if driver == "psycopg" else \
-            " (pip install psycopg2-binary)" if driver == "psycopg2" else ""
-        raise argparse.ArgumentTypeError(
-            f"the database driver {driver!r} of {url.get_backend_name()} URLs is not installed"
-            f"{hint}: {exc}, got {url.render_as_string(hide_password=True)!r}") from None
     return text
+
+
+def hide_password(url: str) -> str:
+    """A database URL as it may be printed: its password as ***."""
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError
+
+    try:
+        return make_url(url).render_as_string(hide_password=True)
+    except (ArgumentError, ValueError):
+        return url
 
 
 def seed(text: str) -> int:

@@ -48,8 +48,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if type(exc).__module__.startswith("sqlalchemy") and \
                 getattr(args, "storage", None) is not None:  # the database of tune --storage
             reason = str(getattr(exc, "orig", None) or exc).splitlines()[0]
+            from .arguments import hide_password
+
             print(f"exo-ilc {args.command}: error: argument --storage: cannot use the database "
-                  f"{args.storage!r}: {reason}", file=sys.stderr)
+                  f"{hide_password(args.storage)!r}: {reason}", file=sys.stderr)
             return 2
         print(f"exo-ilc {args.command}: internal error: {type(exc).__name__}: {exc}\n"
               "This is a bug in exo-ilc, not in what you typed; please report it with the command "

@@ -485,7 +485,7 @@ def test_run_records_a_bag_that_analyses_to_its_table(tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--config",
                            str(config_file), "--trials", "3", "--quiet", "--json", str(run_json),
                            "--bag-dir", str(tmp_path / "bags")], capture_output=True, text=True,
-                          timeout=150, stdin=subprocess.DEVNULL, check=False)
+                          timeout=150, stdin=subprocess.DEVNULL, check=False, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]
     (bag,) = (tmp_path / "bags").iterdir()
     assert f"bag: {bag}" in proc.stderr

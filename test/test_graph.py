@@ -48,7 +48,7 @@ def test_run_json_equals_simulate(tmp_path: Path) -> None:
     config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n')
     graph_json, local_json = tmp_path / "graph.json", tmp_path / "local.json"
     result = _exo_ilc("run", "--no-bag", "--config", str(config_file), "--trials", "3",
-                      "--json", str(graph_json), timeout=150)
+                      "--json", str(graph_json), timeout=150, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
     assert "Iterations to the bound" in result.stdout
     local = _exo_ilc("simulate", "--config", str(config_file), "--trials", "3", "--json",
@@ -151,7 +151,7 @@ def test_ctrl_c_stops_every_process(tmp_path: Path) -> None:
     process = subprocess.Popen(
         [sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--trials", "100",
          "--domain-id", str(claim.domain_id)], stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env, text=True)
+        stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env, text=True, cwd=tmp_path)
     try:
         deadline = time.monotonic() + 90.0
         children: list[int] = []

@@ -9,10 +9,11 @@ from typing import Any
 
 from tqdm import tqdm
 
-from ..comparison import Variant, format_comparison, plot_comparison, run_comparison
+from ..analysis.comparison import Variant, format_comparison, plot_comparison, run_comparison
+from ..analysis.report import write_json
 from ..core.config import config_dir, load_config, read_yaml
 from ..core.errors import ConfigError
-from ..report import RunSummary, write_json
+from ..core.summary import RunSummary
 from .tune import default_jobs
 
 TUNED_NAME = "tuned.yaml"

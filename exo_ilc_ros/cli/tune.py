@@ -13,9 +13,9 @@ from typing import Any
 import optuna
 from tqdm import tqdm
 
+from ..analysis.tuning import RunScore, TuningProblem, TuningResult, best_result, optimize
 from ..core.config import load_config
 from ..core.errors import ConfigError
-from ..tuning import RunScore, TuningProblem, TuningResult, best_result, optimize
 
 DEFAULT_STORAGE = ".exo-ilc/tune.journal"
 DEFAULT_OUT_DIR = ".exo-ilc/tuned"

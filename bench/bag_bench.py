@@ -38,7 +38,7 @@ MODES = {"without": "no recorder", "supervisor": "recorder in the supervisor's p
 def graph_steps_per_second(config: Config, mode: str, bag_dir: Path) -> dict[str, float]:
     """Lock-step control steps per second within trials and overall (graph_bench's measure:
     trial start to end events, the first three trials skipped), in one of :data:`MODES`."""
-    from exo_ilc_ros.bag.recording import Recording
+    from exo_ilc_ros.orchestration.recording import Recording
 
     if mode == "without":
         return graph_rate(config)

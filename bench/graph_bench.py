@@ -23,10 +23,15 @@ from typing import Any
 
 import numpy as np
 
-from exo_ilc_ros import topics
 from exo_ilc_ros.core.config import Config, load_config
-from exo_ilc_ros.graph import GraphSession, run_graph
-from exo_ilc_ros.launcher import GRAPH_NODES, NodeSpec, claim_domain_id, graph_environment
+from exo_ilc_ros.orchestration.graph import GraphSession, run_graph
+from exo_ilc_ros.orchestration.launcher import (
+    GRAPH_NODES,
+    NodeSpec,
+    claim_domain_id,
+    graph_environment,
+)
+from exo_ilc_ros.wire import topics
 
 
 def middleware_floor(count: int, raw: bool, listener: bool = False) -> dict[str, float]:

@@ -30,7 +30,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from exo_ilc_ros.nodes.cdr import JointStateWriter, float64_array, read_joint_state
+from exo_ilc_ros.wire.cdr import JointStateWriter, float64_array, read_joint_state
 
 QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 NAMES = ["j1", "j2", "j3"]

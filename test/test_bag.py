@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import yaml
 
-from exo_ilc_ros import topics
+from exo_ilc_ros.analysis.figures import convergence_figure, tracking_figure
 from exo_ilc_ros.bag import (
     BagReadError,
     BagWriteError,
@@ -32,8 +32,8 @@ from exo_ilc_ros.bag.provenance import read_provenance
 from exo_ilc_ros.cli.main import main as exo_ilc
 from exo_ilc_ros.core.config import Config, load_config
 from exo_ilc_ros.core.session import RunResult, run_trials
-from exo_ilc_ros.figures import convergence_figure, tracking_figure
-from exo_ilc_ros.report import RunSummary
+from exo_ilc_ros.core.summary import RunSummary
+from exo_ilc_ros.wire import topics
 
 TRIALS = 5
 SHORT = {"trajectory.duration": 1.0, "max_trials": TRIALS}
@@ -244,8 +244,8 @@ def test_recording_runs_the_recorder_in_the_supervisors_process(tmp_path: Path,
     """By default the recorder joins ilc_supervisor's process (one container, its parameters
     from a params file of its own so they reach no other node); isolated, it is one more
     process. -p arguments cannot be composed (they would reach every node of the process)."""
-    from exo_ilc_ros.bag.recording import Recording
-    from exo_ilc_ros.launcher import GRAPH_NODES, NodeSpec, composed
+    from exo_ilc_ros.orchestration.launcher import GRAPH_NODES, NodeSpec, composed
+    from exo_ilc_ros.orchestration.recording import Recording
 
     with Recording(config, tmp_path, "r") as recording:
         names = [spec.name for spec in recording.graph_nodes()]
@@ -439,8 +439,8 @@ def test_recorder_sigkill_leaves_the_filed_trials(tmp_path: Path) -> None:
     from rclpy.parameter import Parameter
     from rclpy.parameter_client import AsyncParameterClient
 
-    from exo_ilc_ros.bag.recording import Recording
-    from exo_ilc_ros.graph import GraphSession
+    from exo_ilc_ros.orchestration.graph import GraphSession
+    from exo_ilc_ros.orchestration.recording import Recording
 
     trials = 10
     config = load_config(overrides={**SHORT, "max_trials": trials, "wait_for_recorder": True})
@@ -516,7 +516,7 @@ def test_layouts_name_every_joint_and_known_topics(config: Config) -> None:
 def test_joint_states_decoded_row_wise_equal_rosbags() -> None:
     """The fast decoder against rosbags' own, with a message of another layout mixed in."""
     from exo_ilc_ros.bag import messages
-    from exo_ilc_ros.bag.cdr import joint_states
+    from exo_ilc_ros.wire.cdr import joint_states
 
     names = ["a", "bb", "ccc"]
     raws = [messages.joint_state(10**9 * k + 7, names, [k, 2.0, 3.0], [0.5, k, -1.0],

@@ -10,7 +10,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from exo_ilc_ros.nodes.cdr import (
+from exo_ilc_ros.wire.cdr import (
     CdrError,
     JointStateWriter,
     float64_array,

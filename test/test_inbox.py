@@ -18,8 +18,8 @@ def test_inbox_drains_two_topics_in_receive_order_and_is_never_spun() -> None:
     from rclpy.node import Node
     from std_msgs.msg import Float64MultiArray
 
-    from exo_ilc_ros.nodes.cdr import float64_array, read_float64_array
     from exo_ilc_ros.nodes.common import Inbox
+    from exo_ilc_ros.wire.cdr import float64_array, read_float64_array
 
     rclpy.init()
     try:
@@ -63,8 +63,8 @@ def test_inboxes_of_one_process_share_one_subscription_per_topic() -> None:
     from rclpy.node import Node
     from std_msgs.msg import Float64MultiArray
 
-    from exo_ilc_ros.nodes.cdr import float64_array, read_float64_array
     from exo_ilc_ros.nodes.common import INBOX_QOS, Inbox
+    from exo_ilc_ros.wire.cdr import float64_array, read_float64_array
 
     def values(taken: list[tuple[int, str, bytes]]) -> list[float]:
         return [float(read_float64_array(raw)[0]) for _, _, raw in taken]

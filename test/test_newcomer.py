@@ -13,13 +13,13 @@ from pathlib import Path
 import pytest
 from matplotlib.figure import Figure
 
-from exo_ilc_ros import figures
+from exo_ilc_ros.analysis import figures
+from exo_ilc_ros.analysis.report import format_iterations
 from exo_ilc_ros.bag import read_bag, write_run
 from exo_ilc_ros.cli.clean import parse_age
 from exo_ilc_ros.cli.main import main as exo_ilc
 from exo_ilc_ros.core.config import Config, load_config
 from exo_ilc_ros.core.session import run_trials
-from exo_ilc_ros.report import format_iterations
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = {"trajectory.duration": 1.0}
@@ -107,8 +107,8 @@ def test_headers_keep_whole_joint_names(bag_dir: Path) -> None:
     runs = [read_bag(bag_dir / "run_a").summary()]
     text = format_iterations(runs, ["shoulder_flexion", "shoulder_abduction", "elbow_flexion"])
     assert "shoulder_abduction" in text
+    from exo_ilc_ros.analysis.tuning import RunScore, TuningResult
     from exo_ilc_ros.cli.tune import format_before_after
-    from exo_ilc_ros.tuning import RunScore, TuningResult
 
     score = RunScore(0.1, [3, 4, 5], [3, 4, 5], 5.0, 0.2, 0.2, 1e-3, 0.0)
     result = TuningResult("s", load_config(), 5.0, 5.0, [score], [score], 1)

@@ -139,10 +139,10 @@ def test_one_node_registry() -> None:
     the registry, and every registry entry points at a real node class and main."""
     import importlib
 
-    from exo_ilc_ros.bag.recording import RECORDER_MODULE
     from exo_ilc_ros.core import schema
-    from exo_ilc_ros.launcher import GRAPH_NODES
     from exo_ilc_ros.nodes import container, registry
+    from exo_ilc_ros.orchestration.launcher import GRAPH_NODES
+    from exo_ilc_ros.orchestration.recording import RECORDER_MODULE
 
     assert [(s.name, s.module) for s in GRAPH_NODES] == \
         [(n.name, n.module) for n in registry.GRAPH]

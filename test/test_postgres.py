@@ -136,7 +136,7 @@ def test_a_lost_race_to_create_the_tables_is_retried(monkeypatch: pytest.MonkeyP
     failure is not retried and is one line."""
     from sqlalchemy.exc import IntegrityError, OperationalError
 
-    from exo_ilc_ros import tuning
+    from exo_ilc_ros.analysis import tuning
 
     calls: list[int] = []
     real = optuna.create_study

@@ -20,12 +20,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from exo_ilc_ros import topics
 from exo_ilc_ros.core.config import Config, load_config
 from exo_ilc_ros.core.experiment import Experiment
 from exo_ilc_ros.core.session import LearningSession, run_trials
 from exo_ilc_ros.core.trial import record_from_samples
-from exo_ilc_ros.launcher import GraphError
+from exo_ilc_ros.orchestration.launcher import GraphError
+from exo_ilc_ros.wire import topics
 
 pytestmark = pytest.mark.graph
 
@@ -117,11 +117,11 @@ def test_nodes_reject_bad_input_keep_running_and_report_it() -> None:
     import rclpy
     from trajectory_msgs.msg import JointTrajectory
 
-    from exo_ilc_ros.nodes.cdr import float64_array
     from exo_ilc_ros.nodes.computed_torque_controller import ComputedTorqueController
     from exo_ilc_ros.nodes.ilc_supervisor import IlcSupervisor
+    from exo_ilc_ros.nodes.messages import feedforward_message
     from exo_ilc_ros.nodes.plant_simulator import PlantSimulator
-    from exo_ilc_ros.nodes.protocol import feedforward_message
+    from exo_ilc_ros.wire.cdr import float64_array
 
     rclpy.init()
     try:
@@ -232,9 +232,9 @@ def test_plant_watchdog_in_real_time_mode_stops_holding_the_last_command(tmp_pat
     from std_srvs.srv import Trigger
 
     from exo_ilc_ros.core.controller import safe_hold_effort
-    from exo_ilc_ros.nodes.cdr import float64_array
     from exo_ilc_ros.nodes.common import DIAGNOSTICS_QOS, SAMPLES_QOS
     from exo_ilc_ros.nodes.plant_simulator import PlantSimulator
+    from exo_ilc_ros.wire.cdr import float64_array
 
     periods = 10
     config = _config(mode="real_time", **{"trajectory.duration": 3.0,
@@ -339,7 +339,7 @@ def test_envelope_abort_in_the_graph_equals_in_process_and_sigterm_stops_cleanly
     """A tight envelope aborts every trial at the same sample: the graph gives exactly
     run_trials' table, marks each trial aborted (event and summary), learns nothing (the
     feed-forward stays), reports it on /diagnostics; SIGTERM then stops every node (exit 0)."""
-    from exo_ilc_ros.graph import GraphSession
+    from exo_ilc_ros.orchestration.graph import GraphSession
 
     config = _config(max_trials=3, **{"safety.error_envelope": [0.01, 0.01, 0.01]})
     local = run_trials(config)
@@ -381,8 +381,8 @@ def test_bad_messages_and_a_stalled_plant_change_nothing_learned() -> None:
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    from exo_ilc_ros.graph import GraphSession
     from exo_ilc_ros.nodes.common import SAMPLES_QOS
+    from exo_ilc_ros.orchestration.graph import GraphSession
 
     # 30 s trials last ~1-2 s of wall time in lock-step, so the freeze below lands mid-trial
     # (a 3 s trial can be over before the signal arrives on a busy machine).
@@ -452,7 +452,7 @@ def test_bad_messages_and_a_stalled_plant_change_nothing_learned() -> None:
 def _kill_mid_trial(config: Config, victim: str, after: int) -> int:
     """Run the graph with a store, kill -9 ``victim`` as soon as ``after`` trials are stored
     (i.e. during trial ``after + 1``); returns the number of trials stored."""
-    from exo_ilc_ros.graph import GraphSession, stored_summaries
+    from exo_ilc_ros.orchestration.graph import GraphSession, stored_summaries
 
     with GraphSession(config) as session:
         def stored() -> bool:
@@ -473,7 +473,7 @@ def test_kill_9_a_node_mid_trial_then_resume_is_bit_identical(tmp_path: Path,
     """kill -9 of a node in the middle of trial 3 (trials of 3 s, 301 samples): the graph stops
     with the node named, the store holds trials 1..2 (3 if trial 3 ended first), and a resumed
     graph finishes with exactly the uninterrupted table."""
-    from exo_ilc_ros.graph import run_graph
+    from exo_ilc_ros.orchestration.graph import run_graph
 
     config = _config(max_trials=5, **{"store.directory": str(tmp_path / "store"),
                                       "trajectory.duration": 3.0})
@@ -548,7 +548,7 @@ def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(
     supervisor stores a trial only once the recorder filed it, so trial 3 is never stored and
     is run again."""
     from exo_ilc_ros.bag import read_bag, trials_filed
-    from exo_ilc_ros.report import RunSummary
+    from exo_ilc_ros.core.summary import RunSummary
 
     config_file = tmp_path / "short.yaml"
     config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 3.0\n')

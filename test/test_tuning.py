@@ -9,10 +9,7 @@ import numpy as np
 import optuna
 import pytest
 
-from exo_ilc_ros.cli.main import main
-from exo_ilc_ros.core import schema
-from exo_ilc_ros.core.config import Config, load_config
-from exo_ilc_ros.tuning import (
+from exo_ilc_ros.analysis.tuning import (
     TuningError,
     TuningProblem,
     best_result,
@@ -25,6 +22,9 @@ from exo_ilc_ros.tuning import (
     score_errors,
     suggest_schedules,
 )
+from exo_ilc_ros.cli.main import main
+from exo_ilc_ros.core import schema
+from exo_ilc_ros.core.config import Config, load_config
 
 SHORT = {"trajectory.duration": 2.0}
 """A short problem: 2 s horizon (201 samples), still the paper's gains and schedules."""

@@ -1,7 +1,7 @@
 """Bags of runs (ROS-free): writing them (:class:`BagWriter`, :func:`write_run`) and reading them
 back into per-trial data and the report's tables (:func:`read_bag`).
 
-Everything follows the wire contract of :mod:`exo_ilc_ros.topics`; a bag's ``metadata.yaml``
+Everything follows the wire contract of :mod:`exo_ilc_ros.wire.topics`; a bag's ``metadata.yaml``
 ``custom_data`` carries the run's provenance (:mod:`.provenance`).
 """
 

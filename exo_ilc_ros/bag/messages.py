@@ -1,5 +1,6 @@
-"""CDR bytes of the graph's messages (as :mod:`exo_ilc_ros.topics` describes them) built with
-rosbags' typestore, and the parsing of their key-values.
+"""CDR bytes of the graph's messages (as :mod:`exo_ilc_ros.wire.topics` describes them) built
+with rosbags' typestore, for bags written without the graph (their key-values:
+:mod:`exo_ilc_ros.wire.protocol`).
 
 Serialisation goes through ``typestore.serialize_cdr`` (exact sizes); never through rclpy's
 ``serialize_message``, whose buffers carry trailing bytes rosbags rejects.
@@ -7,18 +8,14 @@ Serialisation goes through ``typestore.serialize_cdr`` (exact sizes); never thro
 
 from __future__ import annotations
 
-import json
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from functools import cache
 from typing import Any
 
 import numpy as np
 
-from .. import topics
-
-PARAMETERS_CHANGED = "parameters_changed"
-
-"""The rows of a trial's levels, as the summary's ``level/<name>/<joint>`` keys name them."""
+from ..wire import topics
+from ..wire.protocol import feedforward_frame
 
 
 @cache
@@ -97,7 +94,7 @@ def feedforward(ns: int, trial: int, names: Sequence[str], time: Any, position: 
                          time_from_start=duration_msg(float(t)))
               for i, t in enumerate(np.asarray(time, dtype=float))]
     msg = _type("trajectory_msgs/msg/JointTrajectory")(
-        header=header(ns, f"{topics.FEEDFORWARD_FRAME_PREFIX}{trial}"),
+        header=header(ns, feedforward_frame(trial)),
         joint_names=list(names), points=points)
     return serialize(msg, topics.TYPES[topics.FEEDFORWARD])
 
@@ -131,50 +128,3 @@ def trial_summary(ns: int, values: Sequence[tuple[str, str]], within_bound: bool
     trial = dict(values).get("trial", "?")
     return _diagnostics(ns, topics.SUMMARY_STATUS, OK if within_bound else WARN,
                         f"trial {trial}", values)
-
-
-def summary_values(trial: int, mass_uncertainty: float, law: str, names: Sequence[str],
-                   max_abs_error: Any, max_abs_feedforward: Any, max_abs_effort: Any,
-                   levels: Any | None, aborted_at: int | None = None,
-                   changed: Mapping[str, Any] | None = None) -> list[tuple[str, str]]:
-    """The key-values of a trial summary (floats as ``repr`` so they parse back exactly):
-    ``aborted_at`` for a trial the envelope aborted, ``parameters_changed`` (JSON) for the
-    live changes the session applied at this trial's end (in effect from the next trial)."""
-    out = [("trial", str(trial)), ("mass_uncertainty", repr(float(mass_uncertainty))),
-           ("law", law)]
-    for key, row in (("max_abs_error", max_abs_error),
-                     ("max_abs_feedforward", max_abs_feedforward),
-                     ("max_abs_effort", max_abs_effort)):
-        out += [(f"{key}/{n}", repr(float(x))) for n, x in zip(names, row, strict=True)]
-    if levels is not None:
-        for level_name, row in zip(topics.LEVEL_SYMBOLS, np.asarray(levels), strict=False):
-            out += [(f"level/{level_name}/{n}", repr(float(x)))
-                    for n, x in zip(names, row, strict=True)]
-    if aborted_at is not None:
-        out.append(("aborted_at", str(aborted_at)))
-    if changed:
-        out.append((PARAMETERS_CHANGED, json.dumps(dict(changed), sort_keys=True)))
-    return out
-
-
-def parameters_changed(values: Mapping[str, str]) -> dict[str, Any]:
-    """The live changes a trial summary says took effect at its trial's end ({} if none or
-    unparsable)."""
-    try:
-        changed = json.loads(values.get(PARAMETERS_CHANGED, "{}"))
-    except ValueError:
-        return {}
-    return changed if isinstance(changed, dict) else {}
-
-
-def key_values(status: Any) -> dict[str, str]:
-    """A DiagnosticStatus' values as a dict."""
-    return {str(kv.key): str(kv.value) for kv in status.values}
-
-
-def per_joint(values: Mapping[str, str], key: str, names: Sequence[str]) -> np.ndarray | None:
-    """The ``<key>/<joint>`` floats in joint order (None if any is missing or unparsable)."""
-    try:
-        return np.array([float(values[f"{key}/{n}"]) for n in names])
-    except (KeyError, ValueError):
-        return None

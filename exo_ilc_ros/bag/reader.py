@@ -28,12 +28,12 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .. import topics
 from ..core.experiment import build_reference
 from ..core.protocol import STEP_TIMEOUT
-from ..report import RunSummary
+from ..core.summary import RunSummary
+from ..wire import protocol, topics
+from ..wire.cdr import joint_states
 from . import messages
-from .cdr import joint_states
 from .errors import BagReadError
 from .provenance import ParameterChange, Provenance, read_provenance
 
@@ -180,7 +180,7 @@ class BagRun:
         for k in range(1, count + 1):
             trial = self.trials.get(k)
             values = self.summaries.get(k, {})
-            recorded = messages.per_joint(values, "max_abs_error", self.joint_names)
+            recorded = protocol.per_joint(values, "max_abs_error", self.joint_names)
             if trial is not None and trial.ended and trial.missing_samples == 0:
                 errors[k - 1] = trial.max_abs_error
                 sources.append("samples")
@@ -189,12 +189,12 @@ class BagRun:
                 sources.append("summary")
             else:
                 sources.append("missing")
-            recorded_ff = messages.per_joint(values, "max_abs_feedforward", self.joint_names)
+            recorded_ff = protocol.per_joint(values, "max_abs_feedforward", self.joint_names)
             if recorded_ff is not None:
                 ff[k - 1] = recorded_ff
             elif trial is not None and trial.feedforward is not None:
                 ff[k - 1] = np.max(np.abs(trial.feedforward), axis=0)
-            v = messages.per_joint(values, "max_abs_effort", self.joint_names)
+            v = protocol.per_joint(values, "max_abs_effort", self.joint_names)
             if v is not None:
                 effort[k - 1] = v
             elif trial is not None and not np.all(np.isnan(trial.command)):
@@ -313,13 +313,6 @@ def _statuses(stream: _Stream, name: str) -> Iterator[tuple[int, int, Any]]:
                 yield messages.time_ns(msg.header.stamp), log, status
 
 
-def _trial_number(values: dict[str, str], key: str = "trial") -> int | None:
-    try:
-        return int(values[key])
-    except (KeyError, ValueError):
-        return None
-
-
 """``reason`` of the ``aborted`` event of a trial the error envelope aborted: unlike the other
 ``aborted`` events (watchdog, a stuck protocol step), that trial is not run again."""
 
@@ -425,22 +418,22 @@ def read_bag(path: Path | str) -> BagRun:
     reruns: dict[int, list[str]] = {}
     resumed_after: int | None = None
     for stamp, log, status in _statuses(streams[topics.TRIAL_EVENTS], topics.TRIAL_STATUS):
-        values = messages.key_values(status)
+        values = protocol.key_values(status)
         if status.message == "finished":
             continue
         if status.message == "resumed":  # no trial number: trials 1..N came from the store
-            resumed_after = _trial_number(values, "trials")
+            resumed_after = protocol.int_value(values, "trials")
             notes.append(f"the run was resumed from its store after trial {resumed_after}: "
                          "the trials before were recorded in the interrupted run's bag"
                          if resumed_after is not None else "the run was resumed from its store")
             continue
-        k = _trial_number(values)
+        k = protocol.int_value(values, "trial")
         if k is None:
             notes.append(f"trial event {status.message!r} at {stamp} ns without a trial number")
             continue
         if status.message == "aborted":
             if values.get("reason") == topics.ENVELOPE_REASON:
-                at = _trial_number(values, "aborted_at")
+                at = protocol.int_value(values, "aborted_at")
                 aborted_at[k] = -1 if at is None else at
                 notes.append(f"trial {k} was aborted by the error envelope at sample "
                              f"{values.get('aborted_at', '?')} (safe hold from there; kept, "
@@ -457,13 +450,13 @@ def read_bag(path: Path | str) -> BagRun:
             summaries.setdefault(k, {}).update(values)
     summary_stamps: dict[int, int] = {}
     for stamp, _, status in _statuses(streams[topics.TRIAL_SUMMARY], topics.SUMMARY_STATUS):
-        values = messages.key_values(status)
-        k = _trial_number(values)
+        values = protocol.key_values(status)
+        k = protocol.int_value(values, "trial")
         if k is not None:
             summaries.setdefault(k, {}).update(values)
             summary_stamps[k] = stamp
     for k, values in summaries.items():  # a bag without the events: the summary marks it
-        at = _trial_number(values, "aborted_at")
+        at = protocol.int_value(values, "aborted_at")
         if at is not None and aborted_at.get(k, -1) < 0:
             aborted_at[k] = at
 
@@ -471,11 +464,11 @@ def read_bag(path: Path | str) -> BagRun:
     profiles: dict[int, bytes] = {}
     for raw in streams[topics.FEEDFORWARD].msgs:
         frame = _frame_id(raw, decode)
-        if frame.startswith(topics.FEEDFORWARD_FRAME_PREFIX):
-            try:
-                profiles[int(frame[len(topics.FEEDFORWARD_FRAME_PREFIX):])] = raw
-            except ValueError:
-                notes.append(f"feed-forward with frame_id {frame!r}")
+        trial = protocol.trial_of_frame(frame)
+        if trial is not None:
+            profiles[trial] = raw
+        elif frame.startswith(topics.FEEDFORWARD_FRAME_PREFIX):
+            notes.append(f"feed-forward with frame_id {frame!r}")
 
     js = streams[topics.JOINT_STATES]
     if not js.msgs:

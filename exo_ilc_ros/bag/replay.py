@@ -21,7 +21,7 @@ from ..core.config import Config
 from ..core.laws import TrialRecord
 from ..core.schema import SUPERVISOR
 from ..core.session import LIVE, RunResult, run_trials
-from . import messages
+from ..wire import protocol
 from .errors import BagReadError
 from .reader import BagRun
 
@@ -51,9 +51,9 @@ def replay_plan(run: BagRun) -> ReplayPlan:
         raise BagReadError(run.path, "no completed trial to replay")
     notes: list[str] = []
     changes: dict[int, dict[str, Any]] = {}
-    if any(messages.PARAMETERS_CHANGED in values for values in run.summaries.values()):
+    if any(protocol.PARAMETERS_CHANGED in values for values in run.summaries.values()):
         for k, values in sorted(run.summaries.items()):
-            changed = messages.parameters_changed(values)
+            changed = protocol.parameters_changed(values)
             if changed:
                 changes[k + 1] = changed
     else:
@@ -103,7 +103,7 @@ def replay(run: BagRun, on_trial: Callable[[TrialRecord], None] | None = None) -
     for k, values in sorted(run.summaries.items()):
         if not 1 <= k <= len(result.records):
             continue
-        rows = [messages.per_joint(values, key, run.joint_names) for key in COMPARED]
+        rows = [protocol.per_joint(values, key, run.joint_names) for key in COMPARED]
         if any(row is None for row in rows):
             continue
         compared += 1

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import topics
 from ..core.config import Config
 from ..core.session import RunResult
+from ..wire import protocol, topics
 from . import messages
 from .provenance import TRIALS_COMPLETED, provenance_data
 from .writer import BagWriter
@@ -47,7 +47,7 @@ def unique_path(parent: Path | str, name: str) -> Path:
 
 def declare_topics(writer: BagWriter) -> None:
     """Every topic of :data:`topics.TYPES`, with the QoS the graph's publishers offer."""
-    from .qos import offered_qos
+    from ..wire.qos import offered_qos
 
     for topic, msgtype in topics.TYPES.items():
         writer.add_topic(topic, msgtype, offered_qos(topic))
@@ -84,7 +84,7 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                 writer.write(topics.EFFORT_COMMANDS, ns,
                              messages.effort_command(record.effort[i]))
             end = t0 + (samples - 1) * period_ns
-            values = messages.summary_values(
+            values = protocol.summary_values(
                 k, result.mass_uncertainty, result.law, names, record.max_abs_error,
                 np.max(np.abs(record.feedforward), axis=0), np.max(np.abs(record.effort), axis=0),
                 record.levels, record.aborted_at, result.applied.get(k + 1))

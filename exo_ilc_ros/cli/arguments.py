@@ -214,7 +214,7 @@ def storage(text: str) -> str:
     from sqlalchemy.engine import make_url
     from sqlalchemy.exc import ArgumentError
 
-    from ..tuning import TuningError, check_database_driver
+    from ..analysis.tuning import TuningError, check_database_driver
 
     try:
         check_database_driver(text)

@@ -9,10 +9,11 @@ from typing import Any
 
 from tqdm import tqdm
 
-from ..comparison import Variant, format_comparison, plot_comparison, run_comparison
+from ..analysis.comparison import Variant, format_comparison, plot_comparison, run_comparison
+from ..analysis.report import write_json
 from ..core.config import config_dir, read_yaml
 from ..core.errors import ConfigError
-from ..report import RunSummary, write_json
+from ..core.summary import RunSummary
 from .arguments import config_with_flags, figure_file, input_file, integer, json_file, parameter
 from .tune import default_jobs
 

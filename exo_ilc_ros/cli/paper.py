@@ -71,8 +71,8 @@ def paper(args: argparse.Namespace) -> int:
                 path = unique_path(args.bag_dir, run_name("sim", result.law, delta))
                 bags.append(write_run(path, run_config, result))
             else:
-                from ..bag.recording import Recording
-                from ..graph import run_graph
+                from ..orchestration.graph import run_graph
+                from ..orchestration.recording import Recording
 
                 run_config = run_config.replace({"wait_for_recorder": True})
                 with Recording(run_config, args.bag_dir) as recording:

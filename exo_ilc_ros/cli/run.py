@@ -15,9 +15,7 @@ from tqdm import tqdm
 
 from ..core.config import Config
 from ..core.errors import ConfigError
-from ..report import (
-    RunSummary,
-)
+from ..core.summary import RunSummary
 from .arguments import directory, domain_id
 from .simulate import add_config_arguments, config_from_args, print_report
 
@@ -89,7 +87,7 @@ def _check_store(config: Config, resume: bool) -> int:
 def run(args: argparse.Namespace) -> int:
     """Run the graph once per mass uncertainty and report."""
 
-    from ..launcher import GraphError
+    from ..orchestration.launcher import GraphError
 
     config = config_from_args(args)  # an invalid YAML fails here, before any node starts
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
@@ -135,8 +133,8 @@ def announce_graph(bar: Any, bag: Path | None) -> Callable[[Any], None]:
 def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
              trials: int) -> RunSummary:
     """One graph run (one mass uncertainty)."""
-    from ..bag.recording import Recording
-    from ..graph import TrialSummary, run_graph
+    from ..orchestration.graph import TrialSummary, run_graph
+    from ..orchestration.recording import Recording
 
     config = run_config
     with tqdm(total=trials, desc=f"graph {config['law']} delta={delta:g}", unit="trial",

@@ -8,15 +8,15 @@ from typing import Any
 
 from tqdm import tqdm
 
-from ..core.config import Config
-from ..core.session import run_trials
-from ..report import (
-    RunSummary,
+from ..analysis.report import (
     format_iterations,
     format_long_run,
     format_trial_table,
     write_json,
 )
+from ..core.config import Config
+from ..core.session import run_trials
+from ..core.summary import RunSummary
 from .arguments import config_with_flags, directory, input_file, json_file, parameter
 
 

@@ -13,9 +13,9 @@ from typing import Any
 import optuna
 from tqdm import tqdm
 
+from ..analysis.tuning import RunScore, TuningProblem, TuningResult, best_result, optimize
 from ..core.config import load_config
 from ..core.errors import ConfigError
-from ..tuning import RunScore, TuningProblem, TuningResult, best_result, optimize
 from .arguments import (
     at_least_two_trials,
     input_file,

@@ -1,6 +1,6 @@
 """bag_recorder: records every topic of the graph into a rosbag2 MCAP bag, as received.
 
-Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.topics.TYPES` (depth
+Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.wire.topics.TYPES` (depth
 ``RECORDER_DEPTH``; the feed-forward transient local, as published) and stores the CDR bytes
 untouched, stamped with the wall-clock time DDS received them (what ``ros2 bag record`` does
 without ``--use-sim-time``). The subscriptions are an :class:`~.common.Inbox` drained every
@@ -33,7 +33,6 @@ from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
-from .. import topics
 from ..bag.provenance import (
     RECORDED_BY,
     RUN_NAME,
@@ -43,9 +42,11 @@ from ..bag.provenance import (
     parameter_changes_data,
     provenance_data,
 )
-from ..bag.qos import RECORDER_DEPTH, TRANSIENT_LOCAL_TOPICS, offered_qos
 from ..bag.writer import BagWriter
 from ..core.config import load_config
+from ..wire import topics
+from ..wire.protocol import int_value, key_values
+from ..wire.qos import RECORDER_DEPTH, TRANSIENT_LOCAL_TOPICS, offered_qos
 from .common import EVENTS_QOS, Inbox, diagnostic_array, run_nodes, status, wall_clock
 
 NAME = "bag_recorder"
@@ -177,9 +178,7 @@ class BagRecorder(Node):
         out = []
         for item in msg.status:
             if item.name == topics.TRIAL_STATUS:
-                values = {kv.key: kv.value for kv in item.values}
-                trial = values.get("trial")
-                out.append((item.message, int(trial) if trial and trial.isdigit() else None))
+                out.append((item.message, int_value(key_values(item), "trial")))
         return out
 
     def _before_event(self, raw: bytes) -> None:
@@ -206,9 +205,8 @@ class BagRecorder(Node):
         """The summary of trial k: split if its end event is in already."""
         msg = deserialize_message(raw, message_class(topics.TYPES[topics.TRIAL_SUMMARY]))
         for item in msg.status:
-            values = {kv.key: kv.value for kv in item.values}
-            if item.name == topics.SUMMARY_STATUS and values.get("trial", "").isdigit():
-                trial = int(values["trial"])
+            trial = int_value(key_values(item), "trial")
+            if item.name == topics.SUMMARY_STATUS and trial is not None:
                 self.summarised.add(trial)
                 if self.ended == trial:
                     self._split()

@@ -26,14 +26,15 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
-from .. import topics
 from ..core import schema
 from ..core.controller import GuardedControlStep
 from ..core.experiment import Experiment
 from ..core.safety import Watchdog
 from ..core.trial import period_ns, sample_index
 from ..core.validation import Cause, Rejection, validate_feedforward
-from .cdr import float64_array
+from ..wire import topics
+from ..wire.cdr import float64_array
+from ..wire.protocol import trial_of_frame
 from .common import (
     DIAGNOSTICS_QOS,
     LATCHED_QOS,
@@ -108,8 +109,8 @@ class ComputedTorqueController(Node):
     def on_feedforward(self, msg: JointTrajectory) -> None:
         """Load the next trial's reference and feed-forward profile (validated first)."""
         frame = msg.header.frame_id
-        if not frame.startswith(topics.FEEDFORWARD_FRAME_PREFIX) or \
-                not frame[len(topics.FEEDFORWARD_FRAME_PREFIX):].isdigit():
+        trial = trial_of_frame(frame)
+        if trial is None:
             self.rejections.reject(Rejection(Cause.BAD_STAMP, f"{topics.FEEDFORWARD}: frame_id "
                                              f"{frame!r} is not trial:<k>"))
             return
@@ -128,7 +129,7 @@ class ComputedTorqueController(Node):
         self.q_ref = profile.position
         self.qd_ref = profile.velocity
         self.samples = samples
-        self.trial = int(frame[len(topics.FEEDFORWARD_FRAME_PREFIX):])
+        self.trial = trial
         self.t0_ns = stamp_ns(msg.header.stamp)
         self.aborted_at = -1
         self.trial_trips = 0

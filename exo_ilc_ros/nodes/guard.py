@@ -20,7 +20,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.node import Node
 
 from ..core.validation import Cause, LogOnce, Rejection, validate_joint_state
-from .cdr import (
+from ..wire.cdr import (
     HEADER,
     STAMP,
     CdrError,

@@ -23,10 +23,11 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from .. import topics
 from ..core import schema
 from ..core.protocol import TrialProtocol
 from ..core.session import TrialConclusion
+from ..wire import topics
+from ..wire.protocol import int_value
 from .common import (
     DIAGNOSTICS_QOS,
     EVENTS_QOS,
@@ -40,7 +41,7 @@ from .common import (
     wall_clock,
 )
 from .guard import Health, JointStateGate, Rejections, rejections_check
-from .protocol import feedforward_message, trial_summary
+from .messages import feedforward_message, trial_summary
 
 NAME = schema.SUPERVISOR
 PLANT_PARAMETERS = [p.name for p in schema.PARAMETERS if p.section == schema.PLANT]
@@ -141,16 +142,15 @@ class IlcSupervisor(Node):
             values = values_of(item)
             if item.name == topics.RECORDER_STATUS and item.message == "ready":
                 self.recorder_ready = True
-                filed = values.get("trials_filed", "0")
-                self.protocol.on_recorder_filed(int(filed) if filed.isdigit() else 0)
+                self.protocol.on_recorder_filed(int_value(values, "trials_filed") or 0)
                 continue
-            trial, t0 = values.get("trial", ""), values.get("t0_ns", "")
-            if not (trial.isdigit() and t0.lstrip("-").isdigit()):
+            trial, t0 = int_value(values, "trial"), int_value(values, "t0_ns")
+            if trial is None or t0 is None:
                 continue
             if item.name == topics.FEEDFORWARD_ACK_STATUS:
-                self.protocol.on_acknowledged(int(trial), int(t0))
+                self.protocol.on_acknowledged(trial, t0)
             elif item.name == topics.CONTROLLER_TRIAL_STATUS and item.message == "done":
-                self.protocol.on_done(int(trial), int(t0), values)
+                self.protocol.on_done(trial, t0, values)
 
     def destroy_node(self) -> None:
         """The inbox's companion node, then this one."""

@@ -1,7 +1,7 @@
 """plant_simulator: the arm with its true masses, integrated one control period at a time.
 
 Publishes /joint_states and /clock, takes efforts on /effort_controller/commands, and offers
-the reset/start services of the trial protocol (see :mod:`exo_ilc_ros.topics`). Lock-step mode
+the reset/start services of the trial protocol (see :mod:`exo_ilc_ros.wire.topics`). Lock-step mode
 advances one period per command; real-time mode steps on a wall-clock timer with the last
 command held.
 
@@ -26,7 +26,6 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-from .. import topics
 from ..core import schema
 from ..core.controller import safe_hold_effort
 from ..core.experiment import Experiment
@@ -34,7 +33,8 @@ from ..core.plant import PlantStepper, clamp_counted
 from ..core.safety import Watchdog
 from ..core.trial import period_ns
 from ..core.validation import Cause, Rejection, validate_effort_command
-from .cdr import CdrError, JointStateWriter, read_float64_array
+from ..wire import topics
+from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
 from .common import (
     CLOCK_QOS,
     DIAGNOSTICS_QOS,

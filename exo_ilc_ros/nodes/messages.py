@@ -1,4 +1,5 @@
-"""The trial protocol's messages as ilc_supervisor sends them (topics.py describes them)."""
+"""The trial protocol's messages as ilc_supervisor sends them (rclpy objects; key-values from
+:mod:`exo_ilc_ros.wire.protocol`)."""
 
 from __future__ import annotations
 
@@ -9,11 +10,11 @@ from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticStatus
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from .. import topics
-from ..bag.messages import summary_values
 from ..core.schema import SUPERVISOR
 from ..core.session import TrialConclusion
 from ..core.trajectory import SampledReference
+from ..wire import topics
+from ..wire.protocol import feedforward_frame, summary_values
 from .common import doubles, status
 
 
@@ -22,7 +23,7 @@ def feedforward_message(reference: SampledReference, feedforward: np.ndarray, tr
     """``/ilc/feedforward`` of trial ``trial`` starting at ``t0_ns``: frame ``trial:<k>``, one
     point per sample (positions, velocities: the reference; accelerations: u_ff)."""
     msg = JointTrajectory()
-    msg.header.frame_id = f"{topics.FEEDFORWARD_FRAME_PREFIX}{trial}"
+    msg.header.frame_id = feedforward_frame(trial)
     msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t0_ns, 1_000_000_000)
     msg.joint_names = list(joint_names)
     points = []

@@ -22,8 +22,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import IO
 
-from .core.errors import ExoIlcError
-from .nodes import registry
+from ..core.errors import ExoIlcError
+from ..nodes import registry
 
 DOMAIN_IDS = range(1, 101)
 LOCK_PATTERN = ".exo_ilc_ros_domain_{}.lock"

@@ -19,8 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from . import topics
-from .core.config import Config
+from ..core.config import Config
+from ..core.summary import RunSummary
+from ..wire import topics
+from ..wire.protocol import int_value, per_joint
 from .launcher import (
     GRAPH_NODES,
     DomainClaim,
@@ -30,7 +32,6 @@ from .launcher import (
     claim_domain_id,
     graph_environment,
 )
-from .report import RunSummary
 
 
 @dataclass
@@ -43,7 +44,8 @@ class TrialSummary:
 
     def row(self, key: str, joints: Sequence[str]) -> np.ndarray:
         """``key/<joint>`` for every joint (NaN where absent)."""
-        return np.array([float(self.values.get(f"{key}/{name}", "nan")) for name in joints])
+        row = per_joint(self.values, key, joints)
+        return np.full(len(joints), np.nan) if row is None else row
 
     def levels(self, joints: Sequence[str]) -> np.ndarray | None:
         """M, M', M'' (rows) per joint, or None if the trial had none (trial 1, linear law)."""
@@ -69,8 +71,8 @@ def stored_summaries(config: Config) -> list[TrialSummary]:
     as trial summaries: what a resumed run restored rather than ran (empty without a store)."""
     if not config["store.directory"]:
         return []
-    from .core.experiment import build_reference
-    from .core.store import RunStore
+    from ..core.experiment import build_reference
+    from ..core.store import RunStore
 
     store = RunStore(config["store.directory"], config, build_reference(config))
     joints = config["joint_names"]
@@ -134,7 +136,7 @@ class GraphSession:
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.experimental import EventsExecutor
 
-        from .nodes.common import EVENTS_QOS
+        from ..nodes.common import EVENTS_QOS
 
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE",
                               self.env["ROS_AUTOMATIC_DISCOVERY_RANGE"])
@@ -190,9 +192,9 @@ class GraphSession:
                 if item.message == "start" and self.started_at is None:
                     self.started_at = time.monotonic()
                 if item.message == "resumed":
-                    self._resumed_after = _int_value(values, "trials")
+                    self._resumed_after = int_value(values, "trials") or 0
                 if item.message == "finished":
-                    self._finished_after = _int_value(values, "trials")
+                    self._finished_after = int_value(values, "trials") or 0
                     self.finished_at = time.monotonic()
 
     @property
@@ -225,11 +227,6 @@ class GraphSession:
                 self.processes.check()
                 last_check = now
             self.executor.spin_once(timeout_sec=0.05)
-
-
-def _int_value(values: dict[str, str], key: str) -> int:
-    text = values.get(key, "0")
-    return int(text) if text.isdigit() else 0
 
 
 @dataclass

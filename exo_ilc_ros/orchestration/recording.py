@@ -15,11 +15,11 @@ from types import TracebackType
 
 import yaml
 
+from ..bag.run_writer import run_name, unique_path
 from ..core import schema
 from ..core.config import Config
-from ..launcher import GRAPH_NODES, NodeSpec, composed
 from ..nodes.registry import RECORDER
-from .run_writer import run_name, unique_path
+from .launcher import GRAPH_NODES, NodeSpec, composed
 
 RECORDER_MODULE = RECORDER.module
 

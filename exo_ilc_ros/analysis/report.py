@@ -4,75 +4,17 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .core.experiment import IterationsToBound, iterations_to_bound
-from .core.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth, format_growth
-from .core.session import RunResult
+from ..core.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth, format_growth
+from ..core.summary import RunSummary
 
 PAPER_FIRST_JOINT1 = {0.05: 35, 0.10: 96, 0.15: 101}
 """Iterations to the 0.005 rad bound the paper reports for joint 1; joints 2-3: within 20."""
 PAPER_OTHER_JOINTS_WITHIN = 20
-
-
-@dataclass
-class RunSummary:
-    """One run as the tables show it: max |e| per trial and joint, plus what was learned."""
-
-    mass_uncertainty: float
-    law: str
-    error_bound: float
-    max_abs_error: np.ndarray
-    max_abs_feedforward: np.ndarray | None = None
-    max_abs_effort: np.ndarray | None = None
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    @classmethod
-    def from_result(cls, result: RunResult) -> RunSummary:
-        """From an in-process run."""
-        return cls(result.mass_uncertainty, result.law, result.error_bound,
-                   result.max_abs_errors, result.max_abs_feedforward, result.max_abs_effort)
-
-    def iterations_to_bound(self) -> IterationsToBound:
-        """First and settled trial per joint."""
-        return iterations_to_bound(self.max_abs_error, self.error_bound)
-
-    def to_json(self) -> dict[str, Any]:
-        """The ``runs[]`` entry of the JSON export."""
-        its = self.iterations_to_bound()
-        trials = []
-        for k, row in enumerate(self.max_abs_error):
-            entry: dict[str, Any] = {"trial": k + 1, "max_abs_error": [float(x) for x in row]}
-            if self.max_abs_feedforward is not None:
-                entry["max_abs_feedforward"] = [float(x) for x in self.max_abs_feedforward[k]]
-            if self.max_abs_effort is not None:
-                entry["max_abs_effort"] = [float(x) for x in self.max_abs_effort[k]]
-            trials.append(entry)
-        out = {"mass_uncertainty": self.mass_uncertainty, "law": self.law,
-               "error_bound": self.error_bound, "trials": trials,
-               "iterations_to_bound": {"first": its.first, "settled": its.settled}}
-        out.update(self.extra)
-        return out
-
-    @classmethod
-    def from_json(cls, data: dict[str, Any]) -> RunSummary:
-        """Inverse of :meth:`to_json`."""
-        trials = data["trials"]
-
-        def table(key: str) -> np.ndarray | None:
-            if not trials or key not in trials[0]:
-                return None
-            return np.array([t[key] for t in trials], dtype=float)
-
-        errors = table("max_abs_error")
-        return cls(float(data["mass_uncertainty"]), str(data["law"]),
-                   float(data.get("error_bound", 0.005)),
-                   errors if errors is not None else np.zeros((0, 0)),
-                   table("max_abs_feedforward"), table("max_abs_effort"))
 
 
 def write_json(path: Path | str, config_values: dict[str, Any],

@@ -1,18 +1,25 @@
-"""CDR (little-endian XCDR1, what rmw_fastrtps puts on the wire) for the two messages of the
-control loop, so the hot callbacks skip rclpy's Python message objects.
+"""CDR (little-endian XCDR1, what rmw_fastrtps puts on the wire) of the control loop's two
+messages: the fast paths the nodes, the recorder and the bag reader share.
 
 ``JointStateWriter`` fills a preallocated JointState image (stamp, position, velocity,
 effort) in place; ``read_joint_state`` and ``read_float64_array`` decode the raw bytes a
 ``raw=True`` subscription delivers, for any publisher (names, frame_id and layout of any
-length). Checked against rclpy's own (de)serialisation in ``test/test_cdr.py``.
+length); ``joint_states`` decodes a whole recorded stream at once (messages of one layout as
+rows of one array, ~20x faster than one by one). One walk over a JointState's fields
+(``_names_span``, ``_doubles``) serves them all. Checked against rclpy's and rosbags' own
+(de)serialisation in ``test/test_cdr.py`` and ``test/test_bag.py``.
 """
 
 from __future__ import annotations
 
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+
+from .topics import JOINT_STATES, TYPES
 
 HEADER = b"\x00\x01\x00\x00"
 """Encapsulation: CDR, little endian."""
@@ -216,3 +223,85 @@ def read_joint_state_full(raw: bytes
     except struct.error as exc:
         raise CdrError(f"truncated JointState: {exc}") from None
     return sec * 1_000_000_000 + nanosec, names, position, velocity, effort
+
+
+@dataclass
+class JointStates:
+    """Every JointState of a stream, as arrays (NaN rows where a message lacked a field)."""
+
+    stamps: np.ndarray
+    """header.stamp in ns, (m,)"""
+    names: list[str]
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """Where a JointState's fields sit, for reading messages of its layout as table rows."""
+
+    size: int
+    names: tuple[int, int]
+    """Byte span of frame_id and names: rows with other bytes there go the slow way."""
+    arrays: tuple[int | None, int | None, int | None]
+    """Byte offsets of position, velocity, effort data (None: empty)."""
+
+
+def _rows(raw: bytes, joints: int) -> _Rows | None:
+    """The layout of this JointState for row-wise reading, or None (other endianness, a
+    position or velocity not of ``joints`` values)."""
+    try:
+        _check_header(raw)
+        _, names_end = _names_span(raw)
+        offset = names_end
+        arrays: list[int | None] = []
+        for _ in range(3):
+            values, offset = _doubles(raw, offset)
+            if values.shape[0] not in (0, joints):
+                return None
+            arrays.append(4 + offset - 8 * joints if values.shape[0] else None)
+    except (struct.error, CdrError):
+        return None
+    if 4 + offset != len(raw) or arrays[0] is None or arrays[1] is None:
+        return None
+    return _Rows(len(raw), (12, 4 + names_end), (arrays[0], arrays[1], arrays[2]))
+
+
+def joint_states(raws: Sequence[bytes], decode: Callable[[bytes, str], Any],
+                 joint_names: Sequence[str] = ()) -> JointStates:
+    """Decode ``raws`` (all of one topic); messages with the first one's layout and names are
+    read as rows of one array, any other through ``decode`` (rosbags' deserialiser);
+    ``joint_names`` is used if the messages carry none."""
+    msgtype = TYPES[JOINT_STATES]
+    first = decode(raws[0], msgtype)
+    names = [str(n) for n in first.name] or list(joint_names)
+    joints = len(names) or len(first.position)
+    m = len(raws)
+    stamps = np.zeros(m, dtype=np.int64)
+    out = [np.full((m, joints), np.nan) for _ in range(3)]
+    layout = _rows(raws[0], joints)
+    fast = np.zeros(m, dtype=bool)
+    if layout is not None:
+        fast = np.fromiter((len(r) == layout.size for r in raws), bool, m)
+        rows = np.flatnonzero(fast)
+        buffer = np.frombuffer(b"".join(raws[int(i)] for i in rows), dtype=np.uint8)
+        table = buffer.reshape(len(rows), layout.size)
+        a, b = layout.names
+        same = (table[:, a:b] == table[0, a:b]).all(axis=1) & \
+            (table[:, :2] == table[0, :2]).all(axis=1)
+        fast[rows[~same]] = False
+        rows, table = rows[same], table[same]
+        sec = table[:, 4:8].copy().view("<i4")[:, 0].astype(np.int64)
+        nanosec = table[:, 8:12].copy().view("<u4")[:, 0].astype(np.int64)
+        stamps[rows] = sec * 1_000_000_000 + nanosec
+        for target, start in zip(out, layout.arrays, strict=True):
+            if start is not None:
+                target[rows] = table[:, start:start + 8 * joints].copy().view("<f8")
+    for i in np.flatnonzero(~fast):
+        msg = decode(raws[int(i)], msgtype)
+        stamps[i] = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+        for target, values in zip(out, (msg.position, msg.velocity, msg.effort), strict=True):
+            if len(values) == joints:
+                target[i] = values
+    return JointStates(stamps, names, out[0], out[1], out[2])

@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from .core.config import Config
-from .core.session import run_trials
-from .report import RunSummary
+from ..core.config import Config
+from ..core.session import run_trials
+from ..core.summary import RunSummary
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from .. import topics
+from . import topics
 
 OFFERED_DEPTH = 1000
 """History depth of the graph's sample and event publishers (``SAMPLES_QOS``, ``EVENTS_QOS``)."""

@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from .bag.reader import TrialData
-from .report import PAPER_FIRST_JOINT1, PAPER_OTHER_JOINTS_WITHIN, RunSummary
+from ..bag.reader import TrialData
+from ..core.summary import RunSummary
+from .report import PAPER_FIRST_JOINT1, PAPER_OTHER_JOINTS_WITHIN
 
 
 def run_label(run: RunSummary) -> str:

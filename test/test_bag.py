@@ -442,7 +442,9 @@ def test_recorder_sigkill_leaves_the_filed_trials(tmp_path: Path) -> None:
     from exo_ilc_ros.orchestration.graph import GraphSession
     from exo_ilc_ros.orchestration.recording import Recording
 
-    trials = 10
+    # Enough trials that the run is still going when the recorder is killed: ten short ones
+    # were over in 1.8 s once, before the parameter change was even answered.
+    trials = 40
     config = load_config(overrides={**SHORT, "max_trials": trials, "wait_for_recorder": True})
     reference = run_trials(config)
     with Recording(config, tmp_path, "killed") as recording, \
@@ -451,7 +453,7 @@ def test_recorder_sigkill_leaves_the_filed_trials(tmp_path: Path) -> None:
         client = AsyncParameterClient(session.node, "ilc_supervisor")
         assert client.wait_for_services(timeout_sec=10.0)
         future = client.set_parameters([Parameter("error_bound", value=0.006)])
-        _spin_until(session, future.done, 10)
+        _spin_until(session, future.done, 30)
         assert future.result().results[0].successful
         filed = max(2, len(session.summaries) + 1)  # a trial ended after the change
         _spin_until(session, lambda: trials_filed(recording.path) >= filed, 60)

@@ -541,3 +541,56 @@ def robust_deltas(config: Config, points: int = 3) -> list[float]:
     if math.isclose(low, high):
         return [low]
     return [float(x) for x in np.linspace(low, high, points)]
+
+
+@dataclass(frozen=True)
+class Robustness:
+    """The weights against every delta of ``norm_optimal.uncertainty_range`` checked."""
+
+    low: float
+    high: float
+    frequency_worst: list[float]
+    """max over joints and frequencies of |F| (:func:`frequency_factor`) per delta."""
+    lifted: list[LiftedRobustness]
+
+    @property
+    def robust(self) -> bool:
+        """No delta of the range makes a factor exceed 1 (beyond rounding)."""
+        return (all(f <= 1.0 + ROBUST_TOLERANCE for f in self.frequency_worst)
+                and all(r.norm <= 1.0 + ROBUST_TOLERANCE for r in self.lifted))
+
+
+ROBUST_TOLERANCE = 1e-6
+"""|F| or ||F||_2 up to 1 + this counts as 1 (the directions the law leaves unlearned)."""
+
+
+def robustness(config: Config, points: int = 3, frequencies: int = 2001) -> Robustness:
+    """Check the config's norm-optimal weights and model over ``norm_optimal.uncertainty_range``
+    (``points`` deltas): the per-joint factor per frequency and the lifted map's 2-norm."""
+    low, high = robustness_range(config)
+    frequency = np.linspace(0.0, 0.5 / float(config["control.period"]), frequencies)
+    deltas = robust_deltas(config, points)
+    worst = [max(float(np.max(f)) for f in frequency_factor(config, d, frequency))
+             for d in deltas]
+    return Robustness(low, high, worst, [lifted_factor(config, d) for d in deltas])
+
+
+def format_robustness(report: Robustness) -> str:
+    """One line per delta checked, then the verdict (a WARNING when not robust)."""
+    lines = [f"norm-optimal weights against norm_optimal.uncertainty_range "
+             f"[{report.low:g}, {report.high:g}] (delta: max |F| over joints and frequencies; "
+             "||F||_2 of the lifted map, plant linearised along the reference):"]
+    for f, r in zip(report.frequency_worst, report.lifted, strict=True):
+        lines.append(f"  delta {r.delta:6.3f}: max |F| {f:.6f}, lifted ||F||_2 {r.norm:.6f} "
+                     f"(1 {r.norm - 1.0:+.1e})")
+    if report.robust:
+        lines.append("  robust: no factor above 1 in the range (learning is monotone in norm, "
+                     "the unlearned directions stay as they are)")
+    else:
+        bad = [r.delta for f, r in zip(report.frequency_worst, report.lifted, strict=True)
+               if f > 1.0 + ROBUST_TOLERANCE or r.norm > 1.0 + ROBUST_TOLERANCE]
+        lines.append("  WARNING: the weights are not robust to the configured uncertainty "
+                     "range: a factor exceeds 1 at delta = " + ", ".join(f"{d:g}" for d in bad)
+                     + " (raise norm_optimal.weight_input_change, or move "
+                     "norm_optimal.model_mass_uncertainty towards that end)")
+    return "\n".join(lines)

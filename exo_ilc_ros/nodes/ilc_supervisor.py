@@ -310,6 +310,8 @@ class IlcSupervisor(Node):
         if conclusion.applied:
             self.get_logger().info(f"parameters changed; applied from trial {session.trial}: "
                                    f"{json.dumps(conclusion.applied)}")
+        for note in conclusion.update.notes if conclusion.learned else ():
+            self.get_logger().info(f"learning from trial {record.trial}: {note}")
         if record.aborted:
             self.get_logger().error(f"trial {record.trial} aborted by the error envelope at "
                                     f"sample {aborted}; not learned from")

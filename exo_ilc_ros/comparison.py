@@ -1,4 +1,5 @@
-"""Learning laws side by side: the paper's sign law, a tuned sign law and the linear law.
+"""Learning laws side by side: the paper's sign law, a tuned sign law, the linear law and the
+norm-optimal law.
 
 Runs every (law, mass uncertainty) pair in-process (optionally over worker processes), then one
 table (first / settled iteration per joint, final floor, peak error, learned input) and one figure
@@ -141,7 +142,7 @@ def plot_comparison(runs: Sequence[ComparedRun], joint_names: Sequence[str],
             if row == len(deltas) - 1:
                 ax.set_xlabel("trial")
     axes[0][0].legend(fontsize=8)
-    fig.suptitle("Max tracking error per trial: paper's sign law, tuned sign law, linear law")
+    fig.suptitle("Max tracking error per trial: " + ", ".join(labels))
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

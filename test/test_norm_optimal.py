@@ -145,3 +145,40 @@ def test_reaches_the_bound_before_the_linear_law() -> None:
     assert None not in linear and None not in ours
     assert all(o <= lin for o, lin in zip(ours, linear, strict=True))  # type: ignore[operator]
     assert max(ours) < max(linear)  # type: ignore[type-var]
+
+
+def test_tune_norm_optimal_weights(tmp_path: Path) -> None:
+    """`tune --law norm_optimal` searches Wd and delta_m (and leaves the sign problem's digest
+    alone); its baseline is the config's values; the best is written as a norm_optimal config."""
+    from exo_ilc_ros.tuning import (
+        TuningProblem,
+        best_result,
+        optimize,
+        weight_params,
+        weights_from_params,
+    )
+
+    config = _config()
+    back = weights_from_params(weight_params(config), config.joints)
+    assert back == {k: config[k] for k in back}
+    sign = TuningProblem.from_config(config, [0.15], 4)
+    assert not any(k.startswith("norm_optimal.") for k in sign.fixed_values())
+    assert "law" not in sign.settings()
+    problem = TuningProblem.from_config(config, [0.15], 4, law="norm_optimal")
+    assert problem.digest() != sign.digest()
+    study = optimize(problem, str(tmp_path / "t.journal"), 2, seed=3)
+    result = best_result(study, problem)
+    assert result.baseline_runs and result.best_value <= (result.baseline_value or 0.0)
+    out = tmp_path / "tuned.yaml"
+    assert cli_main(["tune", "--law", "norm_optimal", "--config", str(_short_yaml(tmp_path)),
+                     "--mass-uncertainty", "0.15", "--trials", "4", "--budget", "0",
+                     "--storage", str(tmp_path / "t.journal"), "--study-name",
+                     study.study_name, "--jobs", "1", "--out", str(out)]) == 0
+    assert load_config(out)["law"] == "norm_optimal"
+
+
+def _short_yaml(tmp_path: Path) -> Path:
+    path = tmp_path / "short.yaml"
+    path.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n'
+                    "ilc_supervisor:\n  ros__parameters:\n    law: norm_optimal\n")
+    return path

@@ -43,7 +43,7 @@ def test_per_joint_model_is_analyze_loops_lifted_map() -> None:
 
 
 def test_update_is_the_minimiser_of_the_cost() -> None:
-    """(NO2) from the cached factor equals Phi u + L e, and the gradient of (NO1) vanishes."""
+    """The law's update is Phi u + L e of (NO2), and the gradient of (NO1) vanishes there."""
     config = _config(**{"norm_optimal.weight_input_size": [1e-6, 0.0, 2e-6],
                         "norm_optimal.weight_error": [1.0, 2.0, 0.5]})
     experiment = Experiment(config, 0.15)
@@ -54,7 +54,7 @@ def test_update_is_the_minimiser_of_the_cost() -> None:
     new = law.update(record).feedforward
     m = norm_optimal.learning_matrices(config)
     u, e = record.feedforward.ravel(), record.error.ravel()
-    np.testing.assert_allclose(new.ravel(), m.memory @ u + m.learning @ e, atol=1e-9)
+    np.testing.assert_allclose(new.ravel(), m.phi @ u + m.learning @ e, atol=1e-9)
     we, wd, wu = m.weights.stacked(m.model.samples)
     du = new.ravel() - u
     gradient = -m.model.g.T @ (we * (e - m.model.g @ du)) + wd * du + wu * new.ravel()

@@ -36,14 +36,13 @@ the effort held over each period T, u = u_ff + K_P e + K_D e_dot.
 * ``linearised``: (NO4) linearised along the reference, the second term's Jacobians included
   (the gravity stiffness and velocity terms the mass error leaves): coupled and time-varying.
 
-G and H depend only on the configuration (model, gains, period, reference, weights): G and the
-Cholesky factor of H are computed once and cached (:func:`learning_matrices`), so an update is
-one matrix-vector product and two triangular solves (milliseconds).
+G, L and Phi depend only on the configuration (model, gains, period, reference, weights): they
+are computed once and cached (:func:`learning_matrices`), so an update is one matrix-vector
+product (milliseconds).
 """
 
 from __future__ import annotations
 
-import functools
 import json
 import math
 import time
@@ -216,43 +215,41 @@ class Weights:
 
 @dataclass(frozen=True, eq=False)
 class LearningMatrices:
-    """(NO2) for one model and one set of weights, held as G and the Cholesky factor of H:
-    an update is du = H^-1 (G^T We e_k - Wu u_ff,k), two triangular solves and one product."""
+    """L and Phi of (NO2) for one model and one set of weights: an update is one
+    matrix-vector product (two with an input-size weight)."""
 
     model: LiftedModel
     weights: Weights
-    factor: tuple[np.ndarray, bool]
-    """scipy's ``cho_factor(H)``."""
+    learning: np.ndarray
+    """L = H^-1 G^T We."""
+    memory: np.ndarray | None
+    """Phi = I - H^-1 Wu; None when it is the identity (no input-size weight)."""
     seconds: float = field(default=0.0, compare=False)
-    """Seconds it took to build H and its factor (and the model, if it was not cached yet)."""
+    """Seconds it took to build L and Phi (and the model, if it was not cached yet)."""
 
-    def change(self, feedforward: np.ndarray, error: np.ndarray) -> np.ndarray:
-        """u_ff,k+1 - u_ff,k of (NO2) for stacked (sample-major) u_ff,k and e_k."""
-        we, _, wu = self.weights.stacked(self.model.samples)
-        rhs = self.model.g.T @ (we * error)
-        if np.any(wu > 0.0):
-            rhs -= wu * feedforward
-        return np.asarray(cho_solve(self.factor, rhs))
+    def next_feedforward(self, feedforward: np.ndarray, error: np.ndarray) -> np.ndarray:
+        """u_ff,k+1 = Phi u_ff,k + L e_k of (NO2), stacked (sample-major)."""
+        memory = feedforward if self.memory is None else self.memory @ feedforward
+        return np.asarray(memory + self.learning @ error)
 
-    @functools.cached_property
-    def learning(self) -> np.ndarray:
-        """L = H^-1 G^T We (dense; for the analysis, the update does not form it)."""
-        we, _, _ = self.weights.stacked(self.model.samples)
-        return np.asarray(cho_solve(self.factor, self.model.g.T * we))
-
-    @functools.cached_property
-    def memory(self) -> np.ndarray:
-        """Phi = I - H^-1 Wu."""
-        _, _, wu = self.weights.stacked(self.model.samples)
-        return np.eye(wu.size) - np.asarray(cho_solve(self.factor, np.diag(wu)))
+    @property
+    def phi(self) -> np.ndarray:
+        """Phi as a matrix (the identity when there is no input-size weight)."""
+        return np.eye(self.learning.shape[0]) if self.memory is None else self.memory
 
 
-def _factor(model: LiftedModel, weights: Weights) -> tuple[np.ndarray, bool]:
+def _build_matrices(model: LiftedModel, weights: Weights, seconds: float = 0.0
+                    ) -> LearningMatrices:
     we, wd, wu = weights.stacked(model.samples)
-    h = (model.g.T * we) @ model.g
+    gtw = model.g.T * we
+    h = gtw @ model.g
     h[np.diag_indices_from(h)] += wd + wu
-    c, lower = cho_factor(h, overwrite_a=True)
-    return c, lower
+    factor = cho_factor(h, overwrite_a=True)
+    learning = np.ascontiguousarray(cho_solve(factor, gtw))
+    memory = None
+    if np.any(wu > 0.0):
+        memory = np.eye(wu.size) - np.asarray(cho_solve(factor, np.diag(wu)))
+    return LearningMatrices(model, weights, learning, memory, seconds)
 
 
 def learning_matrices(config: Config) -> LearningMatrices:
@@ -262,8 +259,8 @@ def learning_matrices(config: Config) -> LearningMatrices:
     matrices = _MATRICES.get(key)
     if matrices is None:
         start = time.perf_counter()
-        model, weights = lifted_model(config), Weights.of(config)
-        matrices = LearningMatrices(model, weights, _factor(model, weights),
+        built = _build_matrices(lifted_model(config), Weights.of(config))
+        matrices = LearningMatrices(built.model, built.weights, built.learning, built.memory,
                                     time.perf_counter() - start)
         _remember(_MATRICES, key, matrices)
     return matrices
@@ -459,8 +456,8 @@ class NormOptimalLaw:
         return _initial(reference, self.initial)
 
     def update(self, record: TrialRecord) -> FeedforwardUpdate:
-        """(NO2): u_ff,k+1 = u_ff,k + H^-1 (G^T We e_k - Wu u_ff,k); with constraints the QP
-        (NO3), and a note naming the constraints that were active."""
+        """(NO2): u_ff,k+1 = Phi u_ff,k + L e_k; with constraints the QP (NO3), and a note
+        naming the constraints that were active."""
         shape = record.feedforward.shape
         if shape[0] * shape[1] != self.matrices.model.g.shape[0]:
             raise SafetyError(f"trial {record.trial}: {shape[0]} samples, but the learning "
@@ -469,8 +466,8 @@ class NormOptimalLaw:
             step = solve_constrained(self.matrices, self.constraints, record)
             notes = constraint_notes(step)
             return FeedforwardUpdate(record.feedforward + step.change, None, notes)
-        change = self.matrices.change(record.feedforward.ravel(), record.error.ravel())
-        return FeedforwardUpdate(record.feedforward + change.reshape(shape), None)
+        new = self.matrices.next_feedforward(record.feedforward.ravel(), record.error.ravel())
+        return FeedforwardUpdate(new.reshape(shape), None)
 
 
 def constraint_notes(step: ConstrainedStep) -> tuple[str, ...]:
@@ -533,7 +530,7 @@ def lifted_factor(config: Config, delta: float, radius: bool = False) -> LiftedR
     matrices = learning_matrices(config)
     plant = lifted_model(config.replace({"norm_optimal.model": "linearised",
                                          "norm_optimal.model_mass_uncertainty": float(delta)}))
-    f = matrices.memory - matrices.learning @ plant.g
+    f = matrices.phi - matrices.learning @ plant.g
     rho = float(np.max(np.abs(np.linalg.eigvals(f)))) if radius else None
     return LiftedRobustness(float(delta), float(np.linalg.norm(f, 2)), rho)
 

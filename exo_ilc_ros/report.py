@@ -157,13 +157,14 @@ def format_iterations(runs: Sequence[RunSummary], joint_names: Sequence[str]) ->
     """Iterations to the bound per joint (first / settled) beside the paper's numbers."""
     lines = [f"Iterations to the bound, first within / settled within (paper: joint 1 "
              f"35/96/101 at 5/10/15 %, joints 2-3 within {PAPER_OTHER_JOINTS_WITHIN})"]
-    header = f"{'law':<8}{'delta':>7}  " + "".join(f"{name[:18]:>20}" for name in joint_names)
+    w = max([8] + [len(r.law) + 1 for r in runs])  # 8 for sign / linear, wider for norm_optimal
+    header = f"{'law':<{w}}{'delta':>7}  " + "".join(f"{name[:18]:>20}" for name in joint_names)
     lines += [header + f"{'paper joint 1':>15}", "-" * (len(header) + 15)]
     for r in runs:
         its = r.iterations_to_bound()
         cells = "".join(f"{_fmt(f) + ' / ' + _fmt(s):>20}"
                         for f, s in zip(its.first, its.settled, strict=True))
         paper = PAPER_FIRST_JOINT1.get(round(r.mass_uncertainty, 4))
-        lines.append(f"{r.law:<8}{r.mass_uncertainty:>7.3f}  {cells}{_fmt(paper):>15}")
+        lines.append(f"{r.law:<{w}}{r.mass_uncertainty:>7.3f}  {cells}{_fmt(paper):>15}")
     lines.append("('-': never within the bound / not within at the last trial)")
     return "\n".join(lines)

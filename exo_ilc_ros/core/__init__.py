@@ -38,6 +38,7 @@ from .laws import (
     sgn,
 )
 from .model import ArmModel
+from .norm_optimal import NormOptimalLaw, learning_matrices
 from .qfilter import QFilter, QFilteredLaw
 from .session import LearningSession, RunResult, StopReason, TrialConclusion, run_trials
 from .trajectory import QuinticTrajectory, SampledReference
@@ -45,10 +46,12 @@ from .trajectory import QuinticTrajectory, SampledReference
 __all__ = [
     "ArmModel", "Config", "ConfigError", "ErrorSum", "ExoIlcError", "Experiment",
     "FeedforwardUpdate", "GrowthFit", "InitialFeedforward", "IterationsToBound", "LearningLaw",
-    "LearningSession", "LinearLaw", "LoopAnalysis", "Memory", "ModelError", "PlantDynamics",
+    "LearningSession", "LinearLaw", "LoopAnalysis", "Memory", "ModelError", "NormOptimalLaw",
+    "PlantDynamics",
     "QFilter", "QFilteredLaw", "QuinticTrajectory", "RunResult", "SampledReference",
     "ScheduleIndex", "SignLaw", "StepSchedule", "StopReason", "TrialConclusion", "TrialRecord",
     "analyze_loop", "build_arm", "build_law", "build_reference", "computed_torque_kernel",
     "config_dir", "default_config_path", "error_sums", "feedback_input", "fit_growth",
-    "integrate_period", "iterations_to_bound", "load_config", "run_trials", "sgn", "simulate_trial",
+    "integrate_period", "iterations_to_bound", "learning_matrices", "load_config", "run_trials",
+    "sgn", "simulate_trial",
 ]

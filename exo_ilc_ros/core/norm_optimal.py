@@ -238,8 +238,8 @@ class LearningMatrices:
         return np.eye(self.learning.shape[0]) if self.memory is None else self.memory
 
 
-def _build_matrices(model: LiftedModel, weights: Weights, seconds: float = 0.0
-                    ) -> LearningMatrices:
+def _build_matrices(model: LiftedModel, weights: Weights) -> LearningMatrices:
+    """L and Phi of (NO2) from one Cholesky factorisation of H."""
     we, wd, wu = weights.stacked(model.samples)
     gtw = model.g.T * we
     h = gtw @ model.g
@@ -249,7 +249,7 @@ def _build_matrices(model: LiftedModel, weights: Weights, seconds: float = 0.0
     memory = None
     if np.any(wu > 0.0):
         memory = np.eye(wu.size) - np.asarray(cho_solve(factor, np.diag(wu)))
-    return LearningMatrices(model, weights, learning, memory, seconds)
+    return LearningMatrices(model, weights, learning, memory)
 
 
 def learning_matrices(config: Config) -> LearningMatrices:

@@ -30,7 +30,7 @@ def _config(**overrides: object) -> Config:
 
 def test_per_joint_model_is_analyze_loops_lifted_map() -> None:
     """The per_joint model's G holds, per joint, the P_q of convergence.lifted_map."""
-    config = _config(**{"norm_optimal.model": "per_joint",
+    config = _config(**{"norm_optimal.model_kind": "per_joint",
                         "norm_optimal.model_mass_uncertainty": 0.1})
     model = norm_optimal.lifted_model(config)
     n, count = config.joints, model.samples

@@ -24,8 +24,9 @@ fixed u, x_k+1 - x_k from the model; margin = ``norm_optimal.effort_margin``), a
 the states of the model (:func:`solve_constrained`, Clarabel), instead of clipping the result
 after the fact.
 
-The model (``norm_optimal.model``) is the closed loop the computed torque leaves when the plant's
-masses are (1 + delta_m) times the nominal ones, delta_m = ``norm_optimal.model_mass_uncertainty``:
+The model (``norm_optimal.model_kind``) is the closed loop the computed torque leaves when the
+plant's masses are (1 + delta_m) times the nominal ones, delta_m =
+``norm_optimal.model_mass_uncertainty``:
 
     qdd = g u - (1 - g) a_N(q)^-1 c_N(q, qdot),   g = 1 / (1 + delta_m),                (NO4)
 
@@ -66,7 +67,7 @@ class ModelKind(Enum):
     LINEARISED = "linearised"
 
 
-MODEL_KEYS = ("norm_optimal.model", "norm_optimal.model_mass_uncertainty", "control.period",
+MODEL_KEYS = ("norm_optimal.model_kind", "norm_optimal.model_mass_uncertainty", "control.period",
               "control.kp", "control.kd", "trajectory.start", "trajectory.goal",
               "trajectory.duration", "model.link_masses", "model.link_lengths",
               "model.radius_proximal", "model.radius_distal", "model.joint_axes",
@@ -142,10 +143,10 @@ def _expm_batch(m: np.ndarray, order: int = 8) -> np.ndarray:
 
 
 def build_lifted_model(config: Config) -> LiftedModel:
-    """The lifted model of the config's ``norm_optimal.model`` (module docstring, (NO4))."""
+    """The lifted model of the config's ``norm_optimal.model_kind`` (module docstring, (NO4))."""
     from .experiment import build_reference
 
-    kind = ModelKind(config["norm_optimal.model"])
+    kind = ModelKind(config["norm_optimal.model_kind"])
     reference = build_reference(config)
     count, n = reference.position.shape
     period = float(config["control.period"])
@@ -528,7 +529,7 @@ def lifted_factor(config: Config, delta: float, radius: bool = False) -> LiftedR
     """:class:`LiftedRobustness` of the config's weights against a plant with masses
     (1 + delta) (its closed loop linearised along the reference, (NO4) with delta)."""
     matrices = learning_matrices(config)
-    plant = lifted_model(config.replace({"norm_optimal.model": "linearised",
+    plant = lifted_model(config.replace({"norm_optimal.model_kind": "linearised",
                                          "norm_optimal.model_mass_uncertainty": float(delta)}))
     f = matrices.phi - matrices.learning @ plant.g
     rho = float(np.max(np.abs(np.linalg.eigvals(f)))) if radius else None

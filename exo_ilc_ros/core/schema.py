@@ -66,6 +66,10 @@ def _range_rule(value: Any) -> str | None:
     return None
 
 
+def _margin_rule(value: Any) -> str | None:
+    return None if value < 1.0 else f"must be < 1 (a share of the limit), got {value!r}"
+
+
 def _schedule_parameters() -> list[Parameter]:
     out = []
     meaning = {"position": ("M", "|s e|"), "velocity": ("M'", "|s e_dot|"),
@@ -199,7 +203,7 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("norm_optimal.weight_input_size", SUPERVISOR, Kind.DOUBLE_ARRAY,
               "norm-optimal law: weight Wu on the squared learned input (0: none; > 0 leaks "
               "u_ff towards 0, raising the floor)", per_joint=True, minimum=0.0, live=True),
-    Parameter("norm_optimal.model", SUPERVISOR, Kind.STRING,
+    Parameter("norm_optimal.model_kind", SUPERVISOR, Kind.STRING,
               "norm-optimal law's lifted model: per_joint (ZOH double integrator under PD, "
               "as analyze-loop) or linearised (coupled, along the reference, gravity terms of "
               "the mass error included)", choices=("per_joint", "linearised"), live=True),
@@ -213,11 +217,10 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("norm_optimal.effort_margin", SUPERVISOR, Kind.DOUBLE,
               "constrained norm-optimal law: share of control.effort_limit kept free for the "
               "error of the next trial's predicted effort (0.01: the QP aims at 99 %)",
-              minimum=0.0, live=True),
+              minimum=0.0, live=True, extra_rule=_margin_rule),
     Parameter("norm_optimal.uncertainty_range", SUPERVISOR, Kind.DOUBLE_ARRAY,
               "[low, high] mass uncertainty the norm-optimal weights must tolerate: "
-              "analyze-loop warns when they do not", minimum=-0.9, live=True,
-              extra_rule=_range_rule),
+              "analyze-loop warns when they do not", minimum=-0.9, extra_rule=_range_rule),
     Parameter("q_filter.enabled", SUPERVISOR, Kind.BOOL,
               "zero-phase low-pass Q applied to the learned feed-forward after every update",
               live=True),

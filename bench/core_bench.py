@@ -1,4 +1,5 @@
-"""Benchmark of the in-process core: one 5 s trial and a full 150-trial run.
+"""Benchmark of the in-process core: one 5 s trial, each law's between-trial update (and the
+norm-optimal learning matrix) and a full 150-trial run.
 
 Run with ``.venv/bin/python -m bench.core_bench``. Prints medians; asserts nothing (wall-clock
 timing is noisy on a shared 2-core machine). Target: one trial <= 35 ms.
@@ -8,11 +9,14 @@ from __future__ import annotations
 
 import statistics
 import time
+from typing import Any
 
 import numpy as np
 
 from exo_ilc_ros.core import Experiment, load_config, run_trials
+from exo_ilc_ros.core.config import Config
 from exo_ilc_ros.core.dynamics import workspace
+from exo_ilc_ros.core.experiment import build_law
 from exo_ilc_ros.core.plant import rk4_period
 
 
@@ -34,6 +38,40 @@ def plant_step_times(experiment: Experiment, repeats: int = 2000) -> list[float]
             rk4_period(q, qd, effort, *args)
         times.append((time.perf_counter() - start) / repeats)
     return times
+
+
+def between_trials(config: Config) -> None:
+    """The supervisor's between-trial computation: each law's update (median of 21) from one
+    5 s trial's record, and the norm-optimal law's learning matrix (once per configuration)."""
+    from exo_ilc_ros.core import norm_optimal
+
+    experiment = Experiment(config, 0.10)
+    record = experiment.run_trial(np.zeros_like(experiment.reference.position), 1)
+    norm_optimal.clear_cache()
+    start = time.perf_counter()
+    norm_optimal.learning_matrices(config)
+    cold = time.perf_counter() - start
+    start = time.perf_counter()
+    norm_optimal.learning_matrices(config.replace({"error_bound": 0.004}))
+    cached = time.perf_counter() - start
+    n = record.feedforward.size
+    print(f"norm-optimal learning matrix ({n} x {n}, linearised model): built in {cold:.2f} s "
+          f"once per configuration; {cached * 1e3:.2f} ms from the cache after a live change "
+          "of another parameter")
+    variants: list[tuple[str, dict[str, Any]]] = [
+        ("sign", {"law": "sign"}), ("linear", {"law": "linear"}),
+        ("norm_optimal", {"law": "norm_optimal"}),
+        ("norm_optimal constrained (QP)", {"law": "norm_optimal",
+                                           "norm_optimal.constrained": True})]
+    for label, overrides in variants:
+        law = build_law(config.replace(overrides))
+        times = []
+        for _ in range(21 if "QP" not in label else 5):
+            start = time.perf_counter()
+            law.update(record)
+            times.append(time.perf_counter() - start)
+        print(f"between trials, {label} update: median {statistics.median(times) * 1e3:.2f} ms "
+              f"(min {min(times) * 1e3:.2f} ms, {len(times)} runs)")
 
 
 def main() -> None:
@@ -63,8 +101,9 @@ def main() -> None:
     print(f"plant step (one period, {experiment.substeps} RK4 sub-steps = {evaluations} plant "
           f"evaluations, called from Python): median {step * 1e6:.1f} us "
           f"({step / evaluations * 1e9:.0f} ns per evaluation, call overhead included)")
+    between_trials(config)
     run_times = []
-    for law in ("sign", "linear"):
+    for law in ("sign", "linear", "norm_optimal"):
         start = time.perf_counter()
         run_trials(config, 0.10, 150, law)
         run_times.append((law, time.perf_counter() - start))

@@ -67,6 +67,26 @@ def test_run_json_equals_simulate(tmp_path: Path) -> None:
         assert result.stdout.split(marker)[0] == local.stdout.split(marker)[0]
 
 
+def test_norm_optimal_graph_equals_in_process(tmp_path: Path) -> None:
+    """`law: norm_optimal` through the graph: the supervisor builds the same cached learning
+    matrix and learns the same feed-forward as in-process, to 1e-9 (3 short trials)."""
+    config_file = tmp_path / "norm_optimal.yaml"
+    config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n'
+                           "ilc_supervisor:\n  ros__parameters:\n    law: norm_optimal\n")
+    graph_json = tmp_path / "graph.json"
+    result = _exo_ilc("run", "--no-bag", "--config", str(config_file), "--trials", "3",
+                      "--mass-uncertainty", "0.15", "--json", str(graph_json), timeout=150)
+    assert result.returncode == 0, result.stderr[-3000:]
+    reference = run_trials(load_config(config_file), 0.15, 3)
+    (g,) = json.loads(graph_json.read_text())["runs"]
+    assert g["law"] == "norm_optimal" and len(g["trials"]) == 3
+    np.testing.assert_allclose([t["max_abs_error"] for t in g["trials"]],
+                               reference.max_abs_errors, rtol=0.0, atol=1e-9)
+    np.testing.assert_allclose([t["max_abs_feedforward"] for t in g["trials"]],
+                               reference.max_abs_feedforward, rtol=0.0, atol=1e-9)
+    assert reference.max_abs_errors[-1].max() < 0.1 * reference.max_abs_errors[0].max()
+
+
 def _set(session: Any, name: str, value: Any) -> Any:
     from rclpy.parameter import Parameter
     from rclpy.parameter_client import AsyncParameterClient

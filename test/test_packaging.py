@@ -29,6 +29,7 @@ ROSDEP_KEYS: dict[str, str] = {
     "mcap": "python3-mcap-pip",
     "mcap-ros2-support": "mcap-ros2-support",
     "optuna": "python3-optuna-pip",
+    "clarabel": "python3-clarabel-pip",
 }
 """pip name -> rosdep key (rosdistro's rosdep/python.yaml: the system package where there is
 one, a ``-pip`` key otherwise; ``mcap-ros2-support`` is that key's own name there)."""

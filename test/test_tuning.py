@@ -163,4 +163,5 @@ def test_compare_prints_one_table_and_writes_one_figure(
     rows = [line for line in text.splitlines() if line.startswith(("sign", "linear"))]
     assert len(rows) == 6
     assert {row.split("  ")[0] for row in rows} == {"sign (paper)", "sign (tuned)", "linear"}
+    assert sum(line.startswith("norm-optimal") for line in text.splitlines()) == 2
     assert plot.stat().st_size > 10_000

@@ -239,6 +239,8 @@ def good_value(p: schema.Parameter) -> st.SearchStrategy[Any]:
     low = 1e-6 if p.strictly_positive else (p.minimum if p.minimum is not None else -1e3)
     if p.name == "q_filter.cutoff_hz":
         return st.floats(1e-3, NYQUIST * 0.999)
+    if p.name == "norm_optimal.effort_margin":
+        return st.floats(0.0, 0.999)
     if p.kind is schema.Kind.DOUBLE:
         return st.floats(low, 1e3)
     if p.kind is schema.Kind.INTEGER:

@@ -1,4 +1,5 @@
-"""Learning laws side by side: the paper's sign law, a tuned sign law and the linear law.
+"""Learning laws side by side: the paper's sign law, a tuned sign law, the linear law and the
+norm-optimal law.
 
 Runs every (law, mass uncertainty) pair in-process (optionally over worker processes), then one
 table (first / settled iteration per joint, final floor, peak error, learned input) and one figure
@@ -145,6 +146,6 @@ def plot_comparison(runs: Sequence[ComparedRun], joint_names: Sequence[str],
     # One legend below the panels, never over a curve.
     fig.legend(*axes[0][0].get_legend_handles_labels(), loc="outside lower center",
                ncols=len(labels) + 1, fontsize=8, frameon=False)
-    fig.suptitle("Max tracking error per trial: paper's sign law, tuned sign law, linear law")
+    fig.suptitle("Max tracking error per trial: " + ", ".join(labels))
     fig.savefig(path, dpi=120)
     plt.close(fig)

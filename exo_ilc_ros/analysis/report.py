@@ -104,9 +104,10 @@ def format_iterations(runs: Sequence[RunSummary], joint_names: Sequence[str],
     ``labels`` (e.g. bag names) in a first column, one per run."""
     lines = [f"Iterations to the bound, first within / settled within (paper: joint 1 "
              f"35/96/101 at 5/10/15 %, joints 2-3 within {PAPER_OTHER_JOINTS_WITHIN})"]
+    w = max([8] + [len(r.law) + 1 for r in runs])  # 8 for sign / linear, wider for norm_optimal
     cell = max([len(name) + 2 for name in joint_names] + [20])
     first = max([len(label) + 2 for label in labels] + [5]) if labels is not None else 0
-    header = (f"{'bag' if labels is not None else '':<{first}}{'law':<8}{'delta':>7}  "
+    header = (f"{'bag' if labels is not None else '':<{first}}{'law':<{w}}{'delta':>7}  "
               + "".join(f"{name:>{cell}}" for name in joint_names))
     lines += [header + f"{'paper joint 1':>15}", "-" * (len(header) + 15)]
     for i, r in enumerate(runs):
@@ -115,7 +116,7 @@ def format_iterations(runs: Sequence[RunSummary], joint_names: Sequence[str],
                         for f, s in zip(its.first, its.settled, strict=True))
         paper = PAPER_FIRST_JOINT1.get(round(r.mass_uncertainty, 4))
         label = labels[i] if labels is not None else ""
-        lines.append(f"{label:<{first}}{r.law:<8}{r.mass_uncertainty:>7.3f}  {cells}"
+        lines.append(f"{label:<{first}}{r.law:<{w}}{r.mass_uncertainty:>7.3f}  {cells}"
                      f"{_fmt(paper):>15}")
     lines.append("('-': never within the bound / not within at the last trial)")
     return "\n".join(lines)

@@ -64,6 +64,12 @@ DIVERGENCE_FACTOR = 10.0
 """A run stops early once max |e| exceeds this multiple of its trial-1 max |e|."""
 SPACE_VERSION = 1
 """Bumped whenever the search space changes (part of the default study name)."""
+NORM_OPTIMAL_KEYS = ("norm_optimal.weight_input_change", "norm_optimal.model_mass_uncertainty")
+"""What ``--law norm_optimal`` tunes: Wd per joint and the model's delta_m."""
+INPUT_CHANGE_RANGE = (1e-12, 1e-4)
+"""Log-uniform range of ``norm_optimal.weight_input_change`` (the shipped 1e-8 inside)."""
+MODEL_DELTA_RANGE = (0.0, 0.2)
+"""Uniform range of ``norm_optimal.model_mass_uncertainty``."""
 
 
 class TuningError(ExoIlcError):
@@ -80,6 +86,8 @@ class TuningProblem:
     trials: int
     peak_weight: float = 20.0
     aggregate: str = "max"
+    law: str = "sign"
+    """sign: the step schedules; norm_optimal: its input-change weights and model delta_m."""
 
     def __post_init__(self) -> None:
         if self.aggregate not in ("max", "mean"):
@@ -91,10 +99,11 @@ class TuningProblem:
 
     @classmethod
     def from_config(cls, config: Config, mass_uncertainties: Sequence[float], trials: int,
-                    peak_weight: float = 20.0, aggregate: str = "max") -> TuningProblem:
-        """The problem of tuning ``config``'s sign-law schedules."""
+                    peak_weight: float = 20.0, aggregate: str = "max",
+                    law: str = "sign") -> TuningProblem:
+        """The problem of tuning ``config``'s sign-law schedules (or ``law``'s values)."""
         return cls(config.values, tuple(float(d) for d in mass_uncertainties), int(trials),
-                   float(peak_weight), aggregate)
+                   float(peak_weight), aggregate, law)
 
     @property
     def config(self) -> Config:
@@ -104,14 +113,15 @@ class TuningProblem:
     def fixed_values(self) -> dict[str, Any]:
         """The config values the objective depends on, except the schedules being tuned."""
         unused = ("law", "max_trials", "mass_uncertainty", "stop_when_settled")
+        other = ("norm_optimal.",) if self.law == "sign" else NORM_OPTIMAL_KEYS
         return {k: v for k, v in self.config_values.items()
-                if not k.startswith(("schedule.", "linear.")) and k not in unused}
+                if not k.startswith(("schedule.", "linear.", *other)) and k not in unused}
 
     def settings(self) -> dict[str, Any]:
         """Uncertainties, trials, weighting and search-space version."""
         return {"mass_uncertainties": list(self.mass_uncertainties), "trials": self.trials,
                 "peak_weight": self.peak_weight, "aggregate": self.aggregate,
-                "space": SPACE_VERSION}
+                "space": SPACE_VERSION, **({"law": self.law} if self.law != "sign" else {})}
 
     def digest(self) -> str:
         """A stable hash of everything the objective depends on except the schedules."""
@@ -191,6 +201,52 @@ def schedule_values(config: Config) -> dict[str, list[float]]:
     return {f"schedule.{t}.{k}": config[f"schedule.{t}.{k}"] for t in TERMS for k in SCHEDULE_KEYS}
 
 
+def suggest_weights(trial: optuna.Trial, joints: int) -> dict[str, Any]:
+    """Sample the norm-optimal law's tuned values (:data:`NORM_OPTIMAL_KEYS`)."""
+    change = [trial.suggest_float(f"norm_optimal.j{j + 1}.weight_input_change",
+                                  *INPUT_CHANGE_RANGE, log=True) for j in range(joints)]
+    delta = trial.suggest_float("norm_optimal.model_mass_uncertainty", *MODEL_DELTA_RANGE)
+    return {NORM_OPTIMAL_KEYS[0]: change, NORM_OPTIMAL_KEYS[1]: delta}
+
+
+def weight_params(config: Config) -> dict[str, float]:
+    """Optuna parameters that reproduce ``config``'s norm-optimal tuned values."""
+    params = {f"norm_optimal.j{j + 1}.weight_input_change": float(w)
+              for j, w in enumerate(config[NORM_OPTIMAL_KEYS[0]])}
+    params["norm_optimal.model_mass_uncertainty"] = float(config[NORM_OPTIMAL_KEYS[1]])
+    return params
+
+
+def weights_from_params(params: Mapping[str, float], joints: int) -> dict[str, Any]:
+    """Config values of a trial's parameters (inverse of :func:`weight_params`)."""
+    return {NORM_OPTIMAL_KEYS[0]: [float(params[f"norm_optimal.j{j + 1}.weight_input_change"])
+                                   for j in range(joints)],
+            NORM_OPTIMAL_KEYS[1]: float(params["norm_optimal.model_mass_uncertainty"])}
+
+
+def tuned_values(config: Config, law: str) -> dict[str, Any]:
+    """The part of ``config`` that ``law``'s tuning searches (dotted names)."""
+    if law == "norm_optimal":
+        return {k: config[k] for k in NORM_OPTIMAL_KEYS}
+    return schedule_values(config)
+
+
+def _suggest(trial: optuna.Trial, joints: int, law: str) -> dict[str, Any]:
+    if law == "norm_optimal":
+        return suggest_weights(trial, joints)
+    return suggest_schedules(trial, joints)
+
+
+def _params(config: Config, law: str) -> dict[str, float]:
+    return weight_params(config) if law == "norm_optimal" else schedule_params(config)
+
+
+def _from_params(params: Mapping[str, float], joints: int, law: str) -> dict[str, Any]:
+    if law == "norm_optimal":
+        return weights_from_params(params, joints)
+    return schedules_from_params(params, joints)
+
+
 # --- objective ----------------------------------------------------------------------------------
 
 @dataclass
@@ -267,7 +323,7 @@ def evaluate(config: Config, problem: TuningProblem) -> tuple[float, list[RunSco
 
         diverged = False
         try:
-            run_trials(config, delta, problem.trials, law="sign", on_trial=guard)
+            run_trials(config, delta, problem.trials, law=problem.law, on_trial=guard)
         except (_DivergedError, FloatingPointError, ArithmeticError):
             diverged = True
         scores.append(score_errors(np.array(rows), problem.trials, bound, problem.peak_weight,
@@ -286,7 +342,7 @@ class Objective:
 
     def __call__(self, trial: optuna.Trial) -> float:
         """Score one sampled schedule set; per-run details go to the trial's user attrs."""
-        config = self.base.replace(suggest_schedules(trial, self.base.joints))
+        config = self.base.replace(_suggest(trial, self.base.joints, self.problem.law))
         total, scores = evaluate(config, self.problem)
         trial.set_user_attr("runs", [asdict(s) for s in scores])
         return total
@@ -385,7 +441,7 @@ def open_study(problem: TuningProblem, storage: str, study_name: str | None = No
         # "same command on every machine") reads either none of these or all of them.
         study.set_user_attr("problem_digest", problem.digest())
         study.set_user_attr("problem", problem.settings())
-        study.set_user_attr("base_schedules", schedule_values(problem.config))
+        study.set_user_attr("base_schedules", tuned_values(problem.config, problem.law))
         study.set_user_attr("problem_fixed", problem.fixed_values())
     else:
         conflicts = problem.conflicts(stored, study.user_attrs.get("problem", {}))
@@ -394,7 +450,7 @@ def open_study(problem: TuningProblem, storage: str, study_name: str | None = No
                               f"({', '.join(conflicts[:5])} differ); use another --study-name "
                               "or the original options")
     if not study.trials:
-        study.enqueue_trial(schedule_params(problem.config), user_attrs={"baseline": True})
+        study.enqueue_trial(_params(problem.config, problem.law), user_attrs={"baseline": True})
     return study
 
 
@@ -490,7 +546,7 @@ def best_result(study: optuna.Study, problem: TuningProblem) -> TuningResult:
         raise TuningError(f"study {study.study_name!r} has no completed trial yet")
     best = min(complete, key=_rank)
     base = problem.config
-    config = base.replace(schedules_from_params(best.params, base.joints))
+    config = base.replace(_from_params(best.params, base.joints, problem.law))
     baseline = next((t for t in complete if t.user_attrs.get("baseline")), None)
     return TuningResult(study.study_name, config, float(best.value or 0.0),
                         None if baseline is None else float(baseline.value or 0.0),

@@ -19,7 +19,7 @@ def register(sub: Any) -> None:
         "there), without and with the Q-filter. See README, 'Convergence and the Q-filter'.")
     parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
                         "shipped config/exo_ilc.yaml (any subset of keys)")
-    parser.add_argument("--law", choices=("sign", "linear"),
+    parser.add_argument("--law", choices=("sign", "linear", "norm_optimal"),
                         help="learning law (default: the config's law)")
     parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
                         metavar="D",
@@ -62,5 +62,11 @@ def run(args: argparse.Namespace) -> int:
     label = "with the configured Q-filter" if config["q_filter.enabled"] or args.cutoff \
         else "(Q-filter off)"
     print(f"\nworst trial-to-trial factor {label}: {worst:.5f} -> "
-          + ("learning stays bounded" if worst < 1.0 else "the learned input can grow"))
+          + ("learning stays bounded" if worst <= 1.0 + 1e-9 else "the learned input can grow"))
+    if (args.law or config["law"]) == "norm_optimal":
+        from ..core.norm_optimal import format_robustness, robustness
+
+        report = robustness(config)
+        print()
+        print(format_robustness(report))
     return 0

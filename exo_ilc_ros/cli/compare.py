@@ -33,13 +33,15 @@ def register(sub: Any) -> None:
     parser = sub.add_parser(
         "compare", help="compare the paper's, the tuned sign law and the linear law",
         description="Run the paper's hand-tuned sign law, the tuned sign law (from --tuned, or "
-        "config/tuned.yaml if there is one) and the linear law at each mass uncertainty; print "
-        "one table and write one figure.")
+        "config/tuned.yaml if there is one), the linear law and the norm-optimal law at each "
+        "mass uncertainty; print one table and write one figure.")
     parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
                         "shipped config (the paper's law and the linear law run with it)")
     parser.add_argument("--tuned", type=input_file, help="tuned YAML laid over --config "
                         "(default: config/tuned.yaml if found)")
     parser.add_argument("--no-tuned", action="store_true", help="leave the tuned law out")
+    parser.add_argument("--no-norm-optimal", action="store_true",
+                        help="leave the norm-optimal law (law: norm_optimal) out")
     parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
                         metavar="D", default=[0.05, 0.10, 0.15], help="default: 0.05 0.10 0.15")
     parser.add_argument("--trials", type=parameter("max_trials"),
@@ -73,6 +75,9 @@ def compare(args: argparse.Namespace) -> int:
             raise ConfigError(exc.key, exc.rule, str(tuned_path)) from None
         variants.append(Variant("sign (tuned)", tuned.replace({"law": "sign"}), "sign"))
     variants.append(Variant("linear", base.replace({"law": "linear"}), "linear"))
+    if not args.no_norm_optimal:
+        variants.append(Variant("norm-optimal", base.replace({"law": "norm_optimal"}),
+                                "norm_optimal"))
     deltas = args.mass_uncertainty
     print("compare: " + ", ".join(v.label for v in variants) + " at delta = "
           + " ".join(f"{d:g}" for d in deltas) + f", {trials} trials"

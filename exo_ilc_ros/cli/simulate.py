@@ -29,7 +29,7 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
                         "the config's plant_simulator mass_uncertainty)")
     parser.add_argument("--trials", type=parameter("max_trials"),
                         help="trials per run (default: max_trials)")
-    parser.add_argument("--law", choices=("sign", "linear"), help="learning law "
+    parser.add_argument("--law", choices=("sign", "linear", "norm_optimal"), help="learning law "
                         "(default: the config's law)")
     parser.add_argument("--json", metavar="OUT", type=json_file,
                         help="write the per-trial table as JSON")
@@ -129,6 +129,9 @@ def simulate(args: argparse.Namespace) -> int:
             result = run_trials(config, delta, trials, on_trial=progress, store=args.store,
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
+        for trial, notes in result.notes.items():
+            for note in notes:
+                print(f"delta {delta:g}, learning from trial {trial}: {note}", file=sys.stderr)
         if args.bag:
             from ..bag import run_name, unique_path, write_run
 

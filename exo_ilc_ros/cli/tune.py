@@ -86,6 +86,9 @@ def register(sub: Any) -> None:
     parser.add_argument("--aggregate", choices=("max", "mean"), default="max",
                         help="combine the uncertainties' scores by worst case or mean")
     parser.add_argument("--seed", type=seed, help="sampler seed (reproducible with --jobs 1)")
+    parser.add_argument("--law", choices=("sign", "norm_optimal"), default="sign",
+                        help="what to tune: the sign law's schedules (default) or the "
+                        "norm-optimal law's input-change weights and model delta_m")
     parser.set_defaults(func=tune)
 
 
@@ -121,7 +124,7 @@ def tune(args: argparse.Namespace) -> int:
     config = load_config(args.config)
     trials = int(args.trials if args.trials is not None else config["max_trials"])
     problem = TuningProblem.from_config(config, args.mass_uncertainty, trials,
-                                        args.peak_weight, args.aggregate)
+                                        args.peak_weight, args.aggregate, args.law)
     name = args.study_name or problem.default_study_name()
     print(f"study {name} in {args.storage}: {args.budget} more trials on {args.jobs} job(s), "
           f"{trials} trials x {len(problem.mass_uncertainties)} uncertainties each")
@@ -143,11 +146,12 @@ def tune(args: argparse.Namespace) -> int:
                          progress)
     result = best_result(study, problem)
     print(format_before_after(result, config["joint_names"]))
-    tuned = result.config.replace({"law": "sign"})
+    tuned = result.config.replace({"law": args.law})
     out = Path(args.out) if args.out else default_out(name)
     out.parent.mkdir(parents=True, exist_ok=True)
     deltas = " ".join(f"{d:g}" for d in problem.mass_uncertainties)
-    header = (f"Sign-law schedules tuned by `exo-ilc tune` (Optuna study {name}, storage "
+    what = "Sign-law schedules" if args.law == "sign" else "Norm-optimal weights and model"
+    header = (f"{what} tuned by `exo-ilc tune` (Optuna study {name}, storage "
               f"{args.storage}).\n"
               f"Objective {result.best_value:.1f} (starting schedules: "
               f"{'-' if result.baseline_value is None else f'{result.baseline_value:.1f}'}): "

@@ -38,6 +38,7 @@ from .laws import (
     sgn,
 )
 from .model import ArmModel
+from .norm_optimal import NormOptimalLaw, learning_matrices
 from .plant import PlantDynamics
 from .qfilter import QFilter, QFilteredLaw
 from .session import LearningSession, RunResult, StopReason, TrialConclusion, run_trials
@@ -47,10 +48,10 @@ from .trajectory import QuinticTrajectory, SampledReference
 __all__ = [
     "ArmModel", "Config", "ConfigError", "ErrorSum", "ExoIlcError", "Experiment",
     "FeedforwardUpdate", "GrowthFit", "InitialFeedforward", "IterationsToBound", "LearningLaw",
-    "LearningSession", "LinearLaw", "LoopAnalysis", "Memory", "ModelError", "PlantDynamics",
-    "QFilter", "QFilteredLaw", "QuinticTrajectory", "RunResult", "RunStore", "SafetyError",
-    "SampledReference", "ScheduleIndex", "SignLaw", "StepSchedule", "StopReason", "StoreError",
-    "TrialConclusion", "TrialRecord", "analyze_loop", "build_arm", "build_law", "build_reference",
-    "config_dir", "default_config_path", "error_sums", "fit_growth", "iterations_to_bound",
-    "load_config", "run_trials", "sgn",
+    "LearningSession", "LinearLaw", "LoopAnalysis", "Memory", "ModelError", "NormOptimalLaw",
+    "PlantDynamics", "QFilter", "QFilteredLaw", "QuinticTrajectory", "RunResult", "RunStore",
+    "SafetyError", "SampledReference", "ScheduleIndex", "SignLaw", "StepSchedule", "StopReason",
+    "StoreError", "TrialConclusion", "TrialRecord", "analyze_loop", "build_arm", "build_law",
+    "build_reference", "config_dir", "default_config_path", "error_sums", "fit_growth",
+    "iterations_to_bound", "learning_matrices", "load_config", "run_trials", "sgn",
 ]

@@ -235,6 +235,8 @@ def analyze_loop(config: Config, law: str | None = None, mass_uncertainty: float
     q_filter = qfilter if qfilter is not None else qfilter_of(config)
     frequency = np.linspace(0.0, 0.5 / period, points)
     q = q_filter.response(frequency) if q_filter is not None else None
+    if name == "norm_optimal":
+        return _analyze_norm_optimal(config, delta, frequency, q_filter, q, lifted_trials)
     joints = []
     for name_j, kp, kd, gains in zip(config["joint_names"], config["control.kp"],
                                      config["control.kd"], learning_gains(config, name),
@@ -250,6 +252,26 @@ def analyze_loop(config: Config, law: str | None = None, mass_uncertainty: float
                                       lifted_trials)
         joints.append(JointFactor(name_j, raw, None if q is None else q * raw, plain, with_q))
     return LoopAnalysis(name, memory, delta, period, frequency, joints, q_filter)
+
+
+def _analyze_norm_optimal(config: Config, delta: float, frequency: np.ndarray,
+                          q_filter: QFilter | None, q: np.ndarray | None,
+                          lifted_trials: int) -> LoopAnalysis:
+    """The factor of (NO2) (:func:`.norm_optimal.frequency_factor`) per joint; its memory is
+    the feed-forward. ``lifted_trials`` > 0 adds the whole-arm lifted map's check (joints are
+    coupled in the ``linearised`` model: the same check on every joint)."""
+    from . import norm_optimal
+
+    plain = None
+    if lifted_trials > 0:
+        check = norm_optimal.lifted_factor(config, delta, radius=True)
+        plain = LiftedCheck(float(check.radius or 0.0), float(np.log(check.norm)), 1)
+    joints = [JointFactor(name_j, raw, None if q is None else q * raw, plain, None)
+              for name_j, raw in zip(config["joint_names"],
+                                     norm_optimal.frequency_factor(config, delta, frequency),
+                                     strict=True)]
+    return LoopAnalysis("norm_optimal", Memory.FEEDFORWARD, delta, float(config["control.period"]),
+                        frequency, joints, q_filter)
 
 
 def format_analysis(analysis: LoopAnalysis) -> str:
@@ -281,6 +303,8 @@ def format_analysis(analysis: LoopAnalysis) -> str:
                              f"{check.spectral_radius:.5f}, K = {check.trials}: {grows}")
         worst = a.worst(filtered)
         verdict = ("converges (contraction at every frequency)" if worst < 1.0 else
+                   "bounded (|F| = 1 only where the law does not learn: nothing is amplified)"
+                   if worst <= 1.0 + 1e-9 else
                    f"grows by up to {100.0 * (worst - 1.0):.3g} % per trial in the band above")
         lines.append(f"    worst {worst:.5f}: {verdict}")
     return "\n".join(lines)

@@ -74,7 +74,11 @@ def _build_plain_law(config: Config, law: str | None) -> LearningLaw:
         return LinearLaw(np.asarray(config["linear.gain_position"]),
                          np.asarray(config["linear.gain_velocity"]),
                          np.asarray(config["linear.gain_acceleration"]), memory, initial)
-    raise ValueError(f"unknown law {name!r}; use sign or linear")
+    if name == "norm_optimal":
+        from .norm_optimal import NormOptimalLaw
+
+        return NormOptimalLaw.from_config(config)
+    raise ValueError(f"unknown law {name!r}; use sign, linear or norm_optimal")
 
 
 @dataclass(frozen=True)

@@ -160,6 +160,8 @@ class FeedforwardUpdate:
     feedforward: np.ndarray
     levels: np.ndarray | None = None
     """M, M', M'' (rows) per joint for the sign law; None for laws without levels."""
+    notes: tuple[str, ...] = ()
+    """What the law reports about this update (e.g. the constraints that were active)."""
 
 
 class LearningLaw(Protocol):

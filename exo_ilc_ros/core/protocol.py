@@ -290,6 +290,8 @@ class TrialProtocol:
             changed = ", ".join(f"{k} = {v}" for k, v in sorted(conclusion.applied.items()))
             self.port.log(False, f"parameters changed; applied from trial {session.trial}: "
                           f"{changed}")
+        for note in conclusion.update.notes if conclusion.learned else ():
+            self.port.log(False, f"learning from trial {record.trial}: {note}")
         if record.aborted:
             self.port.log(True, f"trial {record.trial} aborted by the error envelope at "
                           f"sample {aborted}; not learned from")

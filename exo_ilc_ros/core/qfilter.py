@@ -101,7 +101,7 @@ class QFilteredLaw:
             feedforward = self.qfilter.apply(feedforward)
         if self.feedforward_limit is not None:
             feedforward = np.clip(feedforward, -self.feedforward_limit, self.feedforward_limit)
-        return FeedforwardUpdate(feedforward, step.levels)
+        return FeedforwardUpdate(feedforward, step.levels, step.notes)
 
 
 def qfilter_of(config: Config) -> QFilter | None:

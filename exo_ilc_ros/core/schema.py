@@ -60,6 +60,16 @@ def _axes_rule(value: Any) -> str | None:
     return f"unknown joint axis {bad[0]!r}; use one of {sorted(AXIS_VECTORS)}" if bad else None
 
 
+def _range_rule(value: Any) -> str | None:
+    if len(value) != 2 or value[0] > value[1]:
+        return f"must be [low, high] with low <= high, got {value!r}"
+    return None
+
+
+def _margin_rule(value: Any) -> str | None:
+    return None if value < 1.0 else f"must be < 1 (a share of the limit), got {value!r}"
+
+
 def _schedule_parameters() -> list[Parameter]:
     out = []
     meaning = {"position": ("M", "|s e|"), "velocity": ("M'", "|s e_dot|"),
@@ -145,8 +155,9 @@ PARAMETERS: tuple[Parameter, ...] = (
               "publish /clock every this many control periods (and at each trial's first "
               "sample); 1: every period", strictly_positive=True),
     Parameter("law", SUPERVISOR, Kind.STRING,
-              "learning law: sign (sgnPDD^2, eq (11)) or linear (Arimoto PDD^2-type)",
-              choices=("sign", "linear"), live=True),
+              "learning law: sign (sgnPDD^2, eq (11)), linear (Arimoto PDD^2-type) or "
+              "norm_optimal (model-based, core/norm_optimal.py)",
+              choices=("sign", "linear", "norm_optimal"), live=True),
     Parameter("max_trials", SUPERVISOR, Kind.INTEGER, "number of trials to run",
               strictly_positive=True),
     Parameter("error_bound", SUPERVISOR, Kind.DOUBLE, "max |e_j| bound (rad)",
@@ -182,6 +193,34 @@ PARAMETERS: tuple[Parameter, ...] = (
               "linear law: learning gain on e_dot", per_joint=True, minimum=0.0, live=True),
     Parameter("linear.gain_acceleration", SUPERVISOR, Kind.DOUBLE_ARRAY,
               "linear law: learning gain on e_ddot", per_joint=True, minimum=0.0, live=True),
+    Parameter("norm_optimal.weight_error", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "norm-optimal law: weight We on the next trial's squared position error, (NO1)",
+              per_joint=True, strictly_positive=True, live=True),
+    Parameter("norm_optimal.weight_input_change", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "norm-optimal law: weight Wd on the squared change of u_ff between trials "
+              "(larger: slower, more robust learning)", per_joint=True, strictly_positive=True,
+              live=True),
+    Parameter("norm_optimal.weight_input_size", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "norm-optimal law: weight Wu on the squared learned input (0: none; > 0 leaks "
+              "u_ff towards 0, raising the floor)", per_joint=True, minimum=0.0, live=True),
+    Parameter("norm_optimal.model_kind", SUPERVISOR, Kind.STRING,
+              "norm-optimal law's lifted model: per_joint (ZOH double integrator under PD, "
+              "as analyze-loop) or linearised (coupled, along the reference, gravity terms of "
+              "the mass error included)", choices=("per_joint", "linearised"), live=True),
+    Parameter("norm_optimal.model_mass_uncertainty", SUPERVISOR, Kind.DOUBLE,
+              "delta_m the norm-optimal model assumes (plant masses m_i (1 + delta_m)); "
+              "0: the controller's nominal model", minimum=-0.9, live=True),
+    Parameter("norm_optimal.constrained", SUPERVISOR, Kind.BOOL,
+              "norm-optimal law: solve each update as a QP that keeps the predicted effort "
+              "within control.effort_limit and u_ff within feedforward_limit (Clarabel)",
+              live=True),
+    Parameter("norm_optimal.effort_margin", SUPERVISOR, Kind.DOUBLE,
+              "constrained norm-optimal law: share of control.effort_limit kept free for the "
+              "error of the next trial's predicted effort (0.01: the QP aims at 99 %)",
+              minimum=0.0, live=True, extra_rule=_margin_rule),
+    Parameter("norm_optimal.uncertainty_range", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "[low, high] mass uncertainty the norm-optimal weights must tolerate: "
+              "analyze-loop warns when they do not", minimum=-0.9, extra_rule=_range_rule),
     Parameter("q_filter.enabled", SUPERVISOR, Kind.BOOL,
               "zero-phase low-pass Q applied to the learned feed-forward after every update",
               live=True),

@@ -243,6 +243,8 @@ class RunResult:
     """Why the run ended (max_trials, or settled with ``stop_when_settled``)."""
     applied: dict[int, dict[str, Any]] = field(default_factory=dict)
     """Live changes per effective trial (the first trial run with them)."""
+    notes: dict[int, tuple[str, ...]] = field(default_factory=dict)
+    """What the law reported when it learned from a trial (e.g. active constraints), by trial."""
 
     @property
     def aborted(self) -> list[int]:
@@ -320,6 +322,8 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
         if run_store is not None:
             run_store.save(record, conclusion.update, conclusion.config)
         result.records.append(record)
+        if conclusion.learned and conclusion.update.notes:
+            result.notes[record.trial] = conclusion.update.notes
         if on_trial is not None:
             on_trial(record)
     result.final = session.next_update

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from exo_ilc_ros.analysis.loop import format_growth
 from exo_ilc_ros.cli.main import main
 from exo_ilc_ros.core import load_config
 from exo_ilc_ros.core.convergence import (
@@ -17,7 +18,7 @@ from exo_ilc_ros.core.convergence import (
     packet_growth_rate,
 )
 from exo_ilc_ros.core.experiment import Experiment
-from exo_ilc_ros.core.growth import fit_growth, format_growth
+from exo_ilc_ros.core.growth import fit_growth
 from exo_ilc_ros.core.laws import Memory
 from exo_ilc_ros.core.qfilter import QFilter
 

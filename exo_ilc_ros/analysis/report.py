@@ -9,8 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from ..core.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth, format_growth
+from ..core.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth
 from ..core.summary import RunSummary
+from .loop import format_growth
 
 PAPER_FIRST_JOINT1 = {0.05: 35, 0.10: 96, 0.15: 101}
 """Iterations to the 0.005 rad bound the paper reports for joint 1; joints 2-3: within 20."""

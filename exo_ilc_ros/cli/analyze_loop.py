@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..core.convergence import analyze_loop, format_analysis, plot_analysis
+from ..analysis.loop import format_analysis, format_robustness, plot_analysis
+from ..core.convergence import analyze_loop
 from .arguments import config_with_flags, figure_file, input_file, integer, parameter
 
 
@@ -64,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"\nworst trial-to-trial factor {label}: {worst:.5f} -> "
           + ("learning stays bounded" if worst <= 1.0 + 1e-9 else "the learned input can grow"))
     if (args.law or config["law"]) == "norm_optimal":
-        from ..core.norm_optimal import format_robustness, robustness
+        from ..core.norm_optimal import robustness
 
         report = robustness(config)
         print()

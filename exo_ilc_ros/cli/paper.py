@@ -10,6 +10,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from ..core.errors import ConfigError
 from .analyze import analyze
 from .arguments import (
     config_with_flags,
@@ -52,6 +53,9 @@ def register(sub: Any) -> None:
 
 def paper(args: argparse.Namespace) -> int:
     """Three runs, three bags, then ``analyze`` on them."""
+    if args.in_process and args.domain_id is not None:
+        raise ConfigError("--in-process", "starts no graph: --domain-id would be ignored; drop "
+                          "one")
     config = config_with_flags(args.config, {} if args.trials is None else
                                {"max_trials": ("--trials", args.trials)})
     trials = config["max_trials"]

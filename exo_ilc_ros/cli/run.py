@@ -38,7 +38,7 @@ def register(sub: Any) -> None:
     parser.add_argument("--no-bag", action="store_true",
                         help="do not start bag_recorder (default: each run is recorded to "
                         "<bag-dir>/<run-name>/, rosbag2 MCAP)")
-    parser.add_argument("--bag-dir", default="bags", metavar="DIR", type=directory,
+    parser.add_argument("--bag-dir", metavar="DIR", type=directory,
                         help="where the bags go (default: bags)")
     parser.add_argument("--isolated-recorder", action="store_true",
                         help="run bag_recorder in a process of its own (default: in "
@@ -89,6 +89,10 @@ def run(args: argparse.Namespace) -> int:
 
     from ..orchestration.launcher import GraphError
 
+    if args.no_bag and (args.bag_dir is not None or args.isolated_recorder):
+        given = "--bag-dir" if args.bag_dir is not None else "--isolated-recorder"
+        raise ConfigError("--no-bag", f"records nothing: {given} would be ignored; drop one")
+    args.bag_dir = "bags" if args.bag_dir is None else args.bag_dir
     config = config_from_args(args)  # an invalid YAML fails here, before any node starts
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     trials = config["max_trials"]

@@ -9,7 +9,6 @@ Works on any (trials, joints) table: an in-process run, a JSON export or a bag's
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,17 +79,3 @@ def fit_growth(max_abs_feedforward: np.ndarray, window: int = DEFAULT_WINDOW,
     with np.errstate(invalid="ignore"):
         growing = (rate > min_rate) & (rate > significance * stderr)
     return GrowthFit(rate, stderr, growing, first + 1, table.shape[0])
-
-
-def format_growth(fit: GrowthFit | None, joint_names: Sequence[str]) -> str:
-    """One line: per joint the fitted factor per trial and, if flagged, GROWING."""
-    if fit is None:
-        return f"growth of max |u_ff|: too few trials (< {MIN_TRIALS}) to tell"
-    cells = []
-    for name, r, s, flag in zip(joint_names, fit.rate, fit.stderr, fit.growing, strict=True):
-        cells.append(f"{name} {100.0 * r:+.3f}+-{100.0 * s:.3f} %/trial"
-                     + (" GROWING" if flag else ""))
-    verdict = ("LEARNED INPUT KEEPS GROWING (the error may still look fine)"
-               if fit.any_growing else "bounded")
-    return (f"growth of max |u_ff| over trials {fit.first_trial}-{fit.last_trial}: "
-            + "; ".join(cells) + f" -> {verdict}")

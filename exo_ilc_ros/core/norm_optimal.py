@@ -580,24 +580,3 @@ def robustness(config: Config, points: int = 3, frequencies: int = 2001) -> Robu
     worst = [max(float(np.max(f)) for f in frequency_factor(config, d, frequency))
              for d in deltas]
     return Robustness(low, high, worst, [lifted_factor(config, d) for d in deltas])
-
-
-def format_robustness(report: Robustness) -> str:
-    """One line per delta checked, then the verdict (a WARNING when not robust)."""
-    lines = [f"norm-optimal weights against norm_optimal.uncertainty_range "
-             f"[{report.low:g}, {report.high:g}] (delta: max |F| over joints and frequencies; "
-             "||F||_2 of the lifted map, plant linearised along the reference):"]
-    for f, r in zip(report.frequency_worst, report.lifted, strict=True):
-        lines.append(f"  delta {r.delta:6.3f}: max |F| {f:.6f}, lifted ||F||_2 {r.norm:.6f} "
-                     f"(1 {r.norm - 1.0:+.1e})")
-    if report.robust:
-        lines.append("  robust: no factor above 1 in the range (learning is monotone in norm, "
-                     "the unlearned directions stay as they are)")
-    else:
-        bad = [r.delta for f, r in zip(report.frequency_worst, report.lifted, strict=True)
-               if f > 1.0 + ROBUST_TOLERANCE or r.norm > 1.0 + ROBUST_TOLERANCE]
-        lines.append("  WARNING: the weights are not robust to the configured uncertainty "
-                     "range: a factor exceeds 1 at delta = " + ", ".join(f"{d:g}" for d in bad)
-                     + " (raise norm_optimal.weight_input_change, or move "
-                     "norm_optimal.model_mass_uncertainty towards that end)")
-    return "\n".join(lines)

@@ -19,6 +19,7 @@ from exo_ilc_ros.core.store import RunStore
 
 SHORT = {"trajectory.duration": 1.0}
 PLANT = {"mass_uncertainty": 0.1}
+CHANGE_LIVE = {"error_bound": 0.006}
 
 
 class FakeGraph:
@@ -233,3 +234,27 @@ def test_a_late_start_reply_does_not_lose_the_trial() -> None:
     protocol.on_started(True)  # the late reply changes nothing
     assert [trial for trial, _ in graph.pushed] == [1, 2]
     assert protocol.session is not None and protocol.session.retried == []
+
+
+def test_a_live_change_the_session_refuses_is_logged_not_raised() -> None:
+    """The node validated the change against its own parameters; should the session (which
+    also holds the plant's) refuse it at the boundary, the run goes on without it."""
+    from exo_ilc_ros.core.errors import ConfigError
+
+    config = load_config(overrides={**SHORT, "max_trials": 2})
+    graph = FakeGraph(config)
+    changed = config.replace(CHANGE_LIVE)
+    protocol = TrialProtocol(config, graph, live=lambda: changed, clock=graph.clock)
+    graph.protocol = protocol
+    protocol.open(PLANT)
+    assert protocol.session is not None
+
+    def refuse(values: Any) -> None:
+        raise ConfigError("error_bound", "refused for the test")
+
+    protocol.session.stage = refuse  # type: ignore[method-assign]
+    protocol.tick(graph_ready=True)
+    _run_to_end(graph, protocol)
+    assert [c.record.trial for c in graph.conclusions] == [1, 2]
+    assert all(c.applied == {} for c in graph.conclusions)
+    assert any("not applied" in e and "error_bound" in e for e in graph.errors)

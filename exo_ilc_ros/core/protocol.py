@@ -318,7 +318,10 @@ class TrialProtocol:
             return
         changed = {name: live[name] for name in sorted(LIVE) if live[name] != self.seen[name]}
         self.seen = live
-        self.session.stage(changed)
+        try:
+            self.session.stage(changed)
+        except (ExoIlcError, ValueError) as exc:  # the node checked them; the session disagrees
+            self.port.log(True, f"live change {changed} not applied: {exc}")
 
     def _save(self) -> bool:
         """The concluded trial into the store (False: it could not be saved; run stopped)."""

@@ -41,3 +41,34 @@ def pytest_configure(config: pytest.Config) -> None:
         os.environ["EXO_ILC_TEST_DOMAIN_ID"] = str(_claim_domain_id())
     os.environ["ROS_DOMAIN_ID"] = os.environ["EXO_ILC_TEST_DOMAIN_ID"]
     os.environ.setdefault("ROS_LOG_DIR", str(Path(tempfile.gettempdir()) / "exo_ilc_ros_test_logs"))
+
+
+EXIT_GRACE = 60.0
+"""Seconds the process may take to exit after the session ended before the watchdog acts."""
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """An exit watchdog: once, after every test had passed, the process hung at interpreter
+    exit for 17 minutes (DDS teardown, not reproduced since), which would cost CI its time limit.
+    If the process is still alive ``EXIT_GRACE`` s after the session, every thread's stack goes
+    to stderr (for the bug report) and the process exits with the session's own status."""
+    import faulthandler
+    import sys
+    import threading
+    import time
+
+    status = int(exitstatus)
+
+    def watchdog() -> None:
+        time.sleep(EXIT_GRACE)
+        sys.stderr.write(f"\nconftest: the test process did not exit {EXIT_GRACE:g} s after the "
+                         f"session ended; thread stacks follow, then exit {status}\n")
+        faulthandler.dump_traceback(all_threads=True)
+        sys.stderr.flush()
+        sys.stdout.flush()
+        os._exit(status)
+
+    threading.Thread(target=watchdog, name="exit-watchdog", daemon=True).start()
+    # Last resort for a hang in C-level finalisation, where no Python thread runs any more.
+    faulthandler.dump_traceback_later(EXIT_GRACE * 2, exit=True)

@@ -113,3 +113,52 @@ def test_gate_fast_path_checks_what_the_full_check_does() -> None:
     reordered = gate(swapped)
     assert reordered is not None
     np.testing.assert_array_equal(reordered[1], [1.0, 2.0, 3.0])
+
+
+@pytest.mark.parametrize("window", [None, (1_000, 2_000)])
+def test_gate_fast_and_full_paths_agree_on_stamps(window: tuple[int, int] | None) -> None:
+    """The same message, stamp by stamp, through a gate that knows the layout (fast path) and
+    through one that never saw it (full check): accepted or rejected alike, for stamps that are
+    negative (sec = -1 once came back as -999999995 ns), repeated, older, in and outside the
+    trial's window, and far in the future."""
+    from exo_ilc_ros.nodes.guard import JointStateGate, Rejections
+
+    names = ["j1", "j2", "j3"]
+    writer = JointStateWriter(names)
+    zero = np.zeros(3)
+    stamps = [1_500, -1_000_000_000 + 5, -1, 0, 999, 1_000, 1_000, 1_500, 1_499, 2_000, 2_001,
+              10**18, 1_700]
+    fast = JointStateGate(names, Rejections(_Node()))  # type: ignore[arg-type]
+    fast(writer.write(1_000 if window else 1, zero, zero, zero))  # learns the layout
+    assert fast.layout is not None
+    for stamp in stamps:
+        fast.restart(window)
+        full = JointStateGate(names, Rejections(_Node()))  # type: ignore[arg-type]
+        full.restart(window)
+        raw = writer.write(stamp, zero + 0.1, zero, zero)
+        got_fast, got_full = fast(raw), full(raw)
+        assert (got_fast is None) == (got_full is None), stamp
+        if got_fast is not None and got_full is not None:
+            assert got_fast[0] == got_full[0] == stamp
+    for stamp in (-1, -1_000_000_000 + 5):
+        fast.restart()
+        assert fast(writer.write(stamp, zero, zero, zero)) is None, "negative stamps never pass"
+
+
+def test_a_future_stamp_costs_one_message() -> None:
+    """A well-formed JointState stamped far in the future, inside a trial: rejected (BAD_STAMP)
+    and the trial's next samples still pass (before, it became the 'last stamp' and every later
+    sample of the trial was rejected as not increasing)."""
+    from exo_ilc_ros.core.validation import Cause
+    from exo_ilc_ros.nodes.guard import JointStateGate, Rejections
+
+    names = ["j1", "j2", "j3"]
+    writer = JointStateWriter(names)
+    zero = np.zeros(3)
+    rejections = Rejections(_Node())  # type: ignore[arg-type]
+    gate = JointStateGate(names, rejections)
+    gate.restart((10_000, 20_000))
+    assert gate(writer.write(10_000, zero, zero, zero)) is not None
+    assert gate(writer.write(10**15, zero, zero, zero)) is None
+    assert gate(writer.write(11_000, zero, zero, zero)) is not None
+    assert rejections.log.counts == {Cause.BAD_STAMP: 1}

@@ -599,13 +599,16 @@ def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(
     assert graph["iterations_to_bound"] == local["iterations_to_bound"]
 
     before, after = read_bag(first_bag), read_bag(second_bag)
-    # Stored == filed: the trial the recorder did not file (3, unless the kill came late) was
-    # not stored either.
-    assert before.completed == list(range(1, stored_after + 1))
+    # Stored is a subset of filed: every stored trial is in the first bag. A trial the recorder
+    # filed in the instant before SIGKILL (a short trial takes ~30 ms; in the supervisor's
+    # process the kill also takes the supervisor before it stored it) is in that bag but not
+    # stored, so the resume runs it again: then it is in both bags, identical.
+    assert before.completed[:stored_after] == list(range(1, stored_after + 1))
+    assert len(before.completed) <= stored_after + 1, (before.completed, stored_after)
     assert before.resumed_after is None
     assert after.completed == list(range(stored_after + 1, trials + 1))
     assert after.resumed_after == stored_after and not after.incomplete
-    assert sorted(before.completed + after.completed) == list(range(1, trials + 1))
+    assert sorted(set(before.completed + after.completed)) == list(range(1, trials + 1))
     for run in (before, after):
         for k in run.completed:
             assert run.trials[k].complete, (run.path, k)

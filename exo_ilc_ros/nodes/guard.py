@@ -98,12 +98,22 @@ class JointStateGate:
         self.fast_names: bytes | None = None
         """The names segment of the last message whose names were exactly joint_names."""
         self.last_stamp_ns: int | None = None
+        self.window: tuple[int, int] | None = None
+        """Stamps a message may carry (the running trial's first and last sample): one outside
+        is rejected without touching ``last_stamp_ns``, so a stamp far in the future costs one
+        message, not the rest of the trial."""
         self.layout: _Layout | None = None
         """Where the values sit in a message of the last accepted layout with these names."""
 
-    def restart(self) -> None:
-        """Forget the last stamp (a new trial: the plant may have been restarted)."""
+    def restart(self, window: tuple[int, int] | None = None) -> None:
+        """Forget the last stamp (a new trial: the plant may have been restarted); accept only
+        stamps within ``window`` (first, last sample of the trial; None: any)."""
         self.last_stamp_ns = None
+        self.window = window
+
+    def _in_window(self, stamp: int) -> bool:
+        window = self.window
+        return window is None or window[0] <= stamp <= window[1]
 
     def __call__(self, raw: bytes) -> tuple[int, np.ndarray, np.ndarray] | None:
         layout = self.layout
@@ -114,8 +124,8 @@ class JointStateGate:
                 layout.doubles.unpack_from(raw, layout.velocity)
             sec, nanosec = STAMP.unpack_from(raw, 4)
             stamp = sec * 1_000_000_000 + nanosec
-            if isfinite(sum(values)) and (self.last_stamp_ns is None or
-                                          stamp > self.last_stamp_ns):
+            if isfinite(sum(values)) and stamp >= 0 and self._in_window(stamp) and \
+                    (self.last_stamp_ns is None or stamp > self.last_stamp_ns):
                 self.last_stamp_ns = stamp
                 n = self.n
                 return (stamp, np.frombuffer(raw, "<f8", n, layout.position),
@@ -126,6 +136,7 @@ class JointStateGate:
                 stamp, position, velocity = read_joint_state(raw)
                 if position.shape[0] == self.n and velocity.shape[0] == self.n and \
                         np.isfinite(position).all() and np.isfinite(velocity).all() and \
+                        stamp >= 0 and self._in_window(stamp) and \
                         (self.last_stamp_ns is None or stamp > self.last_stamp_ns):
                     self.last_stamp_ns = stamp
                     return stamp, position, velocity
@@ -138,6 +149,12 @@ class JointStateGate:
                                       self.last_stamp_ns)
         if isinstance(sample, Rejection):
             self.rejections.reject(sample)
+            return None
+        if not self._in_window(sample.stamp_ns):
+            assert self.window is not None
+            self.rejections.reject_cause(
+                Cause.BAD_STAMP, f"/joint_states: stamp {sample.stamp_ns} ns is outside the "
+                f"running trial's samples [{self.window[0]}, {self.window[1]}] ns")
             return None
         if names == self.joint_names:
             self.fast_names = segment

@@ -23,7 +23,7 @@ import numpy as np
 
 from .config import Config
 from .errors import ExoIlcError
-from .experiment import Experiment
+from .experiment import Experiment, build_reference
 from .samples import TrialSamples
 from .session import LIVE, LearningSession, TrialConclusion
 from .store import RunStore
@@ -82,7 +82,7 @@ class TrialProtocol:
         """The node's parameters now (accepted live changes are staged at the boundary)."""
         self.seen = config
         self.clock = clock
-        self.reference = Experiment(config).reference
+        self.reference = build_reference(config)
         self.samples = TrialSamples(self.reference)
         self.session: LearningSession | None = None
         """Created by :meth:`open` once the plant's parameters are known."""

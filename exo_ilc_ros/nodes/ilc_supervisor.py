@@ -24,7 +24,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from ..core import schema
-from ..core.protocol import Phase, TrialProtocol
+from ..core.protocol import TrialProtocol
 from ..core.session import TrialConclusion
 from ..wire import topics
 from ..wire.protocol import int_value
@@ -117,10 +117,10 @@ class IlcSupervisor(Node):
             return
         ok = response.success and response.message.startswith(topics.T0_PREFIX)
         t0 = int(response.message[len(topics.T0_PREFIX):]) if ok else None
-        if t0 is not None and self.protocol.phase is Phase.RESETTING:  # the trial's stamps only
-            samples = self.protocol.samples
-            self.gate.restart((t0, t0 + (samples.received.shape[0] - 1) * samples.step_ns))
         self.protocol.on_reset(t0, response.message)
+        samples = self.protocol.samples
+        if t0 is not None and samples.t0_ns == t0:  # taken: the trial's own stamps only
+            self.gate.restart((t0, samples.end_ns))
 
     def on_start_done(self, future: Future) -> None:
         """Running, or refused (not linked yet: retried)."""

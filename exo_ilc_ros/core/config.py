@@ -90,7 +90,7 @@ def flatten_ros_yaml(document: Any, source: str) -> dict[str, Any]:
         params = body["ros__parameters"] or {}
         if not isinstance(params, dict):
             raise ConfigError(f"{section}.ros__parameters", "must be a mapping", source)
-        for key, value in _flatten(params, ""):
+        for key, value in flatten_tree(params, ""):
             if key in schema.ROS_BUILTIN:
                 continue
             param = schema.BY_NAME.get(key)
@@ -105,11 +105,12 @@ def flatten_ros_yaml(document: Any, source: str) -> dict[str, Any]:
     return flat
 
 
-def _flatten(tree: Mapping[str, Any], prefix: str) -> Iterable[tuple[str, Any]]:
+def flatten_tree(tree: Mapping[str, Any], prefix: str = "") -> Iterable[tuple[str, Any]]:
+    """(dotted name, value) of every leaf of a nested ``ros__parameters`` mapping."""
     for key, value in tree.items():
         name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            yield from _flatten(value, name + ".")
+        if isinstance(value, Mapping):
+            yield from flatten_tree(value, name + ".")
         else:
             yield name, value
 

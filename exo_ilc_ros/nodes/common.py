@@ -28,7 +28,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 
 from ..core import schema
-from ..core.config import Config, load_config, load_ros_yaml
+from ..core.config import Config, flatten_tree, load_config, load_ros_yaml
 from ..core.errors import ConfigError, ExoIlcError
 from ..core.validation import validate_update
 
@@ -177,14 +177,6 @@ def _params_file_sections(document: Any, path: tuple[str, ...] = ()
             yield from _params_file_sections(body, (*path, str(key)))
 
 
-def _flat(tree: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str, Any]]:
-    for key, value in tree.items():
-        if isinstance(value, Mapping):
-            yield from _flat(value, f"{prefix}{key}.")
-        else:
-            yield f"{prefix}{key}", value
-
-
 class GivenValue(NamedTuple):
     """A parameter value from the command line, where it came from, and whether it came from a
     wildcard section (``/**``) rather than one naming the node."""
@@ -224,7 +216,7 @@ def command_line_parameters(argv: Sequence[str], node_fqn: str) -> dict[str, Giv
                 if _node_pattern(key).fullmatch(node_fqn):
                     wildcard = "*" in key
                     out.update((name, GivenValue(value, path, wildcard))
-                               for name, value in _flat(body))
+                               for name, value in flatten_tree(body))
         elif arg in ("-p", "--param") and i < len(args):
             rule, i = args[i], i + 1
             target, sep, text = rule.partition(":=")

@@ -22,7 +22,7 @@ import numpy as np
 from ..core.config import Config
 from ..core.summary import RunSummary
 from ..wire import topics
-from ..wire.protocol import int_value, per_joint
+from ..wire.protocol import int_value, per_joint, summary_values
 from .launcher import (
     GRAPH_NODES,
     DomainClaim,
@@ -78,15 +78,12 @@ def stored_summaries(config: Config) -> list[TrialSummary]:
     joints = config["joint_names"]
     out = []
     for entry in store.summaries:
-        values = {"trial": str(entry["trial"]),
-                  "mass_uncertainty": repr(float(config["mass_uncertainty"])),
-                  "law": str(entry["live"].get("law", config["law"]))}
-        for key in ("max_abs_error", "max_abs_feedforward", "max_abs_effort"):
-            values.update({f"{key}/{name}": repr(float(x))
-                           for name, x in zip(joints, entry[key], strict=True)})
-        if entry.get("aborted_at") is not None:
-            values["aborted_at"] = str(entry["aborted_at"])
-        out.append(TrialSummary(int(entry["trial"]), values))
+        values = summary_values(entry["trial"], config["mass_uncertainty"],
+                                str(entry["live"].get("law", config["law"])), joints,
+                                entry["max_abs_error"], entry["max_abs_feedforward"],
+                                entry["max_abs_effort"], entry.get("levels"),
+                                entry.get("aborted_at"))
+        out.append(TrialSummary(int(entry["trial"]), dict(values)))
     return out
 
 

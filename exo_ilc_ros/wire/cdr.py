@@ -252,8 +252,7 @@ def _rows(raw: bytes, joints: int) -> _Rows | None:
     """The layout of this JointState for row-wise reading, or None (other endianness, a
     position or velocity not of ``joints`` values)."""
     try:
-        _check_header(raw)
-        _, names_end = _names_span(raw)
+        _, names_end = _names_span(raw)  # checks the encapsulation too
         offset = names_end
         arrays: list[int | None] = []
         for _ in range(3):

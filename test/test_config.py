@@ -117,3 +117,24 @@ def test_invalid_files_name_the_file_key_and_rule(tmp_path: Path, text: str, key
 def test_missing_file_is_a_config_error(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="cannot read"):
         load_config(tmp_path / "nope.yaml")
+
+
+def test_scenario_overlays_are_laid_over_the_config_in_order(tmp_path):
+    from exo_ilc_ros.core.config import scenario_names, scenario_path
+
+    assert "ideal" in scenario_names()
+    ideal = load_config(overlays=[scenario_path("ideal")])
+    assert ideal.values == load_config().values
+    law = tmp_path / "law.yaml"
+    law.write_text("ilc_supervisor:\n  ros__parameters:\n    law: linear\n    max_trials: 7\n")
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("ilc_supervisor:\n  ros__parameters:\n    max_trials: 9\n")
+    config = load_config(law, overlays=[scenario])
+    assert (config["law"], config["max_trials"]) == ("linear", 9)
+    with pytest.raises(ConfigError, match="unknown scenario 'nope'"):
+        scenario_path("nope")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("plant_simulator:\n  ros__parameters:\n    no_such_key: 1\n")
+    with pytest.raises(ConfigError) as info:
+        load_config(law, overlays=[bad])
+    assert info.value.source == str(bad) and info.value.key == "no_such_key"

@@ -254,15 +254,51 @@ def _yaml_value(value: Any) -> str:
     return json.dumps(value)
 
 
+SCENARIO_DIR_NAME = "scenarios"
+
+
+def scenario_dir() -> Path:
+    """Where the shipped scenario overlays are: ``config/scenarios/``."""
+    return config_dir() / SCENARIO_DIR_NAME
+
+
+def scenario_names() -> list[str]:
+    """The shipped scenarios, by name (file stem), sorted."""
+    return sorted(p.stem for p in scenario_dir().glob("*.yaml"))
+
+
+def scenario_path(name_or_path: str | Path) -> Path:
+    """A scenario overlay: a shipped name (``realistic`` is ``config/scenarios/realistic.yaml``)
+    or a path to a YAML file of the same layout."""
+    text = str(name_or_path)
+    candidate = Path(text)
+    if candidate.suffix in (".yaml", ".yml") or candidate.is_file():
+        if not candidate.is_file():
+            raise ConfigError("<file>", "no such scenario file", text)
+        return candidate
+    shipped = scenario_dir() / f"{text}.yaml"
+    if not shipped.is_file():
+        raise ConfigError("scenario", f"unknown scenario {text!r}; shipped: "
+                          + ", ".join(scenario_names()))
+    return shipped
+
+
 def load_config(path: Path | str | None = None,
-                overrides: Mapping[str, Any] | None = None) -> Config:
-    """The shipped defaults, then ``path`` (any subset of keys), then ``overrides``; the
-    defaults and ``path`` are validated before ``overrides`` replace any of their values."""
+                overrides: Mapping[str, Any] | None = None,
+                overlays: Iterable[Path | str] = ()) -> Config:
+    """The shipped defaults, then ``path`` (any subset of keys), then each of ``overlays`` in
+    order (e.g. a scenario), then ``overrides``. Each file is validated with what lies under it
+    before ``overrides`` replace any of their values; an error names the file that broke it."""
     default = default_config_path()
     values = read_yaml(default)
     source = str(default)
-    if path is not None and Path(path).resolve() != default.resolve():
-        values.update(read_yaml(path))
-        source = str(path)
-    config = Config(values, source)  # the files are checked whole, whatever overrides them
+    files = [] if path is None else [Path(path)]
+    files += [Path(p) for p in overlays]
+    config = Config(values, source)
+    for file in files:
+        if file.resolve() == default.resolve():
+            continue
+        values.update(read_yaml(file))
+        source = str(file)
+        config = Config(values, source)  # the files are checked whole, whatever overrides them
     return config.replace(overrides) if overrides else config

@@ -168,9 +168,9 @@ def test_writer_refuses_existing_bag_and_undeclared_topic(tmp_path: Path) -> Non
 
 
 def test_batched_writes_give_the_same_file_as_one_by_one(tmp_path: Path) -> None:
-    """write_many (the recorder's path: MCAP records packed by us into rosbags' chunk) writes
-    the very bytes rosbags' own per-message write does, across chunk boundaries (> 1 MiB),
-    with topics interleaved and timestamps out of order; sqlite3 falls back to write."""
+    """write_many (the recorder's path: one batch per drain) writes the very bytes the
+    per-message write does, across chunk boundaries (> 1 MiB), with topics interleaved and
+    timestamps out of order, for MCAP and sqlite3 storage."""
     rng = np.random.default_rng(3)
     messages = [(int(t), topic, rng.bytes(int(size)))
                 for t, topic, size in zip(rng.integers(10**9, 2 * 10**9, 12000),

@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -35,6 +34,7 @@ from ..wire import protocol, topics
 from ..wire.cdr import joint_states
 from . import messages
 from .errors import BagReadError
+from .integrity import check_mcap
 from .provenance import ParameterChange, Provenance, read_provenance
 
 
@@ -246,27 +246,34 @@ class _Stream:
     msgs: list[Any] = field(default_factory=list)
 
 
-@contextmanager
-def _qos_parsed_once() -> Iterator[None]:
-    """rosbags parses every channel's QoS YAML in every file (ruamel, ~3 ms each: seconds for a
-    bag split per trial); the texts repeat, so parse each once while reading."""
-    from rosbags.rosbag2 import storage_mcap
-
-    original = storage_mcap.parse_qos
-    cache: dict[str, Any] = {}
-
-    def parse(value: Any) -> Any:
-        if not isinstance(value, str):
-            return original(value)
-        if value not in cache:
-            cache[value] = original(value)
-        return cache[value]
-
-    storage_mcap.parse_qos = parse
-    try:
-        yield
-    finally:
-        storage_mcap.parse_qos = original
+def verify_files(path: Path, info: dict[str, Any]) -> list[str]:
+    """Check the CRCs of every MCAP file the metadata lists (:func:`.integrity.check_mcap`);
+    raise :class:`BagReadError` naming the first damaged file and what failed. Returns notes
+    on files that carry no CRCs (written before exo_ilc_ros used ``mcap``'s writer): their
+    damage could not have been seen."""
+    if info.get("storage_identifier") != "mcap":
+        return []
+    unchecked: list[str] = []
+    for name in info.get("relative_file_paths") or []:
+        file = path / str(name)
+        if not file.is_file():
+            continue  # rosbags names it below
+        try:
+            check = check_mcap(file)
+        except OSError as exc:
+            raise BagReadError(file, f"cannot be read ({exc.strerror})") from None
+        if not check.intact:
+            raise BagReadError(file, "is corrupt, its checksums do not match: "
+                               + "; ".join(check.problems) + ". The bag's other files may "
+                               "be intact: move this one out of the bag directory and remove "
+                               "it from metadata.yaml to analyse the rest.")
+        if check.chunks and check.chunk_crcs < check.chunks:
+            unchecked.append(file.name)
+    if not unchecked:
+        return []
+    return [f"{len(unchecked)} of the bag's files ({unchecked[0]}"
+            f"{', ...' if len(unchecked) > 1 else ''}) carry no chunk CRCs (written before "
+            "exo_ilc_ros wrote bags with mcap): damage to them could not be detected"]
 
 
 def _read_topics(path: Path, wanted: Sequence[str], raw_topics: Iterable[str]
@@ -277,8 +284,7 @@ def _read_topics(path: Path, wanted: Sequence[str], raw_topics: Iterable[str]
     streams = {t: _Stream() for t in wanted}
     keep_raw = set(raw_topics)
     try:
-        with _qos_parsed_once(), \
-                AnyReader([path], default_typestore=messages.typestore()) as reader:
+        with AnyReader([path], default_typestore=messages.typestore()) as reader:
             connections = [c for c in reader.connections if c.topic in streams]
             for conn in connections:
                 expected = topics.TYPES.get(conn.topic)
@@ -403,6 +409,7 @@ def read_bag(path: Path | str) -> BagRun:
     info = read_metadata(path)
     provenance = read_provenance(info.get("custom_data"))
     notes = list(provenance.problems)
+    notes.extend(verify_files(path, info))
     streams, decode = _read_topics(path, [topics.JOINT_STATES, topics.EFFORT_COMMANDS,
                                           topics.FEEDFORWARD, topics.TRIAL_EVENTS,
                                           topics.TRIAL_SUMMARY],

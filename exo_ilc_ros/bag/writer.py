@@ -1,20 +1,22 @@
 """A rosbag2 bag written as a sequence of complete storage files, so a killed writer loses only
-the file it was writing.
+the file it was writing, and every file carries checksums a reader can verify.
 
-rosbags' :class:`~rosbags.rosbag2.Writer` keeps a 1 MiB chunk and the whole index in memory and
-writes the MCAP summary and ``metadata.yaml`` only on ``close()``: after SIGKILL nothing of it can
-be read. :class:`BagWriter` therefore writes each *split* (e.g. one trial) with its own rosbags
-``Writer`` in ``<bag>/.splits/``, and on :meth:`BagWriter.split` closes it, moves the finished
-file to ``<bag>/<name>_<i>.mcap`` (rosbag2's naming for split bags) and rewrites
+An MCAP file's summary and index are written only when the file is finished: after SIGKILL a
+file being written cannot be read. :class:`BagWriter` therefore writes each *split* (e.g. one
+trial) as a file of its own in ``<bag>/.splits/``, and on :meth:`BagWriter.split` finishes it,
+moves it to ``<bag>/<name>_<i>.mcap`` (rosbag2's naming for split bags) and rewrites
 ``metadata.yaml`` atomically to list every finished file. Readers (rosbags, ``ros2 bag``) see a
 valid multi-file bag at every moment; an interrupted split stays in ``.splits/``.
+
+MCAP files are written with ``mcap``'s writer (:class:`_McapFile`): chunk, data-section and
+summary CRCs, so a flipped byte is detected (:mod:`.integrity`); sqlite3 files with rosbags'
+public ``Writer``.
 """
 
 from __future__ import annotations
 
 import os
 import shutil
-import struct
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -97,70 +99,117 @@ def _counts(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def _qos_text(version: int, qos: Sequence[Any]) -> str:
-    """The offered-QoS YAML rosbags' ``Writer.add_connection`` stores with a connection."""
-    from io import StringIO
-
-    from rosbags.rosbag2.metadata import dump_qos_v8, dump_qos_v9
-    from ruamel.yaml import YAML
-
-    dumped = (dump_qos_v9 if version >= 9 else dump_qos_v8)(list(qos))
-    if isinstance(dumped, str):
-        return dumped
-    stream = StringIO()
-    yaml_ = YAML(typ="safe")
-    yaml_.default_flow_style = False
-    yaml_.dump(dumped, stream)
-    return stream.getvalue().strip()
+CHUNK_SIZE = 2**20
+"""An MCAP chunk is closed once it holds more than this many bytes (1 MiB, as before)."""
 
 
-_MESSAGE_HEADER = struct.Struct("<BQHIQQ")
-"""An MCAP Message record up to its data: opcode 0x05, record length, channel id, sequence
-(0, as rosbags writes it), log time, publish time."""
-_CHUNK_LIMIT = 2**20
-"""rosbags closes a chunk once it holds more than this many bytes (``McapWriter.write``)."""
+def qos_yaml(profiles: Sequence[dict[str, Any]]) -> str:
+    """The ``offered_qos_profiles`` text of an MCAP channel, as rosbag2 Jazzy writes it
+    (``serialize_rclcpp_qos_vector``: the version-9 profiles as a YAML block sequence, keys in
+    ``rmw_qos_profile_t``'s order)."""
+    if not profiles:
+        return ""
+    return str(yaml.dump(list(profiles), Dumper=_Dumper, sort_keys=False,
+                         default_flow_style=False, width=10**9)).strip()
 
 
-def _mcap_chunk(chunk: Any) -> bool:
-    """Whether ``chunk`` is rosbags' pending MCAP chunk as :func:`_pack_mcap_messages` knows
-    it (a rosbags release that changed it falls back to one call per message)."""
-    return chunk is not None and all(hasattr(chunk, a) for a in
-                                      ("bio", "msgs", "message_start_time", "message_end_time"))
+class _McapFile:
+    """One storage file written with ``mcap``'s :class:`~mcap.writer.Writer` (the format's
+    reference implementation): chunked, uncompressed as before, with chunk, data-section and
+    summary CRCs, message and chunk indexes, statistics, and rosbag2's ``ros2`` profile (one
+    ``ros2msg`` schema per type; channels carry ``offered_qos_profiles`` and
+    ``topic_type_hash``; a ``rosbag2`` metadata record holds the file's metadata)."""
+
+    def __init__(self, path: Path) -> None:
+        from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
+
+        from .. import __version__
+
+        self.path = path
+        self._handle = open(path, "wb")  # noqa: SIM115  (closed by finish)
+        self._writer = Writer(self._handle, chunk_size=CHUNK_SIZE,
+                              compression=CompressionType.NONE, index_types=IndexType.ALL,
+                              enable_crcs=True, enable_data_crcs=True)
+        self._writer.start(profile="ros2",
+                           library=f"exo_ilc_ros-{__version__}; {LIBRARY_IDENTIFIER}")
+        self._schemas: dict[str, int] = {}
+        self.channels: dict[str, int] = {}
+        """Topic -> channel id, for the topics that have a message in this file."""
+
+    def connect(self, topic: _Topic) -> int:
+        """Register ``topic``'s channel (and its type's schema, once per file)."""
+        schema = self._schemas.get(topic.msgtype)
+        if schema is None:
+            schema = self._writer.register_schema(topic.msgtype, "ros2msg",
+                                                  topic.definition().encode())
+            self._schemas[topic.msgtype] = schema
+        channel = self._writer.register_channel(topic.name, "cdr", schema,
+                                                topic.channel_metadata())
+        self.channels[topic.name] = channel
+        return channel
+
+    def write(self, channel: int, timestamp: int, data: bytes | memoryview) -> None:
+        """One message: log and publish time ``timestamp`` (ns), as rosbags wrote them."""
+        self._writer.add_message(channel, timestamp, data, timestamp)
+
+    def write_batch(self, channels: Mapping[str, int],
+                    batch: Sequence[tuple[int, str, bytes]]) -> None:
+        """Messages of topics connected in this file, in order."""
+        add = self._writer.add_message
+        for timestamp, topic, data in batch:
+            add(channels[topic], timestamp, data, timestamp)
+
+    def finish(self, metadata: str) -> None:
+        """The ``rosbag2`` metadata record, the summary (indexes, statistics, CRC) and the
+        footer; closes the file."""
+        try:
+            self._writer.flush()  # the last chunk first: the metadata follows the messages
+            self._writer.add_metadata("rosbag2", {"serialized_metadata": metadata})
+            self._writer.finish()
+        finally:
+            self._handle.close()
 
 
-def _pack_mcap_messages(storage: Any, chunk: Any, batch: Sequence[tuple[int, str, bytes]],
-                        connections: Mapping[str, Any]) -> None:
-    """Append ``batch`` to rosbags' open MCAP chunk exactly as its ``McapWriter.write`` would
-    one message at a time (records, chunk index, times, channel statistics), closing the chunk
-    where it would."""
-    pack = _MESSAGE_HEADER.pack
-    stats = storage.channel_stats
-    i = 0
-    while i < len(batch):
-        bio = chunk.bio
-        offset = bio.tell()
-        index = chunk.msgs
-        parts = []
-        start, end = chunk.message_start_time, chunk.message_end_time
-        while i < len(batch) and offset <= _CHUNK_LIMIT:
-            timestamp, topic, data = batch[i]
-            cid = connections[topic].id
-            record = pack(0x05, 22 + len(data), cid, 0, timestamp, timestamp)
-            index[cid].append((timestamp, offset))
-            parts.append(record)
-            parts.append(data)
-            offset += 31 + len(data)
-            stats[cid] += 1
-            start = min(start, timestamp)
-            end = max(end, timestamp)
-            i += 1
-        bio.write(b"".join(parts))
-        chunk.message_start_time, chunk.message_end_time = start, end
-        storage.message_start_time = min(storage.message_start_time, start)
-        storage.message_end_time = max(storage.message_end_time, end)
-        if bio.tell() > _CHUNK_LIMIT:
-            storage.close_chunk()
-            chunk = storage.chunk
+class _Sqlite3File:
+    """One sqlite3 storage file, written through rosbags' public ``Writer`` API in a staging
+    directory of its own (sqlite3 has no checksums; rosbags writes what rosbag2 does)."""
+
+    def __init__(self, staging: Path) -> None:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        self.staging = staging
+        self._writer = Writer(staging, version=Writer.VERSION_LATEST,
+                              storage_plugin=StoragePlugin.SQLITE3)
+        self._writer.open()
+        self._connections: dict[int, Any] = {}
+        self.channels: dict[str, int] = {}
+
+    @property
+    def path(self) -> Path:
+        return self.staging / f"{self.staging.name}.db3"
+
+    def connect(self, topic: _Topic) -> int:
+        connection = self._writer.add_connection(topic.name, topic.msgtype,
+                                                 typestore=typestore(),
+                                                 offered_qos_profiles=list(topic.qos))
+        self._connections[connection.id] = connection
+        self.channels[topic.name] = connection.id
+        return int(connection.id)
+
+    def write(self, channel: int, timestamp: int, data: bytes | memoryview) -> None:
+        self._writer.write(self._connections[channel], timestamp, data)
+
+    def write_batch(self, channels: Mapping[str, int],
+                    batch: Sequence[tuple[int, str, bytes]]) -> None:
+        for timestamp, topic, data in batch:
+            self.write(channels[topic], timestamp, data)
+
+    def finish(self, metadata: str) -> None:
+        """Close the database (rosbags also writes a ``metadata.yaml`` in the staging
+        directory, which the bag's own replaces)."""
+        del metadata
+        self._writer.close()
+
 
 
 @dataclass
@@ -170,6 +219,8 @@ class _Topic:
     qos: Sequence[Any]
     count: int = 0
     _metadata: dict[str, Any] | None = None
+    _definition: str | None = None
+    _channel_metadata: dict[str, str] | None = None
 
     def metadata(self) -> dict[str, Any]:
         """Its ``topic_metadata`` entry (computed once: the hash and QoS do not change)."""
@@ -182,6 +233,21 @@ class _Topic:
                               "type_description_hash": typestore().hash_rihs01(self.msgtype)}
         return self._metadata
 
+    def definition(self) -> str:
+        """The full ``ros2msg`` definition of its type (the MCAP schema's data)."""
+        if self._definition is None:
+            self._definition = str(typestore().generate_msgdef(self.msgtype, ros_version=2)[0])
+        return self._definition
+
+    def channel_metadata(self) -> dict[str, str]:
+        """The MCAP channel's metadata, as rosbag2's MCAP storage writes it."""
+        if self._channel_metadata is None:
+            info = self.metadata()
+            self._channel_metadata = {
+                "offered_qos_profiles": qos_yaml(info["offered_qos_profiles"]),
+                "topic_type_hash": info["type_description_hash"]}
+        return self._channel_metadata
+
 
 @dataclass
 class _FileInfo:
@@ -193,9 +259,7 @@ class _FileInfo:
 
 @dataclass
 class _Split:
-    writer: Any
-    staging: Path
-    connections: dict[str, Any] = field(default_factory=dict)
+    file: _McapFile | _Sqlite3File
     start: int = 2**63 - 1
     end: int = 0
     counts: dict[str, int] = field(default_factory=dict)
@@ -210,18 +274,12 @@ class BagWriter:
 
     def __init__(self, path: Path | str, *, storage: str = "mcap",
                  custom_data: Mapping[str, str] | None = None) -> None:
-        from rosbags.rosbag2 import StoragePlugin
-
         self.path = Path(path)
-        plugins = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
-        if storage not in plugins:
+        if storage not in ("mcap", "sqlite3"):
             raise BagWriteError(self.path, f"unknown storage {storage!r}; use mcap or sqlite3")
         self.storage = storage
-        self._plugin = plugins[storage]
         self.custom_data: dict[str, str] = dict(custom_data or {})
         self._topics: dict[str, _Topic] = {}
-        self._templates: dict[str, tuple[Any, str]] = {}
-        """Per topic: its connection in the first split and its QoS YAML (see _connect)."""
         self._files: list[_FileInfo] = []
         self._split: _Split | None = None
         self._bag_yaml = _MetadataYaml(INFO_KEY)
@@ -261,7 +319,8 @@ class BagWriter:
     # -- content ---------------------------------------------------------------------------
     def add_topic(self, topic: str, msgtype: str, qos: Sequence[Any] = ()) -> None:
         """Declare ``topic`` of ``msgtype`` (e.g. ``sensor_msgs/msg/JointState``) with the QoS
-        its publisher offers (rosbags ``Qos`` tuples; ``ros2 bag play`` replays with them)."""
+        its publishers offer (rosbags ``Qos`` tuples, one per distinct publisher profile;
+        ``ros2 bag play`` offers them again)."""
         known = self._topics.get(topic)
         if known is not None:
             if known.msgtype != msgtype:
@@ -284,13 +343,10 @@ class BagWriter:
         if not self._opened or self._closed:
             raise BagWriteError(self.path, "write on a bag that is not open")
         split = self._split or self._open_split()
-        connection = split.connections.get(topic)
-        if connection is None:
-            declared = self._topics.get(topic)
-            if declared is None:
-                raise BagWriteError(self.path, f"write to undeclared topic {topic}")
-            connection = self._connect(split, declared)
-        split.writer.write(connection, timestamp, data)
+        channel = split.file.channels.get(topic)
+        if channel is None:
+            channel = self._connect(split, topic)
+        split.file.write(channel, timestamp, data)
         split.counts[topic] = split.counts.get(topic, 0) + 1
         split.start = min(split.start, timestamp)
         split.end = max(split.end, timestamp)
@@ -299,10 +355,8 @@ class BagWriter:
         """Store ``(timestamp ns, topic, CDR bytes)`` messages in order (an
         :class:`~exo_ilc_ros.nodes.common.Inbox`'s batch); returns how many.
 
-        The same file as :meth:`write` one by one, at a fraction of the cost per message: for
-        MCAP the message records of the batch are packed here and appended to rosbags' open
-        chunk (what its ``McapWriter.write`` does per message, byte for byte; tested), the
-        recorder's main cost next to the control loop. Other storages write one by one.
+        The same file as :meth:`write` one by one (tested), with the per-message bookkeeping
+        (counts, times) done once per batch: the recorder's main cost next to the control loop.
         """
         batch = messages if isinstance(messages, list) else list(messages)
         if not batch:
@@ -310,17 +364,14 @@ class BagWriter:
         if not self._opened or self._closed:
             raise BagWriteError(self.path, "write on a bag that is not open")
         split = self._split or self._open_split()
-        connections = split.connections
+        channels = split.file.channels
         done = 0
         for i, (_, topic, _) in enumerate(batch):
-            if topic not in connections:  # connected where write() would (rosbags writes the
-                self._write_batch(split, batch[done:i])  # channel into the chunk)
-                declared = self._topics.get(topic)
-                if declared is None:
-                    raise BagWriteError(self.path, f"write to undeclared topic {topic}")
-                self._connect(split, declared)
+            if topic not in channels:  # its channel goes where write() would put it
+                split.file.write_batch(channels, batch[done:i])
+                self._connect(split, topic)
                 done = i
-        self._write_batch(split, batch[done:])
+        split.file.write_batch(channels, batch[done:])
         counts = split.counts
         for _, topic, _ in batch:
             counts[topic] = counts.get(topic, 0) + 1
@@ -330,29 +381,21 @@ class BagWriter:
         split.end = max(split.end, last)
         return len(batch)
 
-    def _write_batch(self, split: _Split, batch: Sequence[tuple[int, str, bytes]]) -> None:
-        """Messages of topics connected in ``split``: packed for MCAP, else one by one."""
-        storage = split.writer.storage
-        chunk = getattr(storage, "chunk", None)
-        if not _mcap_chunk(chunk):
-            for timestamp, topic, data in batch:
-                split.writer.write(split.connections[topic], timestamp, data)
-        elif batch:
-            _pack_mcap_messages(storage, chunk, batch, split.connections)
-
     def split(self) -> Path | None:
         """Finish the file being written (if it holds any message) and list it in
         ``metadata.yaml``; returns the finished file."""
         split, self._split = self._split, None
         if split is None:
             return None
-        self._finish_storage(split)
-        produced = [p for p in split.staging.iterdir() if p.name != "metadata.yaml"]
-        if len(produced) != 1:
-            raise BagWriteError(split.staging, f"expected one storage file, found {produced}")
-        target = self.path / produced[0].name
-        os.replace(produced[0], target)
-        shutil.rmtree(split.staging, ignore_errors=True)
+        produced = split.file.path
+        info = self._metadata([_FileInfo(produced.name, split.start, split.end,
+                                         sum(split.counts.values()))],
+                              {t: split.counts.get(t, 0) for t in self._topics}, {})
+        split.file.finish(self._split_yaml.dump(info).strip())
+        target = self.path / produced.name
+        os.replace(produced, target)
+        if isinstance(split.file, _Sqlite3File):
+            shutil.rmtree(split.file.staging, ignore_errors=True)
         for topic, count in split.counts.items():
             self._topics[topic].count += count
         self._files.append(_FileInfo(target.name, split.start, split.end,
@@ -367,58 +410,25 @@ class BagWriter:
 
     # -- internals -------------------------------------------------------------------------
     def _open_split(self) -> _Split:
-        from rosbags.rosbag2 import Writer
-
+        """Start file ``<name>_<i>`` in ``.splits/`` (moved into the bag when finished)."""
         name = f"{self.path.name}_{len(self._files)}"
-        staging = self.path / SPLITS_DIR / name
-        if staging.exists():
-            shutil.rmtree(staging)
-        writer = Writer(staging, version=Writer.VERSION_LATEST, storage_plugin=self._plugin)
-        writer.open()
-        self._split = _Split(writer, staging)
+        staging = self.path / SPLITS_DIR
+        file: _McapFile | _Sqlite3File
+        if self.storage == "mcap":
+            file = _McapFile(staging / f"{name}.mcap")
+        else:
+            if (staging / name).exists():
+                shutil.rmtree(staging / name)
+            file = _Sqlite3File(staging / name)
+        self._split = _Split(file)
         return self._split
 
-    def _finish_storage(self, split: _Split) -> None:
-        """Write the split's index and footer. What rosbags' ``Writer.close`` does, minus its
-        two ruamel dumps of the metadata (~0.1 s per split, a stall the recorder cannot
-        afford); the storage gets the split's metadata from libyaml instead."""
-        writer = split.writer
-        storage, writer.storage = writer.storage, None
-        info = self._metadata([_FileInfo(f"{split.staging.name}.{self._suffix}", split.start,
-                                         split.end, sum(split.counts.values()))],
-                              {t: split.counts.get(t, 0) for t in self._topics}, {})
-        storage.close(writer.version, self._split_yaml.dump(info).strip())
-
-    def _connect(self, split: _Split, topic: _Topic) -> Any:
-        """Add ``topic``'s connection to the split being written.
-
-        The first split goes through rosbags' ``Writer.add_connection``; later splits reuse
-        what it computed (message definition, hash, the QoS YAML) and register the same
-        connection with the storage directly: ``add_connection`` regenerates the definition
-        and dumps the QoS with ruamel every time, ~1.5 ms per topic and split, which the
-        recorder paid at the start of every trial, next to the control loop.
-        """
-        writer = split.writer
-        template = self._templates.get(topic.name)
-        if template is None or template[0].ext.offered_qos_profiles != list(topic.qos):
-            connection = writer.add_connection(topic.name, topic.msgtype,
-                                               typestore=typestore(),
-                                               offered_qos_profiles=list(topic.qos))
-            self._templates[topic.name] = (connection, _qos_text(writer.version, topic.qos))
-        else:
-            connection = template[0]._replace(id=len(writer.connections) + 1, owner=writer)
-            if topic.msgtype not in writer.added_types:
-                writer.storage.add_msgtype(connection)
-                writer.added_types.add(topic.msgtype)
-            writer.storage.add_connection(connection, template[1])
-            writer.connections.append(connection)
-            writer.counts[connection.id] = 0
-        split.connections[topic.name] = connection
-        return connection
-
-    @property
-    def _suffix(self) -> str:
-        return "mcap" if self.storage == "mcap" else "db3"
+    def _connect(self, split: _Split, topic: str) -> int:
+        """The channel of declared ``topic`` in the split being written."""
+        declared = self._topics.get(topic)
+        if declared is None:
+            raise BagWriteError(self.path, f"write to undeclared topic {topic}")
+        return split.file.connect(declared)
 
     def _write_metadata(self) -> None:
         info = self._metadata(self._files, {t.name: t.count for t in self._topics.values()},

@@ -1,4 +1,12 @@
-"""The QoS each topic's publisher offers (one table for the recorder and the bag metadata)."""
+"""The QoS each topic's publishers offer (one table for the recorder and the bag metadata).
+
+:data:`OFFERED` mirrors the profiles the nodes publish with (``nodes/common.py``: SAMPLES_QOS,
+LATCHED_QOS, CLOCK_QOS, EVENTS_QOS, DIAGNOSTICS_QOS, and rclpy's parameter-events profile); a
+graph test compares it with what the running graph offers. A bag records it per topic as
+``offered_qos_profiles``, from which ``ros2 bag play`` offers the same reliability and
+durability again: a late subscriber of a replayed bag gets the trial events, summaries and
+health it would have got from the graph.
+"""
 
 from __future__ import annotations
 
@@ -9,17 +17,39 @@ from . import topics
 OFFERED_DEPTH = 1000
 """History depth of the graph's sample and event publishers (``SAMPLES_QOS``, ``EVENTS_QOS``)."""
 
+DIAGNOSTICS_DEPTH = 10
+"""History depth of the nodes' /diagnostics publishers (``DIAGNOSTICS_QOS``)."""
+
 RECORDER_DEPTH = 10000
 """Queue depth of the recorder's subscriptions, drained every 10 ms (at 2 x 1 kHz, depth 10
 dropped ~1 % when read per message; 10 000 leaves seconds of slack)."""
 
 TRANSIENT_LOCAL_TOPICS = frozenset({topics.FEEDFORWARD})
-"""Latched topics: a late subscriber still gets the last message."""
+"""Topics the recorder subscribes to transient local: the latched feed-forward (depth 1), whose
+last profile a recorder that matched late still needs. (The events, summaries and diagnostics
+are offered transient local too, see :data:`OFFERED`, but the recorder is matched before trial
+1 and takes them as they come.)"""
+
+VOLATILE, TRANSIENT_LOCAL = "volatile", "transient_local"
+
+OFFERED: dict[str, tuple[tuple[str, int], ...]] = {
+    topics.JOINT_STATES: ((VOLATILE, OFFERED_DEPTH),),
+    topics.CLOCK: ((VOLATILE, 1),),
+    topics.EFFORT_COMMANDS: ((VOLATILE, OFFERED_DEPTH),),
+    topics.FEEDFORWARD: ((TRANSIENT_LOCAL, 1),),
+    topics.TRIAL_EVENTS: ((TRANSIENT_LOCAL, OFFERED_DEPTH),),
+    topics.TRIAL_SUMMARY: ((TRANSIENT_LOCAL, OFFERED_DEPTH),),
+    topics.DIAGNOSTICS: ((TRANSIENT_LOCAL, DIAGNOSTICS_DEPTH), (TRANSIENT_LOCAL, OFFERED_DEPTH)),
+    topics.PARAMETER_EVENTS: ((VOLATILE, OFFERED_DEPTH),),
+}
+"""Per topic, the (durability, depth) of each distinct publisher profile, all reliable and
+keep-last: /diagnostics has the nodes' health (depth 10) and bag_recorder's status (depth
+1000, ``EVENTS_QOS``); /parameter_events is rclpy's default profile for it."""
 
 
 def offered_qos(topic: str) -> list[Any]:
-    """rosbags ``Qos`` of ``topic``'s publisher (for ``metadata.yaml``; ``ros2 bag play``
-    replays latched topics latched)."""
+    """rosbags ``Qos`` of ``topic``'s publishers (for ``metadata.yaml`` and the MCAP channel;
+    ``ros2 bag play`` replays transient-local topics transient local)."""
     from rosbags.interfaces import (
         Qos,
         QosDurability,
@@ -29,9 +59,9 @@ def offered_qos(topic: str) -> list[Any]:
         QosTime,
     )
 
-    durable = topic in TRANSIENT_LOCAL_TOPICS
     default = QosTime(0, 0)  # 0 = the RMW default (infinite) for deadline, lifespan, lease
-    depth = 1 if durable or topic == topics.CLOCK else OFFERED_DEPTH
-    return [Qos(QosHistory.KEEP_LAST, depth, QosReliability.RELIABLE,
-                QosDurability.TRANSIENT_LOCAL if durable else QosDurability.VOLATILE,
-                default, default, QosLiveliness.AUTOMATIC, default, False)]
+    durability = {VOLATILE: QosDurability.VOLATILE,
+                  TRANSIENT_LOCAL: QosDurability.TRANSIENT_LOCAL}
+    return [Qos(QosHistory.KEEP_LAST, depth, QosReliability.RELIABLE, durability[kind],
+                default, default, QosLiveliness.AUTOMATIC, default, False)
+            for kind, depth in OFFERED.get(topic, ((VOLATILE, OFFERED_DEPTH),))]

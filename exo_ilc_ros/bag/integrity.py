@@ -75,22 +75,29 @@ def _decompress(data: memoryview, compression: str, size: int) -> bytes | memory
 
 
 def check_mcap(path: Path | str) -> McapCheck:
-    """Recompute every CRC ``path`` carries and compare; the problems name the record and its
-    byte offset."""
+    """Recompute every CRC the MCAP file at ``path`` carries and compare; the problems name
+    the record and its byte offset."""
     path = Path(path)
-    check = McapCheck(path)
-    problems = check.problems
     with open(path, "rb") as handle:
         size = handle.seek(0, 2)
-        if size < 2 * len(MAGIC) + _FOOTER.size:
-            problems.append(f"{size} bytes: too short for an MCAP file (truncated?)")
-            return check
+        if size == 0:
+            return check_mcap_bytes(b"", path)
         with mmap.mmap(handle.fileno(), 0, access=mmap.ACCESS_READ) as data:
             view = memoryview(data)
             try:
-                _check(view, size, check)
+                return check_mcap_bytes(view, path)
             finally:
                 view.release()
+
+
+def check_mcap_bytes(data: bytes | memoryview, path: Path | str = "<bytes>") -> McapCheck:
+    """:func:`check_mcap` of a file's contents."""
+    check = McapCheck(Path(path))
+    view = memoryview(data)
+    if len(view) < 2 * len(MAGIC) + _FOOTER.size:
+        check.problems.append(f"{len(view)} bytes: too short for an MCAP file (truncated?)")
+        return check
+    _check(view, len(view), check)
     return check
 
 

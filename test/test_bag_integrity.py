@@ -287,3 +287,51 @@ def test_recorder_bag_is_verifiable_and_offers_the_graphs_qos(tmp_path: Path) ->
             offered[metadata["name"]]
         assert all(p["reliability"] == "reliable" for p in metadata["offered_qos_profiles"])
     assert read_bag(recording.path).completed == [1, 2]
+
+
+def test_mcap_walk_reads_what_rosbags_reads(tmp_path: Path, bag: Path) -> None:
+    """read_bag's MCAP reader against rosbags' AnyReader (the reference it replaced): the same
+    messages per topic, in the same order, with the same log times; and the same from copies
+    of a file with zstd and lz4 chunks (``ros2 bag record``'s default is zstd)."""
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType, Writer
+    from rosbags.highlevel import AnyReader
+
+    from exo_ilc_ros.bag.mcap_messages import read_mcap_topics
+
+    wanted = list(topics.TYPES)
+    walked: dict[str, list[tuple[int, bytes]]] = {}
+    for file in sorted(bag.glob("*.mcap")):
+        found = read_mcap_topics(file, wanted)
+        assert found.check.intact
+        for topic, log in found.log.items():
+            walked.setdefault(topic, []).extend(zip(log, found.data[topic], strict=True))
+    reference: dict[str, list[tuple[int, bytes]]] = {}
+    with AnyReader([bag]) as reader:
+        for conn, stamp, raw in reader.messages():
+            reference.setdefault(conn.topic, []).append((stamp, bytes(raw)))
+    assert walked == reference and sum(map(len, walked.values())) == 3 * TRIALS * 101 + 13
+
+    plain = bag / f"{bag.name}_1.mcap"
+    for compression in (CompressionType.ZSTD, CompressionType.LZ4):
+        copy = tmp_path / f"{compression.name}.mcap"
+        with open(plain, "rb") as source, open(copy, "wb") as target:
+            reader = make_reader(source)
+            summary = reader.get_summary()
+            assert summary is not None
+            writer = Writer(target, compression=compression, chunk_size=50_000)
+            writer.start("ros2", "test")
+            for schema in summary.schemas.values():
+                assert writer.register_schema(schema.name, schema.encoding,
+                                              schema.data) == schema.id
+            for channel in summary.channels.values():
+                assert writer.register_channel(channel.topic, channel.message_encoding,
+                                               channel.schema_id, channel.metadata) == channel.id
+            for _, channel, message in reader.iter_messages(log_time_order=False):
+                writer.add_message(channel.id, message.log_time, message.data,
+                                   message.publish_time)
+            writer.finish()
+        found, original = read_mcap_topics(copy, wanted), read_mcap_topics(plain, wanted)
+        assert found.check.intact and found.check.chunks > 1
+        assert found.log == original.log and found.data == original.data
+        assert found.types == original.types

@@ -148,34 +148,37 @@ def _check(view: memoryview, size: int, check: McapCheck) -> None:
         offset = body + length
 
 
-def _check_chunk(view: memoryview, offset: int, body: int, length: int,
-                 check: McapCheck) -> None:
-    check.chunks += 1
+def decompress_chunk(view: memoryview, body: int, length: int
+                     ) -> tuple[bytes | memoryview, int, int, str]:
+    """The chunk record whose body is ``view[body:body + length]``: its records (decompressed),
+    uncompressed size, CRC and compression. Raises ``ValueError`` where it is damaged."""
     if length < _CHUNK_HEAD.size:
-        check.problems.append(f"chunk at byte {offset} is {length} bytes long")
-        return
+        raise ValueError(f"{length} bytes long")
     _, _, uncompressed_size, crc, name_length = _CHUNK_HEAD.unpack_from(view, body)
     at = body + _CHUNK_HEAD.size
     if not 0 <= name_length <= length - _CHUNK_HEAD.size - 8:
-        check.problems.append(f"chunk at byte {offset}: damaged header")
-        return
-    compression = bytes(view[at:at + name_length]).decode(errors="replace")
+        raise ValueError("damaged header")
+    compression = str(view[at:at + name_length], "utf-8", "replace")
     at += name_length
     (records_length,) = struct.unpack_from("<Q", view, at)
     at += 8
     if at + records_length != body + length:
-        check.problems.append(f"chunk at byte {offset}: its records do not fill it "
-                              "(damaged header)")
+        raise ValueError("its records do not fill it (damaged header)")
+    records = _decompress(view[at:at + records_length], compression, uncompressed_size)
+    return records, uncompressed_size, crc, compression
+
+
+def _check_chunk(view: memoryview, offset: int, body: int, length: int,
+                 check: McapCheck) -> None:
+    check.chunks += 1
+    try:
+        records, uncompressed_size, crc, _ = decompress_chunk(view, body, length)
+    except Exception as exc:  # any decoder error means the chunk is damaged
+        check.problems.append(f"chunk at byte {offset} cannot be read: {exc}")
         return
     if not crc:
         return
     check.chunk_crcs += 1
-    try:
-        records = _decompress(view[at:at + records_length], compression, uncompressed_size)
-    except Exception as exc:  # any decoder error means the chunk is damaged
-        check.problems.append(f"chunk at byte {offset} cannot be decompressed "
-                              f"({compression}): {exc}")
-        return
     if len(records) != uncompressed_size or zlib.crc32(records) != crc:
-        check.problems.append(f"chunk at byte {offset} ({records_length} bytes) fails its "
+        check.problems.append(f"chunk at byte {offset} ({uncompressed_size} bytes) fails its "
                               "CRC: messages in it are damaged")

@@ -1,5 +1,9 @@
 """Reading a run back from any rosbag2 bag (MCAP or sqlite3, ours or ``ros2 bag record``'s).
 
+MCAP files are read only after their CRCs are checked (:mod:`.mcap_messages`): a damaged file
+is refused by name with what failed; files written before exo_ilc_ros wrote CRCs read with a
+note. sqlite3 bags are read with rosbags' ``AnyReader``.
+
 Trials are cut out of ``/joint_states`` by the header stamps of the trial start/end events
 (falling back to the summaries' stamps when the events were not recorded); each sample goes to
 index ``round((stamp - start) / period)``, so a dropped message leaves a NaN row, never a shift.
@@ -34,7 +38,7 @@ from ..wire import protocol, topics
 from ..wire.cdr import joint_states
 from . import messages
 from .errors import BagReadError
-from .integrity import check_mcap
+from .mcap_messages import McapReadError, read_mcap_topics
 from .provenance import ParameterChange, Provenance, read_provenance
 
 
@@ -246,38 +250,71 @@ class _Stream:
     msgs: list[Any] = field(default_factory=list)
 
 
-def verify_files(path: Path, info: dict[str, Any]) -> list[str]:
-    """Check the CRCs of every MCAP file the metadata lists (:func:`.integrity.check_mcap`);
-    raise :class:`BagReadError` naming the first damaged file and what failed. Returns notes
-    on files that carry no CRCs (written before exo_ilc_ros used ``mcap``'s writer): their
-    damage could not have been seen."""
-    if info.get("storage_identifier") != "mcap":
-        return []
+def _read_topics(path: Path, info: dict[str, Any], wanted: Sequence[str],
+                 raw_topics: Iterable[str]
+                 ) -> tuple[dict[str, _Stream], Callable[[bytes, str], Any], list[str]]:
+    """The ``wanted`` topics' messages in log-time order (deserialised, or raw for
+    ``raw_topics``), the deserialiser, and notes. MCAP files are read by
+    :mod:`.mcap_messages` after their CRCs are checked; other storages by rosbags."""
+    if info.get("storage_identifier") == "mcap":
+        return _read_mcap(path, info, wanted, set(raw_topics))
+    return (*_read_with_rosbags(path, wanted, raw_topics), [])
+
+
+def _read_mcap(path: Path, info: dict[str, Any], wanted: Sequence[str], keep_raw: set[str]
+               ) -> tuple[dict[str, _Stream], Callable[[bytes, str], Any], list[str]]:
+    """Every file of the bag in turn: refused by name if a checksum fails; a note for files
+    without CRCs (written before exo_ilc_ros wrote bags with ``mcap``: damage to them cannot be
+    seen). Each topic's messages are then put in log-time order (stable), as rosbags does."""
+    streams = {t: _Stream() for t in wanted}
+    types: dict[str, str] = {}
     unchecked: list[str] = []
     for name in info.get("relative_file_paths") or []:
         file = path / str(name)
         if not file.is_file():
-            continue  # rosbags names it below
+            raise BagReadError(file, "is listed in metadata.yaml but missing")
         try:
-            check = check_mcap(file)
+            found = read_mcap_topics(file, wanted)
         except OSError as exc:
-            raise BagReadError(file, f"cannot be read ({exc.strerror})") from None
+            raise BagReadError(file, f"cannot be read ({exc.strerror or exc})") from None
+        except McapReadError as exc:
+            raise BagReadError(file, f"is damaged ({exc}); it carries no CRCs that would say "
+                               "where") from None
+        check = found.check
         if not check.intact:
             raise BagReadError(file, "is corrupt, its checksums do not match: "
-                               + "; ".join(check.problems) + ". The bag's other files may "
-                               "be intact: move this one out of the bag directory and remove "
-                               "it from metadata.yaml to analyse the rest.")
+                               + "; ".join(check.problems) + ". The bag's other files are "
+                               "checked separately; move this one out of the bag (and out of "
+                               "metadata.yaml's file lists) to analyse the rest.")
         if check.chunks and check.chunk_crcs < check.chunks:
             unchecked.append(file.name)
-    if not unchecked:
-        return []
-    return [f"{len(unchecked)} of the bag's files ({unchecked[0]}"
-            f"{', ...' if len(unchecked) > 1 else ''}) carry no chunk CRCs (written before "
-            "exo_ilc_ros wrote bags with mcap): damage to them could not be detected"]
+        for topic, msgtype in found.types.items():
+            expected = topics.TYPES.get(topic)
+            if topic in streams and expected and msgtype != expected:
+                raise BagReadError(file, f"topic {topic} has type {msgtype}, expected "
+                                   f"{expected}")
+            types.setdefault(topic, msgtype)
+        for topic, log in found.log.items():
+            streams[topic].log.extend(log)
+            streams[topic].msgs.extend(found.data[topic])
+    deserialize = messages.typestore().deserialize_cdr
+    for topic, stream in streams.items():
+        times = np.asarray(stream.log, dtype=np.int64)
+        if times.size > 1 and np.any(np.diff(times) < 0):
+            order = np.argsort(times, kind="stable")
+            stream.log = [stream.log[i] for i in order]
+            stream.msgs = [stream.msgs[i] for i in order]
+        if topic not in keep_raw and stream.msgs:
+            stream.msgs = [deserialize(raw, types[topic]) for raw in stream.msgs]
+    notes = [f"{len(unchecked)} of the bag's files ({unchecked[0]}"
+             f"{', ...' if len(unchecked) > 1 else ''}) carry no chunk CRCs (written before "
+             "exo_ilc_ros wrote bags with mcap): damage to them could not be detected"
+             ] if unchecked else []
+    return streams, deserialize, notes
 
 
-def _read_topics(path: Path, wanted: Sequence[str], raw_topics: Iterable[str]
-                 ) -> tuple[dict[str, _Stream], Callable[[bytes, str], Any]]:
+def _read_with_rosbags(path: Path, wanted: Sequence[str], raw_topics: Iterable[str]
+                       ) -> tuple[dict[str, _Stream], Callable[[bytes, str], Any]]:
     from rosbags.highlevel import AnyReader, AnyReaderError
     from rosbags.rosbag2 import ReaderError
 
@@ -409,12 +446,11 @@ def read_bag(path: Path | str) -> BagRun:
     info = read_metadata(path)
     provenance = read_provenance(info.get("custom_data"))
     notes = list(provenance.problems)
-    notes.extend(verify_files(path, info))
-    streams, decode = _read_topics(path, [topics.JOINT_STATES, topics.EFFORT_COMMANDS,
-                                          topics.FEEDFORWARD, topics.TRIAL_EVENTS,
-                                          topics.TRIAL_SUMMARY],
-                                   raw_topics=[topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
-                                               topics.JOINT_STATES])
+    streams, decode, read_notes = _read_topics(
+        path, info, [topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
+                     topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY],
+        raw_topics=[topics.EFFORT_COMMANDS, topics.FEEDFORWARD, topics.JOINT_STATES])
+    notes.extend(read_notes)
 
     # Trial boundaries: start/end events, else the summaries.
     starts: dict[int, int] = {}

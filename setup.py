@@ -47,8 +47,8 @@ setup(
         "pyyaml>=6",
         "tqdm>=4.66",
         "matplotlib>=3.8",
-        "rosbags>=0.10",
-        "mcap>=1.1",
+        "rosbags>=0.11.9,<0.12",  # tested: 0.11.9 (typestore, sqlite3 bags); MCAP is mcap's
+        "mcap>=1.6,<2",  # tested: 1.6.0 (Writer with chunk, data and summary CRCs)
         "mcap-ros2-support>=0.5",
         "optuna>=4",
         "clarabel>=0.9",

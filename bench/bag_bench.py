@@ -12,6 +12,13 @@ figures; asserts nothing (wall-clock timing is noisy on a shared 2-core machine)
 (c) Why a recorder process of its own costs more: the raw ping-pong of graph_bench with and
     without one more, silent subscriber process on both topics (what such a process adds to
     the round trip).
+(d) The writer alone, in-process (steadier than (a) on a shared machine): the recorder's
+    message mix (per control step a JointState and an effort command, a /clock every tenth)
+    written in the batches of a 10 ms drain, a file finished per 501-sample trial; CPU time
+    (process time, less sensitive than wall time to the other tenants of the machine) per
+    step and per finished file, and the in-trial share it takes at (a)'s rate without the
+    recorder (or ``--rate``). Run it on an older tree too (``PYTHONPATH=<tree>``) for a before
+    and after; ``--writer-only`` runs only (d).
 """
 
 from __future__ import annotations
@@ -47,13 +54,17 @@ def graph_steps_per_second(config: Config, mode: str, bag_dir: Path) -> dict[str
         return graph_rate(recorded, recording.graph_nodes(isolated=mode == "isolated"))
 
 
-def bench_recording(trials: int, repeats: int, bag_dir: Path) -> None:
-    """(a): the three modes in turn, ``repeats`` times; the cost of each recording mode from
-    the medians."""
+def bench_recording(trials: int, repeats: int, bag_dir: Path,
+                    modes: tuple[str, ...] = tuple(MODES)) -> float:
+    """(a): the ``modes`` in turn (always with ``without``), ``repeats`` times; the cost of
+    each recording mode from the medians. Returns the median in-trial rate without the
+    recorder."""
     config = load_config(overrides={"max_trials": trials})
-    rates: dict[str, list[dict[str, float]]] = {mode: [] for mode in MODES}
+    modes = ("without", *(m for m in modes if m != "without"))
+    recorded = [m for m in modes if m != "without"]
+    rates: dict[str, list[dict[str, float]]] = {mode: [] for mode in modes}
     for _ in range(repeats):
-        for mode in MODES:
+        for mode in modes:
             rates[mode].append(graph_steps_per_second(config, mode, bag_dir))
         print("  steps/s within trials (overall): " + ", ".join(
             f"{MODES[mode]} {runs[-1]['steps_per_s_in_trial']:.0f} "
@@ -64,14 +75,15 @@ def bench_recording(trials: int, repeats: int, bag_dir: Path) -> None:
         median = {mode: float(np.median([r[key] for r in runs])) for mode, runs in rates.items()}
         paired = {mode: float(np.median([1 - r[key] / b[key] for r, b in
                                          zip(rates[mode], rates["without"], strict=True)]))
-                  for mode in ("supervisor", "isolated")}
+                  for mode in recorded}
         costs = ", ".join(f"{MODES[mode]} {median[mode]:.0f} steps/s, costs "
                           f"{100 * (1 - median[mode] / median['without']):.1f} % (median of "
                           f"the rounds' costs {100 * paired[mode]:.1f} %)"
-                          for mode in ("supervisor", "isolated"))
+                          for mode in recorded)
         print(f"(a) lock-step graph {label}, {trials} trials x 501 samples, medians of "
               f"{repeats}: no recorder {median['without']:.0f} steps/s; {costs} "
-              "(target <= 10 %)")
+              f"(target <= {5 if key == 'steps_per_s_in_trial' else 10} %)")
+    return float(np.median([r["steps_per_s_in_trial"] for r in rates["without"]]))
 
 
 def bench_listener_floor(repeats: int, count: int = 8000) -> None:
@@ -111,19 +123,78 @@ def bench_analysis(trials: int, bag_dir: Path) -> None:
           f"analysed in {min(times):.2f} s (best of 3; target < 5 s)")
 
 
+def bench_writer(rate: float, trials: int, bag_dir: Path, repeats: int = 5) -> dict[str, float]:
+    """(d): the recorder's writing at ``rate`` control steps/s, in-process; the best of
+    ``repeats`` runs of ``trials`` trials of 501 samples."""
+    from exo_ilc_ros.bag import BagWriter, messages
+    from exo_ilc_ros.wire import topics
+    from exo_ilc_ros.wire.qos import offered_qos
+
+    names = ["shoulder_flexion", "shoulder_abduction", "elbow_flexion"]
+    samples, period_ns = 501, 10_000_000
+    per_drain = max(1, int(round(rate * 0.01)))  # control steps between two 10 ms drains
+    zeros = np.zeros(3)
+    state = messages.joint_state(0, names, zeros, zeros, zeros)
+    command = messages.effort_command(zeros)
+    clock = messages.clock(0)
+    best_step, best_split = np.inf, np.inf
+    for repeat in range(repeats):
+        path = bag_dir / f"writer_{repeat}"
+        writing = splitting = 0.0
+        with BagWriter(path) as writer:
+            for topic, msgtype in topics.TYPES.items():
+                writer.add_topic(topic, msgtype, offered_qos(topic))
+            ns = 0
+            for _ in range(trials):
+                for first in range(0, samples, per_drain):
+                    batch = []
+                    for i in range(first, min(samples, first + per_drain)):
+                        ns += period_ns
+                        batch.append((ns, topics.JOINT_STATES, state))
+                        batch.append((ns + 1, topics.EFFORT_COMMANDS, command))
+                        if i % 10 == 0:
+                            batch.append((ns, topics.CLOCK, clock))
+                    start = time.process_time()
+                    writer.write_many(batch)
+                    writing += time.process_time() - start
+                start = time.process_time()
+                writer.split()
+                splitting += time.process_time() - start
+        shutil.rmtree(path, ignore_errors=True)
+        best_step = min(best_step, writing / (trials * samples))
+        best_split = min(best_split, splitting / trials)
+    share = best_step * rate + best_split / (samples / rate)
+    print(f"(d) writer alone ({trials} trials x {samples} samples, batches of {per_drain} "
+          f"steps, best of {repeats}): {1e6 * best_step:.2f} us per control step (2.1 "
+          f"messages), {1e3 * best_split:.2f} ms per finished file; at {rate:.0f} steps/s "
+          f"that is {100 * share:.2f} % of a trial's time")
+    return {"us_per_step": 1e6 * best_step, "ms_per_split": 1e3 * best_split, "share": share}
+
+
 def main() -> None:
     """Measure and print."""
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--trials", type=int, default=20, help="graph trials per run (a)")
     parser.add_argument("--repeats", type=int, default=3, help="runs of each kind (a, c)")
     parser.add_argument("--analysis-trials", type=int, default=150, help="trials of (b)")
-    parser.add_argument("--skip-graph", action="store_true", help="only (b)")
+    parser.add_argument("--skip-graph", action="store_true", help="only (b) and (d)")
+    parser.add_argument("--writer-only", action="store_true", help="only (d)")
+    parser.add_argument("--modes", nargs="+", choices=tuple(MODES), default=tuple(MODES),
+                        help="(a)'s runs (default: all three)")
+    parser.add_argument("--rate", type=float, default=3500.0, help="(d)'s in-trial rate, "
+                        "steps/s, when (a) does not run (default: README's 3,501)")
     args = parser.parse_args()
     bag_dir = Path(tempfile.mkdtemp(prefix="exo_ilc_bag_bench_"))
     try:
+        if args.writer_only:
+            bench_writer(args.rate, 20, bag_dir)
+            return
         bench_analysis(args.analysis_trials, bag_dir)
+        rate = args.rate
         if not args.skip_graph:
-            bench_recording(args.trials, args.repeats, bag_dir)
+            rate = bench_recording(args.trials, args.repeats, bag_dir, args.modes) or rate
+        bench_writer(rate, 20, bag_dir)
+        if not args.skip_graph and "isolated" in args.modes:
             bench_listener_floor(args.repeats)
     finally:
         shutil.rmtree(bag_dir, ignore_errors=True)

@@ -150,11 +150,11 @@ def test_every_single_byte_flip_is_detected(bag: Path) -> None:
     assert check_mcap_bytes(data).intact
 
 
-def test_flipped_chunk_byte_is_refused_clearly(tmp_path: Path, bag: Path,
+def test_flipped_chunk_byte_is_refused_clearly(tmp_path: Path, bag: Path, result: RunResult,
                                                capsys: pytest.CaptureFixture[str]) -> None:
     """A byte flipped inside a chunk's messages: mcap's reader, the check, ``read_bag`` and
     ``exo-ilc analyze`` all refuse it; the error names the file and says what failed, with no
-    traceback."""
+    traceback; ``--skip-damaged`` analyses the other files."""
     from mcap.reader import make_reader
     from mcap.stream_reader import CRCValidationError
 
@@ -178,6 +178,16 @@ def test_flipped_chunk_byte_is_refused_clearly(tmp_path: Path, bag: Path,
     assert exo_ilc(["analyze", str(copy), "--quiet"]) != 0
     err = capsys.readouterr().err
     assert "is corrupt" in err and file.name in err and "Traceback" not in err
+    assert "--skip-damaged" in err
+    # The rest of the bag is still there: trial 2's file left out, with a note.
+    run = read_bag(copy, skip_damaged=True)
+    assert run.completed == [1, 3]
+    assert run.summary().extra["sources"] == ["samples", "missing", "samples"]
+    np.testing.assert_array_equal(run.summary().max_abs_error[[0, 2]],
+                                  result.max_abs_errors[[0, 2]])
+    assert any(note.startswith(f"{file.name} left out: it is corrupt") for note in run.notes)
+    assert exo_ilc(["analyze", str(copy), "--quiet", "--skip-damaged"]) == 0
+    assert f"note: {file.name} left out" in capsys.readouterr().out
 
 
 def test_damaged_summary_is_refused(tmp_path: Path, bag: Path) -> None:

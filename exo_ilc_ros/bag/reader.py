@@ -250,25 +250,28 @@ class _Stream:
     msgs: list[Any] = field(default_factory=list)
 
 
-def _read_topics(path: Path, info: dict[str, Any], wanted: Sequence[str],
+def _read_topics(path: Path, info: dict[str, Any], skip_damaged: bool, wanted: Sequence[str],
                  raw_topics: Iterable[str]
                  ) -> tuple[dict[str, _Stream], Callable[[bytes, str], Any], list[str]]:
     """The ``wanted`` topics' messages in log-time order (deserialised, or raw for
     ``raw_topics``), the deserialiser, and notes. MCAP files are read by
     :mod:`.mcap_messages` after their CRCs are checked; other storages by rosbags."""
     if info.get("storage_identifier") == "mcap":
-        return _read_mcap(path, info, wanted, set(raw_topics))
+        return _read_mcap(path, info, wanted, set(raw_topics), skip_damaged)
     return (*_read_with_rosbags(path, wanted, raw_topics), [])
 
 
-def _read_mcap(path: Path, info: dict[str, Any], wanted: Sequence[str], keep_raw: set[str]
+def _read_mcap(path: Path, info: dict[str, Any], wanted: Sequence[str], keep_raw: set[str],
+               skip_damaged: bool
                ) -> tuple[dict[str, _Stream], Callable[[bytes, str], Any], list[str]]:
-    """Every file of the bag in turn: refused by name if a checksum fails; a note for files
-    without CRCs (written before exo_ilc_ros wrote bags with ``mcap``: damage to them cannot be
-    seen). Each topic's messages are then put in log-time order (stable), as rosbags does."""
+    """Every file of the bag in turn: refused by name if a checksum fails (or left out with a
+    note, ``skip_damaged``); a note for files without CRCs (written before exo_ilc_ros wrote
+    bags with ``mcap``: damage to them cannot be seen). Each topic's messages are then put in
+    log-time order (stable), as rosbags does."""
     streams = {t: _Stream() for t in wanted}
     types: dict[str, str] = {}
     unchecked: list[str] = []
+    notes: list[str] = []
     for name in info.get("relative_file_paths") or []:
         file = path / str(name)
         if not file.is_file():
@@ -282,10 +285,13 @@ def _read_mcap(path: Path, info: dict[str, Any], wanted: Sequence[str], keep_raw
                                "where") from None
         check = found.check
         if not check.intact:
-            raise BagReadError(file, "is corrupt, its checksums do not match: "
-                               + "; ".join(check.problems) + ". The bag's other files are "
-                               "checked separately; move this one out of the bag (and out of "
-                               "metadata.yaml's file lists) to analyse the rest.")
+            damage = "is corrupt, its checksums do not match: " + "; ".join(check.problems)
+            if not skip_damaged:
+                raise BagReadError(file, f"{damage}. The bag's other files are checked on "
+                                   "their own: `exo-ilc analyze --skip-damaged` (read_bag(..., "
+                                   "skip_damaged=True)) analyses them without this one.")
+            notes.append(f"{file.name} left out: it {damage}")
+            continue
         if check.chunks and check.chunk_crcs < check.chunks:
             unchecked.append(file.name)
         for topic, msgtype in found.types.items():
@@ -306,10 +312,11 @@ def _read_mcap(path: Path, info: dict[str, Any], wanted: Sequence[str], keep_raw
             stream.msgs = [stream.msgs[i] for i in order]
         if topic not in keep_raw and stream.msgs:
             stream.msgs = [deserialize(raw, types[topic]) for raw in stream.msgs]
-    notes = [f"{len(unchecked)} of the bag's files ({unchecked[0]}"
-             f"{', ...' if len(unchecked) > 1 else ''}) carry no chunk CRCs (written before "
-             "exo_ilc_ros wrote bags with mcap): damage to them could not be detected"
-             ] if unchecked else []
+    if unchecked:
+        notes.append(f"{len(unchecked)} of the bag's files ({unchecked[0]}"
+                     f"{', ...' if len(unchecked) > 1 else ''}) carry no chunk CRCs (written "
+                     "before exo_ilc_ros wrote bags with mcap): damage to them could not be "
+                     "detected")
     return streams, deserialize, notes
 
 
@@ -440,14 +447,16 @@ def _matching_window(picked: np.ndarray, samples: int, applied: np.ndarray,
     return None
 
 
-def read_bag(path: Path | str) -> BagRun:
-    """Read the run recorded in the rosbag2 bag directory ``path``."""
+def read_bag(path: Path | str, *, skip_damaged: bool = False) -> BagRun:
+    """Read the run recorded in the rosbag2 bag directory ``path``. An MCAP file whose
+    checksums fail is refused (:class:`BagReadError` naming it), or with ``skip_damaged``
+    left out with a note (the trials it held then show as missing or incomplete)."""
     path = Path(path)
     info = read_metadata(path)
     provenance = read_provenance(info.get("custom_data"))
     notes = list(provenance.problems)
     streams, decode, read_notes = _read_topics(
-        path, info, [topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
+        path, info, skip_damaged, [topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
                      topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY],
         raw_topics=[topics.EFFORT_COMMANDS, topics.FEEDFORWARD, topics.JOINT_STATES])
     notes.extend(read_notes)

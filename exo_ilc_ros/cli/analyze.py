@@ -38,6 +38,9 @@ def register(sub: Any) -> None:
                         help="write the first bag's effective config (rerun it with "
                         "`exo-ilc simulate --config FILE`)")
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")
+    parser.add_argument("--skip-damaged", action="store_true",
+                        help="analyse a bag without its files whose checksums fail (named in a "
+                        "note; their trials show as missing) instead of refusing it")
     parser.set_defaults(func=analyze)
 
 
@@ -116,7 +119,7 @@ def bag_labels(runs: Sequence[BagRun]) -> list[str]:
 
 def analyze(args: argparse.Namespace) -> int:
     """Read every bag and check every request first, then report, export, plot."""
-    bag_runs = [read_bag(path) for path in bag_paths(args.bags)]
+    bag_runs = [read_bag(path, skip_damaged=args.skip_damaged) for path in bag_paths(args.bags)]
     names = bag_runs[0].joint_names
     for run in bag_runs[1:]:
         if len(run.joint_names) != len(names):

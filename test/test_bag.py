@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+from test_bag_integrity import assert_bag_verifiable
 
 from exo_ilc_ros.analysis.figures import convergence_figure, tracking_figure
 from exo_ilc_ros.bag import (
@@ -427,6 +428,7 @@ def test_recorder_status_reports_received_then_filed(tmp_path: Path) -> None:
             assert trials_filed(tmp_path / "bag") == 1
         finally:
             recorder.destroy_node()
+        assert_bag_verifiable(tmp_path / "bag")
     finally:
         rclpy.try_shutdown()
 
@@ -463,6 +465,7 @@ def test_recorder_sigkill_leaves_the_filed_trials(tmp_path: Path) -> None:
         _spin_until(session, lambda: session.finished, 120)
 
     run = read_bag(recording.path)
+    assert_bag_verifiable(recording.path)  # every finished file: CRCs right and non-zero
     count = len(run.completed)
     assert 2 <= count < trials  # killed mid-run
     assert run.completed == list(range(1, count + 1))
@@ -500,6 +503,7 @@ def test_run_records_a_bag_that_analyses_to_its_table(tmp_path: Path) -> None:
     run = read_bag(bag)
     assert run.summary().extra["sources"] == ["samples"] * 3 and not run.notes
     assert not (bag / ".splits").exists()  # closed normally
+    assert_bag_verifiable(bag)
 
 
 def test_layouts_name_every_joint_and_known_topics(config: Config) -> None:

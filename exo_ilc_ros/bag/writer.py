@@ -211,7 +211,6 @@ class _Sqlite3File:
         self._writer.close()
 
 
-
 @dataclass
 class _Topic:
     name: str

@@ -61,17 +61,19 @@ class McapCheck:
 
 
 def _decompress(data: memoryview, compression: str, size: int) -> bytes | memoryview:
+    """A chunk's records: as stored, or decompressed by ``mcap``'s own reader code (zstd,
+    lz4: what rosbag2's MCAP storage may write)."""
     if compression == "":
         return data
-    if compression == "zstd":
-        import zstandard
+    if compression not in ("zstd", "lz4"):
+        raise ValueError(f"unknown chunk compression {compression!r}")
+    from mcap.records import Chunk
+    from mcap.stream_reader import get_chunk_data_stream
 
-        return bytes(zstandard.ZstdDecompressor().decompress(bytes(data), max_output_size=size))
-    if compression == "lz4":
-        import lz4.frame
-
-        return bytes(lz4.frame.decompress(bytes(data)))
-    raise ValueError(f"unknown chunk compression {compression!r}")
+    stream, length = get_chunk_data_stream(Chunk(
+        compression=compression, data=bytes(data), message_start_time=0, message_end_time=0,
+        uncompressed_crc=0, uncompressed_size=size))
+    return stream.read(length)
 
 
 def check_mcap(path: Path | str) -> McapCheck:

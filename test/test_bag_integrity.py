@@ -230,6 +230,15 @@ def test_bag_written_before_reads_with_a_note(tmp_path: Path, bag: Path, config:
     run = read_bag(old)
     np.testing.assert_array_equal(run.summary().max_abs_error, result.max_abs_errors)
     assert any("carry no chunk CRCs" in note for note in run.notes)
+    # Damage such a file's structure can still show: a clear refusal, not a traceback.
+    from mcap.reader import make_reader
+
+    with open(file, "rb") as handle:
+        chunk = make_reader(handle).get_summary().chunk_indexes[0]
+    first_record = chunk.chunk_start_offset + 9 + 40 + len(chunk.compression)
+    flip(file, first_record + 5)  # a high byte of the first record's length
+    with pytest.raises(BagReadError, match=r"is damaged \(in the chunk at byte"):
+        read_bag(old)
 
 
 def test_qos_recorded_as_published(bag: Path) -> None:

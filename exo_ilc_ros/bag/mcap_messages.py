@@ -52,6 +52,7 @@ def read_mcap_topics(path: Path | str, wanted: Collection[str]) -> McapTopics:
     """Check ``path``'s CRCs, then take the messages of the ``wanted`` topics (skipped, with
     the check's problems in ``check``, when the file is damaged)."""
     path = Path(path)
+    error = ""
     with open(path, "rb") as handle:
         if handle.seek(0, 2) == 0:
             return McapTopics(check_mcap_bytes(b"", path))
@@ -61,9 +62,13 @@ def read_mcap_topics(path: Path | str, wanted: Collection[str]) -> McapTopics:
                 out = McapTopics(check_mcap_bytes(view, path))
                 if out.check.intact:
                     _Walk(out, set(wanted)).records(view, 8, None)
-                return out
+            except McapReadError as exc:
+                error = str(exc)  # raised below, once no view of the map is left to close
             finally:
                 view.release()
+    if error:
+        raise McapReadError(error)
+    return out
 
 
 class _Walk:
@@ -103,9 +108,14 @@ class _Walk:
                     self.schemas[schema] = _string(view, body + 2)[0]
                 elif opcode == OP_CHUNK and end is None:
                     records, _, _, _ = decompress_chunk(view, body, length)
-                    self.records(memoryview(records), 0, len(records))
+                    try:
+                        self.records(memoryview(records), 0, len(records))
+                    except McapReadError as exc:
+                        raise McapReadError(f"in the chunk at byte {body - 9}: {exc}") from None
                 elif opcode == OP_DATA_END and end is None:
                     return
+        except McapReadError:
+            raise
         except (struct.error, UnicodeDecodeError, ValueError) as exc:
             raise McapReadError(f"damaged record near byte {offset}: {exc}") from None
         if end is None:

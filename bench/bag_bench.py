@@ -12,6 +12,10 @@ figures; asserts nothing (wall-clock timing is noisy on a shared 2-core machine)
 (c) Why a recorder process of its own costs more: the raw ping-pong of graph_bench with and
     without one more, silent subscriber process on both topics (what such a process adds to
     the round trip).
+(e) The CPU time the graph's processes spend per control step from trial 4 to the end, without
+    and with the composed recorder, read from /proc (CPU time, unlike a rate, barely moves
+    when other tenants load the machine): the difference is what recording costs per step,
+    shown as a share of the in-trial time at ``--rate``. ``--cpu-only`` runs only (e).
 (d) The writer alone, in-process (steadier than (a) on a shared machine): the recorder's
     message mix (per control step a JointState and an effort command, a /clock every tenth)
     written in the batches of a 10 ms drain, a file finished per 501-sample trial; CPU time
@@ -24,10 +28,14 @@ figures; asserts nothing (wall-clock timing is noisy on a shared 2-core machine)
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import shutil
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -123,6 +131,58 @@ def bench_analysis(trials: int, bag_dir: Path) -> None:
           f"analysed in {min(times):.2f} s (best of 3; target < 5 s)")
 
 
+def _cpu_seconds(pids: Sequence[int]) -> float:
+    """utime + stime of the processes ``pids`` (from /proc), seconds."""
+    tick = os.sysconf("SC_CLK_TCK")
+    total = 0
+    for pid in pids:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        total += int(fields[11]) + int(fields[12])  # utime, stime (fields 14, 15)
+    return total / tick
+
+
+def graph_cpu_per_step(config: Config, recorded: bool, bag_dir: Path) -> float:
+    """(e): CPU seconds of all the graph's processes per control step, trials 4 to the end."""
+    from exo_ilc_ros.orchestration.graph import GraphSession
+    from exo_ilc_ros.orchestration.launcher import GRAPH_NODES
+    from exo_ilc_ros.orchestration.recording import Recording
+
+    samples = int(round(config["trajectory.duration"] / config["control.period"])) + 1
+    trials = int(config["max_trials"])
+    with contextlib.ExitStack() as stack:
+        nodes: Sequence[Any] = GRAPH_NODES
+        if recorded:
+            config = config.replace({"wait_for_recorder": True})
+            nodes = stack.enter_context(Recording(config, bag_dir)).graph_nodes()
+        session = stack.enter_context(GraphSession(config, nodes=nodes))
+        session.spin_until(lambda: len(session.summaries) >= 3, timeout=600.0)
+        pids = [p.pid for p in session.processes.processes.values()]
+        start = _cpu_seconds(pids)
+        session.spin_until(lambda: len(session.summaries) >= trials, timeout=1800.0,
+                           stall_timeout=120.0)
+        used = _cpu_seconds(pids) - start
+    return used / ((trials - 3) * samples)
+
+
+def bench_cpu(trials: int, repeats: int, rate: float, bag_dir: Path) -> None:
+    """(e): without and with the composed recorder in turn, ``repeats`` times."""
+    config = load_config(overrides={"max_trials": trials})
+    without: list[float] = []
+    with_recorder: list[float] = []
+    for _ in range(repeats):
+        without.append(graph_cpu_per_step(config, False, bag_dir))
+        with_recorder.append(graph_cpu_per_step(config, True, bag_dir))
+        print(f"  graph CPU per control step: no recorder {1e6 * without[-1]:.1f} us, "
+              f"recorder in the supervisor's process {1e6 * with_recorder[-1]:.1f} us",
+              flush=True)
+    bare, recorded = float(np.median(without)), float(np.median(with_recorder))
+    cost = recorded - bare
+    print(f"(e) graph CPU per control step, trials 4-{trials}, medians of {repeats}: no "
+          f"recorder {1e6 * bare:.1f} us, with the recorder {1e6 * recorded:.1f} us: recording "
+          f"costs {1e6 * cost:.1f} us per step, {100 * cost * rate:.2f} % of the in-trial time "
+          f"at {rate:.0f} steps/s (target <= 5 %)")
+
+
 def bench_writer(rate: float, trials: int, bag_dir: Path, repeats: int = 5) -> dict[str, float]:
     """(d): the recorder's writing at ``rate`` control steps/s, in-process; the best of
     ``repeats`` runs of ``trials`` trials of 501 samples."""
@@ -182,6 +242,7 @@ def main() -> None:
     parser.add_argument("--analysis-trials", type=int, default=150, help="trials of (b)")
     parser.add_argument("--skip-graph", action="store_true", help="only (b) and (d)")
     parser.add_argument("--writer-only", action="store_true", help="only (d)")
+    parser.add_argument("--cpu-only", action="store_true", help="only (e)")
     parser.add_argument("--modes", nargs="+", choices=tuple(MODES), default=tuple(MODES),
                         help="(a)'s runs (default: all three)")
     parser.add_argument("--rate", type=float, default=3500.0, help="(d)'s in-trial rate, "
@@ -191,6 +252,9 @@ def main() -> None:
     try:
         if args.writer_only:
             bench_writer(args.rate, 20, bag_dir)
+            return
+        if args.cpu_only:
+            bench_cpu(args.trials, args.repeats, args.rate, bag_dir)
             return
         bench_analysis(args.analysis_trials, bag_dir)
         rate = args.rate

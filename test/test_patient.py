@@ -312,6 +312,7 @@ class _Plant:
             protocol.on_sample(self.t0 + i * step, record.position[i], record.velocity[i])
         protocol.on_done(trial, self.t0, {"watchdog_trips": "0", "aborted_at": "-1"})
         assert len(self.records) < trial, "ended before its true samples were in"
+        assert record.true_position is not None and record.true_velocity is not None
         for i in range(record.position.shape[0]):
             if i == self.drop_true:
                 self.drop_true = -1
@@ -340,6 +341,7 @@ def test_protocol_waits_for_the_true_samples_and_reruns_a_trial_that_lost_one() 
     for (_, position, true_position, effort), ref in zip(plant.records, local.records,
                                                          strict=True):
         assert np.array_equal(position, ref.position)
+        assert ref.true_position is not None
         assert np.array_equal(true_position, ref.true_position)
         assert np.array_equal(effort, ref.effort)
 

@@ -41,6 +41,7 @@ from .experiment import (
     iterations_to_bound,
 )
 from .laws import FeedforwardUpdate, LearningLaw, TrialRecord
+from .patient import PatientLearning, true_error
 from .store import RunStore, StoredTrial
 from .validation import Rejection, check_feedforward_array
 
@@ -256,6 +257,11 @@ class RunResult:
         """(K, joints) table of max |e| per trial and joint."""
         return np.array([r.max_abs_error for r in self.records])
 
+    def true_max_abs_errors(self) -> np.ndarray:
+        """(K, joints) table of the true max |e| per trial and joint (the plant's state; equal
+        to :attr:`max_abs_errors`, the measured one, without sensor effects)."""
+        return np.array([r.true_max_abs_error for r in self.records])
+
     @property
     def max_abs_feedforward(self) -> np.ndarray:
         """(K, joints) table of max |u_ff| per trial and joint."""
@@ -267,8 +273,8 @@ class RunResult:
         return np.array([np.max(np.abs(r.effort), axis=0) for r in self.records])
 
     def iterations_to_bound(self) -> IterationsToBound:
-        """First and settled trial per joint within ``error_bound``."""
-        return iterations_to_bound(self.max_abs_errors, self.error_bound)
+        """First and settled trial per joint with the true max |e| within ``error_bound``."""
+        return iterations_to_bound(self.true_max_abs_errors(), self.error_bound)
 
 
 def run_trials(config: Config, mass_uncertainty: float | None = None,
@@ -305,13 +311,21 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
     experiment = Experiment(effective)
     result = RunResult(experiment.mass_uncertainty, effective["law"],
                        float(effective["error_bound"]))
+    patient = PatientLearning(experiment.patient, experiment.reference.samples) \
+        if experiment.patient.learns else None
     run_store: RunStore | None = None
     if store is not None:
         run_store, restored = session.open_store(store, resume)
         result.records.extend(item.record for item in restored)
         result.resumed = len(restored)
+        for item in restored:
+            if patient is not None:
+                patient.learn(item.record.trial, true_error(item.record))
     while not session.finished:
-        record = experiment.run_trial(session.feedforward, session.trial, session.levels)
+        record = experiment.run_trial(session.feedforward, session.trial, session.levels,
+                                      None if patient is None else patient.torque)
+        if patient is not None:
+            patient.learn(record.trial, true_error(record))
         if session.trial + 1 in pending:
             session.stage(pending.pop(session.trial + 1))
         conclusion = session.conclude(record)

@@ -70,6 +70,10 @@ def _margin_rule(value: Any) -> str | None:
     return None if value < 1.0 else f"must be < 1 (a share of the limit), got {value!r}"
 
 
+def _forgetting_rule(value: Any) -> str | None:
+    return None if 0.0 < value <= 1.0 else f"must be in (0, 1] (1: no forgetting), got {value!r}"
+
+
 def _schedule_parameters() -> list[Parameter]:
     out = []
     meaning = {"position": ("M", "|s e|"), "velocity": ("M'", "|s e_dot|"),
@@ -234,6 +238,22 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("feedforward_limit", SUPERVISOR, Kind.DOUBLE_ARRAY,
               "bound on |learned feed-forward| per joint (rad/s^2, the units of u); 0: no bound",
               per_joint=True, minimum=0.0, live=True),
+    Parameter("assist_as_needed.enabled", SUPERVISOR, Kind.BOOL,
+              "assist-as-needed (core/assist.py, Emken et al. 2007): forgetting factor and "
+              "error deadband around the law", live=True),
+    Parameter("assist_as_needed.forgetting", SUPERVISOR, Kind.DOUBLE,
+              "f of u_k+1 = f u_k + G(e) (learned step): the learned input decays by f per "
+              "trial unless the error calls for it (1: no forgetting)", live=True,
+              extra_rule=_forgetting_rule),
+    Parameter("assist_as_needed.variability", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "sigma: the patient's own trial-to-trial variability of the position error (rad) "
+              "per joint; 0: no deadband", per_joint=True, minimum=0.0, live=True),
+    Parameter("assist_as_needed.deadband_sigmas", SUPERVISOR, Kind.DOUBLE,
+              "deadband half-width in sigmas: |e| below it is not learned (Emken: 3)",
+              minimum=0.0, live=True),
+    Parameter("assist_as_needed.transition_sigmas", SUPERVISOR, Kind.DOUBLE,
+              "width of the tanh transition at the deadband's edge, in sigmas (Emken: 0.5)",
+              strictly_positive=True, live=True),
 )
 
 BY_NAME: Mapping[str, Parameter] = {p.name: p for p in PARAMETERS}

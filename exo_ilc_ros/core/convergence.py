@@ -259,7 +259,9 @@ def analyze_loop(config: Config, law: str | None = None, mass_uncertainty: float
         raw = loop.factor(frequency, memory, gains, forgetting=forgetting)
         plain = with_q = None
         if lifted_trials > 0:
-            samples = round(config["trajectory.duration"] / period) + 1
+            from .exercise import exercise_duration
+
+            samples = round(exercise_duration(config) / period) + 1
             gates = (1.0,) if forgetting is None else (0.0, 1.0)  # both ends of the deadband
             plain = max((lifted_check(lifted_map(loop, samples, memory, gains, None, forgetting,
                                                  g), lifted_trials) for g in gates),

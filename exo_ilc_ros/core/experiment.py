@@ -36,7 +36,13 @@ def build_arm(config: Config) -> ArmModel:
 
 
 def build_reference(config: Config) -> SampledReference:
-    """The quintic reference of eq (14) sampled at the control period."""
+    """The quintic reference of eq (14) sampled at the control period, or the config's
+    exercise (``exercise.name``, a piecewise quintic through rest points, :mod:`.exercise`)."""
+    from .exercise import exercise_reference
+
+    exercise = exercise_reference(config)
+    if exercise is not None:
+        return exercise
     trajectory = QuinticTrajectory.rest_to_rest(config["trajectory.start"],
                                                 config["trajectory.goal"],
                                                 config["trajectory.duration"])

@@ -74,6 +74,11 @@ def _forgetting_rule(value: Any) -> str | None:
     return None if 0.0 < value <= 1.0 else f"must be in (0, 1] (1: no forgetting), got {value!r}"
 
 
+def _name_rule(value: Any) -> str | None:
+    ok = bool(value) and all(c.isalnum() or c in "_-" for c in value)
+    return None if ok else f"must be a name of letters, digits, _ and -, got {value!r}"
+
+
 def _schedule_parameters() -> list[Parameter]:
     out = []
     meaning = {"position": ("M", "|s e|"), "velocity": ("M'", "|s e_dot|"),
@@ -121,6 +126,13 @@ PARAMETERS: tuple[Parameter, ...] = (
               per_joint=True),
     Parameter("trajectory.duration", SHARED, Kind.DOUBLE, "T of eq (14) (s)",
               strictly_positive=True),
+    Parameter("exercise.name", SHARED, Kind.STRING,
+              "the movement (reference) of every trial: paper_quintic (eq (14) from "
+              "trajectory.*) or an exercise of exercise.file (core/exercise.py)",
+              extra_rule=_name_rule),
+    Parameter("exercise.file", SHARED, Kind.STRING,
+              "the exercises file (rest points and durations per exercise, sessions); "
+              "empty: the shipped config/exercises/default.yaml"),
     Parameter("control.period", SHARED, Kind.DOUBLE,
               "control period (s): effort held over it; the error sums (13) are over its samples",
               strictly_positive=True),

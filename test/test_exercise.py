@@ -64,9 +64,9 @@ def test_shipped_exercises_load_and_run() -> None:
 
 def test_unknown_exercise_is_named() -> None:
     config = load_config(None, {"exercise.name": "juggling"})
-    with pytest.raises(ConfigError, match="unknown exercise 'juggling'.*reach_and_return"):
+    with pytest.raises(ConfigError, match=r"unknown exercise 'juggling'.*reach_and_return"):
         build_reference(config)
-    with pytest.raises(ConfigError, match="exercise.name"):
+    with pytest.raises(ConfigError, match=r"exercise\.name"):
         load_config(None, {"exercise.name": "a b"})
 
 

@@ -66,10 +66,13 @@ def register(sub: Any) -> None:
                         "the bag's config, mass uncertainty, trial count and live parameter "
                         "changes (at the trials they took effect), then compare every trial "
                         "with the bag (exit 1 if any differs)")
+    from .therapy import add_therapy_arguments
+
+    add_therapy_arguments(parser)
     parser.set_defaults(func=simulate)
 
 
-REPLAY_EXCLUDES = ("config", "mass_uncertainty", "trials", "law", "store", "bag")
+REPLAY_EXCLUDES = ("config", "mass_uncertainty", "trials", "law", "store", "bag", "patient")
 
 
 def replay_bag(args: argparse.Namespace) -> int:
@@ -116,6 +119,12 @@ def simulate(args: argparse.Namespace) -> int:
         print("exo-ilc simulate: error: --resume needs --store DIR", file=sys.stderr)
         return 2
     config = config_from_args(args)
+    from .therapy import simulate_session, uses_therapy
+
+    if uses_therapy(args):
+        _, runs = simulate_session(args, config)
+        print_report(args, config, runs)
+        return 0
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     trials = config["max_trials"]
     runs = []

@@ -187,6 +187,9 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("store.resume", SUPERVISOR, Kind.BOOL,
               "continue after the last trial in store.directory (false: a store that already "
               "holds trials of this run is an error)"),
+    Parameter("profile.initial", SUPERVISOR, Kind.STRING,
+              "a patient's profile version file (.npz, core/profiles.py) whose feed-forward "
+              "trial 1 uses (exo-ilc simulate/run --patient set it); empty: initial_feedforward"),
     Parameter("stop_when_settled", SUPERVISOR, Kind.INTEGER,
               "stop once every joint has stayed within the bound this many trials (0: never)",
               minimum=0.0, live=True),

@@ -100,8 +100,14 @@ class LearningSession:
         self._custom_law = self.law is not None
         self.active_law: LearningLaw = self.law or build_law(self.config)
         self.reference = build_reference(self.config)
-        first = self.active_law.initial_feedforward(self.reference)
-        self.next_update = FeedforwardUpdate(first, None)
+        if self.config["profile.initial"]:  # a patient's learned profile (core/profiles.py)
+            from .profiles import load_initial
+
+            self.next_update = load_initial(self.config["profile.initial"], self.config,
+                                            self.reference)
+        else:
+            first = self.active_law.initial_feedforward(self.reference)
+            self.next_update = FeedforwardUpdate(first, None)
         self.stop = self._stop_reason()
 
     # --- what runs next ---------------------------------------------------------------------
@@ -276,7 +282,8 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
                on_trial: Callable[[TrialRecord], None] | None = None,
                learning_law: LearningLaw | None = None,
                store: Path | str | None = None, resume: bool = False,
-               changes: Mapping[int, Mapping[str, Any]] | None = None) -> RunResult:
+               changes: Mapping[int, Mapping[str, Any]] | None = None,
+               on_conclusion: Callable[[TrialConclusion], None] | None = None) -> RunResult:
     """Run the experiment in-process, learning between trials: a loop over a
     :class:`LearningSession` (its rules, including ``stop_when_settled``, are the graph's).
 
@@ -288,7 +295,8 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
     are saved before the next trial starts; with ``resume`` the trials already stored under
     this run's learning key are restored (bit for bit) and the run continues after the last
     one. A store that already holds trials without ``resume`` is an error (nothing is
-    overwritten).
+    overwritten). ``on_conclusion`` sees each trial's conclusion (what the next trial uses)
+    once the store holds it (a patient's profile is saved from it, core/profiles.py).
     """
     overrides: dict[str, Any] = {}
     if trials is not None:
@@ -321,6 +329,8 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
                 experiment = Experiment(session.config)
         if run_store is not None:
             run_store.save(record, conclusion.update, conclusion.config)
+        if on_conclusion is not None:
+            on_conclusion(conclusion)
         result.records.append(record)
         if conclusion.learned and conclusion.update.notes:
             result.notes[record.trial] = conclusion.update.notes

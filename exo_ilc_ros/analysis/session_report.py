@@ -13,6 +13,7 @@ from __future__ import annotations
 import base64
 import html
 import io
+import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -79,7 +80,17 @@ def _record_of(run: BagRun, k: int, config: Config) -> TrialRecord | None:
 def exercise_run(run: BagRun) -> ExerciseRun:
     """The report's view of a bag: its metrics (filed in the summaries, else computed from the
     samples), aborts and reruns, and the patient / exercise / session it belongs to."""
-    custom = read_metadata(run.path).get("custom_data") or {}
+    custom = dict(read_metadata(run.path).get("custom_data") or {})
+    sidecar = run.path / "therapy.json"  # a graph run's (cli/therapy.py writes it)
+    if PATIENT not in custom and sidecar.is_file():
+        try:
+            side = json.loads(sidecar.read_text())
+            custom.update({PATIENT: str(side["patient"]), EXERCISE: str(side["exercise"]),
+                           SESSION: str(side["session"]),
+                           PROFILE_VERSION: str(side.get("profile_version") or ""),
+                           PROFILE_STARTED_FROM: str(side.get("profile_started_from") or "")})
+        except (OSError, ValueError, KeyError) as exc:
+            run.notes.append(f"{sidecar}: unreadable ({exc}); patient unknown")
     config = run.provenance.config
     values = config.values if config is not None else {}
     names = run.joint_names

@@ -52,6 +52,9 @@ def register(sub: Any) -> None:
                         "(after a crash or a killed node), bit-identical to an uninterrupted "
                         "run")
     parser.add_argument("--no-store", action="store_true", help="do not save the trials")
+    from .therapy import add_therapy_arguments
+
+    add_therapy_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -97,6 +100,14 @@ def run(args: argparse.Namespace) -> int:
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     trials = config["max_trials"]
     root = _store_root(args)
+    from .therapy import run_session_graph, uses_therapy
+
+    if uses_therapy(args):  # each exercise from the patient's profile, saved from the store
+        if root is None:
+            raise ConfigError("--no-store", "cannot be combined with --patient (the profile "
+                              "is written from the run's store)")
+        print_report(args, config, run_session_graph(args, config, root, _run_one))
+        return 0
     runs: list[RunSummary] = []
     for delta in deltas:
         run_config = config.replace({"mass_uncertainty": delta})
@@ -157,4 +168,5 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
                                    nodes=recording.graph_nodes(args.isolated_recorder),
                                    on_start=announce_graph(bar, recording.path))
             bar.write(f"bag: {recording.path}", file=sys.stderr)
+            result.summary.extra["bag"] = str(recording.path)
     return result.summary

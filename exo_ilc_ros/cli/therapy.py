@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
-import numpy as np
 from tqdm import tqdm
 
 from ..analysis.therapy import format_session_metrics
@@ -121,8 +122,88 @@ def therapy_custom_data(done: ExerciseResult, session: str) -> dict[str, str]:
             keys.PROFILE_VERSION: str(done.version or "")}
 
 
-def first_trial_ratio(first: ExerciseResult, second: ExerciseResult) -> float:
-    """Second session's trial-1 max |e| over the first session's final max |e| (worst joint)."""
-    before = np.max(first.result.records[-1].max_abs_error)
-    after = np.max(second.result.records[0].max_abs_error)
-    return float(after / before)
+def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
+                      run_one: Callable[..., RunSummary]) -> list[RunSummary]:
+    """``exo-ilc run --patient``: the same checks as in-process, then each exercise through
+    the graph (the supervisor starts from the profile: ``profile.initial``). The profile is
+    written from the run's store (every completed trial) when the graph ends, also when it
+    was stopped, so a killed session keeps what it learned."""
+    from ..core.experiment import build_reference
+    from ..core.store import RunStore
+
+    if args.mass_uncertainty and len(args.mass_uncertainty) > 1:
+        raise ConfigError("--mass-uncertainty", "one value with --patient (one patient's arm)")
+    if args.resume:
+        raise ConfigError("--patient", "cannot be combined with --resume")
+    if args.mass_uncertainty:
+        config = config.replace({"mass_uncertainty": args.mass_uncertainty[0]})
+    book = ProfileBook(profiles_root(args.profiles))
+    plan = plan_of(args, config)
+    prepared = [prepare(config, book, args.patient, name, args.new_patient)
+                for name, _ in plan]
+    session = session_id()
+    runs: list[RunSummary] = []
+    for item, (name, trials) in zip(prepared, plan, strict=True):
+        count = trials or item.config["max_trials"]
+        cfg = item.config.replace({"max_trials": count, "store.directory": str(store_root),
+                                   "store.resume": False})
+        reference = build_reference(cfg)
+        start = "from zero" if item.start is None else f"from profile v{item.start.version}"
+        print(f"patient {args.patient}, exercise {name}: {count} trials through the graph, "
+              f"{start}", file=sys.stderr, flush=True)
+        writer = book.begin(args.patient, name, cfg, reference, item.start, session)
+        summary: RunSummary | None = None
+        try:
+            summary = run_one(args, cfg, cfg["mass_uncertainty"], count)
+        finally:
+            stored = RunStore(store_root, cfg, reference).load()
+            done = _profile_from_store(writer, cfg, stored, count)
+            if done is not None and summary is not None:
+                summary.extra["therapy"] = {"patient": args.patient, "exercise": name,
+                                            "profile_started_from": None if item.start is None
+                                            else item.start.version,
+                                            "profile_version": writer.version,
+                                            "metrics": [m.to_json() for m in done]}
+                bag = summary.extra.get("bag")
+                if bag:
+                    _write_sidecar(Path(bag), args.patient, name, session,
+                                   item.start.version if item.start else None,
+                                   writer.version)
+            if done is not None:
+                print(f"profile: {writer.directory} v{writer.version} ({len(done)} trials)",
+                      file=sys.stderr)
+        if summary is not None:
+            runs.append(summary)
+    return runs
+
+
+def _profile_from_store(writer: Any, config: Any, stored: list[Any],
+                        count: int) -> list[Any] | None:
+    """Metrics of the stored trials and the profile version from the last one (None: no trial
+    completed, nothing written)."""
+    from ..core.experiment import Experiment
+    from ..core.metrics import trial_metrics
+
+    if not stored:
+        return None
+    experiment = Experiment(config)
+    metrics = [trial_metrics(s.record, experiment.nominal, experiment.plant) for s in stored]
+    last = stored[-1]
+    writer.save(last.record.trial, last.next_update, last.record.max_abs_error,
+                complete=len(stored) >= count, metrics=metrics[-1].to_json())
+    return metrics
+
+
+SIDECAR = "therapy.json"
+"""Beside a graph run's bag: patient, exercise, session and profile versions (the recorder
+node does not know them)."""
+
+
+def _write_sidecar(bag: Path, patient: str, exercise: str, session: str,
+                   started_from: int | None, version: int) -> None:
+    from ..core.store import write_json_atomic
+
+    if bag.is_dir():
+        write_json_atomic(bag / SIDECAR, {"patient": patient, "exercise": exercise,
+                                          "session": session, "profile_started_from":
+                                          started_from, "profile_version": version})

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.config import Config
-from ..core.metrics import TrialMetrics
+from ..core.metrics import TrialMetrics, metric_summary_values
 from ..core.session import RunResult
 from ..wire import protocol, topics
 from . import messages
@@ -60,7 +60,7 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
               metrics: Sequence[TrialMetrics] | None = None) -> Path:
     """Write ``result`` (a run of ``config``) as a bag at ``path``; ``split_every`` > 0 starts a
     new storage file every that many trials (as the recorder does); ``metrics`` (one per
-    record) go into the trial summaries. Returns ``path``."""
+    record; default: measured here) go into the trial summaries. Returns ``path``."""
     path = Path(path)
     names = list(config["joint_names"])
     custom = provenance_data(config, recorded_by="exo-ilc simulate",
@@ -68,6 +68,7 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                              mass_uncertainty=result.mass_uncertainty, law=result.law)
     custom.update(extra_custom_data or {})
     period_ns = int(round(float(config["control.period"]) * NS))
+    measured = config.replace({"mass_uncertainty": result.mass_uncertainty})
     with BagWriter(path, storage=storage, custom_data=custom) as writer:
         declare_topics(writer)
         for k, record in enumerate(result.records, start=1):
@@ -93,6 +94,8 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                 record.levels, record.aborted_at, result.applied.get(k + 1))
             if metrics is not None:
                 values += metrics[k - 1].summary_values(names)
+            else:  # as the supervisor files them (core/metrics.py)
+                values += metric_summary_values(record, measured, names)
             within = bool(np.all(record.max_abs_error <= result.error_bound))
             writer.write(topics.TRIAL_SUMMARY, end, messages.trial_summary(end, values, within))
             writer.write(topics.TRIAL_EVENTS, end, messages.trial_event(end, "end", k, values))

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from .config import Config
 from .laws import TrialRecord
 from .model import ArmModel
 
@@ -203,3 +204,26 @@ def session_metrics(metrics: Sequence[TrialMetrics]) -> SessionMetrics | None:
     if not metrics:
         return None
     return SessionMetrics(len(metrics), sum(m.aborted for m in metrics), metrics[0], metrics[-1])
+
+
+_MODELS: dict[str, tuple[ArmModel, ArmModel]] = {}
+
+
+def config_models(config: Config) -> tuple[ArmModel, ArmModel]:
+    """The nominal model and the plant (masses (1 + mass_uncertainty)) of ``config``, cached
+    by the config's digest (a node measures every trial with the same two)."""
+    key = config.digest()
+    if key not in _MODELS:
+        from .experiment import build_arm
+
+        nominal = build_arm(config)
+        _MODELS.clear()
+        _MODELS[key] = (nominal, nominal.with_mass_scale(float(config["mass_uncertainty"])))
+    return _MODELS[key]
+
+
+def metric_summary_values(record: TrialRecord, config: Config,
+                          names: Sequence[str]) -> list[tuple[str, str]]:
+    """The ``metric/...`` key-values of ``record``'s trial summary (the supervisor's)."""
+    nominal, plant = config_models(config)
+    return trial_metrics(record, nominal, plant).summary_values(names)

@@ -40,7 +40,7 @@ import numpy as np
 from numba import njit
 
 from .dynamics import forward_dynamics_into
-from .plant import _acceleration_into, rk4_period
+from .plant import _acceleration_into, clamp_counted, rk4_period
 
 if TYPE_CHECKING:
     from .config import Config
@@ -337,3 +337,21 @@ def start_state_into(q_ref0: np.ndarray, qd_ref0: np.ndarray, initial: np.ndarra
     for j in range(q.shape[0]):
         q[j] = q_ref0[j] + initial[0, j]
         qd[j] = qd_ref0[j] + initial[1, j]
+
+
+@njit(cache=True, error_model="numpy")
+def patient_plant_period(i: int, effort: np.ndarray, limit: np.ndarray, saturated: np.ndarray,
+                         q: np.ndarray, qd: np.ndarray, applied: np.ndarray, q_ref: np.ndarray,
+                         qd_ref: np.ndarray, period: float, substeps: int, plant: tuple,
+                         nominal: tuple, mode: int, ws: tuple, stage: np.ndarray,
+                         extra: np.ndarray, joint: np.ndarray, scalars: np.ndarray,
+                         trial_scalars: np.ndarray, history: np.ndarray, memory: np.ndarray,
+                         held: np.ndarray) -> int:
+    """:func:`plant.plant_period` with the patient: refuse a non-finite effort (-1, nothing
+    changes), count saturation, clamp into ``applied`` (:func:`plant.clamp_counted`), then
+    :func:`patient_period` from sample ``i``. Returns the number of joints beyond the limit."""
+    beyond = clamp_counted(effort, limit, saturated, applied)
+    if beyond >= 0:
+        patient_period(i, q, qd, applied, q_ref, qd_ref, period, substeps, plant, nominal, mode,
+                       ws, stage, extra, joint, scalars, trial_scalars, history, memory, held)
+    return beyond

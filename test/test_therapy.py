@@ -197,3 +197,53 @@ def test_sparc_prefers_smooth_movements() -> None:
     smooth = sparc(bell, 100.0)
     assert -1.7 < smooth < -1.4
     assert sparc(tremor, 100.0) < smooth - 0.5
+
+
+# --- through the graph --------------------------------------------------------------------
+
+@pytest.mark.graph
+def test_graph_session_from_the_profile_equals_in_process(tmp_path: Path) -> None:
+    """`exo-ilc run --patient` twice (the second from the profile the first wrote through the
+    graph) gives the per-trial numbers and the profile of `exo-ilc simulate --patient` twice,
+    to 1e-9; the metrics are in the JSON. A short exercise of the user's own file (1 s)."""
+    import subprocess
+    import sys
+
+    exercises = tmp_path / "exercises.yaml"
+    exercises.write_text("exercises:\n  lift:\n    points: [[0, 0, 0], [0.4, 0.2, 0.3], "
+                         "[0.1, 0.1, 0.1]]\n    durations: [0.5, 0.5]\n")
+    config = tmp_path / "therapy.yaml"
+    config.write_text(f'"/**":\n  ros__parameters:\n    exercise:\n      file: "{exercises}"\n')
+
+    def exo_ilc(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "exo_ilc_ros.cli.main", *args], text=True,
+                              capture_output=True, timeout=240, stdin=subprocess.DEVNULL,
+                              check=False, cwd=tmp_path)
+
+    runs = {}
+    for command, extra in (("simulate", []), ("run", ["--no-bag"])):
+        profiles = tmp_path / f"profiles_{command}"
+        common = [command, *extra, "--config", str(config), "--patient", "p1", "--exercise",
+                  "lift", "--trials", "2", "--profiles", str(profiles), "--quiet"]
+        out = tmp_path / f"{command}.json"
+        if command == "simulate":  # in this process: two fewer interpreter start-ups
+            assert main([*common, "--new-patient"]) == 0
+            assert main([*common, "--json", str(out)]) == 0
+        else:
+            first = exo_ilc(*common, "--new-patient")
+            assert first.returncode == 0, first.stderr[-3000:]
+            second = exo_ilc(*common, "--json", str(out))
+            assert second.returncode == 0, second.stderr[-3000:]
+            assert "from profile v1" in second.stderr
+        runs[command] = (json.loads(out.read_text()), ProfileBook(profiles).load("p1", "lift"))
+    (graph, graph_profile), (local, local_profile) = runs["run"], runs["simulate"]
+    (g,), (r,) = graph["runs"], local["runs"]
+    for key in ("max_abs_error", "max_abs_feedforward", "max_abs_effort"):
+        np.testing.assert_allclose([t[key] for t in g["trials"]], [t[key] for t in r["trials"]],
+                                   rtol=0.0, atol=1e-9, err_msg=key)
+    assert graph_profile.version == local_profile.version == 2
+    assert graph_profile.provenance["started_from"] == 1
+    np.testing.assert_allclose(graph_profile.feedforward, local_profile.feedforward, atol=1e-9)
+    assert [m["trial"] for m in g["therapy"]["metrics"]] == [1, 2]
+    np.testing.assert_allclose(g["therapy"]["metrics"][-1]["max_error"],
+                               r["therapy"]["metrics"][-1]["max_error"], atol=1e-9)

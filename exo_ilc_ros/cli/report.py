@@ -34,9 +34,10 @@ def run(args: argparse.Namespace) -> int:
     from ..bag import BagError, read_bag
     from ..core.profiles import ProfileBook, write_bytes_atomic
     from ..core.therapy import profiles_root
+    from .analyze import bag_paths
 
     runs = []
-    for path in args.bags:
+    for path in bag_paths(args.bags, "report"):  # bags/* also matches bags/README.md
         try:
             runs.append(exercise_run(read_bag(path)))
         except BagError as exc:

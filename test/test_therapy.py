@@ -13,6 +13,7 @@ from exo_ilc_ros.cli.main import main
 from exo_ilc_ros.core import ConfigError, Experiment, TrialRecord, load_config
 from exo_ilc_ros.core.errors import ProfileError
 from exo_ilc_ros.core.metrics import (
+    PassiveArm,
     TrialMetrics,
     gravity_compensation,
     required_torque,
@@ -176,6 +177,18 @@ def test_metrics_by_hand() -> None:
     np.testing.assert_allclose(m.rms_error, 0.01, rtol=1e-9)
     np.testing.assert_allclose(m.max_error, 0.01, rtol=1e-9)
     np.testing.assert_allclose(m.feedforward_rms, 1.0)
+    # The passive arm's friction and stiffness are part of what the movement requires.
+    passive = PassiveArm(np.full(3, 0.5), np.full(3, 0.2), 0.1, np.full(3, 2.0),
+                         np.array([0.0, 0.0, 0.3]))
+    torque = passive.torque(q, ref.velocity)
+    np.testing.assert_allclose(torque[100], 0.5 * ref.velocity[100]
+                               + 0.2 * np.tanh(ref.velocity[100] / 0.1)
+                               + 2.0 * (q[100] - [0.0, 0.0, 0.3]))
+    with_arm = required + torque
+    record = TrialRecord(1, ref, q, ref.velocity, np.ones_like(q), np.zeros_like(q),
+                         0.5 * with_arm)
+    assert trial_metrics(record, experiment.nominal, plant, passive).patient_share_total == \
+        pytest.approx(0.5, rel=1e-12)
     velocity = np.linspace(-1.0, 1.0, 11)[:, None] * [1.0, 3.0]
     np.testing.assert_allclose(velocity_slope(2.0 * velocity + 1.0, velocity), [2.0, 2.0])
     # At q = 0 the arm hangs straight down: no gravity torque.

@@ -26,9 +26,9 @@ from ..bag.provenance import PREFIX
 from ..bag.reader import BagRun, read_metadata
 from ..core.config import Config
 from ..core.exercise import PAPER_EXERCISE
-from ..core.experiment import build_arm, build_reference
+from ..core.experiment import build_reference
 from ..core.laws import TrialRecord
-from ..core.metrics import METRIC_UNITS, TrialMetrics, trial_metrics
+from ..core.metrics import METRIC_UNITS, TrialMetrics, config_metrics
 from ..core.profiles import ProfileBook
 
 PATIENT = PREFIX + "patient"
@@ -95,18 +95,14 @@ def exercise_run(run: BagRun) -> ExerciseRun:
     values = config.values if config is not None else {}
     names = run.joint_names
     metrics: list[TrialMetrics] = []
-    nominal = plant = None
     for k in run.completed:
         summary = run.summaries.get(k, {})
         aborted = run.trials[k].aborted_at is not None if k in run.trials else False
         found = TrialMetrics.from_summary(k, summary, names, aborted)
-        if found is None and config is not None:
-            if nominal is None:
-                nominal = build_arm(config)
-                plant = nominal.with_mass_scale(run.mass_uncertainty)
+        if found is None and config is not None:  # a bag of a version without metrics
             record = _record_of(run, k, config)
-            found = None if record is None or plant is None else \
-                trial_metrics(record, nominal, plant)
+            found = None if record is None else config_metrics(
+                record, config.replace({"mass_uncertainty": run.mass_uncertainty}))
         if found is not None:
             metrics.append(found)
     aborts = [(k, t.aborted_at if t.aborted_at is not None else -1)

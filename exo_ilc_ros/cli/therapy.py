@@ -181,13 +181,11 @@ def _profile_from_store(writer: Any, config: Any, stored: list[Any],
                         count: int) -> list[Any] | None:
     """Metrics of the stored trials and the profile version from the last one (None: no trial
     completed, nothing written)."""
-    from ..core.experiment import Experiment
-    from ..core.metrics import trial_metrics
+    from ..core.metrics import config_metrics
 
     if not stored:
         return None
-    experiment = Experiment(config)
-    metrics = [trial_metrics(s.record, experiment.nominal, experiment.plant) for s in stored]
+    metrics = [config_metrics(s.record, config) for s in stored]
     last = stored[-1]
     writer.save(last.record.trial, last.next_update, last.record.max_abs_error,
                 complete=len(stored) >= count, metrics=metrics[-1].to_json())

@@ -11,7 +11,8 @@ Definitions (per joint j over the samples of the trial; an aborted trial up to t
   feed-forward u_ff, rad/s^2 (the units of u in eq (11));
 * the patient's share of the work (Guidali et al., JRRD 50(3), 2013): 1 - sum|tau_robot| /
   sum|tau_required|, tau_required = a(q) qdd + c(q, qdot) of the arm being moved (the plant:
-  the model with the trial's true masses) along the true movement, qdd by central differences.
+  the model with the trial's true masses) along the true movement, qdd by central differences,
+  plus the passive arm's friction and stiffness (:class:`PassiveArm`; not its spasticity).
   0: the robot did all of it; 1: the patient did; < 0: the patient worked against the robot.
   Per joint and over all joints together;
 * smoothness: the spectral arc length (SPARC, Balasubramanian et al., J NeuroEng Rehabil 12:112,
@@ -139,12 +140,49 @@ def gravity_compensation(model: ArmModel, position: np.ndarray) -> np.ndarray:
     return np.array([model.bias_forces(q, zero) for q in position])
 
 
+@dataclass(frozen=True)
+class PassiveArm:
+    """The passive joint forces of the patient's arm that moving it requires (the virtual
+    patient's friction and passive stiffness, ``patient.friction.*``, ``patient.passive.*``;
+    not the spastic part, which the spasticity indicator shows): per joint
+    B qdot + F_c tanh(qdot / v_s) + K (q - q_0)."""
+
+    viscous: np.ndarray
+    coulomb: np.ndarray
+    stribeck_velocity: float
+    stiffness: np.ndarray
+    rest_position: np.ndarray
+
+    @classmethod
+    def from_config(cls, config: Config) -> PassiveArm | None:
+        """The config's passive arm, None when it has none (or no ``patient.*``)."""
+        try:
+            arm = cls(np.asarray(config["patient.friction.viscous"], dtype=float),
+                      np.asarray(config["patient.friction.coulomb"], dtype=float),
+                      float(config["patient.friction.stribeck_velocity"]),
+                      np.asarray(config["patient.passive.stiffness"], dtype=float),
+                      np.asarray(config["patient.passive.rest_position"], dtype=float))
+        except KeyError:
+            return None
+        if not (np.any(arm.viscous) or np.any(arm.coulomb) or np.any(arm.stiffness)):
+            return None
+        return arm
+
+    def torque(self, position: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+        """The torque that overcomes the passive forces at every sample (N m)."""
+        return np.asarray(self.viscous * velocity
+                          + self.coulomb * np.tanh(velocity / self.stribeck_velocity)
+                          + self.stiffness * (position - self.rest_position))
+
+
 def required_torque(model: ArmModel, position: np.ndarray, velocity: np.ndarray,
-                    period: float) -> np.ndarray:
-    """a(q) qdd + c(q, qdot) of ``model`` along the movement (qdd by ``numpy.gradient``)."""
+                    period: float, passive: PassiveArm | None = None) -> np.ndarray:
+    """a(q) qdd + c(q, qdot) of ``model`` along the movement (qdd by ``numpy.gradient``), plus
+    the ``passive`` arm's forces."""
     acceleration = np.gradient(velocity, period, axis=0)
-    return np.array([model.inverse_dynamics(q, v, a)
-                     for q, v, a in zip(position, velocity, acceleration, strict=True)])
+    rigid = np.array([model.inverse_dynamics(q, v, a)
+                      for q, v, a in zip(position, velocity, acceleration, strict=True)])
+    return rigid if passive is None else rigid + passive.torque(position, velocity)
 
 
 def velocity_slope(resistance: np.ndarray, velocity: np.ndarray) -> np.ndarray:
@@ -159,9 +197,11 @@ def velocity_slope(resistance: np.ndarray, velocity: np.ndarray) -> np.ndarray:
     return out
 
 
-def trial_metrics(record: TrialRecord, nominal: ArmModel, plant: ArmModel) -> TrialMetrics:
+def trial_metrics(record: TrialRecord, nominal: ArmModel, plant: ArmModel,
+                  passive: PassiveArm | None = None) -> TrialMetrics:
     """The metrics of ``record`` (module docstring): ``nominal`` is the controller's model
-    (gravity compensation), ``plant`` the arm being moved (required torque)."""
+    (gravity compensation), ``plant`` the arm being moved and ``passive`` its passive forces
+    (required torque)."""
     end = None if record.aborted_at is None else record.aborted_at + 1
     true_q = getattr(record, "true_position", None)
     true_qd = getattr(record, "true_velocity", None)
@@ -172,7 +212,7 @@ def trial_metrics(record: TrialRecord, nominal: ArmModel, plant: ArmModel) -> Tr
     # The effort of sample i is held over [t_i, t_i+1): the torque acting at sample i.
     effort = np.asarray(record.effort)[:end]
     beyond_gravity = effort - gravity_compensation(nominal, np.asarray(record.position)[:end])
-    required = required_torque(plant, q, qd, period) if q.shape[0] > 2 else effort
+    required = required_torque(plant, q, qd, period, passive) if q.shape[0] > 2 else effort
     robot = np.sum(np.abs(effort), axis=0)
     needed = np.sum(np.abs(required), axis=0)
     share = np.where(needed > 0.0, 1.0 - robot / np.where(needed > 0.0, needed, 1.0), 0.0)
@@ -206,24 +246,29 @@ def session_metrics(metrics: Sequence[TrialMetrics]) -> SessionMetrics | None:
     return SessionMetrics(len(metrics), sum(m.aborted for m in metrics), metrics[0], metrics[-1])
 
 
-_MODELS: dict[str, tuple[ArmModel, ArmModel]] = {}
+_MODELS: dict[str, tuple[ArmModel, ArmModel, PassiveArm | None]] = {}
 
 
-def config_models(config: Config) -> tuple[ArmModel, ArmModel]:
-    """The nominal model and the plant (masses (1 + mass_uncertainty)) of ``config``, cached
-    by the config's digest (a node measures every trial with the same two)."""
+def config_models(config: Config) -> tuple[ArmModel, ArmModel, PassiveArm | None]:
+    """The nominal model, the plant (masses (1 + mass_uncertainty)) and the passive arm of
+    ``config``, cached by the config's digest (a node measures every trial with them)."""
     key = config.digest()
     if key not in _MODELS:
         from .experiment import build_arm
 
         nominal = build_arm(config)
         _MODELS.clear()
-        _MODELS[key] = (nominal, nominal.with_mass_scale(float(config["mass_uncertainty"])))
+        _MODELS[key] = (nominal, nominal.with_mass_scale(float(config["mass_uncertainty"])),
+                        PassiveArm.from_config(config))
     return _MODELS[key]
+
+
+def config_metrics(record: TrialRecord, config: Config) -> TrialMetrics:
+    """The metrics of ``record``, a trial of ``config``."""
+    return trial_metrics(record, *config_models(config))
 
 
 def metric_summary_values(record: TrialRecord, config: Config,
                           names: Sequence[str]) -> list[tuple[str, str]]:
     """The ``metric/...`` key-values of ``record``'s trial summary (the supervisor's)."""
-    nominal, plant = config_models(config)
-    return trial_metrics(record, nominal, plant).summary_values(names)
+    return config_metrics(record, config).summary_values(names)

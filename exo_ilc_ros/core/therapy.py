@@ -20,7 +20,7 @@ from .config import Config
 from .errors import ProfileError
 from .experiment import Experiment, build_reference
 from .laws import TrialRecord
-from .metrics import SessionMetrics, TrialMetrics, session_metrics, trial_metrics
+from .metrics import SessionMetrics, TrialMetrics, config_metrics, session_metrics
 from .profiles import Profile, ProfileBook, ProfileWriter, check_name
 from .session import RunResult, TrialConclusion, run_trials
 
@@ -103,7 +103,7 @@ def run_exercise(prepared: PreparedExercise, book: ProfileBook, trials: int | No
 
     def conclude(conclusion: TrialConclusion) -> None:
         record = conclusion.record
-        measured = trial_metrics(record, experiment.nominal, experiment.plant)
+        measured = config_metrics(record, cfg)
         metrics.append(measured)
         true_error = getattr(record, "true_max_abs_error", record.max_abs_error)
         writer.save(record.trial, conclusion.update, true_error,

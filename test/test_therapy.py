@@ -260,3 +260,36 @@ def test_graph_session_from_the_profile_equals_in_process(tmp_path: Path) -> Non
     assert [m["trial"] for m in g["therapy"]["metrics"]] == [1, 2]
     np.testing.assert_allclose(g["therapy"]["metrics"][-1]["max_error"],
                                r["therapy"]["metrics"][-1]["max_error"], atol=1e-9)
+
+
+def test_session_plan_and_flag_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                      ) -> None:
+    """--session runs the plan's exercises with their trials, each saved; therapy flags
+    without --patient and contradictory flags are refused naming the flag."""
+    exercises = tmp_path / "exercises.yaml"
+    exercises.write_text(
+        "exercises:\n  up: {points: [[0, 0, 0], [0.3, 0.2, 0.2]], durations: [0.5]}\n"
+        "  down: {points: [[0.3, 0.2, 0.2], [0, 0, 0]], durations: [0.5]}\n"
+        "sessions:\n  short: [{exercise: up, trials: 2}, {exercise: down, trials: 3}]\n")
+    config = tmp_path / "c.yaml"
+    config.write_text(f'"/**":\n  ros__parameters:\n    exercise:\n      file: "{exercises}"\n')
+    base = ["simulate", "--config", str(config), "--profiles", str(tmp_path / "p"), "--quiet"]
+    assert main([*base, "--patient", "p1", "--new-patient", "--session", "short"]) == 0
+    book = ProfileBook(tmp_path / "p")
+    assert book.exercises("p1") == ["down", "up"]
+    assert book.load("p1", "up").provenance["trials"] == 2
+    assert book.load("p1", "down").provenance["trials"] == 3
+    capsys.readouterr()
+    for args, message in (
+            (["--exercise", "up"], "--exercise: needs --patient ID"),
+            (["--new-patient"], ": needs --patient ID"),
+            (["--patient", "p1", "--session", "short", "--exercise", "up"],
+             "--session: cannot be combined with --exercise"),
+            (["--patient", "p1", "--session", "long"], "unknown session 'long'"),
+            (["--patient", "p1", "--exercise", "up", "up"], "names an exercise twice"),
+            (["--patient", "p1", "--mass-uncertainty", "0.1", "0.2"], "one value with"),
+    ):
+        before = snapshot(tmp_path / "p")
+        assert main([*base, *args]) == 2, args
+        assert message in capsys.readouterr().err, args
+        assert snapshot(tmp_path / "p") == before

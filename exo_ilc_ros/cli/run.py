@@ -106,7 +106,12 @@ def run(args: argparse.Namespace) -> int:
         if root is None:
             raise ConfigError("--no-store", "cannot be combined with --patient (the profile "
                               "is written from the run's store)")
-        print_report(args, config, run_session_graph(args, config, root, _run_one))
+        try:
+            print_report(args, config, run_session_graph(args, config, root, _run_one))
+        except GraphError as exc:
+            print(f"exo-ilc run: {exc}\nexo-ilc run: the graph was stopped; the profile holds "
+                  f"every completed trial (and the store {root})", file=sys.stderr)
+            return 3
         return 0
     runs: list[RunSummary] = []
     for delta in deltas:

@@ -127,26 +127,31 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
     """``exo-ilc run --patient``: the same checks as in-process, then each exercise through
     the graph (the supervisor starts from the profile: ``profile.initial``). The profile is
     written from the run's store (every completed trial) when the graph ends, also when it
-    was stopped, so a killed session keeps what it learned."""
+    was stopped, so a killed session keeps what it learned. Should ``exo-ilc`` itself be
+    killed before it writes the profile, the same command with ``--store DIR --resume``
+    continues the run from its store and writes it."""
     from ..core.experiment import build_reference
     from ..core.store import RunStore
 
     if args.mass_uncertainty and len(args.mass_uncertainty) > 1:
         raise ConfigError("--mass-uncertainty", "one value with --patient (one patient's arm)")
-    if args.resume:
-        raise ConfigError("--patient", "cannot be combined with --resume")
+    from .run import _check_store
+
     if args.mass_uncertainty:
         config = config.replace({"mass_uncertainty": args.mass_uncertainty[0]})
     book = ProfileBook(profiles_root(args.profiles))
     plan = plan_of(args, config)
     prepared = [prepare(config, book, args.patient, name, args.new_patient)
                 for name, _ in plan]
+    for item, (_, trials) in zip(prepared, plan, strict=True):  # before any node starts
+        _check_store(item.config.replace({"max_trials": trials or item.config["max_trials"],
+                                          "store.directory": str(store_root)}), args.resume)
     session = session_id()
     runs: list[RunSummary] = []
     for item, (name, trials) in zip(prepared, plan, strict=True):
         count = trials or item.config["max_trials"]
         cfg = item.config.replace({"max_trials": count, "store.directory": str(store_root),
-                                   "store.resume": False})
+                                   "store.resume": bool(args.resume)})
         reference = build_reference(cfg)
         start = "from zero" if item.start is None else f"from profile v{item.start.version}"
         print(f"patient {args.patient}, exercise {name}: {count} trials through the graph, "

@@ -266,6 +266,86 @@ def test_every_patient_parameter_is_in_the_plant_section() -> None:
     assert names and all(p.section == schema.PLANT and not p.live for p in names)
 
 
+class _Plant:
+    """The graph as the protocol sees it: the in-process trial answered sample by sample,
+    the measured samples, the controller's ``done``, then the true samples (one of them lost
+    in the first attempt)."""
+
+    def __init__(self, config: Any) -> None:
+        self.experiment = Experiment(config)
+        self.protocol: Any = None
+        self.t0 = 0
+        self.pushed: list[tuple[int, np.ndarray]] = []
+        self.records: list[Any] = []
+        self.events: list[tuple[str, dict[str, str]]] = []
+        self.drop_true = 5
+
+    def reset(self) -> None:
+        self.t0 += 10_000_000_000
+        self.protocol.on_reset(self.t0)
+
+    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray) -> None:
+        self.pushed.append((trial, feedforward.copy()))
+        self.protocol.on_acknowledged(trial, t0_ns)
+
+    def start(self) -> None:
+        pass
+
+    def publish_conclusion(self, conclusion: Any, end_ns: int) -> None:
+        record = conclusion.record  # its arrays are the protocol's buffers: copied now
+        self.records.append((record.trial, record.position.copy(),
+                             record.true_position.copy(), record.effort.copy()))
+
+    def event(self, message: str, values: Any, stamp_ns: int | None = None) -> None:
+        self.events.append((message, dict(values)))
+
+    def log(self, error: bool, text: str) -> None:
+        pass
+
+    def run_trial(self) -> None:
+        protocol = self.protocol
+        protocol.on_started(True)
+        trial, ff = self.pushed[-1]
+        record = self.experiment.run_trial(ff, trial, protocol.session.levels)
+        step = protocol.samples.step_ns
+        for i in range(record.position.shape[0]):
+            protocol.on_sample(self.t0 + i * step, record.position[i], record.velocity[i])
+        protocol.on_done(trial, self.t0, {"watchdog_trips": "0", "aborted_at": "-1"})
+        assert len(self.records) < trial, "ended before its true samples were in"
+        assert record.true_position is not None and record.true_velocity is not None
+        for i in range(record.position.shape[0]):
+            if i == self.drop_true:
+                self.drop_true = -1
+                continue
+            protocol.on_true_sample(self.t0 + i * step, record.true_position[i],
+                                    record.true_velocity[i])
+
+
+def test_protocol_waits_for_the_true_samples_and_reruns_a_trial_that_lost_one() -> None:
+    from exo_ilc_ros.core.protocol import Phase, TrialProtocol
+
+    config = _config("sensor", max_trials=3)
+    plant = _Plant(config)
+    protocol = TrialProtocol(config, plant, clock=lambda: 0.0)
+    plant.protocol = protocol
+    protocol.open({"mass_uncertainty": config["mass_uncertainty"]})
+    protocol.tick(graph_ready=True)
+    for _ in range(5):
+        if protocol.phase is Phase.FINISHED:
+            break
+        plant.run_trial()
+    assert protocol.phase is Phase.FINISHED
+    assert ("aborted", {"trial": "1", "reason": "lost", "lost_true": "1"}) in plant.events
+    local = run_trials(config)
+    assert [r[0] for r in plant.records] == [1, 2, 3]
+    for (_, position, true_position, effort), ref in zip(plant.records, local.records,
+                                                         strict=True):
+        assert np.array_equal(position, ref.position)
+        assert ref.true_position is not None
+        assert np.array_equal(true_position, ref.true_position)
+        assert np.array_equal(effort, ref.effort)
+
+
 @pytest.mark.graph
 def test_graph_equals_in_process_under_realistic(tmp_path: Path) -> None:
     """3 trials of ``realistic`` through the graph: measured and true max |e|, u_ff and effort

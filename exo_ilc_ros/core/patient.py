@@ -223,7 +223,7 @@ def measure_into(i: int, q: np.ndarray, qd: np.ndarray, scalars: np.ndarray, noi
         qd_out[j] = v
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def passive_effort_into(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, joint: np.ndarray,
                         inverse_stribeck: float, out: np.ndarray) -> None:
     """``effort`` plus the passive joint forces of eq (6)'s Q^v, Q^f, Q^c (module docstring,

@@ -106,6 +106,9 @@ def main() -> None:
     parser.add_argument("--figure", type=Path, default=None)
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
                         help="assist-as-needed overrides, e.g. assist_as_needed.forgetting=0.97")
+    parser.add_argument("--variability-from-plain", action="store_true",
+                        help="assist_as_needed.variability = sigma of the plain session's last "
+                        "20 trials (core.assist.estimate_variability)")
     args = parser.parse_args()
     scenario = args.scenario or default_scenario()
     overrides: dict[str, Any] = dict(AAN)
@@ -119,6 +122,13 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         plain = session(base, Path(tmp) / "a", "plain", args.trials, True)
+        if args.variability_from_plain:  # sigma measured on the plain session's last trials
+            from exo_ilc_ros.core.assist import estimate_variability
+
+            sigma = estimate_variability(plain.result.records[-20:])
+            overrides["assist_as_needed.variability"] = [float(x) for x in sigma]
+            print("variability measured on the plain session's last 20 trials: sigma = "
+                  + " ".join(f"{x:.4g}" for x in sigma) + " rad")
         aan_config = base.replace(overrides)
         aan = session(aan_config, Path(tmp) / "b", "aan", args.trials, True)
         describe("plain law (robust.yaml)", plain, aan_config)

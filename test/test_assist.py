@@ -114,3 +114,16 @@ def test_lifted_map_ends_of_the_gate() -> None:
                                0.8 * base, atol=1e-15)
     np.testing.assert_allclose(lifted_map(loop, 40, Memory.TOTAL_INPUT, gains, None, 0.8, 1.0),
                                learn - 0.2 * base, atol=1e-15)
+
+
+def test_variability_by_hand() -> None:
+    """Errors 0.1, 0.3 in one trial and 0.3, 0.1 in the other: variance 0.02 at each sample
+    (ddof 1), sigma = sqrt(0.02); an aborted trial is left out; one trial is not enough."""
+    from exo_ilc_ros.core.assist import estimate_variability
+
+    a, b = record_of([0.1, 0.3], 0.0, 0.0), record_of([0.3, 0.1], 0.0, 0.0)
+    aborted = TrialRecord(3, a.reference, np.full((2, 1), 5.0), np.zeros((2, 1)),
+                          np.zeros((2, 1)), np.zeros((2, 1)), np.zeros((2, 1)), aborted_at=1)
+    np.testing.assert_allclose(estimate_variability([a, b, aborted]), [math.sqrt(0.02)])
+    with pytest.raises(ValueError, match="at least two"):
+        estimate_variability([a, aborted])

@@ -24,6 +24,7 @@ G in [0, 1] is largest at an end: |f m| inside the deadband (forgetting only) or
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -108,3 +109,15 @@ def aan_factor(inner: np.ndarray, memory: np.ndarray, forgetting: float) -> np.n
     outside = np.abs(inner - (1.0 - forgetting) * memory)
     return np.asarray(np.maximum(inside, outside))
 
+
+
+def estimate_variability(records: Sequence[TrialRecord]) -> np.ndarray:
+    """sigma per joint (rad) for ``assist_as_needed.variability`` from trials of the patient:
+    sqrt(mean over t of the variance over trials of e(t)), the measured error the law sees
+    (aborted trials left out; at least two trials needed). The trials should be ones where the
+    learned input hardly changes (e.g. the last of a settled session), so that what varies is
+    the patient, not the learning."""
+    errors = np.array([r.error for r in records if not r.aborted])
+    if errors.shape[0] < 2:
+        raise ValueError("estimating the variability needs at least two completed trials")
+    return np.asarray(np.sqrt(np.mean(np.var(errors, axis=0, ddof=1), axis=0)))

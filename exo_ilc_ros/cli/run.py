@@ -174,4 +174,9 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
                                    on_start=announce_graph(bar, recording.path))
             bar.write(f"bag: {recording.path}", file=sys.stderr)
             result.summary.extra["bag"] = str(recording.path)
+    from ..core.metrics import TrialMetrics
+
+    names = config["joint_names"]
+    filed = [TrialMetrics.from_summary(s.trial, s.values, names) for s in result.summaries]
+    result.summary.extra["metrics"] = [m.to_json() for m in filed if m is not None]
     return result.summary

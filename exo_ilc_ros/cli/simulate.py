@@ -148,6 +148,12 @@ def simulate(args: argparse.Namespace) -> int:
             result = run_trials(config, delta, trials, on_trial=progress, store=args.store,
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
+        if args.json:  # the therapy metrics of every trial (core/metrics.py)
+            from ..core.metrics import config_metrics
+
+            measured = config.replace({"mass_uncertainty": delta})
+            runs[-1].extra["metrics"] = [config_metrics(r, measured).to_json()
+                                         for r in result.records]
         for trial, notes in result.notes.items():
             for note in notes:
                 print(f"delta {delta:g}, learning from trial {trial}: {note}", file=sys.stderr)

@@ -370,3 +370,20 @@ def test_graph_equals_in_process_under_realistic(tmp_path: Path) -> None:
         if name == "realistic":
             assert not np.array_equal(graph.true_errors, graph.max_abs_error)
     json.dumps(graph.to_json())  # the summary exports
+
+
+def test_bag_of_a_patient_run_keeps_the_true_error_and_replays_exactly(tmp_path: Path) -> None:
+    """A `sensor` run written as a bag: its summary has the measured and the true tables, and
+    `simulate --replay` (the bag's config, patient included) reproduces every trial."""
+    from exo_ilc_ros.bag import read_bag, write_run
+    from exo_ilc_ros.bag.replay import replay
+
+    config = _config("sensor")
+    result = run_trials(config, 0.05, 3)
+    write_run(tmp_path / "bag", config, result)
+    run = read_bag(tmp_path / "bag")
+    summary = run.summary()
+    assert summary.true_max_abs_error is not None
+    np.testing.assert_array_equal(summary.true_max_abs_error, result.true_max_abs_errors())
+    np.testing.assert_array_equal(summary.max_abs_error, result.max_abs_errors)
+    assert replay(run).identical

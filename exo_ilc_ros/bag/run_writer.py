@@ -91,7 +91,8 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
             values = protocol.summary_values(
                 k, result.mass_uncertainty, result.law, names, record.max_abs_error,
                 np.max(np.abs(record.feedforward), axis=0), np.max(np.abs(record.effort), axis=0),
-                record.levels, record.aborted_at, result.applied.get(k + 1))
+                record.levels, record.aborted_at, result.applied.get(k + 1),
+                None if record.true_position is None else record.true_max_abs_error)
             if metrics is not None:
                 values += metrics[k - 1].summary_values(names)
             else:  # as the supervisor files them (core/metrics.py)

@@ -19,18 +19,20 @@ from exo_ilc_ros.core.errors import ConfigError
 from exo_ilc_ros.core.experiment import Experiment
 from exo_ilc_ros.core.patient import (
     MAS_PRESETS,
+    PatientLearning,
     PatientModel,
     measure_into,
     passive_effort_into,
     patient_period,
     rk4_period_passive,
+    true_error,
 )
 from exo_ilc_ros.core.plant import PlantStepper
 from exo_ilc_ros.core.session import run_trials
 from exo_ilc_ros.core.store import learning_key
 
 SHORT = {"trajectory.duration": 1.0}
-SHIPPED = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic")
+SHIPPED = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic", "learning")
 
 
 def _config(scenario: str = "ideal", **overrides: Any) -> Any:
@@ -151,7 +153,8 @@ def test_held_torque_delay_reflex_and_voluntary_by_hand() -> None:
     q_start = q.copy()
     patient_period(3, q, qd, np.zeros(3), ref.position, ref.velocity, ex.period, ex.substeps,
                    ex.plant.kernel_args, ex.nominal.kernel_args, 0, *_scratch(),
-                   model.joint, model.scalars, trial_scalars, history, memory, held)
+                   model.joint, model.scalars, trial_scalars, np.zeros((0, 0)), history, memory,
+                   held)
     raw = 0.8 * (4.0 * (ref.position[5, 1] - q_start[1]) + 1.0 * (ref.velocity[5, 1]
                                                                      - ref.velocity[3, 1]))
     voluntary = 0.2 + 0.25 * (raw - 0.2)  # a = 0.01 / (0.03 + 0.01)
@@ -187,16 +190,23 @@ def test_draws_depend_only_on_seed_and_trial() -> None:
     assert model.fatigue(1001) == pytest.approx(0.7 + 0.3 * np.exp(-1.0))
 
 
-@pytest.mark.parametrize("scenario", ["realistic", "sensor", "spastic", "voluntary"])
+@pytest.mark.parametrize("scenario", ["realistic", "sensor", "spastic", "voluntary",
+                                      "learning"])
 def test_plant_stepper_is_the_compiled_trial_bit_for_bit(scenario: str) -> None:
     """The node's stepper (begin_trial, measure, step) with the controller's step gives the
-    doubles of :func:`simulate_trial_guarded` (measured, true, effort) for trials 1 and 5."""
+    doubles of :func:`simulate_trial_guarded` (measured, true, effort) for trials 1 to 3, the
+    stepper's own learning patient against the in-process one (trial 2 run twice: a rerun)."""
     ex = Experiment(_config(scenario))
     ref = ex.reference
     u_ff = np.random.default_rng(3).standard_normal(ref.position.shape) * 0.5
-    for trial in (1, 5):
-        record = ex.run_trial(u_ff, trial)
-        stepper, control = PlantStepper(ex), GuardedControlStep(ex)
+    learning = PatientLearning(ex.patient, ref.samples)
+    stepper, control = PlantStepper(ex), GuardedControlStep(ex)
+    last_error: dict[int, np.ndarray] = {}
+    for trial in (1, 2, 2, 3):
+        while learning.learned_through < trial - 1:  # learn from the last run of each trial
+            done = learning.learned_through + 1
+            learning.learn(done, last_error[done])
+        record = ex.run_trial(u_ff, trial, None, learning.torque)
         stepper.begin_trial(trial)
         measured, true, efforts = [], [], []
         for i in range(ref.samples):
@@ -212,6 +222,36 @@ def test_plant_stepper_is_the_compiled_trial_bit_for_bit(scenario: str) -> None:
         expected_true = record.position if record.true_position is None \
             else record.true_position
         assert np.array_equal(np.array(true), expected_true)
+        last_error[trial] = true_error(record)
+    assert ex.patient.learns == (scenario == "learning")
+    if scenario == "learning":
+        assert learning.learned_through == 2 and np.any(learning.torque != 0.0)
+
+
+def test_learning_patient_two_state_by_hand_and_resumed(tmp_path: Path) -> None:
+    """After trial 1 the patient adds (B_f + B_s) K_e e_1; after trial 2
+    (A_f B_f + B_f) K_e e_1 ... by the recursion; a resumed in-process run rebuilds the
+    patient's state from the stored true errors and continues bit for bit."""
+    config = _config("learning")
+    model = PatientModel(config)
+    learning = PatientLearning(model, 101)
+    e1, e2 = np.full((101, 3), 0.01), np.full((101, 3), -0.02)
+    learning.learn(1, e1)
+    gain = np.array(config["patient.learning.gain"])
+    np.testing.assert_allclose(learning.torque, (0.06 + 0.02) * gain * e1, rtol=1e-14)
+    learning.learn(2, e2)
+    fast = 0.92 * 0.06 * gain * e1 + 0.06 * gain * e2
+    slow = 0.995 * 0.02 * gain * e1 + 0.02 * gain * e2
+    np.testing.assert_allclose(learning.torque, fast + slow, rtol=1e-13)
+    with pytest.raises(ValueError):
+        learning.learn(4, e1)
+    whole = run_trials(config, 0.05, 4)
+    run_trials(config, 0.05, 2, store=tmp_path)
+    resumed = run_trials(config, 0.05, 4, store=tmp_path, resume=True)
+    for a, b in zip(whole.records, resumed.records, strict=True):
+        assert np.array_equal(a.position, b.position) and np.array_equal(a.effort, b.effort)
+    plain = run_trials(config.replace({"patient.learning.gain": [0.0, 0.0, 0.0]}), 0.05, 4)
+    assert not np.array_equal(plain.records[-1].position, whole.records[-1].position)
 
 
 def test_true_error_is_the_plants_and_iterations_use_it() -> None:
@@ -348,12 +388,13 @@ def test_protocol_waits_for_the_true_samples_and_reruns_a_trial_that_lost_one() 
 
 @pytest.mark.graph
 def test_graph_equals_in_process_under_realistic(tmp_path: Path) -> None:
-    """3 trials of ``realistic`` through the graph: measured and true max |e|, u_ff and effort
-    of every trial equal the in-process run to 1e-9 (the plant's draws come from the trial
-    number in the feed-forward's frame); ``ideal`` through the graph equals it bit for bit."""
+    """3 trials of ``realistic`` and of ``learning`` through the graph: measured and true
+    max |e|, u_ff and effort of every trial equal the in-process run to 1e-9 (the plant's
+    draws come from the trial number in the feed-forward's frame, the learning patient lives
+    in the plant); ``ideal`` through the graph equals it bit for bit."""
     from exo_ilc_ros.orchestration.graph import run_graph
 
-    for name, tolerance in (("realistic", 1e-9), ("ideal", 0.0)):
+    for name, tolerance in (("realistic", 1e-9), ("learning", 1e-9), ("ideal", 0.0)):
         config = _config(name, max_trials=3)
         local = run_trials(config)
         graph = run_graph(config, timeout=300.0).summary

@@ -109,7 +109,10 @@ def run_exercise(prepared: PreparedExercise, book: ProfileBook, trials: int | No
         writer.save(record.trial, conclusion.update, true_error,
                     complete=conclusion.stop is not None, metrics=measured.to_json())
 
-    result = run_trials(cfg, on_trial=on_trial, on_conclusion=conclude)
+    memory = load_patient_memory(writer.directory, experiment.reference.samples)
+    result = run_trials(cfg, on_trial=on_trial, on_conclusion=conclude, patient_memory=memory)
+    if result.patient_memory is not None:
+        save_patient_memory(writer.directory, result.patient_memory)
     return ExerciseResult(prepared.patient, prepared.exercise, cfg, result, metrics,
                           None if prepared.start is None else prepared.start.version,
                           writer.version if metrics else None)
@@ -120,3 +123,38 @@ def profiles_root(given: str | None) -> Path:
     from .profiles import default_root
 
     return Path(given) if given else default_root()
+
+
+VIRTUAL_PATIENT = "virtual_patient.npz"
+"""Beside a profile: what a *learning virtual patient* (``patient.learning.*``) had learned at
+the end of the last in-process session, so that the next session simulates the same patient
+(simulation only; a real patient keeps it themselves)."""
+
+
+def load_patient_memory(directory: Path, samples: int) -> tuple[Any, Any] | None:
+    """The virtual patient's (fast, slow) states saved beside the profile (None: none, or
+    of another movement)."""
+    import numpy as np
+
+    path = directory / VIRTUAL_PATIENT
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path) as data:
+            fast, slow = np.array(data["fast"]), np.array(data["slow"])
+    except (OSError, ValueError, KeyError) as exc:
+        raise ProfileError(f"{path}: unreadable virtual patient state: {exc}") from None
+    return (fast, slow) if fast.shape[0] == samples == slow.shape[0] else None
+
+
+def save_patient_memory(directory: Path, memory: tuple[Any, Any]) -> None:
+    """Save the virtual patient's (fast, slow) states beside the profile, atomically."""
+    import io
+
+    import numpy as np
+
+    from .profiles import write_bytes_atomic
+
+    buffer = io.BytesIO()
+    np.savez(buffer, fast=memory[0], slow=memory[1])
+    write_bytes_atomic(directory / VIRTUAL_PATIENT, buffer.getvalue())

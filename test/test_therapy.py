@@ -293,3 +293,25 @@ def test_session_plan_and_flag_errors(tmp_path: Path, capsys: pytest.CaptureFixt
         assert main([*base, *args]) == 2, args
         assert message in capsys.readouterr().err, args
         assert snapshot(tmp_path / "p") == before
+
+
+def test_learning_patient_second_session_and_assist_as_needed(tmp_path: Path) -> None:
+    """Under the learning patient with assist-as-needed (f 0.85): the learned feed-forward
+    falls after its peak while the true error stays far inside the envelope, and a second
+    session (robot profile and the virtual patient's memory) starts within 1.5x of the first
+    session's final max |e| (bench/therapy_bench.py measures 100 trials)."""
+    from exo_ilc_ros.core.config import scenario_path
+
+    config = load_config(ROOT / "config" / "robust.yaml", {"assist_as_needed.enabled": True},
+                         overlays=[scenario_path("learning")])
+    book = ProfileBook(tmp_path)
+    first = session(book, trials=30, new=True, config=config)
+    uff = np.array([m.feedforward_rms.sum() for m in first.metrics])
+    assert uff[-1] < 0.8 * uff.max()  # the robot hands over
+    errors = np.array([m.max_error.max() for m in first.metrics])
+    assert np.all(errors[5:] < 0.05)  # safety envelope 1 rad
+    assert (tmp_path / "p1" / "paper_quintic" / "virtual_patient.npz").is_file()
+    second = session(book, trials=2, config=config)
+    final = np.max(first.result.records[-1].true_max_abs_error)
+    start = np.max(second.result.records[0].true_max_abs_error)
+    assert start <= 1.5 * final

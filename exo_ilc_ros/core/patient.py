@@ -19,7 +19,8 @@ Per sample i of a trial (true state x_i = (q_i, qdot_i) of the plant):
    tau^v_i = tau^v_{i-1} + a_v (g_k (K_v (q_d(t_i + s_k) - q_i) + D_v (qdot_d(t_i + s_k) - qdot_i))
    - tau^v_{i-1}): the patient's own sluggish tracking (first-order lag a_v = T / (tau_v + T)) of
    the reference shifted by the trial's timing jitter s_k, with gain g_k = (1 + sigma_a z_k)
-   (amplitude jitter, >= 0) times the fatigue f_k = f_min + (1 - f_min) exp(-r (k - 1)).
+   (amplitude jitter, >= 0) times the fatigue f_k = f_min + (1 - f_min) exp(-r (k - 1)); a
+   **learning patient** adds the torque profile x_f + x_s of :class:`PatientLearning`.
 3. **Passive joint forces** at every RK4 stage (:func:`passive_effort_into`): -B qdot
    - F_c tanh(qdot / v_s) - K (q - q_0), with B = viscous friction + spastic damping and K =
    passive + spastic stiffness.

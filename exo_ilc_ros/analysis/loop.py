@@ -24,6 +24,9 @@ def format_analysis(analysis: LoopAnalysis) -> str:
                      f"{a.qfilter.cutoff_hz:g} Hz, zero-phase (sosfiltfilt, even padding)")
     else:
         lines.append("Q-filter: off")
+    if a.forgetting is not None:
+        lines.append(f"assist-as-needed: forgetting f = {a.forgetting:g}; |F| is the worst of "
+                     "inside the deadband (f |m|) and outside it (|F - (1 - f) m|)")
     variants = [("no Q", False)] + ([("with Q", True)] if a.qfilter is not None else [])
     for label, filtered in variants:
         lines.append(f"  {label}:")

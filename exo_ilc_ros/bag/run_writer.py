@@ -11,13 +11,14 @@ stamps.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 
 from ..core.config import Config
+from ..core.metrics import TrialMetrics, metric_summary_values
 from ..core.session import RunResult
 from ..wire import protocol, topics
 from . import messages
@@ -55,9 +56,11 @@ def declare_topics(writer: BagWriter) -> None:
 
 def write_run(path: Path | str, config: Config, result: RunResult, *, storage: str = "mcap",
               split_every: int = 0, name: str = "",
-              extra_custom_data: Mapping[str, str] | None = None) -> Path:
+              extra_custom_data: Mapping[str, str] | None = None,
+              metrics: Sequence[TrialMetrics] | None = None) -> Path:
     """Write ``result`` (a run of ``config``) as a bag at ``path``; ``split_every`` > 0 starts a
-    new storage file every that many trials (as the recorder does). Returns ``path``."""
+    new storage file every that many trials (as the recorder does); ``metrics`` (one per
+    record; default: measured here) go into the trial summaries. Returns ``path``."""
     path = Path(path)
     names = list(config["joint_names"])
     custom = provenance_data(config, recorded_by="exo-ilc simulate",
@@ -65,6 +68,7 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                              mass_uncertainty=result.mass_uncertainty, law=result.law)
     custom.update(extra_custom_data or {})
     period_ns = int(round(float(config["control.period"]) * NS))
+    measured = config.replace({"mass_uncertainty": result.mass_uncertainty})
     with BagWriter(path, storage=storage, custom_data=custom) as writer:
         declare_topics(writer)
         for k, record in enumerate(result.records, start=1):
@@ -89,6 +93,10 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                 np.max(np.abs(record.feedforward), axis=0), np.max(np.abs(record.effort), axis=0),
                 record.levels, record.aborted_at, result.applied.get(k + 1),
                 None if record.true_position is None else record.true_max_abs_error)
+            if metrics is not None:
+                values += metrics[k - 1].summary_values(names)
+            else:  # as the supervisor files them (core/metrics.py)
+                values += metric_summary_values(record, measured, names)
             within = bool(np.all(record.max_abs_error <= result.error_bound))
             writer.write(topics.TRIAL_SUMMARY, end, messages.trial_summary(end, values, within))
             writer.write(topics.TRIAL_EVENTS, end, messages.trial_event(end, "end", k, values))

@@ -89,7 +89,7 @@ def trial_figure_path(plot: str | None, trial: int, bag: Path, several: bool) ->
     return out.with_stem(f"{out.stem}{middle}_trial{trial}")
 
 
-def bag_paths(paths: Sequence[str]) -> list[Path]:
+def bag_paths(paths: Sequence[str], command: str = "analyze") -> list[Path]:
     """The rosbag2 bag directories among ``paths`` (a directory with a ``metadata.yaml``);
     anything else (``bags/*`` also matches ``bags/README.md``) is skipped with a note. A
     recording killed before its first trial was filed has no ``metadata.yaml`` yet and is
@@ -102,7 +102,7 @@ def bag_paths(paths: Sequence[str]) -> list[Path]:
             continue
         why = ("no such file or directory" if not path.exists() else
                "not a directory" if not path.is_dir() else "no metadata.yaml")
-        print(f"exo-ilc analyze: note: skipping {given}: not a rosbag2 bag ({why})",
+        print(f"exo-ilc {command}: note: skipping {given}: not a rosbag2 bag ({why})",
               file=sys.stderr)
     if not found:
         raise BagReadError(Path(paths[0]), "no rosbag2 bag directory among the arguments "

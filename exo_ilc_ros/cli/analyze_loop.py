@@ -64,6 +64,9 @@ def run(args: argparse.Namespace) -> int:
         else "(Q-filter off)"
     print(f"\nworst trial-to-trial factor {label}: {worst:.5f} -> "
           + ("learning stays bounded" if worst <= 1.0 + 1e-9 else "the learned input can grow"))
+    if (args.law or config["law"]) == "norm_optimal" and config["assist_as_needed.enabled"]:
+        print("note: assist-as-needed is on, but the norm-optimal factor above does not include "
+              "it (its forgetting multiplies the memory term: inside the deadband |F| = f)")
     if (args.law or config["law"]) == "norm_optimal":
         from ..core.norm_optimal import robustness
 

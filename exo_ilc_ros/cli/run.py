@@ -52,6 +52,9 @@ def register(sub: Any) -> None:
                         "(after a crash or a killed node), bit-identical to an uninterrupted "
                         "run")
     parser.add_argument("--no-store", action="store_true", help="do not save the trials")
+    from .therapy import add_therapy_arguments
+
+    add_therapy_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -97,6 +100,19 @@ def run(args: argparse.Namespace) -> int:
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     trials = config["max_trials"]
     root = _store_root(args)
+    from .therapy import run_session_graph, uses_therapy
+
+    if uses_therapy(args):  # each exercise from the patient's profile, saved from the store
+        if root is None:
+            raise ConfigError("--no-store", "cannot be combined with --patient (the profile "
+                              "is written from the run's store)")
+        try:
+            print_report(args, config, run_session_graph(args, config, root, _run_one))
+        except GraphError as exc:
+            print(f"exo-ilc run: {exc}\nexo-ilc run: the graph was stopped; the profile holds "
+                  f"every completed trial (and the store {root})", file=sys.stderr)
+            return 3
+        return 0
     runs: list[RunSummary] = []
     for delta in deltas:
         run_config = config.replace({"mass_uncertainty": delta})
@@ -157,4 +173,10 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
                                    nodes=recording.graph_nodes(args.isolated_recorder),
                                    on_start=announce_graph(bar, recording.path))
             bar.write(f"bag: {recording.path}", file=sys.stderr)
+            result.summary.extra["bag"] = str(recording.path)
+    from ..core.metrics import TrialMetrics
+
+    names = config["joint_names"]
+    filed = [TrialMetrics.from_summary(s.trial, s.values, names) for s in result.summaries]
+    result.summary.extra["metrics"] = [m.to_json() for m in filed if m is not None]
     return result.summary

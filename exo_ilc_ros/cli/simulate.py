@@ -75,10 +75,14 @@ def register(sub: Any) -> None:
                         "the bag's config, mass uncertainty, trial count and live parameter "
                         "changes (at the trials they took effect), then compare every trial "
                         "with the bag (exit 1 if any differs)")
+    from .therapy import add_therapy_arguments
+
+    add_therapy_arguments(parser)
     parser.set_defaults(func=simulate)
 
 
-REPLAY_EXCLUDES = ("config", "scenario", "mass_uncertainty", "trials", "law", "store", "bag")
+REPLAY_EXCLUDES = ("config", "scenario", "mass_uncertainty", "trials", "law", "store", "bag",
+                   "patient")
 
 
 def replay_bag(args: argparse.Namespace) -> int:
@@ -125,6 +129,12 @@ def simulate(args: argparse.Namespace) -> int:
         print("exo-ilc simulate: error: --resume needs --store DIR", file=sys.stderr)
         return 2
     config = config_from_args(args)
+    from .therapy import simulate_session, uses_therapy
+
+    if uses_therapy(args):
+        _, runs = simulate_session(args, config)
+        print_report(args, config, runs)
+        return 0
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     trials = config["max_trials"]
     runs = []
@@ -138,6 +148,12 @@ def simulate(args: argparse.Namespace) -> int:
             result = run_trials(config, delta, trials, on_trial=progress, store=args.store,
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
+        if args.json:  # the therapy metrics of every trial (core/metrics.py)
+            from ..core.metrics import config_metrics
+
+            measured = config.replace({"mass_uncertainty": delta})
+            runs[-1].extra["metrics"] = [config_metrics(r, measured).to_json()
+                                         for r in result.records]
         for trial, notes in result.notes.items():
             for note in notes:
                 print(f"delta {delta:g}, learning from trial {trial}: {note}", file=sys.stderr)

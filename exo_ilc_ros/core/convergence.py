@@ -76,8 +76,9 @@ class JointLoop:
         return np.asarray(1.0 - self.kp * pq - self.kd * pv)
 
     def factor(self, frequency_hz: np.ndarray, memory: Memory, gains: tuple[float, float, float],
-               q: np.ndarray | None = None) -> np.ndarray:
-        """|F(e^jw)| of eq (*) in the module docstring, per frequency."""
+               q: np.ndarray | None = None, forgetting: float | None = None) -> np.ndarray:
+        """|F(e^jw)| of eq (*) in the module docstring, per frequency; with ``forgetting``
+        (assist-as-needed on) the worst over its deadband's gate, :func:`.assist.aan_factor`."""
         w = 2.0 * np.pi * np.asarray(frequency_hz, dtype=float) * self.period
         z = np.exp(1j * w)
         pq, pv = self.closed_loop(z)
@@ -85,16 +86,23 @@ class JointLoop:
         m = 1.0 - self.kp * pq - self.kd * pv if memory is Memory.TOTAL_INPUT else 1.0
         gp, gd, gdd = gains
         f = m - gp * pq - gd * pv - gdd * d * pv
+        if forgetting is not None:
+            from .assist import aan_factor
+
+            worst = aan_factor(f, m * np.ones_like(z), forgetting)
+            return np.asarray(worst if q is None else np.abs(q) * worst)
         if q is not None:
             f = q * f
         return np.asarray(np.abs(f))
 
 
 def lifted_map(loop: JointLoop, samples: int, memory: Memory,
-               gains: tuple[float, float, float], qfilter: QFilter | None = None) -> np.ndarray:
+               gains: tuple[float, float, float], qfilter: QFilter | None = None,
+               forgetting: float | None = None, gate: float = 1.0) -> np.ndarray:
     """The (N+1) x (N+1) matrix F of u_ff,k+1 = F u_ff,k + const over one finite trial: eq (*)
     lifted, with the trial's edges (x(0) = x_d(0), the unapplied last sample, ``numpy.gradient``'s
-    one-sided ends and the Q-filter's edge handling) included exactly.
+    one-sided ends and the Q-filter's edge handling) included exactly. With ``forgetting``
+    (assist-as-needed) f M + G (F - M) at the deadband's gate G = ``gate`` (:mod:`.assist`).
 
     P_q[i, m] = [1 0] (A - B K)^(i-m-1) B for i > m (Markov parameters), likewise P_v.
     """
@@ -116,6 +124,8 @@ def lifted_map(loop: JointLoop, samples: int, memory: Memory,
     base = eye - loop.kp * pq - loop.kd * pv if memory is Memory.TOTAL_INPUT else eye
     gp, gd, gdd = gains
     f = base - gp * pq - gd * pv - gdd * (gradient @ pv)
+    if forgetting is not None:
+        f = forgetting * base + gate * (f - base)
     if qfilter is not None:
         f = qfilter.apply(eye) @ f
     return np.asarray(f)
@@ -198,6 +208,8 @@ class LoopAnalysis:
     frequency_hz: np.ndarray
     joints: list[JointFactor]
     qfilter: QFilter | None
+    forgetting: float | None = None
+    """Assist-as-needed's forgetting factor when it is on (factors: worst over its gate)."""
 
     @property
     def nyquist_hz(self) -> float:
@@ -237,21 +249,29 @@ def analyze_loop(config: Config, law: str | None = None, mass_uncertainty: float
     q = q_filter.response(frequency) if q_filter is not None else None
     if name == "norm_optimal":
         return _analyze_norm_optimal(config, delta, frequency, q_filter, q, lifted_trials)
+    forgetting = config["assist_as_needed.forgetting"] \
+        if config["assist_as_needed.enabled"] else None
     joints = []
     for name_j, kp, kd, gains in zip(config["joint_names"], config["control.kp"],
                                      config["control.kd"], learning_gains(config, name),
                                      strict=True):
         loop = JointLoop(1.0 / (1.0 + delta), kp, kd, period)
-        raw = loop.factor(frequency, memory, gains)
+        raw = loop.factor(frequency, memory, gains, forgetting=forgetting)
         plain = with_q = None
         if lifted_trials > 0:
-            samples = round(config["trajectory.duration"] / period) + 1
-            plain = lifted_check(lifted_map(loop, samples, memory, gains), lifted_trials)
+            from .exercise import exercise_duration
+
+            samples = round(exercise_duration(config) / period) + 1
+            gates = (1.0,) if forgetting is None else (0.0, 1.0)  # both ends of the deadband
+            plain = max((lifted_check(lifted_map(loop, samples, memory, gains, None, forgetting,
+                                                 g), lifted_trials) for g in gates),
+                        key=lambda c: c.spectral_radius)
             if q_filter is not None:
-                with_q = lifted_check(lifted_map(loop, samples, memory, gains, q_filter),
-                                      lifted_trials)
+                with_q = max((lifted_check(lifted_map(loop, samples, memory, gains, q_filter,
+                                                      forgetting, g), lifted_trials)
+                              for g in gates), key=lambda c: c.spectral_radius)
         joints.append(JointFactor(name_j, raw, None if q is None else q * raw, plain, with_q))
-    return LoopAnalysis(name, memory, delta, period, frequency, joints, q_filter)
+    return LoopAnalysis(name, memory, delta, period, frequency, joints, q_filter, forgetting)
 
 
 def _analyze_norm_optimal(config: Config, delta: float, frequency: np.ndarray,

@@ -32,3 +32,8 @@ class SafetyError(ExoIlcError):
 
 class StoreError(ExoIlcError):
     """The store of learned data cannot be read, written or resumed (says which file and why)."""
+
+
+class ProfileError(ExoIlcError):
+    """A patient's learned profile cannot be found, read, trusted or used with this config
+    (says which patient, exercise, version or file, and why)."""

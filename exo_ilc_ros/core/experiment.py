@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .assist import with_assist
 from .config import Config
 from .errors import SafetyError
 from .laws import (
@@ -38,7 +39,13 @@ def build_arm(config: Config) -> ArmModel:
 
 
 def build_reference(config: Config) -> SampledReference:
-    """The quintic reference of eq (14) sampled at the control period."""
+    """The quintic reference of eq (14) sampled at the control period, or the config's
+    exercise (``exercise.name``, a piecewise quintic through rest points, :mod:`.exercise`)."""
+    from .exercise import exercise_reference
+
+    exercise = exercise_reference(config)
+    if exercise is not None:
+        return exercise
     trajectory = QuinticTrajectory.rest_to_rest(config["trajectory.start"],
                                                 config["trajectory.goal"],
                                                 config["trajectory.duration"])
@@ -54,9 +61,10 @@ def build_schedule(config: Config, term: str) -> StepSchedule:
 
 def build_law(config: Config, law: str | None = None) -> LearningLaw:
     """The learning law named by ``law`` (default: the config's ``law``) with its options,
-    wrapped in :class:`QFilteredLaw` when the config enables the Q-filter or a
+    with assist-as-needed when the config enables it (:mod:`.assist`), wrapped in
+    :class:`QFilteredLaw` when the config enables the Q-filter or a
     ``feedforward_limit``."""
-    inner = _build_plain_law(config, law)
+    inner = with_assist(_build_plain_law(config, law), config)
     qfilter = qfilter_of(config)
     limit = feedforward_limit_of(config)
     if qfilter is None and limit is None:

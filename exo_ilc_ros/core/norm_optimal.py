@@ -71,7 +71,7 @@ MODEL_KEYS = ("norm_optimal.model_kind", "norm_optimal.model_mass_uncertainty", 
               "control.kp", "control.kd", "trajectory.start", "trajectory.goal",
               "trajectory.duration", "model.link_masses", "model.link_lengths",
               "model.radius_proximal", "model.radius_distal", "model.joint_axes",
-              "model.gravity")
+              "model.gravity", "exercise.name", "exercise.file")
 """Every config value the lifted model depends on (its cache key)."""
 WEIGHT_KEYS = ("norm_optimal.weight_error", "norm_optimal.weight_input_change",
                "norm_optimal.weight_input_size")

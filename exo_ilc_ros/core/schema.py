@@ -70,6 +70,15 @@ def _margin_rule(value: Any) -> str | None:
     return None if value < 1.0 else f"must be < 1 (a share of the limit), got {value!r}"
 
 
+def _forgetting_rule(value: Any) -> str | None:
+    return None if 0.0 < value <= 1.0 else f"must be in (0, 1] (1: no forgetting), got {value!r}"
+
+
+def _name_rule(value: Any) -> str | None:
+    ok = bool(value) and all(c.isalnum() or c in "_-" for c in value)
+    return None if ok else f"must be a name of letters, digits, _ and -, got {value!r}"
+
+
 MAS_GRADES = ("custom", "0", "1", "1+", "2", "3")
 """``patient.spasticity.mas_grade``: ``custom`` (the spasticity values given) or a Modified
 Ashworth grade (its preset, core/patient.py ``MAS_PRESETS``)."""
@@ -204,6 +213,13 @@ PARAMETERS: tuple[Parameter, ...] = (
               per_joint=True),
     Parameter("trajectory.duration", SHARED, Kind.DOUBLE, "T of eq (14) (s)",
               strictly_positive=True),
+    Parameter("exercise.name", SHARED, Kind.STRING,
+              "the movement (reference) of every trial: paper_quintic (eq (14) from "
+              "trajectory.*) or an exercise of exercise.file (core/exercise.py)",
+              extra_rule=_name_rule),
+    Parameter("exercise.file", SHARED, Kind.STRING,
+              "the exercises file (rest points and durations per exercise, sessions); "
+              "empty: the shipped config/exercises/default.yaml"),
     Parameter("control.period", SHARED, Kind.DOUBLE,
               "control period (s): effort held over it; the error sums (13) are over its samples",
               strictly_positive=True),
@@ -259,6 +275,9 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("store.resume", SUPERVISOR, Kind.BOOL,
               "continue after the last trial in store.directory (false: a store that already "
               "holds trials of this run is an error)"),
+    Parameter("profile.initial", SUPERVISOR, Kind.STRING,
+              "a patient's profile version file (.npz, core/profiles.py) whose feed-forward "
+              "trial 1 uses (exo-ilc simulate/run --patient set it); empty: initial_feedforward"),
     Parameter("stop_when_settled", SUPERVISOR, Kind.INTEGER,
               "stop once every joint has stayed within the bound this many trials (0: never)",
               minimum=0.0, live=True),
@@ -322,6 +341,22 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("feedforward_limit", SUPERVISOR, Kind.DOUBLE_ARRAY,
               "bound on |learned feed-forward| per joint (rad/s^2, the units of u); 0: no bound",
               per_joint=True, minimum=0.0, live=True),
+    Parameter("assist_as_needed.enabled", SUPERVISOR, Kind.BOOL,
+              "assist-as-needed (core/assist.py, Emken et al. 2007): forgetting factor and "
+              "error deadband around the law", live=True),
+    Parameter("assist_as_needed.forgetting", SUPERVISOR, Kind.DOUBLE,
+              "f of u_k+1 = f u_k + G(e) (learned step): the learned input decays by f per "
+              "trial unless the error calls for it (1: no forgetting)", live=True,
+              extra_rule=_forgetting_rule),
+    Parameter("assist_as_needed.variability", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "sigma: the patient's own trial-to-trial variability of the position error (rad) "
+              "per joint; 0: no deadband", per_joint=True, minimum=0.0, live=True),
+    Parameter("assist_as_needed.deadband_sigmas", SUPERVISOR, Kind.DOUBLE,
+              "deadband half-width in sigmas: |e| below it is not learned (Emken: 3)",
+              minimum=0.0, live=True),
+    Parameter("assist_as_needed.transition_sigmas", SUPERVISOR, Kind.DOUBLE,
+              "width of the tanh transition at the deadband's edge, in sigmas (Emken: 0.5)",
+              strictly_positive=True, live=True),
 )
 
 BY_NAME: Mapping[str, Parameter] = {p.name: p for p in PARAMETERS}

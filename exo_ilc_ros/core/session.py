@@ -101,8 +101,14 @@ class LearningSession:
         self._custom_law = self.law is not None
         self.active_law: LearningLaw = self.law or build_law(self.config)
         self.reference = build_reference(self.config)
-        first = self.active_law.initial_feedforward(self.reference)
-        self.next_update = FeedforwardUpdate(first, None)
+        if self.config["profile.initial"]:  # a patient's learned profile (core/profiles.py)
+            from .profiles import load_initial
+
+            self.next_update = load_initial(self.config["profile.initial"], self.config,
+                                            self.reference)
+        else:
+            first = self.active_law.initial_feedforward(self.reference)
+            self.next_update = FeedforwardUpdate(first, None)
         self.stop = self._stop_reason()
 
     # --- what runs next ---------------------------------------------------------------------
@@ -238,6 +244,8 @@ class RunResult:
     records: list[TrialRecord] = field(default_factory=list)
     final: FeedforwardUpdate | None = None
     """The feed-forward learned from the last trial (what trial K+1 would use)."""
+    patient_memory: tuple[np.ndarray, np.ndarray] | None = None
+    """A learning virtual patient's fast and slow states after the run (None: none)."""
     resumed: int = 0
     """Trials restored from the store rather than run (0: none)."""
     stop: StopReason | None = None
@@ -282,7 +290,9 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
                on_trial: Callable[[TrialRecord], None] | None = None,
                learning_law: LearningLaw | None = None,
                store: Path | str | None = None, resume: bool = False,
-               changes: Mapping[int, Mapping[str, Any]] | None = None) -> RunResult:
+               changes: Mapping[int, Mapping[str, Any]] | None = None,
+               on_conclusion: Callable[[TrialConclusion], None] | None = None,
+               patient_memory: tuple[np.ndarray, np.ndarray] | None = None) -> RunResult:
     """Run the experiment in-process, learning between trials: a loop over a
     :class:`LearningSession` (its rules, including ``stop_when_settled``, are the graph's).
 
@@ -294,7 +304,10 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
     are saved before the next trial starts; with ``resume`` the trials already stored under
     this run's learning key are restored (bit for bit) and the run continues after the last
     one. A store that already holds trials without ``resume`` is an error (nothing is
-    overwritten).
+    overwritten). ``on_conclusion`` sees each trial's conclusion (what the next trial uses)
+    once the store holds it (a patient's profile is saved from it, core/profiles.py).
+    ``patient_memory`` (fast, slow) starts a learning patient with what an earlier session left
+    (core/therapy.py); ``result.patient_memory`` is what this run leaves.
     """
     overrides: dict[str, Any] = {}
     if trials is not None:
@@ -313,6 +326,9 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
                        float(effective["error_bound"]))
     patient = PatientLearning(experiment.patient, experiment.reference.samples) \
         if experiment.patient.learns else None
+    if patient is not None and patient_memory is not None:  # the same patient, a new session
+        patient.fast, patient.slow = (np.array(x, dtype=float) for x in patient_memory)
+        patient.torque = patient.fast + patient.slow
     run_store: RunStore | None = None
     if store is not None:
         run_store, restored = session.open_store(store, resume)
@@ -335,6 +351,8 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
                 experiment = Experiment(session.config)
         if run_store is not None:
             run_store.save(record, conclusion.update, conclusion.config)
+        if on_conclusion is not None:
+            on_conclusion(conclusion)
         result.records.append(record)
         if conclusion.learned and conclusion.update.notes:
             result.notes[record.trial] = conclusion.update.notes
@@ -342,4 +360,6 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
             on_trial(record)
     result.final = session.next_update
     result.stop = session.stop
+    if patient is not None:
+        result.patient_memory = (patient.fast.copy(), patient.slow.copy())
     return result

@@ -10,6 +10,7 @@ from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticStatus
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from ..core.metrics import metric_summary_values
 from ..core.schema import SUPERVISOR
 from ..core.session import TrialConclusion
 from ..core.trajectory import SampledReference
@@ -47,5 +48,6 @@ def trial_summary(conclusion: TrialConclusion, joint_names: Sequence[str]) -> Di
                             record.aborted_at, conclusion.applied,
                             None if record.true_position is None
                             else record.true_max_abs_error)
+    values += metric_summary_values(record, config, joint_names)  # core/metrics.py
     level = DiagnosticStatus.OK if conclusion.within_bound else DiagnosticStatus.WARN
     return status(topics.SUMMARY_STATUS, f"trial {record.trial}", values, level, SUPERVISOR)

@@ -1,0 +1,320 @@
+"""The session report a therapist reads: one self-contained HTML page per session (figures as
+base64 PNG, no script, no external file), built from the session's bags and the patient's
+profiles (``exo-ilc report BAG... --html report.html``).
+
+Per exercise: the tracking error and the robot's assistance over the trials, the patient's share
+of the work, the trials the safety envelope stopped or the watchdog made run again and what that
+means, and the session beside the patient's earlier sessions of the exercise (the profile
+versions' provenance). Every number carries its unit.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from ..bag.provenance import PREFIX
+from ..bag.reader import BagRun, read_metadata
+from ..core.config import Config
+from ..core.exercise import PAPER_EXERCISE
+from ..core.experiment import build_reference
+from ..core.laws import TrialRecord
+from ..core.metrics import METRIC_UNITS, TrialMetrics, config_metrics
+from ..core.profiles import ProfileBook
+
+PATIENT = PREFIX + "patient"
+EXERCISE = PREFIX + "exercise"
+SESSION = PREFIX + "session"
+PROFILE_VERSION = PREFIX + "profile_version"
+PROFILE_STARTED_FROM = PREFIX + "profile_started_from"
+
+
+@dataclass
+class ExerciseRun:
+    """One exercise of a session as its bag holds it."""
+
+    path: Path
+    patient: str
+    exercise: str
+    session: str
+    joint_names: list[str]
+    metrics: list[TrialMetrics]
+    error_bound: float
+    envelope: list[float]
+    law: str
+    assist: bool
+    period: float
+    watchdog_periods: int
+    aborts: list[tuple[int, int]] = field(default_factory=list)
+    """(trial, sample) the error envelope stopped."""
+    reruns: list[tuple[int, str]] = field(default_factory=list)
+    """(trial, reason) of every attempt discarded and run again (watchdog, lost, timeout)."""
+    notes: list[str] = field(default_factory=list)
+    profile_version: str = ""
+    started_from: str = ""
+
+
+def _record_of(run: BagRun, k: int, config: Config) -> TrialRecord | None:
+    """Trial ``k`` of ``run`` as a record (for metrics of a bag that has none filed)."""
+    trial = run.trials.get(k)
+    if trial is None or not trial.complete or trial.feedforward is None or \
+            np.isnan(trial.command).any():
+        return None
+    reference = build_reference(config)
+    if reference.samples != trial.position.shape[0]:
+        return None
+    at = trial.aborted_at if trial.aborted_at is None or trial.aborted_at >= 0 else None
+    return TrialRecord(k, reference, trial.position, trial.velocity, trial.feedforward,
+                       trial.command, trial.command, None, at)
+
+
+def exercise_run(run: BagRun) -> ExerciseRun:
+    """The report's view of a bag: its metrics (filed in the summaries, else computed from the
+    samples), aborts and reruns, and the patient / exercise / session it belongs to."""
+    custom = dict(read_metadata(run.path).get("custom_data") or {})
+    sidecar = run.path / "therapy.json"  # a graph run's (cli/therapy.py writes it)
+    if PATIENT not in custom and sidecar.is_file():
+        try:
+            side = json.loads(sidecar.read_text())
+            custom.update({PATIENT: str(side["patient"]), EXERCISE: str(side["exercise"]),
+                           SESSION: str(side["session"]),
+                           PROFILE_VERSION: str(side.get("profile_version") or ""),
+                           PROFILE_STARTED_FROM: str(side.get("profile_started_from") or "")})
+        except (OSError, ValueError, KeyError) as exc:
+            run.notes.append(f"{sidecar}: unreadable ({exc}); patient unknown")
+    config = run.provenance.config
+    values = config.values if config is not None else {}
+    names = run.joint_names
+    metrics: list[TrialMetrics] = []
+    for k in run.completed:
+        summary = run.summaries.get(k, {})
+        aborted = run.trials[k].aborted_at is not None if k in run.trials else False
+        found = TrialMetrics.from_summary(k, summary, names, aborted)
+        if found is None and config is not None:  # a bag of a version without metrics
+            record = _record_of(run, k, config)
+            found = None if record is None else config_metrics(
+                record, config.replace({"mass_uncertainty": run.mass_uncertainty}))
+        if found is not None:
+            metrics.append(found)
+    aborts = [(k, t.aborted_at if t.aborted_at is not None else -1)
+              for k, t in sorted(run.trials.items()) if t.aborted_at is not None]
+    reruns = [(k, reason) for k, t in sorted(run.trials.items()) for reason in t.reruns]
+    return ExerciseRun(
+        run.path, custom.get(PATIENT, "") or "(no patient)",
+        custom.get(EXERCISE, "") or str(values.get("exercise.name", PAPER_EXERCISE)),
+        custom.get(SESSION, "") or run.path.name, names, metrics, run.error_bound,
+        list(values.get("safety.error_envelope", [])), run.law,
+        bool(values.get("assist_as_needed.enabled", False)), run.period,
+        int(values.get("safety.watchdog_periods", 0)), aborts, reruns, list(run.notes),
+        custom.get(PROFILE_VERSION, ""), custom.get(PROFILE_STARTED_FROM, ""))
+
+
+def group_by_session(runs: Sequence[ExerciseRun]) -> dict[tuple[str, str], list[ExerciseRun]]:
+    """(patient, session) -> its exercises, in the order given."""
+    out: dict[tuple[str, str], list[ExerciseRun]] = {}
+    for run in runs:
+        out.setdefault((run.patient, run.session), []).append(run)
+    return out
+
+
+def _png(fig: Figure) -> str:
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=90)
+    return base64.b64encode(buffer.getvalue()).decode("ascii")
+
+
+def exercise_figure(run: ExerciseRun) -> Figure:
+    """Per trial: peak true |e| (rad, log), assistance RMS (N m), learned feed-forward RMS
+    (rad/s^2), the patient's share (1); one line per joint."""
+    fig = Figure(figsize=(10.0, 6.4), layout="constrained")
+    axes = fig.subplots(2, 2, sharex=True)
+    trials = np.array([m.trial for m in run.metrics])
+    panels = ((axes[0, 0], "max_error", "peak true |e| (rad)"),
+              (axes[0, 1], "assistance_rms", "assistance: RMS torque beyond gravity (N m)"),
+              (axes[1, 0], "feedforward_rms", "learned feed-forward RMS (rad/s²)"),
+              (axes[1, 1], "patient_share", "patient's share of the work (fraction, 1 = 100 %)"))
+    for ax, name, label in panels:
+        table = np.array([getattr(m, name) for m in run.metrics])
+        for j, joint in enumerate(run.joint_names):
+            ax.plot(trials, table[:, j], marker=".", markersize=3, linewidth=1.0, label=joint)
+        ax.set_ylabel(label, fontsize=8)
+        ax.grid(True, linewidth=0.3)
+    axes[0, 0].set_yscale("log")
+    axes[0, 0].axhline(run.error_bound, color="k", linestyle="--", linewidth=0.8,
+                       label=f"bound {run.error_bound:g} rad")
+    share = np.array([m.patient_share_total for m in run.metrics])
+    axes[1, 1].plot(trials, share, color="k", linewidth=1.6, label="whole arm")
+    for ax in axes[1]:
+        ax.set_xlabel("trial")
+    for ax in axes.ravel():
+        ax.legend(fontsize=7)
+    fig.suptitle(f"{run.exercise}: {len(run.metrics)} trials", fontsize=10)
+    return fig
+
+
+STYLE = """
+body { font-family: sans-serif; margin: 2em auto; max-width: 62em; color: #222; }
+h1 { font-size: 1.5em; } h2 { font-size: 1.25em; border-bottom: 1px solid #ccc; }
+table { border-collapse: collapse; margin: 0.5em 0 1em; }
+td, th { border: 1px solid #bbb; padding: 0.2em 0.6em; text-align: right; }
+th { background: #eef; } td.l, th.l { text-align: left; }
+.note { color: #444; font-size: 0.92em; } .warn { color: #8a3b00; }
+img { max-width: 100%; }
+"""
+
+
+def _e(text: Any) -> str:
+    return html.escape(str(text))
+
+
+def _number(x: float, unit: str) -> str:
+    """``x`` with its unit: a share (unit 1) in per cent, SPARC as a dimensionless index."""
+    if unit == "1":
+        return f"{100.0 * x:.3g} %"
+    if unit == "SPARC":
+        return f"{x:.3f} (SPARC, dimensionless)"
+    return f"{x:.3g} {_e(unit)}"
+
+
+def _joint_rows(run: ExerciseRun) -> str:
+    first, last = run.metrics[0], run.metrics[-1]
+    rows = []
+    labels = (("max_error", "peak true |e|"), ("rms_error", "RMS true error"),
+              ("assistance_rms", "assistance (RMS torque beyond gravity compensation)"),
+              ("feedforward_rms", "learned feed-forward (RMS)"),
+              ("patient_share", "patient's share of the work"),
+              ("spasticity", "velocity-dependent resistance B (spasticity indicator)"))
+    for name, label in labels:
+        unit = METRIC_UNITS[name]
+        for which, m in ((f"trial {first.trial}", first), (f"trial {last.trial}", last)):
+            cells = "".join(f"<td>{_number(x, unit)}</td>" for x in getattr(m, name))
+            rows.append(f"<tr><td class=l>{_e(label)}</td><td class=l>{which}</td>{cells}</tr>")
+    for name, label, unit in (("patient_share_total", "patient's share, whole arm", "1"),
+                              ("smoothness", "smoothness, SPARC of the speed", "SPARC")):
+        a, b = getattr(first, name), getattr(last, name)
+        rows.append(f"<tr><td class=l>{label}</td><td class=l>trial {first.trial} → "
+                    f"{last.trial}</td><td colspan={len(run.joint_names)}>{_number(a, unit)} → "
+                    f"{_number(b, unit)}</td></tr>")
+    head = "".join(f"<th>{_e(n)}</th>" for n in run.joint_names)
+    return (f"<table><tr><th class=l>metric</th><th class=l>trial</th>{head}</tr>"
+            + "".join(rows) + "</table>")
+
+
+def _events(run: ExerciseRun) -> str:
+    parts = []
+    if run.aborts:
+        items = []
+        for trial, sample in run.aborts:
+            when = f"at t = {sample * run.period:.2f} s" if sample >= 0 else "(sample unknown)"
+            envelope = ", ".join(f"{x:g} rad" for x in run.envelope) or "?"
+            items.append(f"<li>trial {trial} stopped {when}</li>")
+        parts.append(
+            f"<p class=warn><b>{len(run.aborts)} trial(s) stopped by the safety envelope</b> "
+            f"(|error| above {envelope} per joint).</p><ul>{''.join(items)}</ul>"
+            "<p class=note>What it means: the arm moved further from the planned movement than "
+            "the safety envelope allows (a strong push or pull, a spasm, or assistance that did "
+            "not fit). The robot stopped following the movement and held the arm where it was. "
+            "The trial is kept in the record but nothing was learned from it; the next trial "
+            "used the same assistance.</p>")
+    else:
+        parts.append("<p>No trial was stopped by the safety envelope.</p>")
+    trips = [(k, r) for k, r in run.reruns if r == "watchdog"]
+    others = [(k, r) for k, r in run.reruns if r != "watchdog"]
+    if trips:
+        timeout = run.watchdog_periods * run.period
+        parts.append(
+            f"<p class=warn><b>{len(trips)} watchdog trip(s)</b>: trial(s) "
+            f"{', '.join(str(k) for k, _ in trips)}.</p><p class=note>What it means: the "
+            f"controller received no joint measurement for {run.watchdog_periods} control "
+            f"periods ({timeout:.2f} s) and held the arm still. This is a communication or "
+            "computer stall, not something the patient did. The interrupted attempt was "
+            "discarded and the trial run again from the same assistance; nothing was lost.</p>")
+    else:
+        parts.append("<p>No watchdog trip.</p>")
+    if others:
+        parts.append("<p class=note>Trials run again for other reasons: " + ", ".join(
+            f"trial {k} ({_e(r)})" for k, r in others) + " (the attempt was discarded, the "
+            "trial repeated with the same assistance; results unaffected).</p>")
+    return "".join(parts)
+
+
+def _history(run: ExerciseRun, book: ProfileBook | None) -> str:
+    if book is None or run.patient == "(no patient)":
+        return "<p class=note>No profiles given (--profiles): no comparison with earlier " \
+               "sessions.</p>"
+    index = book.index(run.patient, run.exercise) if run.patient in book.patients() else None
+    if index is None:
+        return f"<p class=note>No earlier sessions of {_e(run.exercise)} in {_e(book.root)}.</p>"
+    rows = []
+    for entry in index["versions"]:
+        metrics = entry.get("metrics") or {}
+        peak = max(entry.get("final_max_abs_error") or [float("nan")])
+        assist = metrics.get("assistance_rms")
+        share = metrics.get("patient_share_total")
+        mark = " (this session)" if str(entry["version"]) == run.profile_version else ""
+        rows.append(
+            f"<tr><td class=l>v{entry['version']}{mark}</td><td class=l>"
+            f"{_e(entry.get('updated', entry.get('created', '?')))}</td>"
+            f"<td>{entry.get('trials', 0)}</td><td>{entry.get('trials_total', 0)}</td>"
+            f"<td>{peak:.3g} rad</td>"
+            f"<td>{'-' if assist is None else f'{max(assist):.3g} N m'}</td>"
+            f"<td>{'-' if share is None else _number(share, '1')}</td>"
+            f"<td class=l>{_e(entry.get('status', '?'))}</td></tr>")
+    return ("<table><tr><th class=l>session (profile)</th><th class=l>last saved (UTC)</th>"
+            "<th>trials</th><th>trials in all</th><th>final peak |e|, worst joint</th>"
+            "<th>final assistance RMS, worst joint</th><th>final patient share</th>"
+            "<th class=l>status</th></tr>" + "".join(rows) + "</table>")
+
+
+def render_session(runs: Sequence[ExerciseRun], book: ProfileBook | None = None) -> str:
+    """The HTML page of one session (all ``runs`` share the patient and session)."""
+    first = runs[0]
+    sections = []
+    for run in runs:
+        if not run.metrics:
+            sections.append(f"<h2>{_e(run.exercise)}</h2><p class=warn>No completed trial with "
+                            f"metrics in {_e(run.path)}.</p>")
+            continue
+        start = f"from profile v{run.started_from}" if run.started_from else \
+            "from no stored profile"
+        aan = ", assist-as-needed" if run.assist else ""
+        sections.append(
+            f"<h2>{_e(run.exercise)}</h2><p>{len(run.metrics)} trials, learning law "
+            f"{_e(run.law)}{aan}, started {start}"
+            + (f", saved as profile v{_e(run.profile_version)}" if run.profile_version else "")
+            + f". Error bound {run.error_bound:g} rad. Bag: <code>{_e(run.path)}</code></p>"
+            f"<img alt='error, assistance, feed-forward and patient share over the trials of "
+            f"{_e(run.exercise)}' src='data:image/png;base64,{_png(exercise_figure(run))}'>"
+            + _joint_rows(run) + "<h3>Safety events</h3>" + _events(run)
+            + "<h3>Compared with earlier sessions</h3>" + _history(run, book))
+    glossary = (
+        "<h2>How to read this page</h2><ul class=note>"
+        "<li><b>peak / RMS true |e|</b> (rad): how far the arm was from the planned movement "
+        "(largest and typical), from the arm's true position.</li>"
+        "<li><b>assistance</b> (N m): the robot's torque beyond what merely holds the arm up "
+        "against gravity (RMS over the movement); falling assistance with a small error means "
+        "the patient does more.</li>"
+        "<li><b>learned feed-forward</b> (rad/s²): the part of the assistance the robot learned "
+        "from earlier trials.</li>"
+        "<li><b>patient's share of the work</b> (%): 1 - robot torque / torque the movement "
+        "needs (Guidali et al. 2013); 0 %: the robot did it all, 100 %: the patient did, "
+        "below 0 %: the patient worked against the robot.</li>"
+        "<li><b>smoothness</b> (SPARC, dimensionless): spectral arc length of the speed "
+        "(Balasubramanian et al. 2015); closer to 0 is smoother.</li>"
+        "<li><b>velocity-dependent resistance B</b> (N m s/rad): extra torque per unit speed "
+        "the robot needed; rises with spasticity.</li></ul>")
+    title = f"Therapy session: patient {first.patient}, session {first.session}"
+    return ("<!DOCTYPE html><html lang=en><head><meta charset='utf-8'>"
+            f"<title>{_e(title)}</title><style>{STYLE}</style></head><body>"
+            f"<h1>{_e(title)}</h1><p>{len(runs)} exercise(s): "
+            + ", ".join(_e(r.exercise) for r in runs) + ".</p>"
+            + "".join(sections) + glossary + "</body></html>\n")

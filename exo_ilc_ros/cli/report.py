@@ -1,0 +1,58 @@
+"""``exo-ilc report BAG... --html report.html``: the session report a therapist reads."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from .arguments import directory, output_file
+
+
+def register(sub: Any) -> None:
+    """Add the sub-command."""
+    parser = sub.add_parser(
+        "report", help="the therapy session report (one HTML page per session)",
+        description="Read the bags of a therapy session (exo-ilc simulate/run --patient ... "
+        "--bag) and write one self-contained HTML page per session: per exercise the error "
+        "and the assistance over the trials, the patient's share of the work, safety events "
+        "and the comparison with the patient's earlier sessions (from --profiles).")
+    parser.add_argument("bags", nargs="+", metavar="BAG", help="bag directories")
+    parser.add_argument("--html", required=True, type=output_file((".html", ".htm")),
+                        metavar="OUT.html", help="the page to write; with bags of several "
+                        "sessions one page each, OUT_<patient>_<session>.html")
+    parser.add_argument("--profiles", metavar="DIR", type=directory,
+                        help="profiles root, for the comparison with earlier sessions "
+                        "(default: $EXO_ILC_PROFILES or .exo-ilc/profiles, if it exists)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Read, group by session, render and write."""
+    from ..analysis.session_report import exercise_run, group_by_session, render_session
+    from ..bag import BagError, read_bag
+    from ..core.profiles import ProfileBook, write_bytes_atomic
+    from ..core.therapy import profiles_root
+    from .analyze import bag_paths
+
+    runs = []
+    for path in bag_paths(args.bags, "report"):  # bags/* also matches bags/README.md
+        try:
+            runs.append(exercise_run(read_bag(path)))
+        except BagError as exc:
+            print(f"exo-ilc report: error: {path}: {exc}", file=sys.stderr)
+            return 2
+    root = profiles_root(args.profiles)
+    book = ProfileBook(root) if root.is_dir() else None
+    sessions = group_by_session(runs)
+    out = Path(args.html)
+    for (patient, session), members in sessions.items():
+        target = out if len(sessions) == 1 else \
+            out.with_name(f"{out.stem}_{patient}_{session}{out.suffix}")
+        page = render_session(members, book)
+        write_bytes_atomic(target, page.encode("utf-8"))
+        target.chmod(0o644)  # a page to share (the atomic temp file is private)
+        print(f"wrote {target} (patient {patient}, session {session}, "
+              f"{len(members)} exercise(s))")
+    return 0

@@ -1,0 +1,212 @@
+"""``exo-ilc simulate --patient ID --exercise NAME ...``: a therapy session in-process, each
+exercise starting from the patient's latest profile (core/therapy.py)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from ..analysis.therapy import format_session_metrics
+from ..core.errors import ConfigError
+from ..core.exercise import exercises_path, load_book
+from ..core.profiles import ProfileBook
+from ..core.summary import RunSummary
+from ..core.therapy import ExerciseResult, prepare, profiles_root, run_exercise, session_id
+from .arguments import directory, nonempty
+
+
+def add_therapy_arguments(parser: argparse.ArgumentParser) -> None:
+    """--patient, --exercise, --session, --profiles, --new-patient (simulate and run)."""
+    group = parser.add_argument_group("therapy session (README, 'Therapy sessions')")
+    group.add_argument("--patient", metavar="ID", type=nonempty,
+                       help="the patient: each exercise starts from their latest learned "
+                       "profile and the session's is saved after every trial")
+    group.add_argument("--exercise", metavar="NAME", nargs="+",
+                       help="exercise(s) to run, --trials each (default: the config's "
+                       "exercise.name; names from the exercises file)")
+    group.add_argument("--session", metavar="PLAN", help="a session plan of the exercises file "
+                       "(exercises and trials each) instead of --exercise")
+    group.add_argument("--profiles", metavar="DIR", type=directory,
+                       help="profiles root (default: $EXO_ILC_PROFILES or .exo-ilc/profiles)")
+    group.add_argument("--new-patient", action="store_true",
+                       help="the patient has no profile yet (a first session); without it an "
+                       "unknown patient id is an error (a typo would start from zero)")
+
+
+def uses_therapy(args: argparse.Namespace) -> bool:
+    """True if any therapy flag was given (then --patient is required)."""
+    given = [f for f in ("exercise", "session", "profiles") if getattr(args, f, None)]
+    if given or getattr(args, "new_patient", False):
+        if not args.patient:
+            flag = "--" + (given[0].replace("_", "-") if given else "new-patient")
+            raise ConfigError(flag, "needs --patient ID")
+        return True
+    return bool(getattr(args, "patient", None))
+
+
+def plan_of(args: argparse.Namespace, config: Any) -> list[tuple[str, int | None]]:
+    """(exercise, trials) in order: --session's plan, else --exercise (None: --trials or
+    max_trials), else the config's exercise."""
+    if args.session and args.exercise:
+        raise ConfigError("--session", "cannot be combined with --exercise")
+    if args.session:
+        book = load_book(exercises_path(config), config.joints)
+        return [(item.exercise, item.trials) for item in book.session(args.session)]
+    names = args.exercise or [config["exercise.name"]]
+    if len(set(names)) != len(names):
+        raise ConfigError("--exercise", f"names an exercise twice: {names}")
+    return [(name, None) for name in names]
+
+
+def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[ExerciseResult],
+                                                                      list[RunSummary]]:
+    """Check everything, then run every exercise; returns the results and their summaries."""
+    if args.mass_uncertainty and len(args.mass_uncertainty) > 1:
+        raise ConfigError("--mass-uncertainty", "one value with --patient (one patient's arm)")
+    if args.resume or args.store or args.replay:
+        raise ConfigError("--patient", "cannot be combined with --store, --resume or --replay "
+                          "(the profile is saved after every trial)")
+    if args.mass_uncertainty:
+        config = config.replace({"mass_uncertainty": args.mass_uncertainty[0]})
+    book = ProfileBook(profiles_root(args.profiles))
+    plan = plan_of(args, config)
+    prepared = [prepare(config, book, args.patient, name, args.new_patient)
+                for name, _ in plan]  # every check before anything runs or is written
+    session = session_id()
+    results: list[ExerciseResult] = []
+    runs: list[RunSummary] = []
+    for item, (name, trials) in zip(prepared, plan, strict=True):
+        count = trials or item.config["max_trials"]
+        start = "from zero" if item.start is None else \
+            f"from profile v{item.start.version} ({item.start.provenance.get('trials_total')} " \
+            "trials learned)"
+        print(f"patient {args.patient}, exercise {name}: {count} trials, {start}",
+              file=sys.stderr)
+        with tqdm(total=count, desc=f"{args.patient} {name}", unit="trial", file=sys.stderr,
+                  disable=None) as bar:
+            def progress(record: Any, bar: Any = bar) -> None:
+                bar.update(1)
+                bar.set_postfix_str("max|e| " + " ".join(f"{x:.1e}"
+                                                         for x in record.max_abs_error))
+            done = run_exercise(item, book, count, on_trial=progress, session=session)
+        results.append(done)
+        summary = RunSummary.from_result(done.result)
+        summary.extra["therapy"] = done.to_json()
+        runs.append(summary)
+        print(f"profile: {book.directory(args.patient, name)} v{done.version}", file=sys.stderr)
+        if args.bag:
+            from ..bag import run_name, unique_path, write_run
+
+            path = unique_path(args.bag, run_name(f"sim_{args.patient}_{name}", done.result.law,
+                                                  done.result.mass_uncertainty))
+            write_run(path, done.config, done.result, metrics=done.metrics,
+                      extra_custom_data=therapy_custom_data(done, session))
+            print(f"bag: {path}", file=sys.stderr)
+    for done in results:
+        print(format_session_metrics(done, list(done.config["joint_names"])))
+        print()
+    return results, runs
+
+
+def therapy_custom_data(done: ExerciseResult, session: str) -> dict[str, str]:
+    """The bag's custom data naming the patient, exercise, session and profile versions."""
+    from ..analysis import session_report as keys
+
+    return {keys.PATIENT: done.patient, keys.EXERCISE: done.exercise, keys.SESSION: session,
+            keys.PROFILE_STARTED_FROM: str(done.started_from or ""),
+            keys.PROFILE_VERSION: str(done.version or "")}
+
+
+def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
+                      run_one: Callable[..., RunSummary]) -> list[RunSummary]:
+    """``exo-ilc run --patient``: the same checks as in-process, then each exercise through
+    the graph (the supervisor starts from the profile: ``profile.initial``). The profile is
+    written from the run's store (every completed trial) when the graph ends, also when it
+    was stopped, so a killed session keeps what it learned. Should ``exo-ilc`` itself be
+    killed before it writes the profile, the same command with ``--store DIR --resume``
+    continues the run from its store and writes it."""
+    from ..core.experiment import build_reference
+    from ..core.store import RunStore
+
+    if args.mass_uncertainty and len(args.mass_uncertainty) > 1:
+        raise ConfigError("--mass-uncertainty", "one value with --patient (one patient's arm)")
+    from .run import _check_store
+
+    if args.mass_uncertainty:
+        config = config.replace({"mass_uncertainty": args.mass_uncertainty[0]})
+    book = ProfileBook(profiles_root(args.profiles))
+    plan = plan_of(args, config)
+    prepared = [prepare(config, book, args.patient, name, args.new_patient)
+                for name, _ in plan]
+    for item, (_, trials) in zip(prepared, plan, strict=True):  # before any node starts
+        _check_store(item.config.replace({"max_trials": trials or item.config["max_trials"],
+                                          "store.directory": str(store_root)}), args.resume)
+    session = session_id()
+    runs: list[RunSummary] = []
+    for item, (name, trials) in zip(prepared, plan, strict=True):
+        count = trials or item.config["max_trials"]
+        cfg = item.config.replace({"max_trials": count, "store.directory": str(store_root),
+                                   "store.resume": bool(args.resume)})
+        reference = build_reference(cfg)
+        start = "from zero" if item.start is None else f"from profile v{item.start.version}"
+        print(f"patient {args.patient}, exercise {name}: {count} trials through the graph, "
+              f"{start}", file=sys.stderr, flush=True)
+        writer = book.begin(args.patient, name, cfg, reference, item.start, session)
+        summary: RunSummary | None = None
+        try:
+            summary = run_one(args, cfg, cfg["mass_uncertainty"], count)
+        finally:
+            stored = RunStore(store_root, cfg, reference).load()
+            done = _profile_from_store(writer, cfg, stored, count)
+            if done is not None and summary is not None:
+                summary.extra["therapy"] = {"patient": args.patient, "exercise": name,
+                                            "profile_started_from": None if item.start is None
+                                            else item.start.version,
+                                            "profile_version": writer.version,
+                                            "metrics": [m.to_json() for m in done]}
+                bag = summary.extra.get("bag")
+                if bag:
+                    _write_sidecar(Path(bag), args.patient, name, session,
+                                   item.start.version if item.start else None,
+                                   writer.version)
+            if done is not None:
+                print(f"profile: {writer.directory} v{writer.version} ({len(done)} trials)",
+                      file=sys.stderr)
+        if summary is not None:
+            runs.append(summary)
+    return runs
+
+
+def _profile_from_store(writer: Any, config: Any, stored: list[Any],
+                        count: int) -> list[Any] | None:
+    """Metrics of the stored trials and the profile version from the last one (None: no trial
+    completed, nothing written)."""
+    from ..core.metrics import config_metrics
+
+    if not stored:
+        return None
+    metrics = [config_metrics(s.record, config) for s in stored]
+    last = stored[-1]
+    writer.save(last.record.trial, last.next_update, last.record.max_abs_error,
+                complete=len(stored) >= count, metrics=metrics[-1].to_json())
+    return metrics
+
+
+SIDECAR = "therapy.json"
+"""Beside a graph run's bag: patient, exercise, session and profile versions (the recorder
+node does not know them)."""
+
+
+def _write_sidecar(bag: Path, patient: str, exercise: str, session: str,
+                   started_from: int | None, version: int) -> None:
+    from ..core.store import write_json_atomic
+
+    if bag.is_dir():
+        write_json_atomic(bag / SIDECAR, {"patient": patient, "exercise": exercise,
+                                          "session": session, "profile_started_from":
+                                          started_from, "profile_version": version})

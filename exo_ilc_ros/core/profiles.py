@@ -1,0 +1,323 @@
+"""Learned profiles: the feed-forward a patient's sessions learned for one exercise, kept from
+session to session so that the next session starts where the last one ended.
+
+Layout under the profiles root (``--profiles DIR``, default :func:`default_root`)::
+
+    <root>/<patient>/<exercise>/index.json    versions, their provenance, the current one
+    <root>/<patient>/<exercise>/v0001.npz     version 1: feedforward (N+1, joints), levels
+
+Each session writes one new version and rewrites it after every trial (status ``in_progress``;
+``complete`` at the end), so a killed session leaves the feed-forward learned up to its last
+completed trial. Versions are never deleted; ``rollback`` only moves ``current``. Every file is
+written atomically (temp file, fsync, rename, as :mod:`.store`) and each version's sha256 is in
+the index; a file that does not match is refused, never overwritten.
+
+A profile is used only with the model and reference it was learned with: the nominal model
+and the loop (:data:`MODEL_KEYS`) and the sampled reference (sha256 of its arrays). The plant
+(the patient's arm, mass uncertainty, ...) is deliberately not part of it: it is what changes
+between sessions. A mismatch is a :class:`ProfileError` naming what differs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .config import Config
+from .errors import ProfileError
+from .laws import FeedforwardUpdate
+from .store import _atomic, write_json_atomic
+from .trajectory import SampledReference
+
+PROFILE_FORMAT = 1
+MODEL_KEYS = ("joint_names", "model.link_masses", "model.link_lengths", "model.radius_proximal",
+              "model.radius_distal", "model.joint_axes", "model.gravity", "control.period",
+              "control.kp", "control.kd")
+"""What a feed-forward was learned *for*: the controller's nominal model and loop."""
+ROOT_ENVIRONMENT = "EXO_ILC_PROFILES"
+
+
+def default_root() -> Path:
+    """``$EXO_ILC_PROFILES``, else ``.exo-ilc/profiles`` in the working directory (beside the
+    run stores of ``exo-ilc run``)."""
+    return Path(os.environ.get(ROOT_ENVIRONMENT) or Path(".exo-ilc") / "profiles")
+
+
+def check_name(kind: str, name: str) -> str:
+    """A patient id or exercise name usable as a directory: letters, digits, ``_``, ``-``."""
+    if not name or not all(c.isalnum() or c in "_-" for c in name) or name.startswith("-"):
+        raise ProfileError(f"{kind} {name!r}: use letters, digits, _ and - only")
+    return name
+
+
+def model_values(config: Config) -> dict[str, Any]:
+    """The :data:`MODEL_KEYS` values of ``config``."""
+    return {k: config[k] for k in MODEL_KEYS}
+
+
+def reference_digest(reference: SampledReference) -> str:
+    """16 hex digits of sha256 over the sampled reference (position, velocity, acceleration)."""
+    digest = hashlib.sha256()
+    for array in (reference.position, reference.velocity, reference.acceleration):
+        digest.update(np.ascontiguousarray(array, dtype="<f8").tobytes())
+    return digest.hexdigest()[:16]
+
+
+@dataclass(frozen=True, eq=False)
+class Profile:
+    """One version of a patient's profile for an exercise."""
+
+    patient: str
+    exercise: str
+    version: int
+    path: Path
+    feedforward: np.ndarray
+    levels: np.ndarray | None
+    provenance: dict[str, Any]
+
+    @property
+    def update(self) -> FeedforwardUpdate:
+        """The profile as the first feed-forward of a session."""
+        return FeedforwardUpdate(self.feedforward.copy(),
+                                 None if self.levels is None else self.levels.copy())
+
+    def check_compatible(self, config: Config, reference: SampledReference) -> None:
+        """ProfileError naming the differing model values or the reference, if this profile
+        was learned with another model or movement than ``config``'s."""
+        what = f"profile v{self.version} of patient {self.patient!r}, exercise {self.exercise!r}"
+        stored = self.provenance.get("model", {})
+        now = model_values(config)
+        differ = [k for k in MODEL_KEYS if stored.get(k) != now[k]]
+        if differ:
+            detail = "; ".join(f"{k} {stored.get(k)!r} there, {now[k]!r} now" for k in differ)
+            raise ProfileError(f"{what} was learned with another model: {detail}")
+        if self.provenance.get("reference_digest") != reference_digest(reference) or \
+                self.feedforward.shape != reference.position.shape:
+            raise ProfileError(
+                f"{what} was learned with another reference: {self.provenance.get('samples')} "
+                f"samples of exercise {self.provenance.get('exercise_name')!r} (digest "
+                f"{self.provenance.get('reference_digest')}), now {reference.samples} samples "
+                f"(digest {reference_digest(reference)}); was the exercise changed?")
+
+
+def _read_npz(path: Path, sha256: str) -> dict[str, np.ndarray]:
+    try:
+        blob = path.read_bytes()
+    except OSError as exc:
+        raise ProfileError(f"{path}: cannot read: {exc.strerror}") from None
+    if hashlib.sha256(blob).hexdigest() != sha256:
+        raise ProfileError(f"{path}: corrupt profile file (sha256 does not match its index); "
+                           "roll back to an earlier version (exo-ilc profiles rollback)")
+    try:
+        with np.load(io.BytesIO(blob)) as data:
+            return {k: np.array(data[k]) for k in data.files}
+    except (OSError, ValueError) as exc:
+        raise ProfileError(f"{path}: unreadable profile file: {exc}") from None
+
+
+class ProfileBook:
+    """The profiles under one root: patients, their exercises, versions."""
+
+    def __init__(self, root: Path | str | None = None) -> None:
+        self.root = Path(root) if root is not None else default_root()
+
+    def patients(self) -> list[str]:
+        """Patient ids with at least one exercise profile."""
+        if not self.root.is_dir():
+            return []
+        return sorted(p.name for p in self.root.iterdir()
+                      if p.is_dir() and any((e / "index.json").is_file() for e in p.iterdir()))
+
+    def exercises(self, patient: str) -> list[str]:
+        """Exercises patient ``patient`` has a profile for (ProfileError if unknown)."""
+        self.require_patient(patient)
+        return sorted(e.name for e in (self.root / patient).iterdir()
+                      if (e / "index.json").is_file())
+
+    def require_patient(self, patient: str) -> None:
+        """ProfileError naming ``patient`` (and the known ones) if it has no profile here."""
+        check_name("patient", patient)
+        if patient not in self.patients():
+            known = ", ".join(self.patients()) or "none"
+            raise ProfileError(f"unknown patient {patient!r}: no profiles under {self.root} "
+                               f"(known: {known})")
+
+    def directory(self, patient: str, exercise: str) -> Path:
+        """Where ``patient``'s profile of ``exercise`` lives."""
+        return self.root / check_name("patient", patient) / check_name("exercise", exercise)
+
+    def index(self, patient: str, exercise: str) -> dict[str, Any] | None:
+        """The index of ``patient``'s profile of ``exercise`` (None if there is none);
+        ProfileError for an unreadable or inconsistent index."""
+        path = self.directory(patient, exercise) / "index.json"
+        if not path.exists():
+            return None
+        try:
+            document = json.loads(path.read_text())
+            if document.get("format") != PROFILE_FORMAT:
+                raise ValueError(f"format {document.get('format')!r}, expected {PROFILE_FORMAT}")
+            versions = document["versions"]
+            if [v["version"] for v in versions] != list(range(1, len(versions) + 1)):
+                raise ValueError("versions are not 1..n in order")
+            current = document["current"]
+            if current is not None and not 1 <= current <= len(versions):
+                raise ValueError(f"current version {current} does not exist")
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ProfileError(f"{path}: corrupt profile index: {exc}") from None
+        return dict(document)
+
+    def require_index(self, patient: str, exercise: str) -> dict[str, Any]:
+        """The index, or ProfileError naming the unknown patient or exercise."""
+        self.require_patient(patient)
+        index = self.index(patient, exercise)
+        if index is None:
+            raise ProfileError(f"patient {patient!r} has no profile for exercise {exercise!r} "
+                               f"(has: {', '.join(self.exercises(patient))})")
+        return index
+
+    def load(self, patient: str, exercise: str, version: int | None = None) -> Profile:
+        """Version ``version`` (default: the current one) of the profile, sha256 checked."""
+        index = self.require_index(patient, exercise)
+        number = index["current"] if version is None else version
+        if number is None or not 1 <= number <= len(index["versions"]):
+            raise ProfileError(f"patient {patient!r}, exercise {exercise!r} has no version "
+                               f"{number} (versions 1-{len(index['versions'])})")
+        entry = index["versions"][number - 1]
+        path = self.directory(patient, exercise) / entry["file"]
+        data = _read_npz(path, entry["sha256"])
+        levels = data.get("levels")
+        return Profile(patient, exercise, number, path, data["feedforward"],
+                       levels if levels is not None and levels.size else None, dict(entry))
+
+    def latest(self, patient: str, exercise: str) -> Profile | None:
+        """The current version, or None if the patient has no profile for the exercise."""
+        index = self.index(patient, exercise)
+        if index is None or index["current"] is None:
+            return None
+        return self.load(patient, exercise)
+
+    def rollback(self, patient: str, exercise: str, version: int) -> dict[str, Any]:
+        """Make ``version`` the current one (its file checked first); nothing is deleted."""
+        profile = self.load(patient, exercise, version)
+        index = self.require_index(patient, exercise)
+        index["current"] = profile.version
+        write_json_atomic(self.directory(patient, exercise) / "index.json", index)
+        return index
+
+    def begin(self, patient: str, exercise: str, config: Config, reference: SampledReference,
+              started_from: Profile | None, session: str = "") -> ProfileWriter:
+        """A new version for the session about to run (written at its first trial)."""
+        directory = self.directory(patient, exercise)
+        directory.mkdir(parents=True, exist_ok=True)
+        index = self.index(patient, exercise) or {"format": PROFILE_FORMAT, "patient": patient,
+                                                  "exercise": exercise, "current": None,
+                                                  "versions": []}
+        return ProfileWriter(directory, index, config, reference, started_from, session)
+
+
+class ProfileWriter:
+    """Writes one session's version of a profile after every trial (atomic)."""
+
+    def __init__(self, directory: Path, index: dict[str, Any], config: Config,
+                 reference: SampledReference, started_from: Profile | None,
+                 session: str) -> None:
+        self.directory = directory
+        self.index = index
+        self.version = len(index["versions"]) + 1
+        self.created = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+        self.base = {
+            "version": self.version, "file": f"v{self.version:04d}.npz",
+            "created": self.created, "session": session,
+            "config_digest": config.digest(), "model": model_values(config),
+            "reference_digest": reference_digest(reference), "samples": reference.samples,
+            "exercise_name": config["exercise.name"], "law": config["law"],
+            "assist_as_needed": bool(config["assist_as_needed.enabled"]),
+            "mass_uncertainty": config["mass_uncertainty"],
+            "started_from": None if started_from is None else started_from.version,
+            "trials_before": 0 if started_from is None else
+            int(started_from.provenance.get("trials_total", 0)),
+        }
+
+    def save(self, trials: int, update: FeedforwardUpdate, final_max_abs_error: Any,
+             complete: bool = False, metrics: dict[str, Any] | None = None) -> Path:
+        """The feed-forward after ``trials`` trials of this session (and their last max |e|
+        per joint, rad) as this version, made current; returns the file written."""
+        buffer = io.BytesIO()
+        levels = np.empty((0,)) if update.levels is None else np.asarray(update.levels, float)
+        np.savez(buffer, feedforward=np.asarray(update.feedforward, dtype=float), levels=levels)
+        blob = buffer.getvalue()
+        path = self.directory / self.base["file"]
+        with _atomic(path) as handle:
+            handle.write(blob)
+        entry = dict(self.base)
+        entry.update({
+            "updated": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            "sha256": hashlib.sha256(blob).hexdigest(), "trials": int(trials),
+            "trials_total": int(self.base["trials_before"]) + int(trials),
+            "final_max_abs_error": [float(x) for x in np.asarray(final_max_abs_error)],
+            "status": "complete" if complete else "in_progress",
+        })
+        if metrics:
+            entry["metrics"] = metrics
+        versions = [v for v in self.index["versions"] if v["version"] != self.version]
+        self.index = {**self.index, "versions": [*versions, entry], "current": self.version}
+        write_json_atomic(self.directory / "index.json", self.index)
+        return path
+
+
+def write_bytes_atomic(path: Path | str, blob: bytes) -> None:
+    """``blob`` to ``path``, atomically (as the store writes, :mod:`.store`)."""
+    with _atomic(Path(path)) as handle:
+        handle.write(blob)
+
+
+def export_profile(profile: Profile, path: Path | str) -> Path:
+    """``profile`` to ``path``: ``.json`` (provenance and the feed-forward as lists) or
+    ``.npz`` (the arrays and the provenance as JSON text); written atomically."""
+    path = Path(path)
+    if path.suffix == ".json":
+        document = {"patient": profile.patient, "exercise": profile.exercise,
+                    "version": profile.version, "provenance": profile.provenance,
+                    "feedforward": profile.feedforward.tolist(),
+                    "levels": None if profile.levels is None else profile.levels.tolist()}
+        write_json_atomic(path, document)
+    elif path.suffix == ".npz":
+        buffer = io.BytesIO()
+        np.savez(buffer, feedforward=profile.feedforward,
+                 levels=np.empty((0,)) if profile.levels is None else profile.levels,
+                 provenance=np.array(json.dumps(profile.provenance, sort_keys=True)))
+        with _atomic(path) as handle:
+            handle.write(buffer.getvalue())
+    else:
+        raise ProfileError(f"{path}: export to .json or .npz")
+    return path
+
+
+def load_initial(path: Path | str, config: Config,
+                 reference: SampledReference) -> FeedforwardUpdate:
+    """The first feed-forward of a session from a profile version file (``profile.initial``):
+    its sha256 checked against the index beside it, its model and reference against
+    ``config``'s (:meth:`Profile.check_compatible`)."""
+    path = Path(path)
+    index_path = path.parent / "index.json"
+    try:
+        index = json.loads(index_path.read_text())
+        entry = next(v for v in index["versions"] if v["file"] == path.name)
+    except (OSError, ValueError, KeyError, TypeError, StopIteration) as exc:
+        raise ProfileError(f"{path}: not a profile version listed in {index_path} "
+                           f"({type(exc).__name__}: {exc})") from None
+    data = _read_npz(path, entry["sha256"])
+    levels = data.get("levels")
+    profile = Profile(str(index.get("patient")), str(index.get("exercise")),
+                      int(entry["version"]), path, data["feedforward"],
+                      levels if levels is not None and levels.size else None, dict(entry))
+    profile.check_compatible(config, reference)
+    return profile.update

@@ -52,6 +52,7 @@ setup(
         "mcap-ros2-support>=0.5",
         "optuna>=4",
         "clarabel>=0.9",
+        "mujoco>=4",
     ],
     extras_require={
         "test": ["pytest>=8", "hypothesis>=6.100", "pin>=3", "ruff>=0.6", "mypy>=1.10",

@@ -155,7 +155,7 @@ def test_one_node_registry() -> None:
     plants = set(registry.PLANTS.values())
     for node in registry.NODES:
         module = importlib.import_module(node.module)
-        assert module.NAME == (schema.PLANT if node in plants else node.name)  # a plant's role
+        assert (schema.PLANT if node in plants else node.name) == module.NAME  # a plant's role
         assert callable(module.main) and isinstance(getattr(module, node.cls), type)
 
 

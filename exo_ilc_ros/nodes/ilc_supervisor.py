@@ -94,8 +94,8 @@ class IlcSupervisor(Node):
     # --- inputs -----------------------------------------------------------------------------
     def on_timer(self) -> None:
         """Read the plant's parameters once the graph is up, then drive the protocol."""
-        ready = (self.homing or self.reset_client.service_is_ready() and
-                 self.start_client.service_is_ready()) \
+        ready = (self.homing or (self.reset_client.service_is_ready() and
+                 self.start_client.service_is_ready())) \
             and self.state_sub.get_publisher_count() >= 1 and \
             (self.recorder_ready or not self.params.config["wait_for_recorder"])
         if ready and self.protocol.session is None and self.protocol.error is None:

@@ -95,7 +95,7 @@ def test_grid_and_interpolation() -> None:
 
 
 def test_homing_parameters_are_checked() -> None:
-    with pytest.raises(ConfigError, match="homing.position_tolerance"):
+    with pytest.raises(ConfigError, match=r"homing\.position_tolerance"):
         load_config(overrides={"homing.position_tolerance": [0.001, 0.0, 0.001]})
     with pytest.raises(ConfigError, match="protocol"):
         load_config(overrides={"protocol": "teleport"})
@@ -105,7 +105,7 @@ class ArmGraph:
     """An arm with its own clock (no reset) under the controller's homing decisions; every
     sample goes to the protocol, every report too, as the nodes pass them on."""
 
-    def __init__(self, config: Any, arm: Any = None, start: Sequence[float] | None = None
+    def __init__(self, config: Any, arm: Any = None, start: np.ndarray | None = None
                  ) -> None:
         self.experiment = Experiment(config, DELTA)
         ref = self.experiment.reference

@@ -77,7 +77,8 @@ class HomingPath:
         self.start = np.array(start, dtype=float)
         self.goal = np.array(goal, dtype=float)
         self.duration = homing_duration(self.start, self.goal, speed_limit, period)
-        self._curve = QuinticTrajectory.rest_to_rest(self.start, self.goal, self.duration) \
+        self._curve = QuinticTrajectory.rest_to_rest(
+            self.start.tolist(), self.goal.tolist(), self.duration) \
             if self.duration > 0.0 else None
         self._zero = np.zeros_like(self.goal)
 

@@ -34,6 +34,7 @@ setup(
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/config/layouts", glob("config/layouts/*")),
         ("share/" + package_name + "/config/scenarios", glob("config/scenarios/*.yaml")),
+        ("share/" + package_name + "/config/ros2_control", glob("config/ros2_control/*.yaml")),
         ("share/" + package_name + "/urdf", glob("urdf/*.urdf")),
         ("share/" + package_name + "/launch", glob("launch/*.py")),
     ],

@@ -224,3 +224,8 @@ def test_launch_file_starts_the_graph_and_the_recorder(monkeypatch: pytest.Monke
     assert load_config(recorder["config_file"])["mass_uncertainty"] == 0.1
     assert [n["executable"] for n in _launched(monkeypatch, record="false")] == \
         [n.name for n in registry.GRAPH]
+    mujoco = _launched(monkeypatch, plant="mujoco", mass_uncertainty="0.1")
+    assert [(n["executable"], n["name"]) for n in mujoco[:3]] == \
+        [("mujoco_plant", "plant_simulator"), *((n.name, n.name) for n in registry.GRAPH[1:])]
+    assert all({"protocol": "homing"} in n["parameters"] for n in mujoco[:3])
+    assert load_config(mujoco[3]["parameters"][0]["config_file"])["protocol"] == "homing"

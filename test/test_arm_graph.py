@@ -100,7 +100,7 @@ def test_our_simulator_without_services_converges_then_homing_times_out(tmp_path
     10 % heavier arm sags): the controller reports ``homing_failed`` with the reason on
     /diagnostics, its health goes to ERROR, and the run stops with the reason (GraphError,
     which `exo-ilc run` turns into exit 3 and the resume command); no trial is stored."""
-    from exo_ilc_ros.orchestration.graph import GraphSession, run_graph
+    from exo_ilc_ros.orchestration.graph import GraphSession, run_graph, stored_summaries
 
     config = load_config(overrides={**SHORT, "max_trials": 4})
     result = run_graph(config, nodes=graph_nodes("simulator", "homing"), timeout=240.0)
@@ -134,3 +134,22 @@ def test_our_simulator_without_services_converges_then_homing_times_out(tmp_path
     assert reports and "did not settle" in reports[0]["reason"]
     assert any(name == topics.CONTROLLER_HEALTH_STATUS and "homing failed" in message
                for name, message, _ in found)
+    assert stored_summaries(stuck) == []  # nothing was learned, nothing half-stored
+
+
+def test_an_arm_of_your_own_without_plant_parameters(tmp_path: Path) -> None:
+    """An arm that is not ours (a plant node renamed ``my_arm``, so no ``plant_simulator``
+    parameter service exists, as on hardware): the supervisor goes on with its own plant
+    values after PLANT_PARAMETER_WAIT (the shipped mass_uncertainty: the params file's
+    plant_simulator section is not the supervisor's) and the run completes under homing."""
+    from exo_ilc_ros.nodes import registry
+    from exo_ilc_ros.orchestration.graph import run_graph
+    from exo_ilc_ros.orchestration.launcher import GRAPH_NODES, NodeSpec
+
+    config = load_config(overrides={**SHORT, "trajectory.duration": 1.0, "max_trials": 2})
+    arm = NodeSpec(registry.PLANT.name, registry.FREE_RUNNING_PLANT.module,
+                   ("-r", "__node:=my_arm"))
+    result = run_graph(config, nodes=(arm, *GRAPH_NODES[1:]), timeout=120.0)
+    assert [s.trial for s in result.summaries] == [1, 2]
+    assert result.summaries[0].values["mass_uncertainty"] == \
+        repr(load_config()["mass_uncertainty"])

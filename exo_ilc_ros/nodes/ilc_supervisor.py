@@ -11,6 +11,7 @@ summaries and key the store).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 
 import numpy as np
@@ -46,6 +47,9 @@ from .messages import feedforward_message, trial_summary
 
 NAME = schema.SUPERVISOR
 PLANT_PARAMETERS = [p.name for p in schema.PARAMETERS if p.section == schema.PLANT]
+PLANT_PARAMETER_WAIT = 5.0
+"""protocol homing: wall seconds to wait for a plant's parameter service before going on
+without it (a real arm has none)."""
 
 
 class IlcSupervisor(Node):
@@ -60,6 +64,7 @@ class IlcSupervisor(Node):
         self.protocol = (HomingProtocol if self.homing else TrialProtocol)(
             config, self, lambda: self.params.pending)
         self.plant_future: Future | None = None
+        self.plant_wait_since = 0.0
         self.recorder_ready = False
 
         self.reset_client = self.create_client(Trigger, topics.RESET_SERVICE)
@@ -106,6 +111,15 @@ class IlcSupervisor(Node):
         if self.plant_future is None:
             if self.plant_params.services_are_ready():
                 self.plant_future = self.plant_params.get_parameters(PLANT_PARAMETERS)
+            elif self.homing:  # a real arm has no plant_simulator parameters
+                now = time.monotonic()
+                self.plant_wait_since = self.plant_wait_since or now
+                if now - self.plant_wait_since > PLANT_PARAMETER_WAIT:
+                    self.get_logger().warning(
+                        f"no {schema.PLANT} parameters after {PLANT_PARAMETER_WAIT:g} s (an arm "
+                        "of your own): summaries and the store use this node's "
+                        f"mass_uncertainty {self.params.config['mass_uncertainty']:g}")
+                    self.protocol.open({})
             return
         if not self.plant_future.done():
             return

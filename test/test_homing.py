@@ -296,3 +296,26 @@ def test_the_mujoco_arm_homes_and_runs_a_trial_as_our_plant() -> None:
         assert protocol.phase is Phase.FINISHED and len(graph.conclusions) == 1
         runs.append(graph.conclusions[0].record)
     np.testing.assert_allclose(runs[1].position, runs[0].position, atol=1e-9)
+
+
+def test_with_a_recorder_the_next_trial_is_pushed_only_once_the_last_is_filed(
+        tmp_path: Any) -> None:
+    """No start service holds a homed arm back, so under homing the next feed-forward goes out
+    only after the recorder filed (and the store saved) the last trial; until then the
+    controller holds the arm. Then the run goes on as usual."""
+    overrides = {"max_trials": 2, "wait_for_recorder": True,
+                 "store.directory": str(tmp_path / "store")}
+    graph = ArmGraph(load_config(overrides={**SHORT, **overrides}))
+    protocol = _protocol(graph, **overrides)
+    while len(graph.conclusions) < 1:
+        graph.run(1)
+    graph.run(300)
+    assert len(graph.pushed) == 1 and protocol.phase is Phase.WAIT_RECORDER
+    assert graph.driver.mode is ControllerMode.HOLD
+    assert protocol.store is not None and protocol.store.completed == 0
+    protocol.on_recorder_filed(1)
+    assert protocol.store.completed == 1 and [t for t, _ in graph.pushed] == [1, 2]
+    while len(graph.conclusions) < 2:
+        graph.run(1)
+    protocol.on_recorder_filed(2)
+    assert protocol.phase is Phase.FINISHED and protocol.store.completed == 2

@@ -38,9 +38,13 @@ class HomingProtocol(TrialProtocol):
         super().__init__(config, port, live, clock)
         self.max_missing = int(config["max_missing_samples"])
         self.recent: deque[tuple[int, np.ndarray, np.ndarray]] = deque(
-            maxlen=self.samples.received.shape[0])
+            maxlen=4 * self.samples.received.shape[0])
         """Samples seen while no trial runs (the ``homed`` report may come after sample 0)."""
         self.last_stamp = 0
+        self.token = 0
+        self.deferred = False
+        """The next trial's feed-forward waits until the recorder filed the last trial (the
+        controller would home and start it at once: there is no start to hold back)."""
         self.past_end = False
         self.late = 0
         self.missing = 0
@@ -49,10 +53,17 @@ class HomingProtocol(TrialProtocol):
 
     # --- steps -----------------------------------------------------------------------------
     def _reset(self) -> None:
-        """No reset service: the feed-forward goes out at once, keyed by a new token (above
-        every stamp seen), and the controller homes the arm once it has it."""
+        """No reset service: the feed-forward goes out, keyed by a new token (above every
+        stamp and token before), and the controller homes the arm once it has it; while the
+        recorder has not filed the last trial, only once it has."""
         assert self.session is not None
-        token = max(self.samples.t0_ns, self.last_stamp) + 1
+        if self.unsaved is not None:
+            self.deferred = True
+            self.after_save = "start"
+            self.samples.stop()
+            self._enter(Phase.WAIT_RECORDER)
+            return
+        self.token = token = max(self.token, self.samples.t0_ns, self.last_stamp) + 1
         self.samples.start(token)
         self.done_report = None
         self.past_end = False
@@ -61,6 +72,10 @@ class HomingProtocol(TrialProtocol):
         self.port.push_feedforward(self.trial, token, self.session.feedforward)
 
     def _begin_trial(self) -> None:
+        if self.deferred:  # the recorder filed the last trial: now the feed-forward
+            self.deferred = False
+            self._reset()
+            return
         self.refused = False
         self._enter(Phase.HOMING)
 
@@ -96,6 +111,8 @@ class HomingProtocol(TrialProtocol):
         """A checked sample: placed on the running trial's grid, else kept for a moment (the
         ``homed`` report may follow it)."""
         self.last_stamp = max(self.last_stamp, int(stamp_ns))
+        if self.phase is Phase.HOMING:
+            self.phase_since = self.clock()  # the arm moves: progress (its homing times out)
         if self.phase is not Phase.RUNNING or not self.samples.running:
             self.recent.append((int(stamp_ns), np.array(position), np.array(velocity)))
             return

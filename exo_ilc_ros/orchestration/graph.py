@@ -119,9 +119,9 @@ class GraphSession:
         self.summaries: list[TrialSummary] = []
         self.events: list[tuple[str, dict[str, str], float]] = []
         self._finished_after: int | None = None
+        """The last trial named by the supervisor's ``finished`` event (None: not yet)."""
         self.error: str | None = None
         """The supervisor's ``finished`` event's error (the run stopped on a fault)."""
-        """The last trial named by the supervisor's ``finished`` event (None: not yet)."""
         self._resumed_after = 0
         self.started_at: float | None = None
         """Wall time of the first trial's start event."""

@@ -83,3 +83,35 @@ def test_mjcf_merges_the_fictive_link_and_maps_joint_effects() -> None:
                               [0.0, 0.0, 0.03], ["x", "y", "x"])
     with pytest.raises(ModelError, match="link 2 has no mass"):
         arm_mjcf(bad, names, 0.001)
+
+
+def test_patient_keys_map_to_native_joint_effects() -> None:
+    """Where the configuration has the virtual patient's keys (branch ``patient``), the MuJoCo
+    arm takes viscous friction (+ spastic damping) as ``damping``, Coulomb friction as
+    ``frictionloss``, passive (+ spastic) stiffness towards the rest position as a joint spring:
+    MuJoCo's passive force is then -B qdot - K (q - q_0), by hand; a MAS preset is refused;
+    without the keys every effect is zero."""
+    from exo_ilc_ros.core.mujoco_arm import effects_from_values
+
+    assert effects_from_values(load_config().values) == JointEffects()
+    patient = {"patient.friction.viscous": [0.05, 0.0, 0.02],
+               "patient.spasticity.damping": [0.0, 0.0, 0.1],
+               "patient.friction.coulomb": [0.1, 0.0, 0.0],
+               "patient.passive.stiffness": [0.0, 0.5, 1.0],
+               "patient.spasticity.stiffness": [0.0, 0.0, 2.0],
+               "patient.passive.rest_position": [0.0, 0.1, 0.3],
+               "patient.spasticity.mas_grade": "custom"}
+    effects = effects_from_values(patient)
+    np.testing.assert_allclose(effects.damping, [0.05, 0.0, 0.12])
+    np.testing.assert_allclose(effects.stiffness, [0.0, 0.5, 3.0])
+    config = load_config()
+    arm = MujocoArm(build_arm(config), config["joint_names"], 0.01, 0.001, [40.0] * 3, effects)
+    np.testing.assert_allclose(arm.model.dof_frictionloss, [0.1, 0.0, 0.0])
+    q, qd = np.array([0.2, -0.3, 0.5]), np.array([1.0, -2.0, 0.5])
+    arm.set_state(q, qd)
+    np.testing.assert_allclose(arm.data.qfrc_passive,
+                               -np.array([0.05, 0.0, 0.12]) * qd
+                               - np.array([0.0, 0.5, 3.0]) * (q - np.array([0.0, 0.1, 0.3])),
+                               rtol=1e-12, atol=1e-15)
+    with pytest.raises(ModelError, match="mas_grade"):
+        effects_from_values({**patient, "patient.spasticity.mas_grade": "1+"})

@@ -18,7 +18,7 @@ all zero by default (the paper's plant).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -114,9 +114,36 @@ def arm_mjcf(model: ArmModel, joint_names: Sequence[str], timestep: float,
 
 
 def effects_from_config(config: Config) -> JointEffects:
-    """The MuJoCo-native joint effects the configuration asks for. None yet: the virtual
-    patient's ``patient.*`` keys are not on main (README "MuJoCo plant"); all zero."""
-    return JointEffects()
+    """The MuJoCo-native joint effects the configuration asks for (:func:`effects_from_values`
+    of its values)."""
+    return effects_from_values(config.values)
+
+
+def effects_from_values(values: Mapping[str, Any]) -> JointEffects:
+    """The virtual patient's effects MuJoCo expresses natively, from its ``patient.*`` keys
+    where the configuration has them (the virtual-patient branch; none: all zero):
+    ``friction.viscous`` + ``spasticity.damping`` -> ``damping``; ``friction.coulomb`` ->
+    ``frictionloss`` (MuJoCo's dry friction is a hard Coulomb law, not the tanh of
+    core/patient.py: close above ``stribeck_velocity``); ``passive.stiffness`` +
+    ``spasticity.stiffness`` -> ``stiffness`` towards ``passive.rest_position``. The stretch
+    reflex, the voluntary torque, sensors, start variation and effort delay have no MuJoCo
+    joint attribute and are not simulated here. A Modified Ashworth preset
+    (``spasticity.mas_grade`` not ``custom``) is refused: its values live in core/patient.py."""
+    if "patient.friction.viscous" not in values:
+        return JointEffects()
+    grade = values.get("patient.spasticity.mas_grade", "custom")
+    if grade != "custom":
+        raise ModelError(f"patient.spasticity.mas_grade {grade!r}: the MuJoCo plant takes "
+                         "only custom spasticity values (its preset is core/patient.py's)")
+
+    def joint(name: str) -> np.ndarray:
+        return np.asarray(values.get(f"patient.{name}", [0.0]), dtype=float)
+
+    return JointEffects(
+        damping=tuple(joint("friction.viscous") + joint("spasticity.damping")),
+        frictionloss=tuple(joint("friction.coulomb")),
+        stiffness=tuple(joint("passive.stiffness") + joint("spasticity.stiffness")),
+        springref=tuple(joint("passive.rest_position")))
 
 
 class MujocoArm:

@@ -132,6 +132,9 @@ class ArmGraph:
         self.drop: set[int] = set()
         """Stamps (as sample counts) whose message is lost on the way to the supervisor."""
         self.push: Any = None
+        self.jitter: Any = None
+        """Called with the sample count -> an offset (ns) of that sample's stamp (an arm whose
+        clock is not the control grid's)."""
         """Called at every sample with (stamp, q, qd) -> an extra joint torque (a person)."""
         self.count = 0
 
@@ -173,9 +176,10 @@ class ArmGraph:
             if protocol.phase is Phase.FINISHED:
                 return
             q, qd = self.arm.position.copy(), self.arm.velocity.copy()
-            effort, events = self.driver(self.stamp, q, qd)
+            stamp = self.stamp + (0 if self.jitter is None else self.jitter(self.count))
+            effort, events = self.driver(stamp, q, qd)
             if self.count not in self.drop:
-                protocol.on_sample(self.stamp, q, qd)
+                protocol.on_sample(stamp, q, qd)
             for ev in events:
                 if ev.kind == "homed":
                     protocol.on_homed(ev.trial, self.token, ev.stamp_ns)
@@ -319,3 +323,27 @@ def test_with_a_recorder_the_next_trial_is_pushed_only_once_the_last_is_filed(
         graph.run(1)
     protocol.on_recorder_filed(2)
     assert protocol.phase is Phase.FINISHED and protocol.store.completed == 2
+
+
+def test_stamps_off_the_grid_are_placed_on_it_and_counted_late() -> None:
+    """An arm whose stamps wander up to 4 ms off the 10 ms grid (every third sample 3-4 ms
+    late or early): controller and supervisor place each sample on the nearest grid point, so
+    the trials are those of on-grid stamps (to 1e-5 rad: homing's path and dwell run on the
+    stamps, so the start state moves by ~1e-7 rad); samples more than a quarter period off are
+    counted late."""
+    overrides = {"max_trials": 2, "law": "linear", "homing.dwell": 0.0}
+    runs = []
+    for jitter in (None, lambda k: (3 + k % 2) * MS * (1 if k % 6 == 0 else -1)
+                   if k % 3 == 0 else 0):
+        graph = ArmGraph(load_config(overrides={**SHORT, **overrides}))
+        graph.jitter = jitter
+        protocol = _protocol(graph, **overrides)
+        graph.run(5_000)
+        assert protocol.phase is Phase.FINISHED
+        runs.append(graph)
+    for exact, jittered in zip(runs[0].conclusions, runs[1].conclusions, strict=True):
+        np.testing.assert_allclose(jittered.record.position, exact.record.position, rtol=0,
+                                   atol=1e-5)
+    late = [int(v["samples_late"]) for v in runs[1].summaries]
+    assert [int(v["samples_late"]) for v in runs[0].summaries] == [0, 0]
+    assert all(30 <= n <= 36 for n in late), late  # ~1 in 3 of 101 samples

@@ -155,58 +155,66 @@ def test_an_arm_of_your_own_without_plant_parameters(tmp_path: Path) -> None:
         repr(load_config()["mass_uncertainty"])
 
 
-def test_mujoco_node_steps_per_command_and_holds_safely_without_commands(tmp_path: Path
-                                                                         ) -> None:
-    """The MuJoCo plant node in-process (no controller): its first sample goes out once a
-    command publisher is linked; each command advances one period exactly as MujocoArm.step;
-    a non-finite command is refused (counted, not applied); with no command for 1 s it steps
-    the safe hold around the pose of that moment on its own (``stalls``, health ERROR); the
-    next command releases it. No reset or start service exists."""
+def _plant_node(tmp_path: Path, **overrides: Any) -> tuple[Any, Any, Any, list[Any], list[Any],
+                                                         Any]:
+    """The MuJoCo plant node in-process with a peer (commands out, states and health in)."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    from exo_ilc_ros.core.controller import safe_hold_effort
-    from exo_ilc_ros.core.experiment import Experiment
-    from exo_ilc_ros.core.mujoco_arm import MujocoArm
     from exo_ilc_ros.nodes.common import DIAGNOSTICS_QOS, SAMPLES_QOS
-    from exo_ilc_ros.nodes.mujoco_plant import LOCK_STEP_STALL, MujocoPlant
-    from exo_ilc_ros.wire.cdr import float64_array
+    from exo_ilc_ros.nodes.mujoco_plant import MujocoPlant
 
-    config = load_config(overrides=SHORT)
+    config = load_config(overrides={**SHORT, **overrides})
     params = tmp_path / "params.yaml"
     params.write_text(config.to_ros_yaml("mujoco plant test"))
     rclpy.init(args=["--ros-args", "--params-file", str(params)])
+    plant = MujocoPlant()
+    peer = rclpy.create_node("mujoco_test_peer")
+    states: list[Any] = []
+    health: list[Any] = []
+    peer.create_subscription(JointState, topics.JOINT_STATES, states.append, SAMPLES_QOS)
+    peer.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, lambda m: health.extend(
+        s for s in m.status if s.name == "plant_simulator/health"), DIAGNOSTICS_QOS)
+    commands = peer.create_publisher(Float64MultiArray, topics.EFFORT_COMMANDS, SAMPLES_QOS)
+    executor = SingleThreadedExecutor()
+    executor.add_node(plant)
+    executor.add_node(peer)
+
+    def spin_until(done: Any, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while not done():
+            assert time.monotonic() < deadline, "timed out"
+            executor.spin_once(timeout_sec=0.01)
+    return plant, commands, spin_until, states, health, config
+
+
+def test_mujoco_node_in_lock_step_moves_only_per_command(tmp_path: Path) -> None:
+    """The MuJoCo plant node in lock-step (no controller): no reset or start service; its first
+    sample goes out once a command publisher is linked, and again (same stamp) after 1 s while
+    no command came; each command advances one period exactly as MujocoArm.step; a non-finite
+    command is refused (counted, not applied); without commands nothing moves (simulated time
+    stands still: a late command is never replaced by a step of the plant's own)."""
+    import rclpy
+
+    from exo_ilc_ros.core.experiment import Experiment
+    from exo_ilc_ros.core.mujoco_arm import MujocoArm
+    from exo_ilc_ros.nodes.mujoco_plant import FIRST_SAMPLE_AGAIN
+    from exo_ilc_ros.wire.cdr import float64_array
+
     try:
-        plant = MujocoPlant()
+        plant, commands, spin_until, states, _, config = _plant_node(tmp_path)
         assert plant.get_name() == "plant_simulator"
         assert not [s for s, _ in plant.get_service_names_and_types_by_node(
             "plant_simulator", "/") if s.endswith(("/reset", "/start"))]
-        peer = rclpy.create_node("mujoco_test_peer")
-        states: list[Any] = []
-        health: list[Any] = []
-        peer.create_subscription(JointState, topics.JOINT_STATES, states.append, SAMPLES_QOS)
-        peer.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, lambda m: health.extend(
-            s for s in m.status if s.name == "plant_simulator/health"), DIAGNOSTICS_QOS)
-        commands = peer.create_publisher(Float64MultiArray, topics.EFFORT_COMMANDS,
-                                         SAMPLES_QOS)
-        executor = SingleThreadedExecutor()
-        executor.add_node(plant)
-        executor.add_node(peer)
-
-        def spin_until(done: Any, timeout: float) -> None:
-            deadline = time.monotonic() + timeout
-            while not done():
-                assert time.monotonic() < deadline, "timed out"
-                executor.spin_once(timeout_sec=0.01)
-
-        spin_until(lambda: len(states) >= 1, 15.0)
+        spin_until(lambda: len(states) >= 2, 15.0 + FIRST_SAMPLE_AGAIN)
+        assert states[0].header.stamp == states[1].header.stamp  # sent again, not stepped
         twin = MujocoArm.from_config(config)  # the same arm, stepped here
         ref = Experiment(config).reference
         twin.set_state(ref.position[0], ref.velocity[0])
-        np.testing.assert_array_equal(states[0].position, ref.position[0])
+        np.testing.assert_array_equal(states[1].position, ref.position[0])
         for effort in ([1.0, 0.5, -0.2], [0.3, -0.1, 0.2]):
             commands.publish(float64_array(np.array(effort)))
             count = len(states)
@@ -214,27 +222,38 @@ def test_mujoco_node_steps_per_command_and_holds_safely_without_commands(tmp_pat
             twin.step(np.array(effort))
             np.testing.assert_array_equal(states[-1].position, twin.position)
             np.testing.assert_array_equal(states[-1].velocity, twin.velocity)
-        stamps = [int(s.header.stamp.sec) * 10**9 + int(s.header.stamp.nanosec) for s in states]
+        stamps = [int(s.header.stamp.sec) * 10**9 + int(s.header.stamp.nanosec)
+                  for s in states[1:]]
         assert np.all(np.diff(stamps) == 10_000_000)
         commands.publish(float64_array(np.array([np.nan, 0.0, 0.0])))
         spin_until(lambda: plant.rejections.log.total >= 1, 5.0)
-        assert len(states) == 3  # refused, not applied
-        pose = twin.position
-        spin_until(lambda: plant.stalls >= 2 and len(states) >= 5, 5.0 + LOCK_STEP_STALL)
+        deadline = time.monotonic() + FIRST_SAMPLE_AGAIN + 0.5
+        spin_until(lambda: time.monotonic() > deadline, 5.0)
+        assert len(states) == 4 and plant.stalls == 0  # refused, and nothing on its own
+    finally:
+        rclpy.try_shutdown()
+
+
+def test_mujoco_node_in_real_time_holds_safely_without_commands(tmp_path: Path) -> None:
+    """Real time: the last command is held for ``safety.watchdog_periods`` periods of wall
+    time; then the plant applies the safe hold around the pose of that moment on its own
+    (``stalls``, health ERROR "no effort command; safe hold"); a command releases it."""
+    import rclpy
+
+    from exo_ilc_ros.wire.cdr import float64_array
+
+    try:
+        plant, commands, spin_until, states, health, _ = _plant_node(tmp_path,
+                                                                     mode="real_time")
+        spin_until(lambda: len(states) >= 1, 15.0)
+        commands.publish(float64_array(np.zeros(3)))
+        spin_until(lambda: plant.commands >= 1, 5.0)
+        spin_until(lambda: plant.stalls >= 3, 5.0)
         assert plant.hold_pose is not None
-        np.testing.assert_array_equal(plant.hold_pose, pose)
-        e = plant.experiment
-        hold = safe_hold_effort(pose, twin.position, twin.velocity, e.kp, e.kd,
-                                e.nominal.kernel_args, plant.limit)
-        twin.step(hold)
-        np.testing.assert_array_equal(states[3].position, twin.position)
         plant.on_health_timer()
-        spin_until(lambda: any("safe hold" in h.message for h in health), 5.0)
+        spin_until(lambda: any("no effort command; safe hold" in h.message for h in health),
+                   5.0)
         commands.publish(float64_array(np.zeros(3)))
         spin_until(lambda: plant.hold_pose is None, 5.0)
-        executor.remove_node(plant)
-        executor.remove_node(peer)
-        plant.destroy_node()
-        peer.destroy_node()
     finally:
         rclpy.try_shutdown()

@@ -347,3 +347,12 @@ def test_stamps_off_the_grid_are_placed_on_it_and_counted_late() -> None:
     late = [int(v["samples_late"]) for v in runs[1].summaries]
     assert [int(v["samples_late"]) for v in runs[0].summaries] == [0, 0]
     assert all(30 <= n <= 36 for n in late), late  # ~1 in 3 of 101 samples
+
+
+def test_a_bag_reader_tells_a_failed_homing_in_plain_words() -> None:
+    """An ``aborted`` event with ``reason: homing`` is not a rerun: the run stopped there."""
+    from exo_ilc_ros.bag.reader import rerun_note
+
+    note = rerun_note(2, {"reason": "homing", "detail": "homing failed: did not settle"})
+    assert note.startswith("trial 2 was not started: homing failed: did not settle")
+    assert "run again" not in note

@@ -5,11 +5,10 @@ homing``.
 It runs under the plant's node name (``plant_simulator``: the same parameter section, so the
 supervisor reads its mass uncertainty as from our simulator) and publishes ``/joint_states`` and
 ``/clock``, takes ``/effort_controller/commands``. ``mode: lock_step`` advances one control
-period per command (the first sample goes out once a controller is linked); ``real_time`` steps
-on a wall-clock timer with the last command held. In both modes a watchdog (``safety.
-watchdog_periods`` periods of wall time without a command, at least 1 s in lock-step) applies the
-safe hold around the current pose instead, one period at a time, until commands come again
-(in lock-step this also restarts a ping-pong whose message was lost).
+period per command and nothing else (the first sample goes out once a controller is linked, and
+again after 1 s while no command came); ``real_time`` steps on a wall-clock timer with the last
+command held, and after ``safety.watchdog_periods`` periods of wall time without a command
+applies the safe hold around the pose of that moment instead, until commands come again.
 
 :class:`FreeRunningPlant` is the node with any stepper; ``free_running_plant`` runs it with our
 own simulator's RK4 (``core/plant.py``): our simulator as any arm, for ``protocol: homing``.
@@ -48,9 +47,9 @@ from .common import (
 from .guard import Health, Rejections, rejections_check
 
 NAME = schema.PLANT
-LOCK_STEP_STALL = 1.0
-"""Lock-step: wall seconds without a command before the plant steps once on its own (the safe
-hold), at least."""
+FIRST_SAMPLE_AGAIN = 1.0
+"""Lock-step: wall seconds without any command before the first sample is sent again (it may
+have gone out before the controller's subscription matched)."""
 
 
 class FreeRunningPlant(Node):
@@ -81,9 +80,8 @@ class FreeRunningPlant(Node):
         self.commands = 0
         self.stalls = 0
         """Periods the plant stepped on its own (the safe hold): no command came in time."""
-        floor = int(LOCK_STEP_STALL * 1e9) if self.lock_step else 0
-        self.timeout_ns = max(int(config["safety.watchdog_periods"]) * self.step_ns, floor)
-        """Wall time without a command before the safe hold."""
+        self.timeout_ns = int(config["safety.watchdog_periods"]) * self.step_ns
+        """Real time: wall time without a command before the safe hold."""
         self.last_command_ns = 0
         self.hold_pose: np.ndarray | None = None
         self.state = JointStateWriter(config["joint_names"])
@@ -140,13 +138,21 @@ class FreeRunningPlant(Node):
             self._advance(self.held)
 
     def on_tick(self) -> None:
-        """Real-time: one period with the held command. Both modes: start once a controller
-        is linked; the safe hold while no command comes."""
+        """Both modes: start once a controller is linked. Lock-step: nothing moves without a
+        command (simulated time stands still, as in plant_simulator); the first sample is sent
+        again while no command ever came. Real time: one period with the held command, the
+        safe hold once no command came for the timeout."""
+        now = time.monotonic_ns()
         if not self.started:
             if self.state_pub.get_subscription_count() >= 1 and \
                     self.command_sub.get_publisher_count() >= 1:
                 self.started = True
-                self.last_command_ns = time.monotonic_ns()
+                self.last_command_ns = now
+                self._publish()
+            return
+        if self.lock_step:
+            if not self.commands and now - self.last_command_ns > FIRST_SAMPLE_AGAIN * 1e9:
+                self.last_command_ns = now
                 self._publish()
             return
         if self.hold_pose is None and \
@@ -163,7 +169,7 @@ class FreeRunningPlant(Node):
                                       e.nominal.kernel_args, self.limit)
             self.stalls += 1
             self._advance(effort)
-        elif not self.lock_step:
+        else:
             self._advance(self.held)
 
     def _advance(self, effort: np.ndarray) -> None:

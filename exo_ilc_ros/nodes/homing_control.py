@@ -15,6 +15,7 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from ..core.homing import ControllerEvent, ControllerMode, HomingController, HomingSettings
@@ -39,6 +40,10 @@ class HomingControl:
         self.token = -1
         self.homing_failures: list[int] = []
         node.health.checks.append(self._check)
+        here = np.zeros(config.joints)  # load the hold's and the envelope's kernels now,
+        node.step.hold_at(here)  # not at the first sample (a lock-step arm waits meanwhile)
+        node.step.hold(here, here)
+        node.step.outside(here, here)
 
     def load(self, trial: int, token: int, profile: FeedforwardProfile) -> None:
         """A new trial's profile: home at the next sample, then run it."""

@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -51,6 +52,12 @@ class HomingProtocol(TrialProtocol):
         """Of the running trial: samples off their grid point by more than a quarter period,
         grid points without a sample (filled)."""
 
+    def open(self, plant: Mapping[str, Any]) -> None:
+        """As :meth:`TrialProtocol.open`; a trial ends with the controller's ``done`` and its
+        samples only (the plants without services send no report of their own)."""
+        super().open(plant)
+        self.real_time = False
+
     # --- steps -----------------------------------------------------------------------------
     def _reset(self) -> None:
         """No reset service: the feed-forward goes out, keyed by a new token (above every
@@ -69,6 +76,7 @@ class HomingProtocol(TrialProtocol):
         self.past_end = False
         self.late = self.missing = 0
         self._enter(Phase.WAIT_ACK)
+        self.pushed_at = self.clock()  # for a base class that pushes again without an ack
         self.port.push_feedforward(self.trial, token, self.session.feedforward)
 
     def _begin_trial(self) -> None:

@@ -35,6 +35,7 @@ setup(
         ("share/" + package_name + "/config/layouts", glob("config/layouts/*")),
         ("share/" + package_name + "/config/scenarios", glob("config/scenarios/*.yaml")),
         ("share/" + package_name + "/config/exercises", glob("config/exercises/*.yaml")),
+        ("share/" + package_name + "/config/ros2_control", glob("config/ros2_control/*.yaml")),
         ("share/" + package_name + "/urdf", glob("urdf/*.urdf")),
         ("share/" + package_name + "/launch", glob("launch/*.py")),
     ],
@@ -53,6 +54,7 @@ setup(
         "mcap-ros2-support>=0.5",
         "optuna>=4",
         "clarabel>=0.9",
+        "mujoco>=4",
     ],
     extras_require={
         "test": ["pytest>=8", "hypothesis>=6.100", "pin>=3", "ruff>=0.6", "mypy>=1.10",

@@ -4,6 +4,7 @@ and bag_recorder beside them.
     ros2 launch exo_ilc_ros exo_ilc.launch.py
     ros2 launch exo_ilc_ros exo_ilc.launch.py params_file:=my.yaml mass_uncertainty:=0.10
     ros2 launch exo_ilc_ros exo_ilc.launch.py bag_path:=bags/today record:=false
+    ros2 launch exo_ilc_ros exo_ilc.launch.py plant:=mujoco     # MuJoCo, protocol homing
 
 Every node reads the shipped config/exo_ilc.yaml, then ``params_file`` (any subset of keys,
 same layout) if given. The nodes are those of ``exo_ilc_ros/nodes/registry.py``. The recorder
@@ -36,22 +37,34 @@ def _nodes(context: LaunchContext) -> list[Node]:
     if user:
         params.append(user)
     delta = LaunchConfiguration("mass_uncertainty").perform(context)
+    plant = LaunchConfiguration("plant").perform(context)
+    if plant not in ("simulator", "mujoco"):
+        raise ValueError(f"plant:={plant}: use simulator or mujoco")
+    if plant == "mujoco":  # no reset service: every node runs the homing protocol
+        params.append({"protocol": "homing"})
     nodes = []
     for entry in registry.GRAPH:
         node_params = list(params)
-        if entry.name == registry.PLANT.name and delta:
-            node_params.append({"mass_uncertainty": float(delta)})
-        nodes.append(Node(package=PACKAGE, executable=entry.name, name=entry.name,
+        executable = entry.name
+        if entry.name == registry.PLANT.name:  # the plant's role and parameter section
+            executable = registry.PLANTS[plant].name
+            if delta:
+                node_params.append({"mass_uncertainty": float(delta)})
+        nodes.append(Node(package=PACKAGE, executable=executable, name=entry.name,
                           parameters=node_params, output="screen", emulate_tty=True))
     if LaunchConfiguration("record").perform(context).lower() in ("true", "1", "yes"):
-        nodes.append(_recorder(user, delta, LaunchConfiguration("bag_path").perform(context)))
+        nodes.append(_recorder(user, delta, LaunchConfiguration("bag_path").perform(context),
+                               plant))
     return nodes
 
 
-def _recorder(user: str, delta: str, bag_path: str) -> Node:
+def _recorder(user: str, delta: str, bag_path: str, plant: str = "simulator") -> Node:
     from exo_ilc_ros.core.config import load_config
 
-    config = load_config(user or None, {"mass_uncertainty": float(delta)} if delta else None)
+    overrides: dict[str, object] = {"mass_uncertainty": float(delta)} if delta else {}
+    if plant == "mujoco":
+        overrides["protocol"] = "homing"
+    config = load_config(user or None, overrides or None)
     config_file = os.path.join(tempfile.mkdtemp(prefix="exo_ilc_launch_"), "effective.yaml")
     with open(config_file, "w") as out:
         out.write(config.to_ros_yaml("effective config of ros2 launch exo_ilc_ros"))
@@ -69,6 +82,9 @@ def generate_launch_description() -> LaunchDescription:
                               description="ROS parameter YAML laid over config/exo_ilc.yaml"),
         DeclareLaunchArgument("mass_uncertainty", default_value="",
                               description="plant mass uncertainty delta (default: the YAML's)"),
+        DeclareLaunchArgument("plant", default_value="simulator",
+                              description="simulator (plant_simulator, reset/start services) or "
+                              "mujoco (mujoco_plant, no services: protocol homing)"),
         DeclareLaunchArgument("record", default_value="true",
                               description="start bag_recorder (true/false)"),
         DeclareLaunchArgument("bag_path", default_value="",

@@ -30,6 +30,7 @@ ROSDEP_KEYS: dict[str, str] = {
     "mcap-ros2-support": "mcap-ros2-support",
     "optuna": "python3-optuna-pip",
     "clarabel": "python3-clarabel-pip",
+    "mujoco": "python3-mujoco-pip",
 }
 """pip name -> rosdep key (rosdistro's rosdep/python.yaml: the system package where there is
 one, a ``-pip`` key otherwise; ``mcap-ros2-support`` is that key's own name there)."""
@@ -151,9 +152,10 @@ def test_one_node_registry() -> None:
                                                schema.SUPERVISOR]
     assert {n.name: f"{n.module}:{n.cls}" for n in registry.NODES} == container.NODES
     assert registry.RECORDER.module == RECORDER_MODULE
+    plants = set(registry.PLANTS.values())
     for node in registry.NODES:
         module = importlib.import_module(node.module)
-        assert node.name == module.NAME
+        assert (schema.PLANT if node in plants else node.name) == module.NAME  # a plant's role
         assert callable(module.main) and isinstance(getattr(module, node.cls), type)
 
 
@@ -222,3 +224,8 @@ def test_launch_file_starts_the_graph_and_the_recorder(monkeypatch: pytest.Monke
     assert load_config(recorder["config_file"])["mass_uncertainty"] == 0.1
     assert [n["executable"] for n in _launched(monkeypatch, record="false")] == \
         [n.name for n in registry.GRAPH]
+    mujoco = _launched(monkeypatch, plant="mujoco", mass_uncertainty="0.1")
+    assert [(n["executable"], n["name"]) for n in mujoco[:3]] == \
+        [("mujoco_plant", "plant_simulator"), *((n.name, n.name) for n in registry.GRAPH[1:])]
+    assert all({"protocol": "homing"} in n["parameters"] for n in mujoco[:3])
+    assert load_config(mujoco[3]["parameters"][0]["config_file"])["protocol"] == "homing"

@@ -376,6 +376,7 @@ PROTOCOL_STEPS = {
     "resetting": "moving the plant back to the start pose",
     "wait_ack": "waiting for the controller to take the trial's feed-forward",
     "starting": "starting the trial",
+    "homing": "waiting for the controller to bring the arm to the start pose (protocol homing)",
     "running": "running the trial (no new joint sample arrived)",
     "wait_recorder": "waiting for bag_recorder to file the trial",
 }
@@ -389,6 +390,10 @@ def rerun_note(trial: int, values: dict[str, str]) -> str:
     if reason == "watchdog":
         cause = (f"watchdog: the controller went without /joint_states for longer than its "
                  f"watchdog allows and held the arm safe ({values.get('watchdog_trips', '?')}x)")
+    elif reason == "homing":
+        return (f"trial {trial} was not started: {values.get('detail', 'homing failed')}; the "
+                "run stopped there with the arm in the safe hold (a resumed run starts it "
+                "again). Nothing was learned from it.")
     elif reason == "lost":
         cause = f"lost: {values.get('lost', 'some')} joint samples of the attempt never arrived"
     elif reason and reason != "timeout":

@@ -55,6 +55,9 @@ def register(sub: Any) -> None:
     from .therapy import add_therapy_arguments
 
     add_therapy_arguments(parser)
+    parser.add_argument("--plant", choices=("simulator", "mujoco"), default="simulator",
+                        help="the arm: our simulator (default) or MuJoCo (mujoco_plant, no "
+                        "reset service: sets protocol homing)")
     parser.set_defaults(func=run)
 
 
@@ -97,6 +100,10 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--no-bag", f"records nothing: {given} would be ignored; drop one")
     args.bag_dir = "bags" if args.bag_dir is None else args.bag_dir
     config = config_from_args(args)  # an invalid YAML fails here, before any node starts
+    if args.plant == "mujoco" and config["protocol"] != "homing":
+        print("exo-ilc run: --plant mujoco offers no reset service: protocol homing",
+              file=sys.stderr)
+        config = config.replace({"protocol": "homing"})
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     trials = config["max_trials"]
     root = _store_root(args)
@@ -154,9 +161,11 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
              trials: int) -> RunSummary:
     """One graph run (one mass uncertainty)."""
     from ..orchestration.graph import TrialSummary, run_graph
+    from ..orchestration.launcher import graph_nodes
     from ..orchestration.recording import Recording
 
     config = run_config
+    nodes = graph_nodes(args.plant, config["protocol"])
     with tqdm(total=trials, desc=f"graph {config['law']} delta={delta:g}", unit="trial",
               file=sys.stderr, disable=None) as bar:
         def progress(summary: TrialSummary, bar: Any = bar) -> None:
@@ -165,12 +174,12 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
             bar.set_postfix_str("max|e| " + " ".join(f"{x:.1e}" for x in errors))
         if args.no_bag:
             result = run_graph(run_config, args.domain_id, on_summary=progress,
-                               on_start=announce_graph(bar, None))
+                               on_start=announce_graph(bar, None), nodes=nodes)
         else:
             run_config = run_config.replace({"wait_for_recorder": True})
             with Recording(run_config, args.bag_dir) as recording:
                 result = run_graph(run_config, args.domain_id, on_summary=progress,
-                                   nodes=recording.graph_nodes(args.isolated_recorder),
+                                   nodes=recording.graph_nodes(args.isolated_recorder, nodes),
                                    on_start=announce_graph(bar, recording.path))
             bar.write(f"bag: {recording.path}", file=sys.stderr)
             result.summary.extra["bag"] = str(recording.path)

@@ -42,6 +42,8 @@ class Phase(Enum):
     RESETTING = "resetting"
     WAIT_ACK = "wait_ack"
     STARTING = "starting"
+    HOMING = "homing"
+    """Protocol homing: the controller brings the arm to q_d(0) (core/homing_protocol.py)."""
     RUNNING = "running"
     WAIT_RECORDER = "wait_recorder"
     FINISHED = "finished"

@@ -239,6 +239,29 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("watchdog_min_timeout", CONTROLLER, Kind.DOUBLE,
               "wall-clock floor of the controller's watchdog (s): in lock-step a loaded machine "
               "may deliver a sample late without any fault; 0 on hardware", minimum=0.0),
+    Parameter("protocol", SHARED, Kind.STRING,
+              "how a trial starts: services (the plant's reset/start services put it at x_d(0); "
+              "our simulator) or homing (the controller brings any arm to q_d(0) and starts "
+              "once it settled; core/homing.py)", choices=("services", "homing")),
+    Parameter("homing.speed_limit", CONTROLLER, Kind.DOUBLE,
+              "protocol homing: peak joint speed of the homing quintic (rad/s); its duration "
+              "is 15/8 max |q_d(0) - q| / speed_limit", strictly_positive=True),
+    Parameter("homing.position_tolerance", CONTROLLER, Kind.DOUBLE_ARRAY,
+              "protocol homing: |q - q_d(0)| allowed when a trial starts (rad, per joint)",
+              per_joint=True, strictly_positive=True),
+    Parameter("homing.velocity_tolerance", CONTROLLER, Kind.DOUBLE_ARRAY,
+              "protocol homing: |qdot| allowed when a trial starts (rad/s, per joint)",
+              per_joint=True, strictly_positive=True),
+    Parameter("homing.dwell", CONTROLLER, Kind.DOUBLE,
+              "protocol homing: how long the arm must stay within both tolerances before the "
+              "trial starts (s); leaving them meanwhile is a fault", minimum=0.0),
+    Parameter("homing.timeout", CONTROLLER, Kind.DOUBLE,
+              "protocol homing: how long after the path's end the arm may take to settle "
+              "before homing fails (s)", strictly_positive=True),
+    Parameter("max_missing_samples", SUPERVISOR, Kind.INTEGER,
+              "protocol homing: samples of a trial that may be missing (filled by linear "
+              "interpolation); a trial missing more is run again, not learned from",
+              minimum=0.0),
     Parameter("mass_uncertainty", PLANT, Kind.DOUBLE,
               "delta: the plant's masses are m_i (1 + delta); the controller keeps m_i",
               minimum=-0.9),

@@ -47,6 +47,7 @@ from .common import (
     wall_clock,
 )
 from .guard import Health, JointStateGate, Rejections, rejections_check
+from .homing_control import HomingControl
 
 NAME = schema.CONTROLLER
 LATENCY_WINDOW = 100_000
@@ -102,6 +103,9 @@ class ComputedTorqueController(Node):
                           clock=wall_clock())
         self.health = Health(self, NAME)
         self.health.checks += [self._loop_check, rejections_check(self.rejections, "inputs")]
+        self.homing = HomingControl(self, experiment.period, self.step_count) \
+            if config["protocol"] == "homing" else None
+        """``protocol: homing``: every sample goes to it (nodes/homing_control.py)."""
         ref = experiment.reference
         self.step(ref.acceleration[0], ref.position[0], ref.velocity[0], ref.position[0],
                   ref.velocity[0])  # compile the kernels before the first trial
@@ -138,6 +142,8 @@ class ComputedTorqueController(Node):
         self.gate.restart()
         if self.params.pending is not self.params.config:  # live envelope: trial boundary
             self.step.envelope[:] = self.params.pending["safety.error_envelope"]
+        if self.homing is not None:
+            self.homing.load(trial, self.t0_ns, profile)
         self.ack_due = True
         self.on_ack_timer()
         if self.pending is not None:
@@ -156,6 +162,9 @@ class ComputedTorqueController(Node):
 
     def on_joint_state(self, raw: bytes) -> None:
         """Effort for this sample of the trial (the safe hold once aborted or tripped)."""
+        if self.homing is not None:
+            self.homing.on_joint_state(raw)
+            return
         received = time.perf_counter_ns()
         sample = self.gate(raw)
         if sample is None:

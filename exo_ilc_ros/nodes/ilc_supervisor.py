@@ -11,10 +11,11 @@ summaries and key the store).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
@@ -24,6 +25,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from ..core import schema
+from ..core.homing_protocol import HomingProtocol
 from ..core.protocol import TrialProtocol
 from ..core.session import TrialConclusion
 from ..wire import topics
@@ -45,6 +47,9 @@ from .messages import feedforward_message, trial_summary
 
 NAME = schema.SUPERVISOR
 PLANT_PARAMETERS = [p.name for p in schema.PARAMETERS if p.section == schema.PLANT]
+PLANT_PARAMETER_WAIT = 5.0
+"""protocol homing: wall seconds to wait for a plant's parameter service before going on
+without it (a real arm has none)."""
 
 
 class IlcSupervisor(Node):
@@ -55,8 +60,11 @@ class IlcSupervisor(Node):
         self.params = SchemaParameters(self, NAME)
         config = self.params.config
         self.joint_names: list[str] = config["joint_names"]
-        self.protocol = TrialProtocol(config, self, lambda: self.params.pending)
+        self.homing = config["protocol"] == "homing"  # no reset/start: any arm
+        self.protocol = (HomingProtocol if self.homing else TrialProtocol)(
+            config, self, lambda: self.params.pending)
         self.plant_future: Future | None = None
+        self.plant_wait_since = 0.0
         self.recorder_ready = False
 
         self.reset_client = self.create_client(Trigger, topics.RESET_SERVICE)
@@ -93,7 +101,8 @@ class IlcSupervisor(Node):
     # --- inputs -----------------------------------------------------------------------------
     def on_timer(self) -> None:
         """Read the plant's parameters once the graph is up, then drive the protocol."""
-        ready = self.reset_client.service_is_ready() and self.start_client.service_is_ready() \
+        ready = (self.homing or (self.reset_client.service_is_ready() and
+                 self.start_client.service_is_ready())) \
             and self.state_sub.get_publisher_count() >= 1 and \
             (self.recorder_ready or not self.params.config["wait_for_recorder"])
         if ready and self.protocol.session is None and self.protocol.error is None:
@@ -104,6 +113,15 @@ class IlcSupervisor(Node):
         if self.plant_future is None:
             if self.plant_params.services_are_ready():
                 self.plant_future = self.plant_params.get_parameters(PLANT_PARAMETERS)
+            elif self.homing:  # a real arm has no plant_simulator parameters
+                now = time.monotonic()
+                self.plant_wait_since = self.plant_wait_since or now
+                if now - self.plant_wait_since > PLANT_PARAMETER_WAIT:
+                    self.get_logger().warning(
+                        f"no {schema.PLANT} parameters after {PLANT_PARAMETER_WAIT:g} s (an arm "
+                        "of your own): summaries and the store use this node's "
+                        f"mass_uncertainty {self.params.config['mass_uncertainty']:g}")
+                    self.protocol.open({})
             return
         if not self.plant_future.done():
             return
@@ -160,6 +178,21 @@ class IlcSupervisor(Node):
                 self.protocol.on_acknowledged(trial, t0)
             elif item.name == topics.CONTROLLER_TRIAL_STATUS and item.message == "done":
                 self.protocol.on_done(trial, t0, values)
+            elif item.name == topics.CONTROLLER_TRIAL_STATUS and \
+                    isinstance(self.protocol, HomingProtocol):
+                self._on_homing_report(item.message, trial, t0, values)
+
+    def _on_homing_report(self, message: str, trial: int, t0: int,
+                          values: dict[str, str]) -> None:
+        """The controller's ``homed`` (t0 of the trial) or ``homing_failed`` (reason)."""
+        assert isinstance(self.protocol, HomingProtocol)
+        token = int_value(values, "token")
+        if token is None:
+            return
+        if message == "homed":
+            self.protocol.on_homed(trial, token, t0)
+        elif message == "homing_failed":
+            self.protocol.on_homing_failed(trial, token, values.get("reason", ""))
 
     def destroy_node(self) -> None:
         """The inbox's companion node, then this one."""
@@ -189,6 +222,9 @@ class IlcSupervisor(Node):
                                    ("reason", topics.ENVELOPE_REASON),
                                    ("aborted_at", str(record.aborted_at))], end_ns)
         summary = trial_summary(conclusion, self.joint_names)
+        if isinstance(self.protocol, HomingProtocol):
+            summary.values.extend(KeyValue(key=k, value=v) for k, v in
+                                  self.protocol.summary_values(record, self.joint_names))
         self.summary_pub.publish(diagnostic_array(self, [summary], end_ns))
         self.event("end", [(kv.key, kv.value) for kv in summary.values], end_ns)
 

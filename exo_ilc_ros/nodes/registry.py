@@ -36,8 +36,19 @@ CONTROLLER = NodeEntry("computed_torque_controller",
                        "exo_ilc_ros.nodes.computed_torque_controller", "ComputedTorqueController")
 SUPERVISOR = NodeEntry("ilc_supervisor", "exo_ilc_ros.nodes.ilc_supervisor", "IlcSupervisor")
 RECORDER = NodeEntry("bag_recorder", "exo_ilc_ros.nodes.bag_recorder", "BagRecorder")
+MUJOCO_PLANT = NodeEntry("mujoco_plant", "exo_ilc_ros.nodes.mujoco_plant", "MujocoPlant")
+"""The arm in MuJoCo, no services (``protocol: homing``); its ROS node name is the plant's
+(``plant_simulator``: the same parameters), so it replaces PLANT in a graph."""
+FREE_RUNNING_PLANT = NodeEntry("free_running_plant", "exo_ilc_ros.nodes.free_running_plant",
+                               "FreeRunningPlant")
+"""Our simulator without services (``protocol: homing``); node name ``plant_simulator`` too."""
+PLANTS: dict[str, NodeEntry] = {"simulator": PLANT, "mujoco": MUJOCO_PLANT,
+                                "simulator_homing": FREE_RUNNING_PLANT}
+"""The plant a graph runs (``exo-ilc run --plant``, the launch file's ``plant:=``); with
+``protocol: homing`` the simulator runs as ``free_running_plant``."""
 
-NODES: tuple[NodeEntry, ...] = (PLANT, CONTROLLER, SUPERVISOR, RECORDER)
+NODES: tuple[NodeEntry, ...] = (PLANT, CONTROLLER, SUPERVISOR, RECORDER, MUJOCO_PLANT,
+                                FREE_RUNNING_PLANT)
 """Every node of the package."""
 GRAPH: tuple[NodeEntry, ...] = (PLANT, CONTROLLER, SUPERVISOR)
 """The control graph, in start order; the recorder comes beside it (its own process, or in

@@ -126,6 +126,8 @@ class GraphSession:
         self.events: list[tuple[str, dict[str, str], float]] = []
         self._finished_after: int | None = None
         """The last trial named by the supervisor's ``finished`` event (None: not yet)."""
+        self.error: str | None = None
+        """The supervisor's ``finished`` event's error (the run stopped on a fault)."""
         self._resumed_after = 0
         self.started_at: float | None = None
         """Wall time of the first trial's start event."""
@@ -198,6 +200,7 @@ class GraphSession:
                     self._resumed_after = int_value(values, "trials") or 0
                 if item.message == "finished":
                     self._finished_after = int_value(values, "trials") or 0
+                    self.error = values.get("error") or None
                     self.finished_at = time.monotonic()
 
     @property
@@ -254,6 +257,8 @@ def run_graph(config: Config, domain_id: int | None = None, extra: Sequence[Node
         if on_start is not None:
             on_start(session)
         session.spin_until(lambda: session.finished, timeout, stall_timeout)
+        if session.error is not None:
+            raise GraphError(f"ilc_supervisor stopped the run: {session.error}")
         wall = None
         if session.started_at is not None and session.finished_at is not None:
             wall = session.finished_at - session.started_at

@@ -75,6 +75,17 @@ GRAPH_NODES: tuple[NodeSpec, ...] = tuple(NodeSpec(node.name, node.module)
 """The processes ``exo-ilc run`` starts, in this order (:data:`.nodes.registry.GRAPH`)."""
 
 
+def graph_nodes(plant: str = "simulator", protocol: str = "services") -> tuple[NodeSpec, ...]:
+    """:data:`GRAPH_NODES` with the plant ``plant`` (a key of :data:`registry.PLANTS`: our
+    simulator, ``free_running_plant`` for it under ``protocol: homing``, or MuJoCo), run under
+    the plant's node name and parameter section."""
+    if plant == "simulator" and protocol == "homing":
+        plant = "simulator_homing"
+    entry = registry.PLANTS[plant]
+    return tuple(NodeSpec(spec.name, entry.module) if spec.name == registry.PLANT.name
+                 else spec for spec in GRAPH_NODES)
+
+
 @dataclass
 class DomainClaim:
     """A ROS domain id held (through a lock file) until :meth:`release` or process exit."""

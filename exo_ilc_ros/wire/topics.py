@@ -107,7 +107,12 @@ CONTROLLER_TRIAL_STATUS = "computed_torque_controller/trial"
 ``done``, values ``trial``, ``t0_ns``, ``aborted_at`` (first sample outside the error envelope,
 -1: none) and ``watchdog_trips`` (in this trial). The supervisor ends a trial only with it: the
 record is rebuilt with the safe hold from ``aborted_at``; a trial with a watchdog trip is run
-again (the commands it got are not the ones the record would assume)."""
+again (the commands it got are not the ones the record would assume). Under ``protocol: homing``
+(no reset/start services; the feed-forward's header stamp is a token naming the attempt) also
+``homed`` (values ``trial``, ``token``, ``t0_ns`` = the stamp of the trial's sample 0) and
+``homing_failed`` (``trial``, ``token``, ``t0_ns`` = -1, ``reason``); the trial summary then
+adds ``samples_missing``, ``samples_late``, ``initial_error/<joint>`` and
+``initial_velocity/<joint>`` (core/homing_protocol.py)."""
 PLANT_HEALTH_STATUS = "plant_simulator/health"
 SUPERVISOR_HEALTH_STATUS = "ilc_supervisor/health"
 T0_PREFIX = "t0_ns="

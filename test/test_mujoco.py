@@ -86,32 +86,41 @@ def test_mjcf_merges_the_fictive_link_and_maps_joint_effects() -> None:
 
 
 def test_patient_keys_map_to_native_joint_effects() -> None:
-    """Where the configuration has the virtual patient's keys (branch ``patient``), the MuJoCo
-    arm takes viscous friction (+ spastic damping) as ``damping``, Coulomb friction as
-    ``frictionloss``, passive (+ spastic) stiffness towards the rest position as a joint spring:
-    MuJoCo's passive force is then -B qdot - K (q - q_0), by hand; a MAS preset is refused;
-    without the keys every effect is zero."""
-    from exo_ilc_ros.core.mujoco_arm import effects_from_values
+    """The MuJoCo arm takes the virtual patient's viscous friction (+ spastic damping) as
+    ``damping``, Coulomb friction as ``frictionloss``, passive (+ spastic) stiffness towards the
+    rest position as a joint spring: MuJoCo's passive force is then -B qdot - K (q - q_0), by
+    hand; a MAS preset gives its stiffness and damping; the shipped config has no effect; what
+    MuJoCo cannot express is named."""
+    from exo_ilc_ros.core.mujoco_arm import effects_from_config, effects_not_simulated
+    from exo_ilc_ros.core.patient import MAS_PRESETS
 
-    assert effects_from_values(load_config().values) == JointEffects()
-    patient = {"patient.friction.viscous": [0.05, 0.0, 0.02],
-               "patient.spasticity.damping": [0.0, 0.0, 0.1],
-               "patient.friction.coulomb": [0.1, 0.0, 0.0],
-               "patient.passive.stiffness": [0.0, 0.5, 1.0],
-               "patient.spasticity.stiffness": [0.0, 0.0, 2.0],
-               "patient.passive.rest_position": [0.0, 0.1, 0.3],
-               "patient.spasticity.mas_grade": "custom"}
-    effects = effects_from_values(patient)
+    config = load_config()
+    arm = build_arm(config)
+    names = config["joint_names"]
+    assert arm_mjcf(arm, names, 0.001, effects_from_config(config)) == arm_mjcf(arm, names, 0.001)
+    assert effects_not_simulated(config) == []
+    patient = config.replace({"patient.friction.viscous": [0.05, 0.0, 0.02],
+                              "patient.spasticity.damping": [0.0, 0.0, 0.1],
+                              "patient.friction.coulomb": [0.1, 0.0, 0.0],
+                              "patient.passive.stiffness": [0.0, 0.5, 1.0],
+                              "patient.spasticity.stiffness": [0.0, 0.0, 2.0],
+                              "patient.passive.rest_position": [0.0, 0.1, 0.3]})
+    effects = effects_from_config(patient)
     np.testing.assert_allclose(effects.damping, [0.05, 0.0, 0.12])
     np.testing.assert_allclose(effects.stiffness, [0.0, 0.5, 3.0])
-    config = load_config()
-    arm = MujocoArm(build_arm(config), config["joint_names"], 0.01, 0.001, [40.0] * 3, effects)
-    np.testing.assert_allclose(arm.model.dof_frictionloss, [0.1, 0.0, 0.0])
+    mujoco_arm = MujocoArm(arm, names, 0.01, 0.001, [40.0] * 3, effects)
+    np.testing.assert_allclose(mujoco_arm.model.dof_frictionloss, [0.1, 0.0, 0.0])
     q, qd = np.array([0.2, -0.3, 0.5]), np.array([1.0, -2.0, 0.5])
-    arm.set_state(q, qd)
-    np.testing.assert_allclose(arm.data.qfrc_passive,
+    mujoco_arm.set_state(q, qd)
+    np.testing.assert_allclose(mujoco_arm.data.qfrc_passive,
                                -np.array([0.05, 0.0, 0.12]) * qd
                                - np.array([0.0, 0.5, 3.0]) * (q - np.array([0.0, 0.1, 0.3])),
                                rtol=1e-12, atol=1e-15)
-    with pytest.raises(ModelError, match="mas_grade"):
-        effects_from_values({**patient, "patient.spasticity.mas_grade": "1+"})
+    graded = config.replace({"patient.spasticity.mas_grade": "2"})
+    k, b, _, _ = MAS_PRESETS["2"]
+    np.testing.assert_allclose(effects_from_config(graded).stiffness, [k] * 3)
+    np.testing.assert_allclose(effects_from_config(graded).damping, [b] * 3)
+    assert effects_not_simulated(graded) == ["spasticity reflex"]
+    noisy = config.replace({"patient.sensor.position_noise": 1e-4,
+                            "patient.effort_delay": 2})
+    assert effects_not_simulated(noisy) == ["effort delay", "sensors"]

@@ -18,7 +18,7 @@ all zero by default (the paper's plant).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -114,36 +114,53 @@ def arm_mjcf(model: ArmModel, joint_names: Sequence[str], timestep: float,
 
 
 def effects_from_config(config: Config) -> JointEffects:
-    """The MuJoCo-native joint effects the configuration asks for (:func:`effects_from_values`
-    of its values)."""
-    return effects_from_values(config.values)
-
-
-def effects_from_values(values: Mapping[str, Any]) -> JointEffects:
-    """The virtual patient's effects MuJoCo expresses natively, from its ``patient.*`` keys
-    where the configuration has them (the virtual-patient branch; none: all zero):
-    ``friction.viscous`` + ``spasticity.damping`` -> ``damping``; ``friction.coulomb`` ->
+    """The virtual patient's effects MuJoCo expresses natively, from the ``patient.*`` keys:
+    ``friction.viscous`` + spastic damping -> ``damping``; ``friction.coulomb`` ->
     ``frictionloss`` (MuJoCo's dry friction is a hard Coulomb law, not the tanh of
-    core/patient.py: close above ``stribeck_velocity``); ``passive.stiffness`` +
-    ``spasticity.stiffness`` -> ``stiffness`` towards ``passive.rest_position``. The stretch
-    reflex, the voluntary torque, sensors, start variation and effort delay have no MuJoCo
-    joint attribute and are not simulated here. A Modified Ashworth preset
-    (``spasticity.mas_grade`` not ``custom``) is refused: its values live in core/patient.py."""
-    if "patient.friction.viscous" not in values:
-        return JointEffects()
-    grade = values.get("patient.spasticity.mas_grade", "custom")
-    if grade != "custom":
-        raise ModelError(f"patient.spasticity.mas_grade {grade!r}: the MuJoCo plant takes "
-                         "only custom spasticity values (its preset is core/patient.py's)")
+    core/patient.py: close above ``stribeck_velocity``); ``passive.stiffness`` + spastic
+    stiffness -> ``stiffness`` towards ``passive.rest_position``. The spastic stiffness and
+    damping are the Modified Ashworth preset's or the ``custom`` values
+    (:func:`.patient.spasticity_values`). What MuJoCo cannot express is listed by
+    :func:`effects_not_simulated`. All zero: the MJCF has no effect attributes."""
+    from .patient import spasticity_values
+
+    k_spastic, b_spastic, _, _ = spasticity_values(config)
 
     def joint(name: str) -> np.ndarray:
-        return np.asarray(values.get(f"patient.{name}", [0.0]), dtype=float)
+        return np.asarray(config[f"patient.{name}"], dtype=float)
 
     return JointEffects(
-        damping=tuple(joint("friction.viscous") + joint("spasticity.damping")),
+        damping=tuple(joint("friction.viscous") + np.asarray(b_spastic, dtype=float)),
         frictionloss=tuple(joint("friction.coulomb")),
-        stiffness=tuple(joint("passive.stiffness") + joint("spasticity.stiffness")),
+        stiffness=tuple(joint("passive.stiffness") + np.asarray(k_spastic, dtype=float)),
         springref=tuple(joint("passive.rest_position")))
+
+
+def effects_not_simulated(config: Config) -> list[str]:
+    """The virtual patient's effects configured on that the MuJoCo plant does not simulate
+    (no MuJoCo joint attribute): the stretch reflex, voluntary effort, the learning patient,
+    sensors, start variation and the effort delay. Empty: MuJoCo runs the whole patient."""
+    from .patient import spasticity_values
+
+    out = []
+    _, _, reflex_gain, _ = spasticity_values(config)
+    if any(reflex_gain):
+        out.append("spasticity reflex")
+    checks = {
+        "voluntary effort": ("patient.voluntary.stiffness", "patient.voluntary.damping"),
+        "learning patient": ("patient.learning.gain",),
+        "sensors": ("patient.sensor.quantisation", "patient.sensor.position_noise",
+                    "patient.sensor.velocity_noise"),
+        "start variation": ("patient.initial.position_sd", "patient.initial.velocity_sd"),
+    }
+    for label, keys in checks.items():
+        if any(np.any(np.asarray(config[k], dtype=float) != 0.0) for k in keys):
+            out.append(label)
+    if config["patient.sensor.differentiate_velocity"]:
+        out.append("sensors")
+    if config["patient.effort_delay"]:
+        out.append("effort delay")
+    return sorted(set(out))
 
 
 class MujocoArm:

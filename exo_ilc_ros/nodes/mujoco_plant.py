@@ -221,12 +221,17 @@ class MujocoPlant(FreeRunningPlant):
 
     def make_stepper(self) -> Any:
         """MuJoCo's arm of this configuration."""
-        from ..core.mujoco_arm import MujocoArm
+        from ..core.mujoco_arm import MujocoArm, effects_not_simulated
 
         config = self.params.config
         if config["dynamics"] != "full":
             self.get_logger().warning("dynamics: MuJoCo always simulates the full plant "
                                       f"(eq (15)); {config['dynamics']!r} ignored")
+        missing = effects_not_simulated(config)
+        if missing:
+            self.get_logger().warning("virtual patient: MuJoCo simulates friction, passive and "
+                                      "spastic stiffness and damping only; not simulated here: "
+                                      + ", ".join(missing))
         return MujocoArm.from_config(config, self.experiment.mass_uncertainty)
 
     def stepper_state(self, q: np.ndarray, qd: np.ndarray) -> None:

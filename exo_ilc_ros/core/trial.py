@@ -171,20 +171,21 @@ def record_from_samples(experiment: Experiment, trial: int, feedforward: np.ndar
     """The :class:`TrialRecord` of a trial run elsewhere (the graph), from its sampled
     (measured) states: u and effort are formed again exactly as the controller did (the safe
     hold from ``aborted_at`` on, for a trial the error envelope aborted); ``true_position``,
-    ``true_velocity``: the plant's true state when the sensors differ from it."""
+    ``true_velocity``: the plant's true state when the sensors differ from it. The record owns
+    copies of the arrays (a caller's sample buffers may be reused for the next trial)."""
     ref = reference or experiment.reference
-    u_ff = np.ascontiguousarray(feedforward, dtype=float)
-    q = np.ascontiguousarray(position, dtype=float)
-    qd = np.ascontiguousarray(velocity, dtype=float)
+    u_ff = np.array(feedforward, dtype=float, order="C")
+    q = np.array(position, dtype=float, order="C")
+    qd = np.array(velocity, dtype=float, order="C")
     u, effort = control_inputs(u_ff, ref.position, ref.velocity, q, qd, experiment.kp,
                                experiment.kd, experiment.nominal.kernel_args,
                                experiment.effort_limit, -1 if aborted_at is None
                                else int(aborted_at))
     return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels, aborted_at,
                        None if true_position is None
-                       else np.ascontiguousarray(true_position, dtype=float),
+                       else np.array(true_position, dtype=float, order="C"),
                        None if true_velocity is None
-                       else np.ascontiguousarray(true_velocity, dtype=float))
+                       else np.array(true_velocity, dtype=float, order="C"))
 
 
 def period_ns(period: float) -> int:

@@ -246,7 +246,7 @@ def test_plant_watchdog_in_real_time_mode_stops_holding_the_last_command(tmp_pat
         plant = PlantSimulator()
         timeout_ns = periods * 10_000_000  # control.period 0.01 s, real_time_rate 1
         assert not plant.lock_step and plant.watchdog.timeout_ns == timeout_ns
-        peer = rclpy.create_node("watchdog_test_peer")
+        peer = rclpy.create_node("computed_torque_controller")  # the commands' contract node
         states: list[Any] = []
         health: list[Any] = []
         peer.create_subscription(JointState, topics.JOINT_STATES, states.append, SAMPLES_QOS)

@@ -35,9 +35,9 @@ from ..core.validation import Cause, Rejection, validate_feedforward
 from ..wire import topics
 from ..wire.cdr import float64_array
 from ..wire.protocol import trial_of_frame
+from ..wire.publishers import max_bytes
 from .common import (
     DIAGNOSTICS_QOS,
-    LATCHED_QOS,
     SAMPLES_QOS,
     SchemaParameters,
     diagnostic_array,
@@ -47,6 +47,13 @@ from .common import (
     wall_clock,
 )
 from .guard import Health, JointStateGate, Rejections, rejections_check
+from .identified import (
+    FEEDFORWARD_READER_QOS,
+    TrustedInput,
+    decoded,
+    decodes,
+    gate_classifier,
+)
 
 NAME = schema.CONTROLLER
 LATENCY_WINDOW = 100_000
@@ -92,16 +99,23 @@ class ComputedTorqueController(Node):
                                                  SAMPLES_QOS)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
                                                      DIAGNOSTICS_QOS)
-        self.state_sub = self.create_subscription(JointState, topics.JOINT_STATES,
-                                                  self.on_joint_state, SAMPLES_QOS, raw=True)
-        self.create_subscription(JointTrajectory, topics.FEEDFORWARD, self.on_feedforward,
-                                 LATCHED_QOS)
+        joints, samples = config.joints, self.step_count
+        self.state_sub = TrustedInput(  # the plant's samples only (wire.publishers)
+            self, JointState, topics.JOINT_STATES, SAMPLES_QOS, self.on_joint_state,
+            self.rejections, max_bytes(topics.JOINT_STATES, joints, samples),
+            gate_classifier(JointStateGate(self.joint_names, self.rejections)))
+        self.feedforward_sub = TrustedInput(  # the supervisor's profiles only
+            self, JointTrajectory, topics.FEEDFORWARD, FEEDFORWARD_READER_QOS,
+            decoded(JointTrajectory, self.on_feedforward, self.rejections, topics.FEEDFORWARD),
+            self.rejections, max_bytes(topics.FEEDFORWARD, joints, samples),
+            decodes(JointTrajectory, self.rejections, topics.FEEDFORWARD))
         self.create_timer(0.05, self.on_ack_timer, clock=wall_clock())
         self.create_timer(1.0, self.on_health_timer, clock=wall_clock())
         self.create_timer(max(self.watchdog.timeout_ns / 2e9, 0.002), self.on_watchdog_timer,
                           clock=wall_clock())
         self.health = Health(self, NAME)
-        self.health.checks += [self._loop_check, rejections_check(self.rejections, "inputs")]
+        self.health.checks += [self._loop_check, rejections_check(self.rejections, "inputs"),
+                               self.state_sub.health, self.feedforward_sub.health]
         ref = experiment.reference
         self.step(ref.acceleration[0], ref.position[0], ref.velocity[0], ref.position[0],
                   ref.velocity[0])  # compile the kernels before the first trial

@@ -28,6 +28,7 @@ from ..core.protocol import TrialProtocol
 from ..core.session import TrialConclusion
 from ..wire import topics
 from ..wire.protocol import int_value
+from ..wire.publishers import max_bytes
 from .common import (
     DIAGNOSTICS_QOS,
     EVENTS_QOS,
@@ -41,6 +42,7 @@ from .common import (
     wall_clock,
 )
 from .guard import Health, JointStateGate, Rejections, rejections_check
+from .identified import Admission, StatusInput, gate_classifier
 from .messages import feedforward_message, trial_summary
 
 NAME = schema.SUPERVISOR
@@ -69,15 +71,21 @@ class IlcSupervisor(Node):
                                                  EVENTS_QOS)
         self.health_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
                                                 DIAGNOSTICS_QOS)
-        self.inbox = Inbox(self)  # the trial's samples, drained in batches (see Inbox)
-        self.state_sub = self.inbox.subscribe(JointState, topics.JOINT_STATES)
-        self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.on_diagnostics,
-                                 DIAGNOSTICS_QOS)
         self.rejections = Rejections(self)
         self.gate = JointStateGate(self.joint_names, self.rejections)
+        self.samples_from = Admission(  # the plant's samples only (wire.publishers)
+            self, topics.JOINT_STATES, self.rejections,
+            max_bytes(topics.JOINT_STATES, config.joints, 0),
+            gate_classifier(JointStateGate(self.joint_names, self.rejections)))
+        self.inbox = Inbox(self)  # the trial's samples, drained in batches (see Inbox)
+        self.state_sub = self.inbox.subscribe(JointState, topics.JOINT_STATES,
+                                              admit=self.samples_from.admit_raw)
+        self.statuses = StatusInput(self, DIAGNOSTICS_QOS, self.on_diagnostics,
+                                    self.rejections)  # each status from the node it names
         self.health = Health(self, NAME)
         self.health.checks += [self._run_check,
-                               rejections_check(self.rejections, "/joint_states")]
+                               rejections_check(self.rejections, "inputs"),
+                               self.samples_from.health]
         self.create_timer(0.1, self.on_timer, clock=wall_clock())
         self.create_timer(1.0, self.on_health_timer, clock=wall_clock())
         self.get_logger().info(f"{config['law']} law, up to {config['max_trials']} trials; "

@@ -258,3 +258,40 @@ def test_a_live_change_the_session_refuses_is_logged_not_raised() -> None:
     assert [c.record.trial for c in graph.conclusions] == [1, 2]
     assert all(c.applied == {} for c in graph.conclusions)
     assert any("not applied" in e and "error_bound" in e for e in graph.errors)
+
+
+def test_a_lost_acknowledgement_is_asked_for_again_within_a_second() -> None:
+    """The controller's acknowledgement (or the profile itself) is lost: the protocol pushes
+    the same feed-forward again after ACK_RETRY (well under a second), not after the 30 s step
+    timeout, and the trial runs as if nothing happened."""
+    from exo_ilc_ros.core.protocol import ACK_RETRY
+
+    assert ACK_RETRY < 0.5
+    config = load_config(overrides={**SHORT, "max_trials": 2})
+    graph = FakeGraph(config)
+    lost: list[int] = []
+    real_push = graph.push_feedforward
+
+    def push_losing_the_first_ack(trial: int, t0_ns: int, feedforward: np.ndarray) -> None:
+        if not lost:  # the first push reaches nobody
+            lost.append(trial)
+            graph.pushed.append((trial, feedforward.copy()))
+            return
+        real_push(trial, t0_ns, feedforward)
+
+    graph.push_feedforward = push_losing_the_first_ack  # type: ignore[method-assign]
+    protocol = _protocol(graph, max_trials=2)
+    assert protocol.phase is Phase.WAIT_ACK and not graph.pending_start
+    graph.now += ACK_RETRY / 2
+    protocol.tick(graph_ready=True)
+    assert protocol.phase is Phase.WAIT_ACK and len(graph.pushed) == 1, "not before ACK_RETRY"
+    graph.now += ACK_RETRY
+    protocol.tick(graph_ready=True)
+    assert protocol.phase is Phase.STARTING and graph.pending_start
+    assert [trial for trial, _ in graph.pushed] == [1, 1] and protocol.ack_retries == 1
+    np.testing.assert_array_equal(graph.pushed[0][1], graph.pushed[1][1])
+    _run_to_end(graph, protocol)
+    assert protocol.session is not None and protocol.session.retried == []
+    local = run_trials(config, PLANT["mass_uncertainty"])
+    np.testing.assert_array_equal([c.record.max_abs_error for c in graph.conclusions],
+                                  local.max_abs_errors)

@@ -31,6 +31,9 @@ from .trial import record_from_samples
 
 STEP_TIMEOUT = 30.0
 """Wall seconds a protocol step may take before the trial is discarded and run again."""
+ACK_RETRY = 0.25
+"""Wall seconds without the controller's acknowledgement of a pushed feed-forward before it is
+pushed again (a lost profile or acknowledgement costs a quarter second, not STEP_TIMEOUT)."""
 RECORDER_TIMEOUT = 5.0
 """Wall seconds to wait for the recorder to file a trial before going on without it."""
 
@@ -102,6 +105,10 @@ class TrialProtocol:
         self.after_save = ""
         """In WAIT_RECORDER: ``start`` or ``finish``."""
         self.end_ns = 0
+        self.pushed_at = 0.0
+        """When the feed-forward was last pushed (WAIT_ACK: pushed again after ACK_RETRY)."""
+        self.ack_retries = 0
+        """Feed-forwards pushed again for want of an acknowledgement (whole run)."""
         self.error: str | None = None
         self.exit_code: int | None = None
 
@@ -165,6 +172,9 @@ class TrialProtocol:
             self._retry("timeout", [("phase", self.phase.value)])
         elif self.phase is Phase.STARTING and not self.starting:
             self._start()
+        elif self.phase is Phase.WAIT_ACK and now - self.pushed_at > ACK_RETRY:
+            self.ack_retries += 1
+            self._push()
 
     def on_reset(self, t0_ns: int | None, message: str = "") -> None:
         """The plant is at x_d(0), its next sample stamped ``t0_ns`` (None: refused)."""
@@ -176,7 +186,7 @@ class TrialProtocol:
         self.samples.start(t0_ns)
         self.done_report = None
         self._enter(Phase.WAIT_ACK)
-        self.port.push_feedforward(self.trial, t0_ns, self.session.feedforward)
+        self._push()
 
     def on_acknowledged(self, trial: int, t0_ns: int) -> None:
         """The controller loaded the feed-forward of ``trial`` at ``t0_ns``."""
@@ -239,6 +249,11 @@ class TrialProtocol:
         self._enter(Phase.RESETTING)
         self.samples.stop()
         self.port.reset()
+
+    def _push(self) -> None:
+        assert self.session is not None
+        self.pushed_at = self.clock()
+        self.port.push_feedforward(self.trial, self.samples.t0_ns, self.session.feedforward)
 
     def _begin_trial(self) -> None:
         self.port.event("start", [("trial", str(self.trial))], self.samples.t0_ns)

@@ -221,7 +221,8 @@ class IlcSupervisor(Node):
                   ("aborted_trials", " ".join(map(str, aborted))),
                   ("retried", " ".join(f"{k}:{why}" for k, why in retried)),
                   ("store", "" if store is None else str(store.directory)),
-                  ("stored_trials", "0" if store is None else str(store.completed))]
+                  ("stored_trials", "0" if store is None else str(store.completed)),
+                  ("feedforward_pushed_again", str(protocol.ack_retries))]
         if protocol.error:
             return DiagnosticStatus.ERROR, protocol.error, values
         reasons = []

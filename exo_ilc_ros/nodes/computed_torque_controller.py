@@ -49,6 +49,7 @@ from .common import (
 from .guard import Health, JointStateGate, Rejections, rejections_check
 from .identified import (
     FEEDFORWARD_READER_QOS,
+    TRUSTED_READER_QOS,
     TrustedInput,
     decoded,
     decodes,
@@ -101,7 +102,7 @@ class ComputedTorqueController(Node):
                                                      DIAGNOSTICS_QOS)
         joints, samples = config.joints, self.step_count
         self.state_sub = TrustedInput(  # the plant's samples only (wire.publishers)
-            self, JointState, topics.JOINT_STATES, SAMPLES_QOS, self.on_joint_state,
+            self, JointState, topics.JOINT_STATES, TRUSTED_READER_QOS, self.on_joint_state,
             self.rejections, max_bytes(topics.JOINT_STATES, joints, samples),
             gate_classifier(JointStateGate(self.joint_names, self.rejections)))
         self.feedforward_sub = TrustedInput(  # the supervisor's profiles only

@@ -43,6 +43,21 @@ from ..wire.publishers import (
 )
 from .guard import Rejections
 
+TRUSTED_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL,
+                                reliability=ReliabilityPolicy.RELIABLE,
+                                durability=DurabilityPolicy.VOLATILE)
+"""The readers of the control loop's samples and commands: keep all. A KEEP_LAST reader's
+history is shared by every writer of the topic, so a burst of other publishers' messages
+(refused on arrival, but only once taken) pushed the plant's sample out before the controller
+took it, the lock-step loop waited for a command that never came, and the watchdog re-ran the
+trial (seen in the fuzz test). Keeping all, a full reader makes the reliable writers resend
+later instead: a flood delays, it does not delete."""
+STATUS_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                               reliability=ReliabilityPolicy.RELIABLE,
+                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""The supervisor's reader of /diagnostics: 1000 deep, not the writers' 10, so a burst of
+other messages cannot push the controller's ``done`` or acknowledgement out of the reader's
+history before the supervisor takes it (a lost ``done`` costs the 30 s step timeout)."""
 FEEDFORWARD_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                                     reliability=ReliabilityPolicy.RELIABLE,
                                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -340,10 +355,14 @@ def effort_classifier(rejections: Rejections, joints: int) -> Callable[[bytes], 
     return classify
 
 
-def gate_classifier(gate: Callable[[bytes], Any]) -> Callable[[bytes], bool]:
-    """``classify`` for /joint_states: a :class:`guard.JointStateGate` of its own (its stamp
-    memory is not the trusted stream's), which counts the cause of a bad message."""
-    return lambda raw: gate(raw) is not None
+def gate_classifier(gate: Any) -> Callable[[bytes], bool]:
+    """``classify`` for /joint_states: a :class:`guard.JointStateGate` of its own, restarted
+    for every message (a foreign message is judged alone: neither the trusted stream's stamps
+    nor another foreign message's count), which counts the cause of a bad message."""
+    def classify(raw: bytes) -> bool:
+        gate.restart()
+        return gate(raw) is not None
+    return classify
 
 
 def decoded(msg_type: Any, callback: Callable[[Any], None], rejections: Rejections,

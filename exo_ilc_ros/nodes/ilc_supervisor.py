@@ -42,7 +42,7 @@ from .common import (
     wall_clock,
 )
 from .guard import Health, JointStateGate, Rejections, rejections_check
-from .identified import Admission, StatusInput, gate_classifier
+from .identified import STATUS_READER_QOS, Admission, StatusInput, gate_classifier
 from .messages import feedforward_message, trial_summary
 
 NAME = schema.SUPERVISOR
@@ -80,7 +80,7 @@ class IlcSupervisor(Node):
         self.inbox = Inbox(self)  # the trial's samples, drained in batches (see Inbox)
         self.state_sub = self.inbox.subscribe(JointState, topics.JOINT_STATES,
                                               admit=self.samples_from.admit_raw)
-        self.statuses = StatusInput(self, DIAGNOSTICS_QOS, self.on_diagnostics,
+        self.statuses = StatusInput(self, STATUS_READER_QOS, self.on_diagnostics,
                                     self.rejections)  # each status from the node it names
         self.health = Health(self, NAME)
         self.health.checks += [self._run_check,

@@ -46,7 +46,7 @@ from .common import (
     wall_clock,
 )
 from .guard import Health, Rejections, rejections_check
-from .identified import TrustedInput, effort_classifier
+from .identified import TRUSTED_READER_QOS, TrustedInput, effort_classifier
 
 NAME = schema.PLANT
 
@@ -88,7 +88,7 @@ class PlantSimulator(Node):
         self.state_pub = self.create_publisher(JointState, topics.JOINT_STATES, SAMPLES_QOS)
         self.clock_pub = self.create_publisher(Clock, topics.CLOCK, CLOCK_QOS)
         self.command_sub = TrustedInput(  # the controller's commands only (wire.publishers)
-            self, Float64MultiArray, topics.EFFORT_COMMANDS, SAMPLES_QOS, self.on_command,
+            self, Float64MultiArray, topics.EFFORT_COMMANDS, TRUSTED_READER_QOS, self.on_command,
             self.rejections, max_bytes(topics.EFFORT_COMMANDS, config.joints, 0),
             effort_classifier(self.rejections, config.joints))
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,

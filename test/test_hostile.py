@@ -334,3 +334,58 @@ def test_fuzzing_a_running_graph_changes_nothing_learned() -> None:
         errors = [s for s in seen if s.name == "plant_simulator/health" and
                   s.level == s.ERROR and "publishers on /effort_controller/commands" in s.message]
         assert errors, "the second commander was reported as an ERROR"
+
+
+@pytest.mark.graph
+def test_junk_after_the_profile_evicts_it_from_a_depth_1_reader_but_not_from_ours() -> None:
+    """The cause of issue 13's 20-27 s stalls, reproduced on DDS alone: the supervisor's
+    profile, then junk from another publisher, both arriving before the controller takes:
+    a reader with the writer's QoS (transient local, depth 1) holds only the junk (the profile
+    is gone, no acknowledgement ever comes); the controller's reader (100 deep) holds both,
+    and the rule admits the profile."""
+    import rclpy
+    from rclpy.qos import QoSProfile
+    from trajectory_msgs.msg import JointTrajectory
+
+    from exo_ilc_ros.nodes.common import LATCHED_QOS
+    from exo_ilc_ros.nodes.identified import FEEDFORWARD_READER_QOS, IdentifiedSubscription
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        supervisor = rclpy.create_node("ilc_supervisor", context=context)
+        intruder = rclpy.create_node("fuzzer", context=context)
+        reader = rclpy.create_node("computed_torque_controller", context=context)
+        profile_pub = supervisor.create_publisher(JointTrajectory, topics.FEEDFORWARD,
+                                                  LATCHED_QOS)
+        junk_pub = intruder.create_publisher(JointTrajectory, topics.FEEDFORWARD, QoSProfile(
+            depth=10, durability=LATCHED_QOS.durability))
+        got: dict[str, list[tuple[bytes, bytes]]] = {"writer_qos": [], "ours": []}
+        subs = {name: IdentifiedSubscription(reader, JointTrajectory, topics.FEEDFORWARD, qos,
+                                             lambda raw, n, gid, k=name: got[k].append(
+                                                 (raw or b"", gid)))
+                for name, qos in (("writer_qos", LATCHED_QOS),
+                                  ("ours", FEEDFORWARD_READER_QOS))}
+        deadline = time.monotonic() + 10.0
+        while any(s.get_publisher_count() < 2 for s in subs.values()):
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        profile = _feedforward(4)
+        profile_pub.publish(profile)
+        for _ in range(5):
+            junk_pub.publish(b"\x00\x01\x00\x00junk")
+        time.sleep(0.5)  # everything delivered; nobody has taken anything yet
+        for sub in subs.values():
+            while (taken := sub.take_data()) is not None:
+                sub.deliver(taken[0], taken[1], taken[2])
+        profiles = {name: [raw for raw, _ in items if raw == profile]
+                    for name, items in got.items()}
+        assert profiles["writer_qos"] == [], "evicted: the depth-1 reader lost the profile"
+        assert len(got["writer_qos"]) == 1
+        assert profiles["ours"] == [profile] and len(got["ours"]) == 6
+        gids = {gid for raw, gid in got["ours"] if raw == profile}
+        endpoints = {bytes(i.endpoint_gid): i.node_name
+                     for i in reader.get_publishers_info_by_topic(topics.FEEDFORWARD)}
+        assert [endpoints[g] for g in gids] == ["ilc_supervisor"], "the GID names the sender"
+    finally:
+        rclpy.try_shutdown(context=context)

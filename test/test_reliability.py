@@ -237,8 +237,8 @@ def test_plant_watchdog_in_real_time_mode_stops_holding_the_last_command(tmp_pat
     from exo_ilc_ros.wire.cdr import float64_array
 
     periods = 10
-    config = _config(mode="real_time", **{"trajectory.duration": 3.0,
-                                          "safety.watchdog_periods": periods})
+    config = _config(mode="real_time", watchdog_min_timeout=0.0,
+                     **{"trajectory.duration": 3.0, "safety.watchdog_periods": periods})
     params = tmp_path / "params.yaml"
     params.write_text(config.to_ros_yaml("plant watchdog test"))
     rclpy.init(args=["--ros-args", "--params-file", str(params)])

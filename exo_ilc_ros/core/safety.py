@@ -9,6 +9,7 @@ input checks in :mod:`.validation`.
 from __future__ import annotations
 
 from enum import Enum
+from typing import Protocol
 
 
 class WatchdogState(Enum):
@@ -84,3 +85,17 @@ class Watchdog:
         """Key-values for a diagnostic status."""
         return [("state", self.state.value), ("trips", str(self.trips)),
                 ("late_inputs", str(self.late)), ("timeout_ns", str(self.timeout_ns))]
+
+
+class _Parameters(Protocol):
+    def __getitem__(self, name: str) -> object: ...
+
+
+def watchdog_for(config: _Parameters) -> Watchdog:
+    """The one rule of both watchdogs, the controller's (no /joint_states) and the real-time
+    plant's (no command): ``safety.watchdog_periods`` control periods of wall time, never less
+    than ``watchdog_min_timeout`` (default 1 s: a loaded 2-core machine delivers late without
+    any fault, and a trip costs a re-run; 0 on hardware, where the periods alone count)."""
+    period_ns = int(round(float(str(config["control.period"])) * 1e9))
+    return Watchdog(int(str(config["safety.watchdog_periods"])), period_ns,
+                    int(round(float(str(config["watchdog_min_timeout"])) * 1e9)))

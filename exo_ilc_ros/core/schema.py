@@ -133,9 +133,10 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("safety.watchdog_periods", SHARED, Kind.INTEGER,
               "control periods without /joint_states (controller) or a command (plant) before "
               "the safe hold / zero effort", strictly_positive=True),
-    Parameter("watchdog_min_timeout", CONTROLLER, Kind.DOUBLE,
-              "wall-clock floor of the controller's watchdog (s): in lock-step a loaded machine "
-              "may deliver a sample late without any fault; 0 on hardware", minimum=0.0),
+    Parameter("watchdog_min_timeout", SHARED, Kind.DOUBLE,
+              "wall-clock floor of every watchdog (s; the controller's and the real-time "
+              "plant's, core.safety.watchdog_for): a loaded machine may deliver late without "
+              "any fault; 0 on hardware", minimum=0.0),
     Parameter("mass_uncertainty", PLANT, Kind.DOUBLE,
               "delta: the plant's masses are m_i (1 + delta); the controller keeps m_i",
               minimum=-0.9),

@@ -29,7 +29,7 @@ from trajectory_msgs.msg import JointTrajectory
 from ..core import schema
 from ..core.controller import GuardedControlStep
 from ..core.experiment import Experiment
-from ..core.safety import Watchdog
+from ..core.safety import watchdog_for
 from ..core.trial import period_ns, sample_index
 from ..core.validation import Cause, Rejection, validate_feedforward
 from ..wire import topics
@@ -73,8 +73,7 @@ class ComputedTorqueController(Node):
         self.step_ns = period_ns(experiment.period)
         self.rejections = Rejections(self)
         self.gate = JointStateGate(self.joint_names, self.rejections)
-        self.watchdog = Watchdog(config["safety.watchdog_periods"], self.step_ns,
-                                 int(config["watchdog_min_timeout"] * 1e9))
+        self.watchdog = watchdog_for(config)  # the plant's rule too (core.safety)
         self.aborted_at = -1
         """First sample of the current trial outside the error envelope (-1: none)."""
         self.trial_trips = 0

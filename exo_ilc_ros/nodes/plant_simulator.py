@@ -30,7 +30,7 @@ from ..core import schema
 from ..core.controller import safe_hold_effort
 from ..core.experiment import Experiment
 from ..core.plant import PlantStepper, clamp_counted
-from ..core.safety import Watchdog
+from ..core.safety import watchdog_for
 from ..core.trial import period_ns
 from ..core.validation import Cause, Rejection, validate_effort_command
 from ..wire import topics
@@ -79,7 +79,7 @@ class PlantSimulator(Node):
         self.saturated = np.zeros(config.joints, dtype=np.int64)
         self.over_limit = 0
         self.commands = 0
-        self.watchdog = Watchdog(config["safety.watchdog_periods"], self.step_ns)
+        self.watchdog = watchdog_for(config)  # the controller's rule too (core.safety)
         self.hold_pose: np.ndarray | None = None
         """Real-time mode: the pose the plant's safe hold keeps after a watchdog trip."""
 

@@ -34,6 +34,9 @@ STEP_TIMEOUT = 30.0
 ACK_RETRY = 0.25
 """Wall seconds without the controller's acknowledgement of a pushed feed-forward before it is
 pushed again (a lost profile or acknowledgement costs a quarter second, not STEP_TIMEOUT)."""
+LATE_RERUNS = 3
+"""A real-time trial run again this many times in a row for late commands stops the run: the
+machine cannot keep this control rate (nothing stored is lost; resume at a lower rate)."""
 RECORDER_TIMEOUT = 5.0
 """Wall seconds to wait for the recorder to file a trial before going on without it."""
 
@@ -105,6 +108,14 @@ class TrialProtocol:
         self.after_save = ""
         """In WAIT_RECORDER: ``start`` or ``finish``."""
         self.end_ns = 0
+        self.real_time = False
+        """The plant runs on a wall-clock timer (its ``mode``): a trial ends with the plant's
+        report of late commands too, and the run's first attempt is a warm-up."""
+        self.warmed_up = False
+        self.plant_report: Mapping[str, str] | None = None
+        """The real-time plant's ``done`` of the running trial (late commands)."""
+        self.late_reruns = 0
+        """Consecutive runs of this trial discarded for late commands."""
         self.pushed_at = 0.0
         """When the feed-forward was last pushed (WAIT_ACK: pushed again after ACK_RETRY)."""
         self.ack_retries = 0
@@ -140,6 +151,7 @@ class TrialProtocol:
             self.fail(str(exc), code=2)
             return
         self.experiment = Experiment(config)
+        self.real_time = config["mode"] == "real_time"
         self.session = session
         if self.store is not None:
             if session.completed:
@@ -185,6 +197,7 @@ class TrialProtocol:
             return
         self.samples.start(t0_ns)
         self.done_report = None
+        self.plant_report = None
         self._enter(Phase.WAIT_ACK)
         self._push()
 
@@ -238,6 +251,12 @@ class TrialProtocol:
             self.done_report = report
             self._maybe_end_trial()
 
+    def on_plant_done(self, t0_ns: int, report: Mapping[str, str]) -> None:
+        """The real-time plant's end of the trial that started at ``t0_ns`` (late commands)."""
+        if self.phase in (Phase.STARTING, Phase.RUNNING) and t0_ns == self.samples.t0_ns:
+            self.plant_report = report
+            self._maybe_end_trial()
+
     def on_recorder_filed(self, trials: int) -> None:
         """The recorder's count of trials filed (in the bag, files closed)."""
         self.recorder_filed = max(self.recorder_filed, trials)
@@ -274,7 +293,7 @@ class TrialProtocol:
     def _maybe_end_trial(self) -> None:
         report = self.done_report
         if self.phase is not Phase.RUNNING or not self.samples.running or report is None \
-                or not self.samples.last_in:
+                or not self.samples.last_in or (self.real_time and self.plant_report is None):
             return
         trips = int(report.get("watchdog_trips", "0"))
         if trips:
@@ -282,7 +301,35 @@ class TrialProtocol:
                           f"{trips}x (safe hold); running the trial again")
             self._retry("watchdog", [("watchdog_trips", str(trips))])
             return
+        if self.real_time and self._late():
+            return
         self._end_trial(int(report.get("aborted_at", "-1")))
+
+    def _late(self) -> bool:
+        """Real time: the run's first attempt warms the graph up (every path once: DDS, the
+        kernels, the first messages) and is run again; a trial with more than
+        ``max_late_commands`` of its periods on a late command is run again, not learned
+        from (LATE_RERUNS times in a row stop the run). True: not concluded."""
+        if not self.warmed_up:
+            self.warmed_up = True
+            self.port.log(False, f"trial {self.trial}: warm-up attempt done; running it again")
+            self._retry("warm_up", [])
+            return True
+        report = self.plant_report or {}
+        late, periods = int(report.get("late_commands", "0")), int(report.get("periods", "0"))
+        if late <= self.config["max_late_commands"] * max(periods, 1):
+            self.late_reruns = 0
+            return False
+        self.late_reruns += 1
+        share = f"{late} of {periods} periods ran on a late command"
+        if self.late_reruns >= LATE_RERUNS:
+            self.fail(f"trial {self.trial}: {share}, {LATE_RERUNS} times in a row (more than "
+                      f"max_late_commands = {self.config['max_late_commands']:g}): this machine "
+                      "does not keep the control rate; stopped (stored trials are kept)")
+            return True
+        self.port.log(True, f"trial {self.trial}: {share}; running the trial again")
+        self._retry("late_commands", [("late_commands", str(late)), ("periods", str(periods))])
+        return True
 
     def _end_trial(self, aborted: int) -> None:
         """Conclude the trial in the session; store it (once the recorder filed it) and go on

@@ -99,3 +99,39 @@ def watchdog_for(config: _Parameters) -> Watchdog:
     period_ns = int(round(float(str(config["control.period"])) * 1e9))
     return Watchdog(int(str(config["safety.watchdog_periods"])), period_ns,
                     int(round(float(str(config["watchdog_min_timeout"])) * 1e9)))
+
+
+class LateCommands:
+    """Real-time plant: periods run on a late command. Each tick applies the last command
+    received; if none arrived since the previous tick, the command meant for this period is
+    late (it will be applied a period or more after its sample) and the one before is held."""
+
+    def __init__(self) -> None:
+        self.trial = 0
+        """Late periods in the running (or last) trial."""
+        self.periods = 0
+        """Periods stepped in the running (or last) trial."""
+        self.total = 0
+        self._fresh = False
+
+    def start(self) -> None:
+        """A trial starts (sample 0 is out; its command is due before the first tick)."""
+        self.trial = self.periods = 0
+        self._fresh = False
+
+    def command(self) -> None:
+        """A command arrived."""
+        self._fresh = True
+
+    def tick(self) -> None:
+        """A period is stepped with the command held now."""
+        self.periods += 1
+        if not self._fresh:
+            self.trial += 1
+            self.total += 1
+        self._fresh = False
+
+    def as_values(self) -> list[tuple[str, str]]:
+        """Key-values for the plant's health."""
+        return [("late_commands", str(self.trial)), ("late_periods", str(self.periods)),
+                ("late_commands_total", str(self.total))]

@@ -70,6 +70,10 @@ def _margin_rule(value: Any) -> str | None:
     return None if value < 1.0 else f"must be < 1 (a share of the limit), got {value!r}"
 
 
+def _share_rule(value: Any) -> str | None:
+    return None if value <= 1.0 else f"must be <= 1 (a share of the periods), got {value!r}"
+
+
 def _schedule_parameters() -> list[Parameter]:
     out = []
     meaning = {"position": ("M", "|s e|"), "velocity": ("M'", "|s e_dot|"),
@@ -163,6 +167,10 @@ PARAMETERS: tuple[Parameter, ...] = (
               strictly_positive=True),
     Parameter("error_bound", SUPERVISOR, Kind.DOUBLE, "max |e_j| bound (rad)",
               strictly_positive=True, live=True),
+    Parameter("max_late_commands", SUPERVISOR, Kind.DOUBLE,
+              "real_time mode: share (0-1) of a trial's control periods the plant may run with "
+              "the previous command held (this period's came late) before the trial is run "
+              "again instead of learned from", minimum=0.0, extra_rule=_share_rule),
     Parameter("wait_for_recorder", SUPERVISOR, Kind.BOOL,
               "before trial 1, wait until bag_recorder reports it is subscribed to every topic "
               "(exo-ilc run sets it when it records a bag)"),

@@ -153,6 +153,9 @@ class IlcSupervisor(Node):
                 self.recorder_ready = True
                 self.protocol.on_recorder_filed(int_value(values, "trials_filed") or 0)
                 continue
+            if item.name == topics.PLANT_TRIAL_STATUS and item.message == "done":
+                self.protocol.on_plant_done(int_value(values, "t0_ns") or -1, values)
+                continue
             trial, t0 = int_value(values, "trial"), int_value(values, "t0_ns")
             if trial is None or t0 is None:
                 continue
@@ -189,6 +192,10 @@ class IlcSupervisor(Node):
                                    ("reason", topics.ENVELOPE_REASON),
                                    ("aborted_at", str(record.aborted_at))], end_ns)
         summary = trial_summary(conclusion, self.joint_names)
+        if self.protocol.plant_report is not None:  # real time: the plant's late commands
+            summary.values += status("", "", [
+                (k, self.protocol.plant_report.get(k, "")) for k in ("late_commands",
+                                                                     "periods")]).values
         self.summary_pub.publish(diagnostic_array(self, [summary], end_ns))
         self.event("end", [(kv.key, kv.value) for kv in summary.values], end_ns)
 

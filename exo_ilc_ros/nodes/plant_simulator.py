@@ -30,7 +30,7 @@ from ..core import schema
 from ..core.controller import safe_hold_effort
 from ..core.experiment import Experiment
 from ..core.plant import PlantStepper, clamp_counted
-from ..core.safety import watchdog_for
+from ..core.safety import LateCommands, watchdog_for
 from ..core.trial import period_ns
 from ..core.validation import Cause, Rejection, validate_effort_command
 from ..wire import topics
@@ -43,6 +43,7 @@ from .common import (
     SchemaParameters,
     diagnostic_array,
     spin,
+    status,
     wall_clock,
 )
 from .guard import Health, Rejections, rejections_check
@@ -80,6 +81,7 @@ class PlantSimulator(Node):
         self.over_limit = 0
         self.commands = 0
         self.watchdog = watchdog_for(config)  # the controller's rule too (core.safety)
+        self.late = LateCommands()  # real time: periods run on a late (held) command
         self.hold_pose: np.ndarray | None = None
         """Real-time mode: the pose the plant's safe hold keeps after a watchdog trip."""
 
@@ -142,6 +144,7 @@ class PlantSimulator(Node):
         self._publish()
         if self.timer is not None:
             self.watchdog.arm(time.monotonic_ns())
+            self.late.start()
             self.timer.reset()
         response.success = True
         response.message = f"{topics.T0_PREFIX}{self.t0_ns}"
@@ -175,6 +178,7 @@ class PlantSimulator(Node):
                 self._stepped()
         elif self.running:
             self.watchdog.feed(time.monotonic_ns())
+            self.late.command()
 
     def _reject(self, effort: np.ndarray) -> None:
         checked = validate_effort_command(effort.tolist(), self.unbounded.tolist())
@@ -197,7 +201,14 @@ class PlantSimulator(Node):
             self.held[:] = safe_hold_effort(self.hold_pose, self.stepper.position,
                                             self.stepper.velocity, e.kp, e.kd,
                                             e.nominal.kernel_args, self.limit)
+        self.late.tick()
         self._advance(self.held)
+        if not self.running:  # that was the last sample: the trial's lateness, for the supervisor
+            self.diagnostics_pub.publish(diagnostic_array(self, [status(
+                topics.PLANT_TRIAL_STATUS, "done", [("t0_ns", str(self.t0_ns)),
+                                                     ("periods", str(self.late.periods)),
+                                                     ("late_commands", str(self.late.trial))],
+                hardware_id=NAME)]))
 
     def on_health_timer(self) -> None:
         """Health on /diagnostics: rejections, saturation, watchdog."""
@@ -208,7 +219,8 @@ class PlantSimulator(Node):
         values = [("commands", str(self.commands)), ("over_limit", str(self.over_limit)),
                   *((f"saturated/{n}", str(int(c))) for n, c in zip(names, self.saturated,
                                                                       strict=True)),
-                  *(("watchdog/" + k, v) for k, v in self.watchdog.as_values())]
+                  *(("watchdog/" + k, v) for k, v in self.watchdog.as_values()),
+                  *self.late.as_values()]
         reasons = []
         level = DiagnosticStatus.OK
         if self.hold_pose is not None:

@@ -101,6 +101,11 @@ CONTROLLER_TRIAL_STATUS = "computed_torque_controller/trial"
 record is rebuilt with the safe hold from ``aborted_at``; a trial with a watchdog trip is run
 again (the commands it got are not the ones the record would assume)."""
 PLANT_HEALTH_STATUS = "plant_simulator/health"
+PLANT_TRIAL_STATUS = "plant_simulator/trial"
+"""Sent by the real-time plant on /diagnostics after each trial's last sample: message
+``done``, values ``t0_ns``, ``periods`` (stepped) and ``late_commands`` (periods run with the
+previous command held because this period's had not arrived). The supervisor ends a real-time
+trial only with it, and runs it again when too many were late (``max_late_commands``)."""
 SUPERVISOR_HEALTH_STATUS = "ilc_supervisor/health"
 T0_PREFIX = "t0_ns="
 ENVELOPE_REASON = "error_envelope"

@@ -70,6 +70,8 @@ on arrival; the depth only has to outlast a burst between two takes."""
 
 RCL_RET_OK = 0
 RCL_RET_SUBSCRIPTION_TAKE_FAILED = 401
+KEEP_BUFFER = 1 << 20
+"""A take buffer grown beyond this (by an oversized message) is shrunk again."""
 GID_SIZE = 16
 """RMW_GID_STORAGE_SIZE in Jazzy's rmw."""
 
@@ -134,6 +136,14 @@ def _functions() -> tuple[Any, Any, Any]:
                          ctypes.POINTER(_Allocator)]
         init.restype = ctypes.c_int
         rcutils.rcutils_reset_error.restype = None
+        for name in ("rcutils_uint8_array_resize", "rcutils_uint8_array_fini"):
+            function = getattr(rcutils, name)
+            function.restype = ctypes.c_int
+        rcutils.rcutils_uint8_array_resize.argtypes = [ctypes.POINTER(_SerializedMessage),
+                                                       ctypes.c_size_t]
+        rcutils.rcutils_uint8_array_fini.argtypes = [ctypes.POINTER(_SerializedMessage)]
+        _LIBS["resize"] = rcutils.rcutils_uint8_array_resize
+        _LIBS["fini"] = rcutils.rcutils_uint8_array_fini
         _LIBS["take"] = (take, init, rcutils.rcutils_get_default_allocator())
         _LIBS["reset_error"] = rcutils.rcutils_reset_error
     return _LIBS["take"]
@@ -152,6 +162,7 @@ class RawTaker:
         self._message = _SerializedMessage()
         if init(ctypes.byref(self._message), 1024, ctypes.byref(self._allocator)) != RCL_RET_OK:
             raise MemoryError("cannot allocate a serialized message buffer")
+        self._closed = False
         self._info = _MessageInfo()
         self._gid_address = ctypes.addressof(self._info) + _MessageInfo.publisher_gid.offset + \
             _Gid.data.offset
@@ -161,7 +172,9 @@ class RawTaker:
 
     def take(self) -> tuple[bytes | None, int, bytes, int] | None:
         """The next message as (CDR bytes, or None if longer than ``max_bytes``; its length;
-        the sender's GID; DDS receive time in ns), or None when none waits."""
+        the sender's GID; DDS receive time in ns), or None when none waits (or closed)."""
+        if self._closed:
+            return None
         with self.handle:
             ret = self._take(*self._args)
         if ret != RCL_RET_OK:
@@ -173,10 +186,18 @@ class RawTaker:
         message = self._message
         length = int(message.buffer_length)
         gid = ctypes.string_at(self._gid_address, GID_SIZE)
-        if self.max_bytes is not None and length > self.max_bytes:
-            return None, length, gid, int(self._info.received_timestamp)
-        return (ctypes.string_at(message.buffer, length), length, gid,
-                int(self._info.received_timestamp))
+        received = int(self._info.received_timestamp)
+        raw = None if self.max_bytes is not None and length > self.max_bytes else \
+            ctypes.string_at(message.buffer, length)
+        if message.buffer_capacity > KEEP_BUFFER:  # a huge message passed: give it back
+            _LIBS["resize"](ctypes.byref(message), 1024)
+        return raw, length, gid, received
+
+    def close(self) -> None:
+        """Free the buffer (the taker is not used afterwards)."""
+        if not self._closed:
+            self._closed = True
+            _LIBS["fini"](ctypes.byref(self._message))
 
     def _check_layout(self) -> None:
         expected = get_rmw_implementation_identifier()
@@ -234,6 +255,7 @@ class IdentifiedSubscription(Waitable):
         if self in self.node.waitables:
             self.node.remove_waitable(self)
         self.handle.destroy_when_not_in_use()
+        self.taker.close()
 
 
 def census(node: Node, check: PublisherCheck) -> None:
@@ -266,12 +288,6 @@ class Admission:
     def census(self) -> None:
         """Look at the graph again (every health report, and for an unlisted sender)."""
         census(self.node, self.check)
-
-    @property
-    def trusted_present(self) -> bool:
-        """The contract's publisher is in the graph (after a fresh census)."""
-        self.census()
-        return self.check.trusted_gid is not None
 
     def __call__(self, raw: bytes | None, length: int, gid: bytes) -> bool:
         """Size, then sender, then (for a foreign message) its fields: True to act on it."""

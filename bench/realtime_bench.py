@@ -20,6 +20,9 @@ import time
 from exo_ilc_ros.core.config import load_config
 from exo_ilc_ros.orchestration.graph import GraphSession
 
+START_PERIODS = 10
+"""A late command within a trial's first this many periods counts as "at start"."""
+
 
 def one_run(rate_hz: float, trials: int, duration: float) -> dict[str, float]:
     """One real-time run: late commands per trial (from the summaries) and re-runs."""
@@ -31,11 +34,13 @@ def one_run(rate_hz: float, trials: int, duration: float) -> dict[str, float]:
         session.spin_until(lambda: session.finished, timeout=60.0 + 4 * trials * duration,
                            stall_timeout=60.0)
         late = [int(s.values.get("late_commands", "-1")) for s in session.summaries]
+        first = [int(s.values.get("first_late", "-1")) for s in session.summaries]
         periods = [int(s.values.get("periods", "0")) for s in session.summaries]
         reruns = [v.get("reason", "") for m, v, _ in session.events if m == "aborted"]
     return {"late_total": sum(late), "periods": sum(periods),
             "late_trial_1": late[0] if late else -1,
             "trials_late": sum(1 for x in late if x > 0),
+            "late_at_start": sum(1 for f in first if 0 < f <= START_PERIODS),
             "watchdog": sum(1 for r in reruns if r == "watchdog"),
             "warm_up": sum(1 for r in reruns if r == "warm_up"),
             "wall": time.monotonic() - started}
@@ -57,13 +62,15 @@ def main() -> None:
               f"watchdog trips {sum(r['watchdog'] for r in runs):g}, runs with a late command "
               f"in trial 1: {sum(1 for r in runs if r['late_trial_1'] > 0)}, trials with a "
               f"late command {sum(r['trials_late'] for r in runs):g} of "
-              f"{args.runs * args.trials}, late commands {late:g} of {periods:g} periods "
+              f"{args.runs * args.trials} ({sum(r['late_at_start'] for r in runs):g} within "
+              f"the first {START_PERIODS} periods), late commands {late:g} of {periods:g} periods "
               f"({100 * late / max(periods, 1):.3f} %), warm-up attempts "
               f"{sum(r['warm_up'] for r in runs):g}, wall per run "
               f"{sum(r['wall'] for r in runs) / len(runs):.1f} s", flush=True)
         for k, r in enumerate(runs, 1):
             print(f"  run {k}: late {r['late_total']:g} / {r['periods']:g} periods, trial 1 "
-                  f"{r['late_trial_1']:g}, watchdog {r['watchdog']:g}", flush=True)
+                  f"{r['late_trial_1']:g}, at start {r['late_at_start']:g}, watchdog "
+                  f"{r['watchdog']:g}", flush=True)
 
 
 if __name__ == "__main__":

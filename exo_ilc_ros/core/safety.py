@@ -111,12 +111,15 @@ class LateCommands:
         """Late periods in the running (or last) trial."""
         self.periods = 0
         """Periods stepped in the running (or last) trial."""
+        self.first = -1
+        """The first late period of the running (or last) trial (1-based; -1: none)."""
         self.total = 0
         self._fresh = False
 
     def start(self) -> None:
         """A trial starts (sample 0 is out; its command is due before the first tick)."""
         self.trial = self.periods = 0
+        self.first = -1
         self._fresh = False
 
     def command(self) -> None:
@@ -129,9 +132,11 @@ class LateCommands:
         if not self._fresh:
             self.trial += 1
             self.total += 1
+            if self.first < 0:
+                self.first = self.periods
         self._fresh = False
 
     def as_values(self) -> list[tuple[str, str]]:
         """Key-values for the plant's health."""
         return [("late_commands", str(self.trial)), ("late_periods", str(self.periods)),
-                ("late_commands_total", str(self.total))]
+                ("first_late", str(self.first)), ("late_commands_total", str(self.total))]

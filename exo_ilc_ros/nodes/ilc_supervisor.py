@@ -194,8 +194,8 @@ class IlcSupervisor(Node):
         summary = trial_summary(conclusion, self.joint_names)
         if self.protocol.plant_report is not None:  # real time: the plant's late commands
             summary.values += status("", "", [
-                (k, self.protocol.plant_report.get(k, "")) for k in ("late_commands",
-                                                                     "periods")]).values
+                (k, self.protocol.plant_report.get(k, "")) for k in (
+                    "late_commands", "periods", "first_late")]).values
         self.summary_pub.publish(diagnostic_array(self, [summary], end_ns))
         self.event("end", [(kv.key, kv.value) for kv in summary.values], end_ns)
 

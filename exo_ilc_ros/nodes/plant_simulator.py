@@ -207,7 +207,8 @@ class PlantSimulator(Node):
             self.diagnostics_pub.publish(diagnostic_array(self, [status(
                 topics.PLANT_TRIAL_STATUS, "done", [("t0_ns", str(self.t0_ns)),
                                                      ("periods", str(self.late.periods)),
-                                                     ("late_commands", str(self.late.trial))],
+                                                     ("late_commands", str(self.late.trial)),
+                                                     ("first_late", str(self.late.first))],
                 hardware_id=NAME)]))
 
     def on_health_timer(self) -> None:

@@ -103,8 +103,9 @@ again (the commands it got are not the ones the record would assume)."""
 PLANT_HEALTH_STATUS = "plant_simulator/health"
 PLANT_TRIAL_STATUS = "plant_simulator/trial"
 """Sent by the real-time plant on /diagnostics after each trial's last sample: message
-``done``, values ``t0_ns``, ``periods`` (stepped) and ``late_commands`` (periods run with the
-previous command held because this period's had not arrived). The supervisor ends a real-time
+``done``, values ``t0_ns``, ``periods`` (stepped), ``late_commands`` (periods run with the
+previous command held because this period's had not arrived) and ``first_late`` (the first
+such period, 1-based; -1: none). The supervisor ends a real-time
 trial only with it, and runs it again when too many were late (``max_late_commands``)."""
 SUPERVISOR_HEALTH_STATUS = "ilc_supervisor/health"
 T0_PREFIX = "t0_ns="

@@ -76,6 +76,24 @@ def test_status_owner_and_sizes() -> None:
     assert 501 * 136 < ff < 10**5 * 40
 
 
+def test_late_commands_count_the_periods_run_on_a_held_command() -> None:
+    """Hand-counted: commands before ticks 1, 2 and 4 of five; ticks 3 and 5 hold the previous
+    one (late); a new trial starts the count again."""
+    from exo_ilc_ros.core.safety import LateCommands
+
+    late = LateCommands()
+    late.start()
+    for command_before in (True, True, False, True, False):
+        if command_before:
+            late.command()
+        late.tick()
+    assert (late.trial, late.periods, late.first, late.total) == (2, 5, 3, 2)
+    late.start()
+    late.tick()  # the first tick without the command for sample 0
+    assert (late.trial, late.periods, late.first, late.total) == (1, 1, 1, 3)
+    assert dict(late.as_values())["late_commands_total"] == "3"
+
+
 # --- CDR builders for the adversarial messages ----------------------------------------------
 class _Cdr:
     def __init__(self) -> None:

@@ -482,9 +482,12 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
                 break
         draining = [node for node in polling
                     if isinstance(node, DrainingNode) and node.DRAINS_ON_STOP]
-        for node in [n for n in nodes if n not in draining]:
+        leaving = [n for n in nodes if n not in draining]
+        for node in leaving:
             executor.remove_node(node)
             nodes.remove(node)
+        _settle(executor)  # the executor lets go of their entities before they are destroyed
+        for node in leaving:
             destroy(node)
         _drain(executor, [node.poll for node in draining])
     except ExoIlcError as exc:
@@ -500,6 +503,16 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
             signal.signal(sig, handler)
         _ARGV = None
     return code
+
+
+def _settle(executor: EventsExecutor, timeout: float = 1.0) -> None:
+    """Spin until the EventsExecutor has handled everything posted so far (a node's removal
+    included: it unregisters the node's entities then, and an rcl subscription destroyed
+    before that crashed the process): a task posted now runs after them."""
+    marker = executor.create_task(lambda: None)
+    deadline = time.monotonic() + timeout
+    while not marker.done() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.01)
 
 
 def destroy(node: Node) -> None:

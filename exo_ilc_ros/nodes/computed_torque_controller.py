@@ -165,7 +165,7 @@ class ComputedTorqueController(Node):
     def on_ack_timer(self) -> None:
         """Acknowledge the loaded feed-forward once linked to the plant both ways."""
         if not self.ack_due or self.command_pub.get_subscription_count() < 1 or \
-                self.state_sub.get_publisher_count() < 1:
+                self.state_sub.get_publisher_count() < 1 or not self.state_sub.trusted_known():
             return
         self.ack_due = False
         ack = status(topics.FEEDFORWARD_ACK_STATUS, "loaded",

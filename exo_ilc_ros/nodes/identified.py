@@ -162,7 +162,8 @@ class RawTaker:
         self._message = _SerializedMessage()
         if init(ctypes.byref(self._message), 1024, ctypes.byref(self._allocator)) != RCL_RET_OK:
             raise MemoryError("cannot allocate a serialized message buffer")
-        self._closed = False
+        self.closed = False
+        """Set when the subscription is left: no more takes."""
         self._info = _MessageInfo()
         self._gid_address = ctypes.addressof(self._info) + _MessageInfo.publisher_gid.offset + \
             _Gid.data.offset
@@ -173,7 +174,7 @@ class RawTaker:
     def take(self) -> tuple[bytes | None, int, bytes, int] | None:
         """The next message as (CDR bytes, or None if longer than ``max_bytes``; its length;
         the sender's GID; DDS receive time in ns), or None when none waits (or closed)."""
-        if self._closed:
+        if self.closed:
             return None
         with self.handle:
             ret = self._take(*self._args)
@@ -193,12 +194,6 @@ class RawTaker:
             _LIBS["resize"](ctypes.byref(message), 1024)
         return raw, length, gid, received
 
-    def close(self) -> None:
-        """Free the buffer (the taker is not used afterwards)."""
-        if not self._closed:
-            self._closed = True
-            _LIBS["fini"](ctypes.byref(self._message))
-
     def _check_layout(self) -> None:
         expected = get_rmw_implementation_identifier()
         got = self._info.publisher_gid.implementation_identifier
@@ -206,6 +201,10 @@ class RawTaker:
             raise RuntimeError(f"rmw_message_info_t layout not as expected (publisher_gid "
                                f"names {got!r}, not {expected!r}); cannot tell senders apart")
         RawTaker._checked = True
+
+
+_KEPT: list[IdentifiedSubscription] = []
+"""Destroyed subscriptions whose rcl handles live on until the process ends."""
 
 
 class IdentifiedSubscription(Waitable):
@@ -234,6 +233,14 @@ class IdentifiedSubscription(Waitable):
             return int(self.handle.get_publisher_count())
 
     # Waitable
+    def __enter__(self) -> None:
+        """An executor that registered this waitable holds the rcl subscription in use, so
+        :meth:`destroy` defers freeing it until the executor let go (as for rclpy's own)."""
+        self.handle.__enter__()
+
+    def __exit__(self, kind: Any, value: Any, trace: Any) -> None:
+        self.handle.__exit__(kind, value, trace)
+
     def is_ready(self, wait_set: Any) -> bool:
         return bool(wait_set.is_ready("subscription", self._index))
 
@@ -251,11 +258,13 @@ class IdentifiedSubscription(Waitable):
         self._index = wait_set.add_subscription(self.handle)
 
     def destroy(self) -> None:
-        """Leave the node and free the rcl subscription."""
+        """Leave the node; nothing more is taken. The rcl subscription itself is kept until the
+        process ends: the EventsExecutor may still run a wake-up it queued for it (freeing it
+        earlier crashed a container whose recorder drains on after the supervisor is gone)."""
         if self in self.node.waitables:
             self.node.remove_waitable(self)
-        self.handle.destroy_when_not_in_use()
-        self.taker.close()
+        self.taker.closed = True
+        _KEPT.append(self)
 
 
 def census(node: Node, check: PublisherCheck) -> None:
@@ -288,6 +297,13 @@ class Admission:
     def census(self) -> None:
         """Look at the graph again (every health report, and for an unlisted sender)."""
         census(self.node, self.check)
+
+    def trusted_known(self) -> bool:
+        """The contract's publisher is in the graph, after a fresh census (a trial starts only
+        then: its first message is not refused as coming from a writer the graph did not list
+        yet)."""
+        self.census()
+        return self.check.trusted_gid is not None
 
     def __call__(self, raw: bytes | None, length: int, gid: bytes) -> bool:
         """Size, then sender, then (for a foreign message) its fields: True to act on it."""
@@ -412,57 +428,52 @@ def decodes(msg_type: Any, rejections: Rejections, topic: str) -> Callable[[byte
     return classify
 
 
-class StatusInput:
-    """``/diagnostics`` for a node that acts on other nodes' statuses: a status named
-    ``<node>/...`` is passed on only if that node's publisher sent it (others are refused,
-    ``foreign_publisher``); oversized or undecodable messages are refused."""
+class StatusAdmission:
+    """``/diagnostics`` for a node that acts on other nodes' statuses (an :class:`common.Inbox`
+    ``admit`` rule): a message is admitted only if every status named ``<node>/...`` in it was
+    sent by that node's publisher (a node publishes its own statuses); others are refused
+    (``foreign_publisher``), as are oversized (``oversized``) and undecodable (``not_numeric``)
+    ones.
 
-    def __init__(self, node: Node, qos: QoSProfile, callback: Callable[[Any], None],
-                 rejections: Rejections) -> None:
-        from diagnostic_msgs.msg import DiagnosticArray
+    (Read through the inbox, not an :class:`IdentifiedSubscription`: a waitable on a node that
+    leaves the EventsExecutor while the executor spins on for a draining recorder crashed the
+    supervisor's container at shut-down.)"""
 
+    def __init__(self, node: Node, rejections: Rejections) -> None:
         from ..wire import topics
         from ..wire.publishers import max_bytes
 
         self.node = node
-        self.callback = callback
         self.rejections = rejections
         self.limit = max_bytes(topics.DIAGNOSTICS, 0, 0)
         self.check = PublisherCheck(topics.DIAGNOSTICS, "")
-        self._decode = decoded(DiagnosticArray, self._on_array, rejections, topics.DIAGNOSTICS)
-        self._sender = ""
-        self.subscription = IdentifiedSubscription(node, DiagnosticArray, topics.DIAGNOSTICS,
-                                                   qos, self.on_message, self.limit)
 
-    def on_message(self, raw: bytes | None, length: int, gid: bytes) -> None:
-        """Size, then decode, then each status against its sender."""
-        if raw is None:
-            self.rejections.reject_cause(Cause.OVERSIZED, f"/diagnostics: {length} bytes, "
+    def __call__(self, raw: bytes, gid: bytes) -> bool:
+        """Size, then decode, then each named status against its sender."""
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.serialization import deserialize_message
+
+        from ..wire.publishers import status_owner
+
+        if len(raw) > self.limit:
+            self.rejections.reject_cause(Cause.OVERSIZED, f"/diagnostics: {len(raw)} bytes, "
                                          f"more than {self.limit}")
-            return
+            return False
+        try:
+            msg = deserialize_message(raw, DiagnosticArray)
+        except Exception as exc:  # any bytes may come; rclpy raises various errors
+            self.rejections.reject_cause(Cause.NOT_NUMERIC, f"/diagnostics: undecodable: {exc}")
+            return False
         sender = self.check.known.get(gid)
         if sender is None:
             census(self.node, self.check)
             sender = self.check.known.get(gid, "")
-        self._sender = sender
-        self._decode(raw)
-
-    def _on_array(self, msg: Any) -> None:
-        from ..wire.publishers import status_owner
-
         namespace = self.node.get_namespace()
-        kept = []
         for item in msg.status:
             owner = status_owner(item.name, namespace)
-            if owner is not None and owner != self._sender:
+            if owner is not None and owner != sender:
                 self.rejections.reject_cause(
                     Cause.FOREIGN_PUBLISHER, f"/diagnostics: status {item.name!r} from "
-                    f"{self._sender or 'a publisher not in the graph'}, not {owner}")
-                continue
-            kept.append(item)
-        msg.status = kept
-        self.callback(msg)
-
-    def destroy(self) -> None:
-        """Free the subscription."""
-        self.subscription.destroy()
+                    f"{sender or 'a publisher not in the graph'}, not {owner}")
+                return False
+        return True

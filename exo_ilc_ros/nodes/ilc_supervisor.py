@@ -18,6 +18,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
+from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
@@ -42,7 +43,7 @@ from .common import (
     wall_clock,
 )
 from .guard import Health, JointStateGate, Rejections, rejections_check
-from .identified import STATUS_READER_QOS, Admission, StatusInput, gate_classifier
+from .identified import STATUS_READER_QOS, Admission, StatusAdmission, gate_classifier
 from .messages import feedforward_message, trial_summary
 
 NAME = schema.SUPERVISOR
@@ -80,8 +81,10 @@ class IlcSupervisor(Node):
         self.inbox = Inbox(self)  # the trial's samples, drained in batches (see Inbox)
         self.state_sub = self.inbox.subscribe(JointState, topics.JOINT_STATES,
                                               admit=self.samples_from.admit_raw)
-        self.statuses = StatusInput(self, STATUS_READER_QOS, self.on_diagnostics,
-                                    self.rejections)  # each status from the node it names
+        self.inbox.subscribe(DiagnosticArray, topics.DIAGNOSTICS, STATUS_READER_QOS,
+                             admit=StatusAdmission(self, self.rejections))  # own statuses only
+        self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.on_status_bell,
+                                 STATUS_READER_QOS, raw=True)  # wakes poll at once
         self.health = Health(self, NAME)
         self.health.checks += [self._run_check,
                                rejections_check(self.rejections, "inputs"),
@@ -101,6 +104,7 @@ class IlcSupervisor(Node):
         """Read the plant's parameters once the graph is up, then drive the protocol."""
         ready = self.reset_client.service_is_ready() and self.start_client.service_is_ready() \
             and self.state_sub.get_publisher_count() >= 1 and \
+            self.samples_from.trusted_known() and \
             (self.recorder_ready or not self.params.config["wait_for_recorder"])
         if ready and self.protocol.session is None and self.protocol.error is None:
             self._read_plant_parameters()
@@ -137,16 +141,24 @@ class IlcSupervisor(Node):
             self.protocol.on_started(response.success, response.message)
 
     def poll(self) -> None:
-        """Every /joint_states message waiting in the inbox (called by the spin loop); every
-        one is checked, bad input is counted even between trials."""
-        for _, _, raw in self.inbox.take():
+        """Every /joint_states and admitted /diagnostics message waiting in the inbox, in the
+        order they arrived (called by the spin loop and for every /diagnostics message): every
+        sample is checked (bad input is counted even between trials), and every sample of a
+        trial is in before its ``done`` is looked at."""
+        for _, topic, raw in self.inbox.take():
+            if topic == topics.DIAGNOSTICS:
+                self.on_diagnostics(deserialize_message(raw, DiagnosticArray))
+                continue
             sample = self.gate(raw)
             if sample is not None:
                 self.protocol.on_sample(*sample)
 
+    def on_status_bell(self, raw: bytes) -> None:
+        """A /diagnostics message arrived: take it (with its sender) through the inbox now."""
+        self.poll()
+
     def on_diagnostics(self, msg: DiagnosticArray) -> None:
         """The recorder's filed trials, the controller's acknowledgement and ``done``."""
-        self.poll()  # every sample of the trial is in before its ``done`` is looked at
         for item in msg.status:
             values = values_of(item)
             if item.name == topics.RECORDER_STATUS and item.message == "ready":

@@ -133,7 +133,8 @@ class PlantSimulator(Node):
             response.message = "call reset before start"
             return response
         if self.state_pub.get_subscription_count() < 1 or \
-                self.command_sub.get_publisher_count() < 1:
+                self.command_sub.get_publisher_count() < 1 or \
+                not self.command_sub.trusted_known():
             response.success = False
             response.message = "waiting for a controller on " + topics.EFFORT_COMMANDS
             return response

@@ -40,6 +40,9 @@ QoS: /joint_states and /effort_controller/commands reliable, volatile, depth 100
 /ilc/feedforward reliable, transient local, depth 1; /ilc/trial_events and /ilc/trial_summary
 reliable, transient local, depth 1000 (late joiners get the history); /diagnostics reliable,
 transient local, depth 10; /clock reliable, depth 1. A volatile subscriber matches them all.
+(Those are the writers'. The nodes read the loop's inputs keeping all, the feed-forward 100
+deep and /diagnostics 1000 deep, and act only on messages from the contract's publisher:
+:mod:`.publishers`.)
 
 Trial protocol (the supervisor drives it; lock-step and real-time alike):
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import array
+from typing import Any
 
 import numpy as np
 import pytest
@@ -162,3 +163,51 @@ def test_a_future_stamp_costs_one_message() -> None:
     assert gate(writer.write(10**15, zero, zero, zero)) is None
     assert gate(writer.write(11_000, zero, zero, zero)) is not None
     assert rejections.log.counts == {Cause.BAD_STAMP: 1}
+
+
+def test_gate_fast_and_full_paths_agree_on_any_stamp_sequence() -> None:
+    """Property (hypothesis, deterministic): for any sequence of stamps (sec over the whole
+    int32 range, nanosec over uint32, so negative and far-future ones too), any trial window
+    and restarts in between, a gate that knows the plant's layout (fast path) and one that is
+    made to take the full check every time accept and reject exactly the same messages, with
+    the same stamps."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from exo_ilc_ros.nodes.guard import JointStateGate, Rejections
+
+    names = ["j1", "j2", "j3"]
+    writer = JointStateWriter(names)
+    zero = np.zeros(3)
+    stamps = st.tuples(st.integers(-2**31, 2**31 - 1), st.integers(0, 2**32 - 1))
+    windows = st.one_of(st.none(), st.tuples(st.integers(-10**10, 10**10),
+                                             st.integers(0, 10**10)).map(
+        lambda w: (w[0], w[0] + w[1])))
+    steps = st.lists(st.one_of(stamps, windows.map(lambda w: ("restart", w))), max_size=30)
+
+    @settings(max_examples=300, derandomize=True, database=None, deadline=None)
+    @given(steps)
+    def check(sequence: list[Any]) -> None:
+        fast = JointStateGate(names, Rejections(_Node()))  # type: ignore[arg-type]
+        full = JointStateGate(names, Rejections(_Node()))  # type: ignore[arg-type]
+        fast(writer.write(0, zero, zero, zero))  # learns the layout
+        fast.restart()
+        assert fast.layout is not None
+        for step in sequence:
+            if step[0] == "restart":
+                fast.restart(step[1])
+                full.restart(step[1])
+                continue
+            sec, nanosec = step
+            raw = bytearray(writer.write(0, zero + 0.5, zero, zero))
+            raw[4:12] = np.array([sec], "<i4").tobytes() + np.array([nanosec], "<u4").tobytes()
+            full.layout = None  # always the full check
+            full.fast_names = None
+            got_fast, got_full = fast(bytes(raw)), full(bytes(raw))
+            assert (got_fast is None) == (got_full is None), (sec, nanosec)
+            if got_fast is not None and got_full is not None:
+                assert got_fast[0] == got_full[0] == sec * 1_000_000_000 + nanosec
+                assert got_fast[0] >= 0
+            assert fast.last_stamp_ns == full.last_stamp_ns
+
+    check()

@@ -218,7 +218,8 @@ def test_real_time_mode_runs_trials() -> None:
     average 7. A broken loop (commands ignored, the arm falling) is off by far more than 50 %."""
     from exo_ilc_ros.orchestration.graph import run_graph
 
-    config = _short_config(max_trials=2, mode="real_time", real_time_rate=4.0, law="linear")
+    config = _short_config(max_trials=2, mode="real_time", real_time_rate=4.0, law="linear",
+                           max_late_commands=1.0)  # late ones expected here: see above
     result = run_graph(config, timeout=120.0, stall_timeout=60.0)
     local = run_trials(config)
     errors = result.summary.max_abs_error

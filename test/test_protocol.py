@@ -258,3 +258,94 @@ def test_a_live_change_the_session_refuses_is_logged_not_raised() -> None:
     assert [c.record.trial for c in graph.conclusions] == [1, 2]
     assert all(c.applied == {} for c in graph.conclusions)
     assert any("not applied" in e and "error_bound" in e for e in graph.errors)
+
+
+def test_a_lost_acknowledgement_is_asked_for_again_within_a_second() -> None:
+    """The controller's acknowledgement (or the profile itself) is lost: the protocol pushes
+    the same feed-forward again after ACK_RETRY (well under a second), not after the 30 s step
+    timeout, and the trial runs as if nothing happened."""
+    from exo_ilc_ros.core.protocol import ACK_RETRY
+
+    assert ACK_RETRY < 0.5
+    config = load_config(overrides={**SHORT, "max_trials": 2})
+    graph = FakeGraph(config)
+    lost: list[int] = []
+    real_push = graph.push_feedforward
+
+    def push_losing_the_first_ack(trial: int, t0_ns: int, feedforward: np.ndarray) -> None:
+        if not lost:  # the first push reaches nobody
+            lost.append(trial)
+            graph.pushed.append((trial, feedforward.copy()))
+            return
+        real_push(trial, t0_ns, feedforward)
+
+    graph.push_feedforward = push_losing_the_first_ack  # type: ignore[method-assign]
+    protocol = _protocol(graph, max_trials=2)
+    assert protocol.phase is Phase.WAIT_ACK and not graph.pending_start
+    graph.now += ACK_RETRY / 2
+    protocol.tick(graph_ready=True)
+    assert protocol.phase is Phase.WAIT_ACK and len(graph.pushed) == 1, "not before ACK_RETRY"
+    graph.now += ACK_RETRY
+    protocol.tick(graph_ready=True)
+    assert protocol.phase is Phase.STARTING and graph.pending_start
+    assert [trial for trial, _ in graph.pushed] == [1, 1] and protocol.ack_retries == 1
+    np.testing.assert_array_equal(graph.pushed[0][1], graph.pushed[1][1])
+    _run_to_end(graph, protocol)
+    assert protocol.session is not None and protocol.session.retried == []
+    local = run_trials(config, PLANT["mass_uncertainty"])
+    np.testing.assert_array_equal([c.record.max_abs_error for c in graph.conclusions],
+                                  local.max_abs_errors)
+
+
+def test_real_time_warms_up_then_reruns_a_trial_with_too_many_late_commands() -> None:
+    """Real-time plant: the first attempt is a warm-up (run again); a trial whose plant reports
+    more than max_late_commands of its periods on a late command is run again with the same
+    feed-forward, not learned from; within the share it is concluded; LATE_RERUNS in a row stop
+    the run. The table equals run_trials."""
+    from exo_ilc_ros.core.protocol import LATE_RERUNS
+
+    config = load_config(overrides={**SHORT, "max_trials": 3, "max_late_commands": 0.02})
+    graph = FakeGraph(config)
+    protocol = TrialProtocol(config, graph, clock=graph.clock)
+    graph.protocol = protocol
+    protocol.open({**PLANT, "mode": "real_time"})
+    protocol.tick(graph_ready=True)
+    assert protocol.real_time
+    periods = protocol.reference.samples - 1
+
+    def run(late: int) -> None:
+        graph.run_started_trial()
+        assert protocol.phase is Phase.RUNNING, "waits for the plant's report"
+        protocol.on_plant_done(graph.t0, {"late_commands": str(late), "periods": str(periods)})
+
+    def aborted() -> list[dict[str, str]]:
+        return [values for message, values in graph.events if message == "aborted"]
+
+    run(0)  # the warm-up attempt
+    assert aborted() == [{"trial": "1", "reason": "warm_up"}]
+    run(2)  # 2 of 100 periods late: within 2 %
+    run(3)  # trial 2: 3 % late, run again
+    assert aborted()[-1] == {"trial": "2", "reason": "late_commands", "late_commands": "3",
+                             "periods": str(periods)}
+    run(0)
+    run(0)
+    assert protocol.phase is Phase.FINISHED
+    assert protocol.session is not None
+    assert protocol.session.retried == [(1, "warm_up"), (2, "late_commands")]
+    assert [trial for trial, _ in graph.pushed] == [1, 1, 2, 2, 3]
+    np.testing.assert_array_equal(graph.pushed[2][1], graph.pushed[3][1])
+    local = run_trials(config, PLANT["mass_uncertainty"])
+    np.testing.assert_array_equal([c.record.max_abs_error for c in graph.conclusions],
+                                  local.max_abs_errors)
+
+    # A machine that never keeps up: the run stops after LATE_RERUNS late attempts in a row.
+    graph = FakeGraph(config)
+    protocol = TrialProtocol(config, graph, clock=graph.clock)
+    graph.protocol = protocol
+    protocol.open({**PLANT, "mode": "real_time"})
+    protocol.tick(graph_ready=True)
+    run(0)
+    for _ in range(LATE_RERUNS):
+        run(periods // 2)
+    assert protocol.phase is Phase.FINISHED and protocol.exit_code == 1
+    assert "does not keep the control rate" in graph.events[-1][1]["error"]

@@ -237,8 +237,8 @@ def test_plant_watchdog_in_real_time_mode_stops_holding_the_last_command(tmp_pat
     from exo_ilc_ros.wire.cdr import float64_array
 
     periods = 10
-    config = _config(mode="real_time", **{"trajectory.duration": 3.0,
-                                          "safety.watchdog_periods": periods})
+    config = _config(mode="real_time", watchdog_min_timeout=0.0,
+                     **{"trajectory.duration": 3.0, "safety.watchdog_periods": periods})
     params = tmp_path / "params.yaml"
     params.write_text(config.to_ros_yaml("plant watchdog test"))
     rclpy.init(args=["--ros-args", "--params-file", str(params)])
@@ -246,7 +246,7 @@ def test_plant_watchdog_in_real_time_mode_stops_holding_the_last_command(tmp_pat
         plant = PlantSimulator()
         timeout_ns = periods * 10_000_000  # control.period 0.01 s, real_time_rate 1
         assert not plant.lock_step and plant.watchdog.timeout_ns == timeout_ns
-        peer = rclpy.create_node("watchdog_test_peer")
+        peer = rclpy.create_node("computed_torque_controller")  # the commands' contract node
         states: list[Any] = []
         health: list[Any] = []
         peer.create_subscription(JointState, topics.JOINT_STATES, states.append, SAMPLES_QOS)

@@ -31,6 +31,12 @@ from .trial import record_from_samples
 
 STEP_TIMEOUT = 30.0
 """Wall seconds a protocol step may take before the trial is discarded and run again."""
+ACK_RETRY = 0.25
+"""Wall seconds without the controller's acknowledgement of a pushed feed-forward before it is
+pushed again (a lost profile or acknowledgement costs a quarter second, not STEP_TIMEOUT)."""
+LATE_RERUNS = 3
+"""A real-time trial run again this many times in a row for late commands stops the run: the
+machine cannot keep this control rate (nothing stored is lost; resume at a lower rate)."""
 RECORDER_TIMEOUT = 5.0
 """Wall seconds to wait for the recorder to file a trial before going on without it."""
 
@@ -108,6 +114,18 @@ class TrialProtocol:
         self.after_save = ""
         """In WAIT_RECORDER: ``start`` or ``finish``."""
         self.end_ns = 0
+        self.real_time = False
+        """The plant runs on a wall-clock timer (its ``mode``): a trial ends with the plant's
+        report of late commands too, and the run's first attempt is a warm-up."""
+        self.warmed_up = False
+        self.plant_report: Mapping[str, str] | None = None
+        """The real-time plant's ``done`` of the running trial (late commands)."""
+        self.late_reruns = 0
+        """Consecutive runs of this trial discarded for late commands."""
+        self.pushed_at = 0.0
+        """When the feed-forward was last pushed (WAIT_ACK: pushed again after ACK_RETRY)."""
+        self.ack_retries = 0
+        """Feed-forwards pushed again for want of an acknowledgement (whole run)."""
         self.error: str | None = None
         self.exit_code: int | None = None
 
@@ -145,6 +163,7 @@ class TrialProtocol:
                       "(exo-ilc simulate --store DIR --resume)", code=2)
             return
         self.expects_truth = self.experiment.patient.measures
+        self.real_time = config["mode"] == "real_time"
         self.session = session
         if self.store is not None:
             if session.completed:
@@ -177,6 +196,9 @@ class TrialProtocol:
             self._retry("timeout", [("phase", self.phase.value)])
         elif self.phase is Phase.STARTING and not self.starting:
             self._start()
+        elif self.phase is Phase.WAIT_ACK and now - self.pushed_at > ACK_RETRY:
+            self.ack_retries += 1
+            self._push()
 
     def on_reset(self, t0_ns: int | None, message: str = "") -> None:
         """The plant is at x_d(0), its next sample stamped ``t0_ns`` (None: refused)."""
@@ -189,8 +211,9 @@ class TrialProtocol:
         if self.expects_truth:
             self.truth.start(t0_ns)
         self.done_report = None
+        self.plant_report = None
         self._enter(Phase.WAIT_ACK)
-        self.port.push_feedforward(self.trial, t0_ns, self.session.feedforward)
+        self._push()
 
     def on_acknowledged(self, trial: int, t0_ns: int) -> None:
         """The controller loaded the feed-forward of ``trial`` at ``t0_ns``."""
@@ -251,6 +274,12 @@ class TrialProtocol:
             self.done_report = report
             self._maybe_end_trial()
 
+    def on_plant_done(self, t0_ns: int, report: Mapping[str, str]) -> None:
+        """The real-time plant's end of the trial that started at ``t0_ns`` (late commands)."""
+        if self.phase in (Phase.STARTING, Phase.RUNNING) and t0_ns == self.samples.t0_ns:
+            self.plant_report = report
+            self._maybe_end_trial()
+
     def on_recorder_filed(self, trials: int) -> None:
         """The recorder's count of trials filed (in the bag, files closed)."""
         self.recorder_filed = max(self.recorder_filed, trials)
@@ -263,6 +292,11 @@ class TrialProtocol:
         self.samples.stop()
         self.truth.stop()
         self.port.reset()
+
+    def _push(self) -> None:
+        assert self.session is not None
+        self.pushed_at = self.clock()
+        self.port.push_feedforward(self.trial, self.samples.t0_ns, self.session.feedforward)
 
     def _begin_trial(self) -> None:
         self.port.event("start", [("trial", str(self.trial))], self.samples.t0_ns)
@@ -283,7 +317,7 @@ class TrialProtocol:
     def _maybe_end_trial(self) -> None:
         report = self.done_report
         if self.phase is not Phase.RUNNING or not self.samples.running or report is None \
-                or not self.samples.last_in:
+                or not self.samples.last_in or (self.real_time and self.plant_report is None):
             return
         if self.expects_truth:
             if not self.truth.last_in:
@@ -299,7 +333,35 @@ class TrialProtocol:
                           f"{trips}x (safe hold); running the trial again")
             self._retry("watchdog", [("watchdog_trips", str(trips))])
             return
+        if self.real_time and self._late():
+            return
         self._end_trial(int(report.get("aborted_at", "-1")))
+
+    def _late(self) -> bool:
+        """Real time: the run's first attempt warms the graph up (every path once: DDS, the
+        kernels, the first messages) and is run again; a trial with more than
+        ``max_late_commands`` of its periods on a late command is run again, not learned
+        from (LATE_RERUNS times in a row stop the run). True: not concluded."""
+        if not self.warmed_up:
+            self.warmed_up = True
+            self.port.log(False, f"trial {self.trial}: warm-up attempt done; running it again")
+            self._retry("warm_up", [])
+            return True
+        report = self.plant_report or {}
+        late, periods = int(report.get("late_commands", "0")), int(report.get("periods", "0"))
+        if late <= self.config["max_late_commands"] * max(periods, 1):
+            self.late_reruns = 0
+            return False
+        self.late_reruns += 1
+        share = f"{late} of {periods} periods ran on a late command"
+        if self.late_reruns >= LATE_RERUNS:
+            self.fail(f"trial {self.trial}: {share}, {LATE_RERUNS} times in a row (more than "
+                      f"max_late_commands = {self.config['max_late_commands']:g}): this machine "
+                      "does not keep the control rate; stopped (stored trials are kept)")
+            return True
+        self.port.log(True, f"trial {self.trial}: {share}; running the trial again")
+        self._retry("late_commands", [("late_commands", str(late)), ("periods", str(periods))])
+        return True
 
     def _end_trial(self, aborted: int) -> None:
         """Conclude the trial in the session; store it (once the recorder filed it) and go on

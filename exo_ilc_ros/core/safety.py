@@ -9,6 +9,7 @@ input checks in :mod:`.validation`.
 from __future__ import annotations
 
 from enum import Enum
+from typing import Protocol
 
 
 class WatchdogState(Enum):
@@ -84,3 +85,58 @@ class Watchdog:
         """Key-values for a diagnostic status."""
         return [("state", self.state.value), ("trips", str(self.trips)),
                 ("late_inputs", str(self.late)), ("timeout_ns", str(self.timeout_ns))]
+
+
+class _Parameters(Protocol):
+    def __getitem__(self, name: str) -> object: ...
+
+
+def watchdog_for(config: _Parameters) -> Watchdog:
+    """The one rule of both watchdogs, the controller's (no /joint_states) and the real-time
+    plant's (no command): ``safety.watchdog_periods`` control periods of wall time, never less
+    than ``watchdog_min_timeout`` (default 1 s: a loaded 2-core machine delivers late without
+    any fault, and a trip costs a re-run; 0 on hardware, where the periods alone count)."""
+    period_ns = int(round(float(str(config["control.period"])) * 1e9))
+    return Watchdog(int(str(config["safety.watchdog_periods"])), period_ns,
+                    int(round(float(str(config["watchdog_min_timeout"])) * 1e9)))
+
+
+class LateCommands:
+    """Real-time plant: periods run on a late command. Each tick applies the last command
+    received; if none arrived since the previous tick, the command meant for this period is
+    late (it will be applied a period or more after its sample) and the one before is held."""
+
+    def __init__(self) -> None:
+        self.trial = 0
+        """Late periods in the running (or last) trial."""
+        self.periods = 0
+        """Periods stepped in the running (or last) trial."""
+        self.first = -1
+        """The first late period of the running (or last) trial (1-based; -1: none)."""
+        self.total = 0
+        self._fresh = False
+
+    def start(self) -> None:
+        """A trial starts (sample 0 is out; its command is due before the first tick)."""
+        self.trial = self.periods = 0
+        self.first = -1
+        self._fresh = False
+
+    def command(self) -> None:
+        """A command arrived."""
+        self._fresh = True
+
+    def tick(self) -> None:
+        """A period is stepped with the command held now."""
+        self.periods += 1
+        if not self._fresh:
+            self.trial += 1
+            self.total += 1
+            if self.first < 0:
+                self.first = self.periods
+        self._fresh = False
+
+    def as_values(self) -> list[tuple[str, str]]:
+        """Key-values for the plant's health."""
+        return [("late_commands", str(self.trial)), ("late_periods", str(self.periods)),
+                ("first_late", str(self.first)), ("late_commands_total", str(self.total))]

@@ -164,6 +164,8 @@ def _patient_parameters() -> list[Parameter]:
         p("effort_delay", Kind.INTEGER, "control periods between a command and its torque at "
           "the joint", minimum=0.0),
     ]
+def _share_rule(value: Any) -> str | None:
+    return None if value <= 1.0 else f"must be <= 1 (a share of the periods), got {value!r}"
 
 
 def _schedule_parameters() -> list[Parameter]:
@@ -236,9 +238,10 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("safety.watchdog_periods", SHARED, Kind.INTEGER,
               "control periods without /joint_states (controller) or a command (plant) before "
               "the safe hold / zero effort", strictly_positive=True),
-    Parameter("watchdog_min_timeout", CONTROLLER, Kind.DOUBLE,
-              "wall-clock floor of the controller's watchdog (s): in lock-step a loaded machine "
-              "may deliver a sample late without any fault; 0 on hardware", minimum=0.0),
+    Parameter("watchdog_min_timeout", SHARED, Kind.DOUBLE,
+              "wall-clock floor of every watchdog (s; the controller's and the real-time "
+              "plant's, core.safety.watchdog_for): a loaded machine may deliver late without "
+              "any fault; 0 on hardware", minimum=0.0),
     Parameter("protocol", SHARED, Kind.STRING,
               "how a trial starts: services (the plant's reset/start services put it at x_d(0); "
               "our simulator) or homing (the controller brings any arm to q_d(0) and starts "
@@ -289,6 +292,10 @@ PARAMETERS: tuple[Parameter, ...] = (
               strictly_positive=True),
     Parameter("error_bound", SUPERVISOR, Kind.DOUBLE, "max |e_j| bound (rad)",
               strictly_positive=True, live=True),
+    Parameter("max_late_commands", SUPERVISOR, Kind.DOUBLE,
+              "real_time mode: share (0-1) of a trial's control periods the plant may run with "
+              "the previous command held (this period's came late) before the trial is run "
+              "again instead of learned from", minimum=0.0, extra_rule=_share_rule),
     Parameter("wait_for_recorder", SUPERVISOR, Kind.BOOL,
               "before trial 1, wait until bag_recorder reports it is subscribed to every topic "
               "(exo-ilc run sets it when it records a bag)"),

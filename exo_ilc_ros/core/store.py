@@ -46,6 +46,7 @@ from .trajectory import SampledReference
 
 STORE_VERSION = 1
 NOT_KEYED = frozenset({"max_trials", "mode", "real_time_rate", "wait_for_recorder",
+                       "max_late_commands",
                        "safety.watchdog_periods", "watchdog_min_timeout",
                        "store.directory",
                        "store.resume"})

@@ -35,6 +35,10 @@ class Cause(Enum):
     BAD_STAMP = "bad_stamp"
     OUT_OF_LIMIT = "out_of_limit"
     WRONG_TIMES = "wrong_times"
+    OVERSIZED = "oversized"
+    """More bytes than a message of the contract may have: refused before decoding."""
+    FOREIGN_PUBLISHER = "foreign_publisher"
+    """A well-formed message from a publisher other than the contract's (wire.publishers)."""
 
 
 @dataclass(frozen=True)

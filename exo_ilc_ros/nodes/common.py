@@ -306,9 +306,12 @@ class Inbox:
                          start_parameter_services=False, enable_rosout=False)
         self._readers: list[_SharedReader] = []
         self._pending: list[tuple[int, str, bytes]] = []
+        self._admit: dict[int, Callable[[bytes, bytes], bool]] = {}
 
-    def subscribe(self, msg_type: Any, topic: str, qos: QoSProfile = INBOX_QOS) -> Any:
-        """A raw subscription drained by :meth:`take` (returned for its publisher count)."""
+    def subscribe(self, msg_type: Any, topic: str, qos: QoSProfile = INBOX_QOS,
+                  admit: Callable[[bytes, bytes], bool] | None = None) -> Any:
+        """A raw subscription drained by :meth:`take` (returned for its publisher count);
+        with ``admit``, only messages for which ``admit(raw, sender's GID)`` is True."""
         name = topic if topic.startswith("/") else \
             f"{self.node.get_namespace().rstrip('/')}/{topic}"
         key = (name, msg_type, qos.history, qos.depth, qos.reliability, qos.durability)
@@ -320,6 +323,8 @@ class Inbox:
         if self not in reader.inboxes:  # the same topic twice in one inbox: read once
             reader.inboxes.append(self)
             self._readers.append(reader)
+        if admit is not None:
+            self._admit[id(reader)] = admit
         return reader.subscription
 
     def take(self) -> list[tuple[int, str, bytes]]:
@@ -355,22 +360,23 @@ class _SharedReader:
         self.key = key
         self.topic: str = subscription.topic_name
         self.inboxes: list[Inbox] = []
+        from .identified import RawTaker  # (identified imports this module)
+        self.taker = RawTaker(subscription.handle)
 
     def drain(self) -> None:
-        """Take every waiting message and hand it to each inbox of the topic."""
-        sub, topic = self.subscription, self.topic
-        taken: list[tuple[int, str, bytes]] = []
-        handle = sub.handle
-        with handle:
-            while True:
-                message = handle.take_message(sub.msg_type, True)
-                if message is None:
-                    break
-                raw, info = message
-                taken.append((int(info["received_timestamp"]), topic, raw))
+        """Take every waiting message and hand it to each inbox of the topic (to those with
+        an ``admit`` rule only the messages it admits)."""
+        topic, take = self.topic, self.taker.take
+        taken: list[tuple[int, str, bytes, bytes]] = []
+        while (message := take()) is not None:
+            raw, _, gid, received = message
+            assert raw is not None  # no size limit here: the recorder keeps everything
+            taken.append((received, topic, raw, gid))
         if taken:
             for inbox in self.inboxes:
-                inbox._pending.extend(taken)
+                admit = inbox._admit.get(id(self))
+                inbox._pending.extend((t, name, raw) for t, name, raw, gid in taken
+                                      if admit is None or admit(raw, gid))
 
     def leave(self, inbox: Inbox) -> None:
         """``inbox`` reads no more; the last one out destroys the subscription."""
@@ -476,10 +482,13 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
                 break
         draining = [node for node in polling
                     if isinstance(node, DrainingNode) and node.DRAINS_ON_STOP]
-        for node in [n for n in nodes if n not in draining]:
+        leaving = [n for n in nodes if n not in draining]
+        for node in leaving:
             executor.remove_node(node)
             nodes.remove(node)
-            node.destroy_node()
+        _settle(executor)  # the executor lets go of their entities before they are destroyed
+        for node in leaving:
+            destroy(node)
         _drain(executor, [node.poll for node in draining])
     except ExoIlcError as exc:
         print(f"error: {exc}", file=sys.stderr, flush=True)
@@ -488,12 +497,33 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         pass
     finally:
         for node in reversed(nodes):
-            node.destroy_node()
+            destroy(node)
         rclpy.try_shutdown()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
         _ARGV = None
     return code
+
+
+def _settle(executor: EventsExecutor, timeout: float = 1.0) -> None:
+    """Spin until the EventsExecutor has handled everything posted so far (a node's removal
+    included: it unregisters the node's entities then, and an rcl subscription destroyed
+    before that crashed the process): a task posted now runs after them."""
+    marker = executor.create_task(lambda: None)
+    deadline = time.monotonic() + timeout
+    while not marker.done() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.01)
+
+
+def destroy(node: Node) -> None:
+    """Destroy ``node`` and the :class:`identified.IdentifiedSubscription` s on it (rclpy's
+    ``destroy_node`` leaves waitables alone)."""
+    from .identified import IdentifiedSubscription
+
+    for waitable in list(node.waitables):
+        if isinstance(waitable, IdentifiedSubscription):
+            waitable.destroy()
+    node.destroy_node()
 
 
 def _drain(executor: EventsExecutor, polls: Sequence[Callable[[], int | None]]) -> None:

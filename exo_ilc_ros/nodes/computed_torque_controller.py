@@ -29,15 +29,15 @@ from trajectory_msgs.msg import JointTrajectory
 from ..core import schema
 from ..core.controller import GuardedControlStep
 from ..core.experiment import Experiment
-from ..core.safety import Watchdog
+from ..core.safety import watchdog_for
 from ..core.trial import period_ns, sample_index
 from ..core.validation import Cause, Rejection, validate_feedforward
 from ..wire import topics
 from ..wire.cdr import float64_array
 from ..wire.protocol import trial_of_frame
+from ..wire.publishers import max_bytes
 from .common import (
     DIAGNOSTICS_QOS,
-    LATCHED_QOS,
     SAMPLES_QOS,
     SchemaParameters,
     diagnostic_array,
@@ -48,6 +48,14 @@ from .common import (
 )
 from .guard import Health, JointStateGate, Rejections, rejections_check
 from .homing_control import HomingControl
+from .identified import (
+    FEEDFORWARD_READER_QOS,
+    TRUSTED_READER_QOS,
+    TrustedInput,
+    decoded,
+    decodes,
+    gate_classifier,
+)
 
 NAME = schema.CONTROLLER
 LATENCY_WINDOW = 100_000
@@ -66,8 +74,7 @@ class ComputedTorqueController(Node):
         self.step_ns = period_ns(experiment.period)
         self.rejections = Rejections(self)
         self.gate = JointStateGate(self.joint_names, self.rejections)
-        self.watchdog = Watchdog(config["safety.watchdog_periods"], self.step_ns,
-                                 int(config["watchdog_min_timeout"] * 1e9))
+        self.watchdog = watchdog_for(config)  # the plant's rule too (core.safety)
         self.aborted_at = -1
         """First sample of the current trial outside the error envelope (-1: none)."""
         self.trial_trips = 0
@@ -93,16 +100,23 @@ class ComputedTorqueController(Node):
                                                  SAMPLES_QOS)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
                                                      DIAGNOSTICS_QOS)
-        self.state_sub = self.create_subscription(JointState, topics.JOINT_STATES,
-                                                  self.on_joint_state, SAMPLES_QOS, raw=True)
-        self.create_subscription(JointTrajectory, topics.FEEDFORWARD, self.on_feedforward,
-                                 LATCHED_QOS)
+        joints, samples = config.joints, self.step_count
+        self.state_sub = TrustedInput(  # the plant's samples only (wire.publishers)
+            self, JointState, topics.JOINT_STATES, TRUSTED_READER_QOS, self.on_joint_state,
+            self.rejections, max_bytes(topics.JOINT_STATES, joints, samples),
+            gate_classifier(JointStateGate(self.joint_names, self.rejections)))
+        self.feedforward_sub = TrustedInput(  # the supervisor's profiles only
+            self, JointTrajectory, topics.FEEDFORWARD, FEEDFORWARD_READER_QOS,
+            decoded(JointTrajectory, self.on_feedforward, self.rejections, topics.FEEDFORWARD),
+            self.rejections, max_bytes(topics.FEEDFORWARD, joints, samples),
+            decodes(JointTrajectory, self.rejections, topics.FEEDFORWARD))
         self.create_timer(0.05, self.on_ack_timer, clock=wall_clock())
         self.create_timer(1.0, self.on_health_timer, clock=wall_clock())
         self.create_timer(max(self.watchdog.timeout_ns / 2e9, 0.002), self.on_watchdog_timer,
                           clock=wall_clock())
         self.health = Health(self, NAME)
-        self.health.checks += [self._loop_check, rejections_check(self.rejections, "inputs")]
+        self.health.checks += [self._loop_check, rejections_check(self.rejections, "inputs"),
+                               self.state_sub.health, self.feedforward_sub.health]
         self.homing = HomingControl(self, experiment.period, self.step_count) \
             if config["protocol"] == "homing" else None
         """``protocol: homing``: every sample goes to it (nodes/homing_control.py)."""
@@ -117,6 +131,10 @@ class ComputedTorqueController(Node):
         if trial is None:
             self.rejections.reject(Rejection(Cause.BAD_STAMP, f"{topics.FEEDFORWARD}: frame_id "
                                              f"{frame!r} is not trial:<k>"))
+            return
+        if (trial, stamp_ns(msg.header.stamp)) == (self.trial, self.t0_ns) and self.samples:
+            self.ack_due = True  # pushed again for want of an acknowledgement: loaded already
+            self.on_ack_timer()
             return
         points = msg.points
         samples = self.step_count
@@ -153,7 +171,7 @@ class ComputedTorqueController(Node):
     def on_ack_timer(self) -> None:
         """Acknowledge the loaded feed-forward once linked to the plant both ways."""
         if not self.ack_due or self.command_pub.get_subscription_count() < 1 or \
-                self.state_sub.get_publisher_count() < 1:
+                self.state_sub.get_publisher_count() < 1 or not self.state_sub.trusted_known():
             return
         self.ack_due = False
         ack = status(topics.FEEDFORWARD_ACK_STATUS, "loaded",

@@ -19,6 +19,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
+from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
@@ -30,6 +31,7 @@ from ..core.protocol import TrialProtocol
 from ..core.session import TrialConclusion
 from ..wire import topics
 from ..wire.protocol import int_value
+from ..wire.publishers import max_bytes
 from .common import (
     DIAGNOSTICS_QOS,
     EVENTS_QOS,
@@ -43,6 +45,7 @@ from .common import (
     wall_clock,
 )
 from .guard import Health, JointStateGate, Rejections, rejections_check
+from .identified import STATUS_READER_QOS, Admission, StatusAdmission, gate_classifier
 from .messages import feedforward_message, trial_summary
 
 NAME = schema.SUPERVISOR
@@ -77,17 +80,30 @@ class IlcSupervisor(Node):
                                                  EVENTS_QOS)
         self.health_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
                                                 DIAGNOSTICS_QOS)
-        self.inbox = Inbox(self)  # the trial's samples, drained in batches (see Inbox)
-        self.state_sub = self.inbox.subscribe(JointState, topics.JOINT_STATES)
-        self.inbox.subscribe(JointState, topics.TRUE_JOINT_STATES)  # the virtual patient's
-        self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.on_diagnostics,
-                                 DIAGNOSTICS_QOS)
         self.rejections = Rejections(self)
         self.gate = JointStateGate(self.joint_names, self.rejections)
+        self.samples_from = Admission(  # the plant's samples only (wire.publishers)
+            self, topics.JOINT_STATES, self.rejections,
+            max_bytes(topics.JOINT_STATES, config.joints, 0),
+            gate_classifier(JointStateGate(self.joint_names, self.rejections)))
+        self.inbox = Inbox(self)  # the trial's samples, drained in batches (see Inbox)
+        self.state_sub = self.inbox.subscribe(JointState, topics.JOINT_STATES,
+                                              admit=self.samples_from.admit_raw)
+        self.inbox.subscribe(DiagnosticArray, topics.DIAGNOSTICS, STATUS_READER_QOS,
+                             admit=StatusAdmission(self, self.rejections))  # own statuses only
+        self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.on_status_bell,
+                                 STATUS_READER_QOS, raw=True)  # wakes poll at once
+        self.truth_from = Admission(  # the plant's true state only (wire.publishers)
+            self, topics.TRUE_JOINT_STATES, self.rejections,
+            max_bytes(topics.TRUE_JOINT_STATES, config.joints, 0),
+            gate_classifier(JointStateGate(self.joint_names, self.rejections)))
+        self.inbox.subscribe(JointState, topics.TRUE_JOINT_STATES,  # the virtual patient's
+                             admit=self.truth_from.admit_raw)
         self.truth_gate = JointStateGate(self.joint_names, self.rejections)
         self.health = Health(self, NAME)
         self.health.checks += [self._run_check,
-                               rejections_check(self.rejections, "/joint_states")]
+                               rejections_check(self.rejections, "inputs"),
+                               self.samples_from.health, self.truth_from.health]
         self.create_timer(0.1, self.on_timer, clock=wall_clock())
         self.create_timer(1.0, self.on_health_timer, clock=wall_clock())
         self.get_logger().info(f"{config['law']} law, up to {config['max_trials']} trials; "
@@ -104,6 +120,7 @@ class IlcSupervisor(Node):
         ready = (self.homing or (self.reset_client.service_is_ready() and
                  self.start_client.service_is_ready())) \
             and self.state_sub.get_publisher_count() >= 1 and \
+            self.samples_from.trusted_known() and \
             (self.recorder_ready or not self.params.config["wait_for_recorder"])
         if ready and self.protocol.session is None and self.protocol.error is None:
             self._read_plant_parameters()
@@ -150,9 +167,14 @@ class IlcSupervisor(Node):
             self.protocol.on_started(response.success, response.message)
 
     def poll(self) -> None:
-        """Every /joint_states message waiting in the inbox (called by the spin loop); every
-        one is checked, bad input is counted even between trials."""
+        """Every /joint_states and admitted /diagnostics message waiting in the inbox, in the
+        order they arrived (called by the spin loop and for every /diagnostics message): every
+        sample is checked (bad input is counted even between trials), and every sample of a
+        trial is in before its ``done`` is looked at."""
         for _, topic, raw in self.inbox.take():
+            if topic == topics.DIAGNOSTICS:
+                self.on_diagnostics(deserialize_message(raw, DiagnosticArray))
+                continue
             if topic == topics.TRUE_JOINT_STATES:
                 true = self.truth_gate(raw)
                 if true is not None:
@@ -162,14 +184,20 @@ class IlcSupervisor(Node):
             if sample is not None:
                 self.protocol.on_sample(*sample)
 
+    def on_status_bell(self, raw: bytes) -> None:
+        """A /diagnostics message arrived: take it (with its sender) through the inbox now."""
+        self.poll()
+
     def on_diagnostics(self, msg: DiagnosticArray) -> None:
         """The recorder's filed trials, the controller's acknowledgement and ``done``."""
-        self.poll()  # every sample of the trial is in before its ``done`` is looked at
         for item in msg.status:
             values = values_of(item)
             if item.name == topics.RECORDER_STATUS and item.message == "ready":
                 self.recorder_ready = True
                 self.protocol.on_recorder_filed(int_value(values, "trials_filed") or 0)
+                continue
+            if item.name == topics.PLANT_TRIAL_STATUS and item.message == "done":
+                self.protocol.on_plant_done(int_value(values, "t0_ns") or -1, values)
                 continue
             trial, t0 = int_value(values, "trial"), int_value(values, "t0_ns")
             if trial is None or t0 is None:
@@ -225,6 +253,10 @@ class IlcSupervisor(Node):
         if isinstance(self.protocol, HomingProtocol):
             summary.values.extend(KeyValue(key=k, value=v) for k, v in
                                   self.protocol.summary_values(record, self.joint_names))
+        if self.protocol.plant_report is not None:  # real time: the plant's late commands
+            summary.values += status("", "", [
+                (k, self.protocol.plant_report.get(k, "")) for k in (
+                    "late_commands", "periods", "first_late")]).values
         self.summary_pub.publish(diagnostic_array(self, [summary], end_ns))
         self.event("end", [(kv.key, kv.value) for kv in summary.values], end_ns)
 
@@ -257,7 +289,8 @@ class IlcSupervisor(Node):
                   ("aborted_trials", " ".join(map(str, aborted))),
                   ("retried", " ".join(f"{k}:{why}" for k, why in retried)),
                   ("store", "" if store is None else str(store.directory)),
-                  ("stored_trials", "0" if store is None else str(store.completed))]
+                  ("stored_trials", "0" if store is None else str(store.completed)),
+                  ("feedforward_pushed_again", str(protocol.ack_retries))]
         if protocol.error:
             return DiagnosticStatus.ERROR, protocol.error, values
         reasons = []

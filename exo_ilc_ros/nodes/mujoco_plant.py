@@ -35,6 +35,7 @@ from ..core.trial import period_ns
 from ..core.validation import Cause, Rejection, validate_effort_command
 from ..wire import topics
 from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
+from ..wire.publishers import max_bytes
 from .common import (
     CLOCK_QOS,
     DIAGNOSTICS_QOS,
@@ -45,6 +46,7 @@ from .common import (
     wall_clock,
 )
 from .guard import Health, Rejections, rejections_check
+from .identified import TRUSTED_READER_QOS, TrustedInput, effort_classifier
 
 NAME = schema.PLANT
 FIRST_SAMPLE_AGAIN = 1.0
@@ -88,13 +90,16 @@ class FreeRunningPlant(Node):
         self.clock = Clock()
         self.state_pub = self.create_publisher(JointState, topics.JOINT_STATES, SAMPLES_QOS)
         self.clock_pub = self.create_publisher(Clock, topics.CLOCK, CLOCK_QOS)
-        self.command_sub = self.create_subscription(
-            Float64MultiArray, topics.EFFORT_COMMANDS, self.on_command, SAMPLES_QOS, raw=True)
+        self.command_sub = TrustedInput(  # the controller's commands only (wire.publishers)
+            self, Float64MultiArray, topics.EFFORT_COMMANDS, TRUSTED_READER_QOS, self.on_command,
+            self.rejections, max_bytes(topics.EFFORT_COMMANDS, config.joints, 0),
+            effort_classifier(self.rejections, config.joints))
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
                                                      DIAGNOSTICS_QOS)
         self.health = Health(self, NAME)
         self.health.checks += [self._effort_check, rejections_check(self.rejections,
-                                                                    "effort commands")]
+                                                                    "effort commands"),
+                               self.command_sub.health]
         self.create_timer(1.0, self.on_health_timer, clock=wall_clock())
         wall_period = self.experiment.period / config["real_time_rate"]
         self.create_timer(wall_period if not self.lock_step else 0.05, self.on_tick,
@@ -145,7 +150,8 @@ class FreeRunningPlant(Node):
         now = time.monotonic_ns()
         if not self.started:
             if self.state_pub.get_subscription_count() >= 1 and \
-                    self.command_sub.get_publisher_count() >= 1:
+                    self.command_sub.get_publisher_count() >= 1 and \
+                    self.command_sub.trusted_known():
                 self.started = True
                 self.last_command_ns = now
                 self._publish()

@@ -34,24 +34,33 @@ from ..core import schema
 from ..core.controller import safe_hold_effort
 from ..core.experiment import Experiment
 from ..core.plant import PlantStepper, clamp_counted
-from ..core.safety import Watchdog
+from ..core.safety import LateCommands, watchdog_for
 from ..core.trial import period_ns
 from ..core.validation import Cause, Rejection, validate_effort_command
 from ..wire import topics
 from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
 from ..wire.protocol import trial_of_frame
+from ..wire.publishers import max_bytes
 from .common import (
     CLOCK_QOS,
     DIAGNOSTICS_QOS,
-    LATCHED_QOS,
     SAMPLES_QOS,
     SchemaParameters,
     diagnostic_array,
     spin,
     stamp_ns,
+    status,
     wall_clock,
 )
 from .guard import Health, Rejections, rejections_check
+from .identified import (
+    FEEDFORWARD_READER_QOS,
+    TRUSTED_READER_QOS,
+    TrustedInput,
+    decoded,
+    decodes,
+    effort_classifier,
+)
 
 NAME = schema.PLANT
 
@@ -84,7 +93,8 @@ class PlantSimulator(Node):
         self.saturated = np.zeros(config.joints, dtype=np.int64)
         self.over_limit = 0
         self.commands = 0
-        self.watchdog = Watchdog(config["safety.watchdog_periods"], self.step_ns)
+        self.watchdog = watchdog_for(config)  # the controller's rule too (core.safety)
+        self.late = LateCommands()  # real time: periods run on a late (held) command
         self.hold_pose: np.ndarray | None = None
         """Real-time mode: the pose the plant's safe hold keeps after a watchdog trip."""
 
@@ -92,22 +102,29 @@ class PlantSimulator(Node):
         self.clock = Clock()
         self.state_pub = self.create_publisher(JointState, topics.JOINT_STATES, SAMPLES_QOS)
         self.clock_pub = self.create_publisher(Clock, topics.CLOCK, CLOCK_QOS)
-        self.command_sub = self.create_subscription(
-            Float64MultiArray, topics.EFFORT_COMMANDS, self.on_command, SAMPLES_QOS, raw=True)
+        self.command_sub = TrustedInput(  # the controller's commands only (wire.publishers)
+            self, Float64MultiArray, topics.EFFORT_COMMANDS, TRUSTED_READER_QOS, self.on_command,
+            self.rejections, max_bytes(topics.EFFORT_COMMANDS, config.joints, 0),
+            effort_classifier(self.rejections, config.joints))
         self.patient = self.experiment.patient
         self.next_trial: tuple[int, int] | None = None
         """(trial k, t0) of the last /ilc/feedforward: the patient's draws are trial k's."""
         self.truth = JointStateWriter(config["joint_names"])
         self.truth_pub = self.create_publisher(JointState, topics.TRUE_JOINT_STATES,
                                                SAMPLES_QOS) if self.patient.measures else None
-        if self.patient.enabled:
-            self.create_subscription(JointTrajectory, topics.FEEDFORWARD, self.on_feedforward,
-                                     LATCHED_QOS)
+        self.feedforward_sub = TrustedInput(  # the supervisor's profiles only: their trial
+            self, JointTrajectory, topics.FEEDFORWARD, FEEDFORWARD_READER_QOS,
+            decoded(JointTrajectory, self.on_feedforward, self.rejections, topics.FEEDFORWARD),
+            self.rejections, max_bytes(topics.FEEDFORWARD, config.joints,
+                                       self.experiment.reference.position.shape[0]),
+            decodes(JointTrajectory, self.rejections, topics.FEEDFORWARD)) \
+            if self.patient.enabled else None
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
                                                      DIAGNOSTICS_QOS)
         self.health = Health(self, NAME)
         self.health.checks += [self._effort_check, rejections_check(self.rejections,
-                                                                    "effort commands")]
+                                                                    "effort commands"),
+                               self.command_sub.health]
         self.create_timer(1.0, self.on_health_timer, clock=wall_clock())
         self.create_service(Trigger, topics.RESET_SERVICE, self.on_reset)
         self.create_service(Trigger, topics.START_SERVICE, self.on_start)
@@ -153,7 +170,8 @@ class PlantSimulator(Node):
             response.message = "call reset before start"
             return response
         if self.state_pub.get_subscription_count() < 1 or \
-                self.command_sub.get_publisher_count() < 1:
+                self.command_sub.get_publisher_count() < 1 or \
+                not self.command_sub.trusted_known():
             response.success = False
             response.message = "waiting for a controller on " + topics.EFFORT_COMMANDS
             return response
@@ -176,6 +194,7 @@ class PlantSimulator(Node):
         self._publish()
         if self.timer is not None:
             self.watchdog.arm(time.monotonic_ns())
+            self.late.start()
             self.timer.reset()
         response.success = True
         response.message = f"{topics.T0_PREFIX}{self.t0_ns}"
@@ -209,6 +228,7 @@ class PlantSimulator(Node):
                 self._stepped()
         elif self.running:
             self.watchdog.feed(time.monotonic_ns())
+            self.late.command()
 
     def _reject(self, effort: np.ndarray) -> None:
         checked = validate_effort_command(effort.tolist(), self.unbounded.tolist())
@@ -231,7 +251,15 @@ class PlantSimulator(Node):
             self.held[:] = safe_hold_effort(self.hold_pose, self.stepper.position,
                                             self.stepper.velocity, e.kp, e.kd,
                                             e.nominal.kernel_args, self.limit)
+        self.late.tick()
         self._advance(self.held)
+        if not self.running:  # that was the last sample: the trial's lateness, for the supervisor
+            self.diagnostics_pub.publish(diagnostic_array(self, [status(
+                topics.PLANT_TRIAL_STATUS, "done", [("t0_ns", str(self.t0_ns)),
+                                                     ("periods", str(self.late.periods)),
+                                                     ("late_commands", str(self.late.trial)),
+                                                     ("first_late", str(self.late.first))],
+                hardware_id=NAME)]))
 
     def on_health_timer(self) -> None:
         """Health on /diagnostics: rejections, saturation, watchdog."""
@@ -242,7 +270,8 @@ class PlantSimulator(Node):
         values = [("commands", str(self.commands)), ("over_limit", str(self.over_limit)),
                   *((f"saturated/{n}", str(int(c))) for n, c in zip(names, self.saturated,
                                                                       strict=True)),
-                  *(("watchdog/" + k, v) for k, v in self.watchdog.as_values())]
+                  *(("watchdog/" + k, v) for k, v in self.watchdog.as_values()),
+                  *self.late.as_values()]
         reasons = []
         level = DiagnosticStatus.OK
         if self.hold_pose is not None:

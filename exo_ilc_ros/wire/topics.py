@@ -45,6 +45,9 @@ QoS: /joint_states and /effort_controller/commands reliable, volatile, depth 100
 /ilc/feedforward reliable, transient local, depth 1; /ilc/trial_events and /ilc/trial_summary
 reliable, transient local, depth 1000 (late joiners get the history); /diagnostics reliable,
 transient local, depth 10; /clock reliable, depth 1. A volatile subscriber matches them all.
+(Those are the writers'. The nodes read the loop's inputs keeping all, the feed-forward 100
+deep and /diagnostics 1000 deep, and act only on messages from the contract's publisher:
+:mod:`.publishers`.)
 
 Trial protocol (the supervisor drives it; lock-step and real-time alike):
 
@@ -114,6 +117,12 @@ again (the commands it got are not the ones the record would assume). Under ``pr
 adds ``samples_missing``, ``samples_late``, ``initial_error/<joint>`` and
 ``initial_velocity/<joint>`` (core/homing_protocol.py)."""
 PLANT_HEALTH_STATUS = "plant_simulator/health"
+PLANT_TRIAL_STATUS = "plant_simulator/trial"
+"""Sent by the real-time plant on /diagnostics after each trial's last sample: message
+``done``, values ``t0_ns``, ``periods`` (stepped), ``late_commands`` (periods run with the
+previous command held because this period's had not arrived) and ``first_late`` (the first
+such period, 1-based; -1: none). The supervisor ends a real-time
+trial only with it, and runs it again when too many were late (``max_late_commands``)."""
 SUPERVISOR_HEALTH_STATUS = "ilc_supervisor/health"
 T0_PREFIX = "t0_ns="
 ENVELOPE_REASON = "error_envelope"

@@ -146,13 +146,27 @@ def test_an_arm_of_your_own_without_plant_parameters(tmp_path: Path) -> None:
     from exo_ilc_ros.orchestration.graph import run_graph
     from exo_ilc_ros.orchestration.launcher import GRAPH_NODES, NodeSpec
 
-    config = load_config(overrides={**SHORT, "trajectory.duration": 1.0, "max_trials": 2})
+    config = load_config(overrides={**SHORT, "trajectory.duration": 1.0, "max_trials": 2,
+                                    "joint_states_publisher": "my_arm"})
     arm = NodeSpec(registry.PLANT.name, registry.FREE_RUNNING_PLANT.module,
                    ("-r", "__node:=my_arm"))
     result = run_graph(config, nodes=(arm, *GRAPH_NODES[1:]), timeout=120.0)
     assert [s.trial for s in result.summaries] == [1, 2]
     assert result.summaries[0].values["mass_uncertainty"] == \
         repr(load_config()["mass_uncertainty"])
+
+
+_IN_PROCESS: list[Any] = []
+"""Nodes a test made in this process: destroyed at its end, so no later test of the session
+(same ROS domain) sees their publishers, even when the test failed."""
+
+
+def _shutdown() -> None:
+    import rclpy
+
+    while _IN_PROCESS:
+        _IN_PROCESS.pop().destroy_node()
+    rclpy.try_shutdown()
 
 
 def _plant_node(tmp_path: Path, **overrides: Any) -> tuple[Any, Any, Any, list[Any], list[Any],
@@ -172,7 +186,7 @@ def _plant_node(tmp_path: Path, **overrides: Any) -> tuple[Any, Any, Any, list[A
     params.write_text(config.to_ros_yaml("mujoco plant test"))
     rclpy.init(args=["--ros-args", "--params-file", str(params)])
     plant = MujocoPlant()
-    peer = rclpy.create_node("mujoco_test_peer")
+    peer = rclpy.create_node("computed_torque_controller")  # the trusted commander
     states: list[Any] = []
     health: list[Any] = []
     peer.create_subscription(JointState, topics.JOINT_STATES, states.append, SAMPLES_QOS)
@@ -182,6 +196,7 @@ def _plant_node(tmp_path: Path, **overrides: Any) -> tuple[Any, Any, Any, list[A
     executor = SingleThreadedExecutor()
     executor.add_node(plant)
     executor.add_node(peer)
+    _IN_PROCESS.extend([plant, peer])
 
     def spin_until(done: Any, timeout: float) -> None:
         deadline = time.monotonic() + timeout
@@ -197,7 +212,6 @@ def test_mujoco_node_in_lock_step_moves_only_per_command(tmp_path: Path) -> None
     no command came; each command advances one period exactly as MujocoArm.step; a non-finite
     command is refused (counted, not applied); without commands nothing moves (simulated time
     stands still: a late command is never replaced by a step of the plant's own)."""
-    import rclpy
 
     from exo_ilc_ros.core.experiment import Experiment
     from exo_ilc_ros.core.mujoco_arm import MujocoArm
@@ -231,14 +245,13 @@ def test_mujoco_node_in_lock_step_moves_only_per_command(tmp_path: Path) -> None
         spin_until(lambda: time.monotonic() > deadline, 5.0)
         assert len(states) == 4 and plant.stalls == 0  # refused, and nothing on its own
     finally:
-        rclpy.try_shutdown()
+        _shutdown()
 
 
 def test_mujoco_node_in_real_time_holds_safely_without_commands(tmp_path: Path) -> None:
     """Real time: the last command is held for ``safety.watchdog_periods`` periods of wall
     time; then the plant applies the safe hold around the pose of that moment on its own
     (``stalls``, health ERROR "no effort command; safe hold"); a command releases it."""
-    import rclpy
 
     from exo_ilc_ros.wire.cdr import float64_array
 
@@ -256,4 +269,4 @@ def test_mujoco_node_in_real_time_holds_safely_without_commands(tmp_path: Path) 
         commands.publish(float64_array(np.zeros(3)))
         spin_until(lambda: plant.hold_pose is None, 5.0)
     finally:
-        rclpy.try_shutdown()
+        _shutdown()

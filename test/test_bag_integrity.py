@@ -354,3 +354,26 @@ def test_mcap_walk_reads_what_rosbags_reads(tmp_path: Path, bag: Path) -> None:
         assert found.check.intact and found.check.chunks > 1
         assert found.log == original.log and found.data == original.data
         assert found.types == original.types
+
+
+def test_another_publishers_junk_in_a_bag_is_left_out_with_a_note() -> None:
+    """The recorder keeps whatever was published on a topic, a foreign publisher's junk too
+    (the nodes refused it live): the reader drops what is not CDR of the topic's type, with a
+    note, and keeps the rest in order (decoded, or raw after the encapsulation check)."""
+    from exo_ilc_ros.bag import messages
+    from exo_ilc_ros.bag.reader import _keep_decodable, _Stream
+
+    good = messages.joint_state(5, ["a"], [0.1], [0.2], [0.0])
+    rng = np.random.default_rng(3)
+    junk = [rng.bytes(40), b"\x00\x01\x00\x00" + rng.bytes(3), b"\x00"]
+    stream = _Stream(log=[1, 2, 3, 4, 5], msgs=[good, junk[0], good, junk[1], junk[2]])
+    notes: list[str] = []
+    decode = messages.typestore().deserialize_cdr
+    _keep_decodable(topics.JOINT_STATES, stream, decode, topics.TYPES[topics.JOINT_STATES],
+                    True, notes)
+    assert stream.log == [1, 3] and [m.position.tolist() for m in stream.msgs] == [[0.1]] * 2
+    assert notes and notes[0].startswith(f"3 message(s) on {topics.JOINT_STATES}")
+    raw = _Stream(log=[1, 2, 3], msgs=[good, junk[0], good])
+    _keep_decodable(topics.JOINT_STATES, raw, decode, topics.TYPES[topics.JOINT_STATES],
+                    False, notes)
+    assert raw.log == [1, 3] and raw.msgs == [good, good]

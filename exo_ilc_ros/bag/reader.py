@@ -314,14 +314,42 @@ def _read_mcap(path: Path, info: dict[str, Any], wanted: Sequence[str], keep_raw
             order = np.argsort(times, kind="stable")
             stream.log = [stream.log[i] for i in order]
             stream.msgs = [stream.msgs[i] for i in order]
-        if topic not in keep_raw and stream.msgs:
-            stream.msgs = [deserialize(raw, types[topic]) for raw in stream.msgs]
+        _keep_decodable(topic, stream, deserialize, types.get(topic, ""),
+                        topic not in keep_raw, notes)
     if unchecked:
         notes.append(f"{len(unchecked)} of the bag's files ({unchecked[0]}"
                      f"{', ...' if len(unchecked) > 1 else ''}) carry no chunk CRCs (written "
                      "before exo_ilc_ros wrote bags with mcap): damage to them could not be "
                      "detected")
     return streams, deserialize, notes
+
+
+CDR_HEADERS = (b"\x00\x00", b"\x00\x01")
+"""The encapsulations a rosbag2 CDR message starts with (big- and little-endian plain CDR)."""
+
+
+def _keep_decodable(topic: str, stream: _Stream, deserialize: Callable[[bytes, str], Any],
+                    msgtype: str, decode: bool, notes: list[str]) -> None:
+    """Drop (with a note) the messages of ``stream`` that are not CDR of ``msgtype``: the
+    recorder keeps whatever was published, a foreign publisher's junk included (the nodes
+    refused it live); ``decode``: replace the others by their deserialised messages, else
+    keep them raw after a check of their encapsulation only."""
+    kept_log, kept = [], []
+    for log, raw in zip(stream.log, stream.msgs, strict=True):
+        if bytes(raw[:2]) not in CDR_HEADERS or len(raw) < 4:
+            continue
+        if decode:
+            try:
+                raw = deserialize(raw, msgtype)
+            except Exception:  # any decoding failure: junk, dropped
+                continue
+        kept_log.append(log)
+        kept.append(raw)
+    dropped = len(stream.msgs) - len(kept)
+    if dropped:
+        notes.append(f"{dropped} message(s) on {topic} are not {msgtype or 'CDR'} and were "
+                     "left out (another publisher's junk: the nodes refused it live)")
+    stream.log, stream.msgs = kept_log, kept
 
 
 def _read_with_rosbags(path: Path, wanted: Sequence[str], raw_topics: Iterable[str]
@@ -524,7 +552,11 @@ def read_bag(path: Path | str, *, skip_damaged: bool = False) -> BagRun:
     # Feed-forward profiles by trial.
     profiles: dict[int, bytes] = {}
     for raw in streams[topics.FEEDFORWARD].msgs:
-        frame = _frame_id(raw, decode)
+        try:
+            frame = _frame_id(raw, decode)
+        except Exception:  # CDR-framed junk: not a profile
+            notes.append(f"an undecodable message on {topics.FEEDFORWARD} left out")
+            continue
         trial = protocol.trial_of_frame(frame)
         if trial is not None:
             profiles[trial] = raw

@@ -74,6 +74,11 @@ def _forgetting_rule(value: Any) -> str | None:
     return None if 0.0 < value <= 1.0 else f"must be in (0, 1] (1: no forgetting), got {value!r}"
 
 
+def _node_name_rule(value: Any) -> str | None:
+    ok = bool(value) and not value[0].isdigit() and all(c.isalnum() or c == "_" for c in value)
+    return None if ok else f"must be a ROS node name (letters, digits and _), got {value!r}"
+
+
 def _name_rule(value: Any) -> str | None:
     ok = bool(value) and all(c.isalnum() or c in "_-" for c in value)
     return None if ok else f"must be a name of letters, digits, _ and -, got {value!r}"
@@ -242,6 +247,10 @@ PARAMETERS: tuple[Parameter, ...] = (
               "wall-clock floor of every watchdog (s; the controller's and the real-time "
               "plant's, core.safety.watchdog_for): a loaded machine may deliver late without "
               "any fault; 0 on hardware", minimum=0.0),
+    Parameter("joint_states_publisher", SHARED, Kind.STRING,
+              "the node whose /joint_states the controller and the supervisor act on (others "
+              "are refused and reported; wire/publishers.py): plant_simulator (our plants) or "
+              "your arm's, e.g. joint_state_broadcaster", extra_rule=_node_name_rule),
     Parameter("protocol", SHARED, Kind.STRING,
               "how a trial starts: services (the plant's reset/start services put it at x_d(0); "
               "our simulator) or homing (the controller brings any arm to q_d(0) and starts "

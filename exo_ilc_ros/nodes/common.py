@@ -480,6 +480,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
             if codes:  # a node that must stop (fatal error)
                 code = int(codes[0])
                 break
+        _deliver(nodes)
         draining = [node for node in polling
                     if isinstance(node, DrainingNode) and node.DRAINS_ON_STOP]
         leaving = [n for n in nodes if n not in draining]
@@ -503,6 +504,24 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
             signal.signal(sig, handler)
         _ARGV = None
     return code
+
+
+def _deliver(nodes: Sequence[Node], timeout: float = 1.0) -> None:
+    """Wait (at most ``timeout`` s in all) until every reliable publisher's last messages were
+    acknowledged by the subscribers matched now: a node that stops right after publishing (the
+    supervisor's ``finished``, a last summary) would otherwise take them with it."""
+    from rclpy.duration import Duration
+
+    deadline = time.monotonic() + timeout
+    for node in nodes:
+        for publisher in list(node.publishers):
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return
+            try:
+                publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
+            except Exception:  # best effort: a publisher rcl cannot wait on is not waited for
+                continue
 
 
 def _settle(executor: EventsExecutor, timeout: float = 1.0) -> None:

@@ -104,7 +104,8 @@ class ComputedTorqueController(Node):
         self.state_sub = TrustedInput(  # the plant's samples only (wire.publishers)
             self, JointState, topics.JOINT_STATES, TRUSTED_READER_QOS, self.on_joint_state,
             self.rejections, max_bytes(topics.JOINT_STATES, joints, samples),
-            gate_classifier(JointStateGate(self.joint_names, self.rejections)))
+            gate_classifier(JointStateGate(self.joint_names, self.rejections)),
+            trusted=config["joint_states_publisher"])
         self.feedforward_sub = TrustedInput(  # the supervisor's profiles only
             self, JointTrajectory, topics.FEEDFORWARD, FEEDFORWARD_READER_QOS,
             decoded(JointTrajectory, self.on_feedforward, self.rejections, topics.FEEDFORWARD),

@@ -85,7 +85,8 @@ class IlcSupervisor(Node):
         self.samples_from = Admission(  # the plant's samples only (wire.publishers)
             self, topics.JOINT_STATES, self.rejections,
             max_bytes(topics.JOINT_STATES, config.joints, 0),
-            gate_classifier(JointStateGate(self.joint_names, self.rejections)))
+            gate_classifier(JointStateGate(self.joint_names, self.rejections)),
+            trusted=config["joint_states_publisher"])
         self.inbox = Inbox(self)  # the trial's samples, drained in batches (see Inbox)
         self.state_sub = self.inbox.subscribe(JointState, topics.JOINT_STATES,
                                               admit=self.samples_from.admit_raw)
@@ -96,7 +97,8 @@ class IlcSupervisor(Node):
         self.truth_from = Admission(  # the plant's true state only (wire.publishers)
             self, topics.TRUE_JOINT_STATES, self.rejections,
             max_bytes(topics.TRUE_JOINT_STATES, config.joints, 0),
-            gate_classifier(JointStateGate(self.joint_names, self.rejections)))
+            gate_classifier(JointStateGate(self.joint_names, self.rejections)),
+            trusted=config["joint_states_publisher"])
         self.inbox.subscribe(JointState, topics.TRUE_JOINT_STATES,  # the virtual patient's
                              admit=self.truth_from.admit_raw)
         self.truth_gate = JointStateGate(self.joint_names, self.rejections)

@@ -230,9 +230,24 @@ class GraphSession:
                     raise GraphError(f"no trial summary for {stall_timeout:g} s; supervisor "
                                      "log:\n" + self.processes.log_tail("ilc_supervisor"))
             if now - last_check > 0.5:
-                self.processes.check()
+                try:
+                    self.processes.check()
+                except GraphError:
+                    if self._drained(done):  # its last messages said what we waited for
+                        return
+                    raise
                 last_check = now
             self.executor.spin_once(timeout_sec=0.05)
+
+    def _drained(self, done: Callable[[], bool], seconds: float = 1.0) -> bool:
+        """Take what a node sent before it exited (its ``finished``, say) for up to
+        ``seconds``; whether ``done()`` came true."""
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            if done():
+                return True
+            self.executor.spin_once(timeout_sec=0.05)
+        return done()
 
 
 @dataclass

@@ -11,6 +11,7 @@ from __future__ import annotations
 import ctypes
 import fcntl
 import os
+import random
 import signal
 import subprocess
 import sys
@@ -101,10 +102,13 @@ class DomainClaim:
 
 
 def claim_domain_id(requested: int | None = None) -> DomainClaim:
-    """A free domain id (lock-file claim), or ``requested`` as given."""
+    """A free domain id (lock-file claim), or ``requested`` as given. The search starts at a
+    random id: a domain a graph just released is not the next one taken (a process of it that
+    outlived its graph, or DDS state not yet gone, would be heard by the next graph)."""
     if requested is not None:
         return DomainClaim(requested)
-    for domain in DOMAIN_IDS:
+    first = random.randrange(len(DOMAIN_IDS))
+    for domain in [*DOMAIN_IDS[first:], *DOMAIN_IDS[:first]]:
         handle = open(Path(tempfile.gettempdir()) / LOCK_PATTERN.format(domain), "w")  # noqa: SIM115 (held)
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)

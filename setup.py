@@ -52,6 +52,7 @@ setup(
         "mcap-ros2-support>=0.5",
         "optuna>=4",
         "clarabel>=0.9",
+        "distributed>=2024.1",  # exo-ilc study --dask: cells on a Dask cluster
     ],
     extras_require={
         "test": ["pytest>=8", "hypothesis>=6.100", "pin>=3", "ruff>=0.6", "mypy>=1.10",

@@ -30,6 +30,7 @@ ROSDEP_KEYS: dict[str, str] = {
     "mcap-ros2-support": "mcap-ros2-support",
     "optuna": "python3-optuna-pip",
     "clarabel": "python3-clarabel-pip",
+    "distributed": "python3-distributed",
 }
 """pip name -> rosdep key (rosdistro's rosdep/python.yaml: the system package where there is
 one, a ``-pip`` key otherwise; ``mcap-ros2-support`` is that key's own name there)."""

@@ -11,8 +11,10 @@ from __future__ import annotations
 import json
 import multiprocessing
 import signal
-from collections.abc import Callable, Sequence
+import threading
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +35,21 @@ class ClusterError(ExoIlcError):
 def _ignore_interrupt() -> None:
     """Worker initializer: Ctrl-C is the parent's to handle (no tracebacks from the workers)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextmanager
+def _interrupt_ignored() -> Iterator[None]:
+    """SIGINT ignored while worker processes are started: they inherit it, so a Ctrl-C while
+    they import (before the initializer runs) prints no KeyboardInterrupt of theirs either.
+    A no-op outside the main thread (only it may set signal handlers)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def run_cells(cells: Sequence[StudyCell], workers: int = 1, dask: str | Any | None = None,
@@ -59,8 +76,9 @@ def _run_on_pool(cells: Sequence[StudyCell], workers: int,
                                initializer=_ignore_interrupt)
     results: list[CellResult | None] = [None] * len(cells)
     try:
-        pending: dict[Future[CellResult], int] = {
-            pool.submit(run_cell, cell): i for i, cell in enumerate(cells)}
+        with _interrupt_ignored():  # the workers start (on submit) with SIGINT ignored
+            pending: dict[Future[CellResult], int] = {
+                pool.submit(run_cell, cell): i for i, cell in enumerate(cells)}
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in done:

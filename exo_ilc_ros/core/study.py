@@ -269,7 +269,8 @@ class SeedOutcome:
     settled: int | None
     """The trial from which every joint stays within it to the last (None: not at the end)."""
     floor_per_joint: np.ndarray
-    """Median of the true max |e| over the last :data:`FLOOR_WINDOW` trials, per joint."""
+    """Median of the true max |e| over the last :data:`FLOOR_WINDOW` trials, per joint (NaN
+    for a run that did not reach its last trial with finite numbers)."""
     growing: np.ndarray
     """Per joint: the growth check flags its learned input (False where it gives no verdict)."""
     growth_rate: np.ndarray
@@ -299,7 +300,7 @@ def seed_outcome(cell: CellResult, trials: int) -> SeedOutcome:
     worst = np.max(errors, axis=1, keepdims=True)
     its = iterations_to_bound(worst, cell.error_bound)
     window = errors[-min(FLOOR_WINDOW, cell.trials):]
-    floor = np.median(window, axis=0)
+    floor = np.median(window, axis=0) if finite else np.full(joints, np.nan)  # none: not settled
     with np.errstate(invalid="ignore", divide="ignore"):
         fit = fit_growth(cell.max_abs_feedforward)
     growing = np.zeros(joints, bool) if fit is None else np.asarray(fit.growing, bool)

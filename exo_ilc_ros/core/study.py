@@ -15,6 +15,7 @@ A *law* is any config file laid over the shipped ``config/exo_ilc.yaml``; the sh
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -200,6 +201,8 @@ class CellResult:
     """Why the run stopped before its last trial (a law that learned a non-finite input ...)."""
     version: str = __version__
     """The exo_ilc_ros that ran the cell (a cluster must run the client's)."""
+    seconds: float = 0.0
+    """Wall time of the run where it ran (not part of the outcome: :meth:`same_as` ignores it)."""
 
     @property
     def trials(self) -> int:
@@ -244,10 +247,12 @@ def run_cell(cell: StudyCell) -> CellResult:
             aborted.append(record.trial)
 
     failure = None
+    start = time.perf_counter()
     try:
         run_trials(config, on_trial=reduce)
     except ExoIlcError as exc:
         failure = f"after trial {len(at_limit)}: {exc}"
+    seconds = time.perf_counter() - start
     joints = config.joints
     samples = int(round(config["trajectory.duration"] / config["control.period"])) + 1
 
@@ -257,7 +262,7 @@ def run_cell(cell: StudyCell) -> CellResult:
     return CellResult(cell.law, cell.scenario, cell.mass_uncertainty, cell.seed,
                       float(config["error_bound"]), samples, table("true"), table("measured"),
                       table("ff"), table("effort"), np.array(at_limit, dtype=np.int64),
-                      aborted, failure)
+                      aborted, failure, seconds=seconds)
 
 
 @dataclass(frozen=True)

@@ -37,13 +37,14 @@ TABLE_QUANTITIES = {"error": ("e", "max |e| (rad)"),
 
 def _table_of(run: RunSummary, quantity: str) -> np.ndarray | None:
     if quantity == "error":
-        return run.max_abs_error
+        return run.true_errors
     return run.max_abs_feedforward if quantity == "feedforward" else run.max_abs_effort
 
 
 def format_trial_table(runs: Sequence[RunSummary], joint_names: Sequence[str],
                        quantity: str = "error", labels: Sequence[str] | None = None) -> str:
-    """Max |e| (rad) per trial: one column group per run, one column per joint.
+    """Max |e| (rad) per trial: one column group per run, one column per joint (the true
+    max |e|, titled so, for runs whose sensors measured something else).
 
     ``quantity`` "feedforward" or "effort" shows max |u_ff| or max |effort| instead. ``labels``
     (e.g. bag names) head the column groups instead of law and uncertainty."""
@@ -58,7 +59,11 @@ def format_trial_table(runs: Sequence[RunSummary], joint_names: Sequence[str],
     for title, width in zip(titles, widths, strict=True):
         head1 += f"| {title:^{width}}"
         head2 += "| " + "".join(f"{prefix + str(j + 1):>10} " for j in range(n)).ljust(width)
-    lines = ([title_q] if quantity != "error" else []) + [head1, head2, "-" * len(head2)]
+    if quantity == "error" and any(r.true_max_abs_error is not None for r in runs):
+        title_q = ("true max |e| (rad): the plant's state; the controller measured other "
+                   "values (max_abs_error in the JSON)")
+    lines = ([title_q] if title_q != TABLE_QUANTITIES["error"][1] else []) + \
+        [head1, head2, "-" * len(head2)]
     count = max(len(r.max_abs_error) for r in runs)
     for k in range(count):
         line = f"{k + 1:>5} "

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import math
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -187,11 +187,35 @@ def directory(text: str) -> str:
     return text
 
 
-def config_with_flags(path: str | None, flags: Mapping[str, tuple[str, Any]]) -> Config:
-    """The shipped config, ``path`` (``--config``) validated whole, then the flags' values
-    ``{parameter: (flag, value)}``; a rule the flags break (e.g. one between parameters) names
-    the flag and its value, not the file."""
-    config = load_config(path)
+def scenario(text: str) -> str:
+    """argparse type: a virtual-patient scenario, a shipped name (config/scenarios/) or a YAML
+    file; returns the file's path (its keys are checked when the config is loaded)."""
+    from ..core.config import scenario_names, scenario_path
+
+    try:
+        return str(scenario_path(text))
+    except ConfigError:
+        if text.endswith((".yaml", ".yml")) or "/" in text:
+            raise argparse.ArgumentTypeError(f"no such scenario file, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"unknown scenario; shipped: {', '.join(scenario_names())} (or a YAML file), "
+            f"got {text!r}") from None
+
+
+def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
+    """``--scenario NAME|FILE``: a virtual patient laid over ``--config``."""
+    parser.add_argument("--scenario", type=scenario, metavar="NAME|FILE",
+                        help="virtual patient laid over --config: a shipped scenario "
+                        "(ideal, sensor, friction, spastic, voluntary, realistic; "
+                        "config/scenarios/) or a ROS parameter YAML of the same layout")
+
+
+def config_with_flags(path: str | None, flags: Mapping[str, tuple[str, Any]],
+                      overlays: Sequence[str] = ()) -> Config:
+    """The shipped config, ``path`` (``--config``) and ``overlays`` (``--scenario``) each
+    validated whole, then the flags' values ``{parameter: (flag, value)}``; a rule the flags
+    break (e.g. one between parameters) names the flag and its value, not the file."""
+    config = load_config(path, overlays=overlays)
     values = {name: value for name, (_, value) in flags.items()}
     if not values:
         return config

@@ -14,7 +14,15 @@ from ..analysis.report import write_json
 from ..core.config import config_dir, read_yaml
 from ..core.errors import ConfigError
 from ..core.summary import RunSummary
-from .arguments import config_with_flags, figure_file, input_file, integer, json_file, parameter
+from .arguments import (
+    add_scenario_argument,
+    config_with_flags,
+    figure_file,
+    input_file,
+    integer,
+    json_file,
+    parameter,
+)
 from .tune import default_jobs
 
 TUNED_NAME = "tuned.yaml"
@@ -37,6 +45,7 @@ def register(sub: Any) -> None:
         "mass uncertainty; print one table and write one figure.")
     parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
                         "shipped config (the paper's law and the linear law run with it)")
+    add_scenario_argument(parser)
     parser.add_argument("--tuned", type=input_file, help="tuned YAML laid over --config "
                         "(default: config/tuned.yaml if found)")
     parser.add_argument("--no-tuned", action="store_true", help="leave the tuned law out")
@@ -60,7 +69,8 @@ def compare(args: argparse.Namespace) -> int:
     if args.no_tuned and args.tuned:
         raise ConfigError("--no-tuned", f"cannot be combined with --tuned {args.tuned}")
     base = config_with_flags(args.config, {} if args.trials is None else
-                             {"max_trials": ("--trials", args.trials)})
+                             {"max_trials": ("--trials", args.trials)},
+                             [args.scenario] if args.scenario else [])
     trials = int(base["max_trials"])
     variants = [Variant("sign (paper)", base.replace({"law": "sign"}), "sign")]
     tuned_path = None if args.no_tuned else (Path(args.tuned) if args.tuned else find_tuned())

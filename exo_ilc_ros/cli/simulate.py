@@ -17,13 +17,22 @@ from ..analysis.report import (
 from ..core.config import Config
 from ..core.session import run_trials
 from ..core.summary import RunSummary
-from .arguments import config_with_flags, directory, input_file, json_file, parameter
+from .arguments import (
+    add_scenario_argument,
+    config_with_flags,
+    directory,
+    input_file,
+    json_file,
+    parameter,
+)
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
-    """--config, --mass-uncertainty, --trials, --law: shared by simulate and run."""
+    """--config, --scenario, --mass-uncertainty, --trials, --law: shared by simulate and
+    run."""
     parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
                         "shipped config/exo_ilc.yaml (any subset of keys)")
+    add_scenario_argument(parser)
     parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
                         metavar="D", help="plant mass uncertainty delta, one run each (default: "
                         "the config's plant_simulator mass_uncertainty)")
@@ -42,7 +51,7 @@ def config_from_args(args: argparse.Namespace) -> Config:
         flags["law"] = ("--law", args.law)
     if args.trials is not None:
         flags["max_trials"] = ("--trials", args.trials)
-    return config_with_flags(args.config, flags)
+    return config_with_flags(args.config, flags, [args.scenario] if args.scenario else [])
 
 
 def register(sub: Any) -> None:
@@ -69,7 +78,7 @@ def register(sub: Any) -> None:
     parser.set_defaults(func=simulate)
 
 
-REPLAY_EXCLUDES = ("config", "mass_uncertainty", "trials", "law", "store", "bag")
+REPLAY_EXCLUDES = ("config", "scenario", "mass_uncertainty", "trials", "law", "store", "bag")
 
 
 def replay_bag(args: argparse.Namespace) -> int:

@@ -17,6 +17,7 @@ from ..analysis.tuning import RunScore, TuningProblem, TuningResult, best_result
 from ..core.config import load_config
 from ..core.errors import ConfigError
 from .arguments import (
+    add_scenario_argument,
     at_least_two_trials,
     input_file,
     integer,
@@ -59,6 +60,7 @@ def register(sub: Any) -> None:
         "one study through --storage.")
     parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
                         "shipped config; its schedules are the starting point (trial 0)")
+    add_scenario_argument(parser)
     parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
                         metavar="D",
                         default=[0.05, 0.10, 0.15], help="uncertainties scored at once "
@@ -121,7 +123,7 @@ def format_before_after(result: TuningResult, joint_names: Sequence[str]) -> str
 
 def tune(args: argparse.Namespace) -> int:
     """Run the study, print before/after, write the tuned YAML."""
-    config = load_config(args.config)
+    config = load_config(args.config, overlays=[args.scenario] if args.scenario else [])
     trials = int(args.trials if args.trials is not None else config["max_trials"])
     problem = TuningProblem.from_config(config, args.mass_uncertainty, trials,
                                         args.peak_weight, args.aggregate, args.law)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numba
 
-KERNEL_MODULES = ("dynamics.py", "plant.py", "controller.py", "trial.py")
+KERNEL_MODULES = ("dynamics.py", "plant.py", "controller.py", "trial.py", "patient.py")
 
 if not os.environ.get("NUMBA_CACHE_DIR"):
     here = Path(__file__).resolve().parent

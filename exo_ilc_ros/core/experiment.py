@@ -21,6 +21,7 @@ from .laws import (
     TrialRecord,
 )
 from .model import ArmModel
+from .patient import PatientModel
 from .plant import PlantDynamics
 from .qfilter import QFilteredLaw, feedforward_limit_of, qfilter_of
 from .trajectory import QuinticTrajectory, SampledReference
@@ -125,11 +126,14 @@ class Experiment:
         self.substeps = int(round(self.period / config["integration_step"]))
         self.dynamics = PlantDynamics.FULL if config["dynamics"] == "full" \
             else PlantDynamics.PAPER_APPROXIMATION
+        self.patient = PatientModel(config)
+        """The virtual patient's effects (all off by default)."""
 
     def run_trial(self, feedforward: np.ndarray, trial: int,
                   levels: np.ndarray | None = None) -> TrialRecord:
         """One trial with the given feed-forward, from x_d(0), guarded by the error envelope
-        (``record.aborted_at`` set if it left it: safe hold from that sample on)."""
+        (``record.aborted_at`` set if it left it: safe hold from that sample on), with the
+        virtual patient's effects and trial ``trial``'s draws (:mod:`.patient`)."""
         ref = self.reference
         u_ff = np.ascontiguousarray(feedforward, dtype=float)
         if u_ff.shape != ref.position.shape:
@@ -138,9 +142,14 @@ class Experiment:
         if not np.all(np.isfinite(u_ff)):
             raise SafetyError(f"trial {trial}: the feed-forward holds non-finite values; "
                               "refusing to run it")
-        q, qd, u, effort, abort = simulate_trial_guarded(
+        patient = self.patient
+        draws = patient.draws(trial, ref.samples)
+        q, qd, u, effort, abort, q_true, qd_true = simulate_trial_guarded(
             u_ff, ref.position, ref.velocity, self.kp, self.kd, self.effort_limit, self.period,
             self.substeps, self.plant.kernel_args, self.nominal.kernel_args, int(self.dynamics),
-            self.error_envelope)
+            self.error_envelope, patient.joint, patient.scalars, draws.noise, draws.initial,
+            draws.trial_scalars)
+        measured = patient.measures
         return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels,
-                           None if abort < 0 else int(abort))
+                           None if abort < 0 else int(abort), q_true if measured else None,
+                           qd_true if measured else None)

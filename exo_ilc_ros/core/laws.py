@@ -71,6 +71,11 @@ class TrialRecord:
     aborted_at: int | None = None
     """Index of the first sample outside the error envelope (the trial was aborted there and
     the safe hold commanded from it on); None for a completed trial. No law learns from it."""
+    true_position: np.ndarray | None = None
+    """The plant's true q at every sample when the sensors (:mod:`.patient`) made the measured
+    ``position`` differ from it; None: the measured state is the true one."""
+    true_velocity: np.ndarray | None = None
+    """The plant's true qdot, as ``true_position``."""
 
     @property
     def aborted(self) -> bool:
@@ -100,6 +105,17 @@ class TrialRecord:
         sample, the tracking part; the hold after it does not track the reference)."""
         end = None if self.aborted_at is None else self.aborted_at + 1
         return np.asarray(np.max(np.abs(self.error[:end]), axis=0))
+
+    @cached_property
+    def true_max_abs_error(self) -> np.ndarray:
+        """max_t |q_d,j(t) - q_j(t)| per joint of the plant's true state (as
+        :attr:`max_abs_error`, which holds what the controller measured); equal to it when
+        the record has no true state apart."""
+        if self.true_position is None:
+            return self.max_abs_error
+        end = None if self.aborted_at is None else self.aborted_at + 1
+        error = self.reference.position - self.true_position
+        return np.asarray(np.max(np.abs(error[:end]), axis=0))
 
 
 def error_sums(record: TrialRecord, mode: ErrorSum) -> np.ndarray:

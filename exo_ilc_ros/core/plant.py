@@ -181,20 +181,37 @@ def integrate_period(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, period: 
 
 
 class PlantStepper:
-    """The simulated arm (true masses) advanced one control period at a time, effort held."""
+    """The simulated arm (true masses) advanced one control period at a time, effort held,
+    with the virtual patient of the experiment's config (:mod:`.patient`): the same kernels as
+    :func:`trial.simulate_trial_guarded`, so the graph's plant equals the in-process trial."""
 
     def __init__(self, experiment: Experiment) -> None:
+        from .patient import TrialDraws
+
         self.experiment = experiment
         n = experiment.reference.position.shape[1]
+        samples = experiment.reference.samples
         self.position = np.empty(n)
         self.velocity = np.empty(n)
+        """The true state of the arm."""
         self.applied = np.zeros(n)
         """The effort applied over the last period (after the plant's own limit)."""
         self._ws = workspace(n)
         self._stage = np.empty((10, n))
-        self._extra = np.empty(2 * n)
+        self._extra = np.empty(3 * n)
         self._limit = experiment.effort_limit
         self._no_count = np.zeros(n, dtype=np.int64)
+        self.patient = experiment.patient
+        self.trial: int | None = None
+        """The trial whose draws the patient uses (None: none begun since the reset)."""
+        self.index = 0
+        """The sample the arm is at within the trial."""
+        self._draws = TrialDraws(np.zeros((2, 0, 0)), np.zeros((2, 0)), np.zeros(2))
+        self._history = np.empty((2, samples, n))
+        self._memory = np.zeros((3, n))
+        self._held = np.empty(n)
+        self._measured_position = np.empty(n)
+        self._measured_velocity = np.empty(n)
         self.reset()
 
     def reset(self) -> None:
@@ -203,9 +220,39 @@ class PlantStepper:
         self.position[:] = ref.position[0]
         self.velocity[:] = ref.velocity[0]
         self.applied[:] = 0.0
+        self.trial = None
+        self.index = 0
+
+    def begin_trial(self, trial: int) -> None:
+        """Trial ``trial`` starts at sample 0: the patient's draws of that trial, the start
+        state x_d(0) plus its offset, the patient's memory cleared (a no-op without patient)."""
+        from .patient import start_state_into
+
+        self.reset()
+        self.trial = int(trial)
+        if not self.patient.enabled:
+            return
+        ref = self.experiment.reference
+        self._draws = self.patient.draws(trial, ref.samples)
+        start_state_into(ref.position[0], ref.velocity[0], self._draws.initial, self.position,
+                         self.velocity)
+        self._memory[:] = 0.0
+
+    def measure(self) -> tuple[np.ndarray, np.ndarray]:
+        """What the sensors read at the current sample (:func:`patient.measure_into`; the true
+        state itself without sensor effects). Call once per sample, before :meth:`step`."""
+        if not self.patient.measures or self.trial is None:
+            return self.position, self.velocity
+        from .patient import measure_into
+
+        measure_into(self.index, self.position, self.velocity, self.patient.scalars,
+                     self._draws.noise, self._memory, self._measured_position,
+                     self._measured_velocity)
+        return self._measured_position, self._measured_velocity
 
     def step(self, effort: np.ndarray, saturated: np.ndarray | None = None) -> int:
-        """Hold ``effort`` (clamped to +-effort_limit) over one period: RK4 on the sub-steps.
+        """Hold ``effort`` (clamped to +-effort_limit) over one period: RK4 on the sub-steps,
+        with the patient once a trial has begun (:meth:`begin_trial`).
 
         ``saturated`` (int64 per joint), if given, counts the joints at or beyond the limit.
         Returns how many joints were beyond it (clamped), or -1, without stepping, for an
@@ -214,8 +261,23 @@ class PlantStepper:
         if effort.shape != self.applied.shape:
             return -1
         e = self.experiment
-        return int(plant_period(effort, self._limit, self._no_count if saturated is None
-                                else saturated, self.position, self.velocity, self.applied,
-                                e.period, e.substeps, e.plant.kernel_args,
-                                e.nominal.kernel_args, int(e.dynamics), self._ws, self._stage,
-                                self._extra))
+        counts = self._no_count if saturated is None else saturated
+        if self.patient.enabled and self.trial is not None \
+                and self.index + 1 < e.reference.samples:
+            from .patient import patient_plant_period
+
+            ref = e.reference
+            beyond = int(patient_plant_period(
+                self.index, effort, self._limit, counts, self.position, self.velocity,
+                self.applied, ref.position, ref.velocity, e.period, e.substeps,
+                e.plant.kernel_args, e.nominal.kernel_args, int(e.dynamics), self._ws,
+                self._stage, self._extra, self.patient.joint, self.patient.scalars,
+                self._draws.trial_scalars, self._history, self._memory, self._held))
+        else:
+            beyond = int(plant_period(effort, self._limit, counts, self.position,
+                                      self.velocity, self.applied, e.period, e.substeps,
+                                      e.plant.kernel_args, e.nominal.kernel_args,
+                                      int(e.dynamics), self._ws, self._stage, self._extra))
+        if beyond >= 0:
+            self.index += 1
+        return beyond

@@ -84,6 +84,10 @@ class TrialProtocol:
         self.clock = clock
         self.reference = build_reference(config)
         self.samples = TrialSamples(self.reference)
+        self.truth = TrialSamples(self.reference)
+        """The plant's true state of the running trial (/ground_truth/joint_states), collected
+        when the virtual patient's sensors make it differ from the measured samples."""
+        self.expects_truth = False
         self.session: LearningSession | None = None
         """Created by :meth:`open` once the plant's parameters are known."""
         self.experiment: Experiment | None = None
@@ -133,6 +137,7 @@ class TrialProtocol:
             self.fail(str(exc), code=2)
             return
         self.experiment = Experiment(config)
+        self.expects_truth = self.experiment.patient.measures
         self.session = session
         if self.store is not None:
             if session.completed:
@@ -174,6 +179,8 @@ class TrialProtocol:
             self.port.log(True, f"plant reset failed: {message}")
             return
         self.samples.start(t0_ns)
+        if self.expects_truth:
+            self.truth.start(t0_ns)
         self.done_report = None
         self._enter(Phase.WAIT_ACK)
         self.port.push_feedforward(self.trial, t0_ns, self.session.feedforward)
@@ -220,6 +227,15 @@ class TrialProtocol:
             return
         self._maybe_end_trial()
 
+    def on_true_sample(self, stamp_ns: int, position: np.ndarray,
+                       velocity: np.ndarray) -> None:
+        """A sample of the plant's true state (/ground_truth/joint_states); the trial ends once
+        both its measured and its true samples are in."""
+        if not self.expects_truth or not self.truth.add(stamp_ns, position, velocity):
+            return
+        if self.truth.last_in and self.samples.last_in and not self.samples.missing:
+            self._maybe_end_trial()
+
     def on_done(self, trial: int, t0_ns: int, report: Mapping[str, str]) -> None:
         """The controller's end of ``trial`` (abort index, watchdog trips); kept until the
         plant's start is confirmed (by its reply or its samples)."""
@@ -238,6 +254,7 @@ class TrialProtocol:
     def _reset(self) -> None:
         self._enter(Phase.RESETTING)
         self.samples.stop()
+        self.truth.stop()
         self.port.reset()
 
     def _begin_trial(self) -> None:
@@ -261,6 +278,14 @@ class TrialProtocol:
         if self.phase is not Phase.RUNNING or not self.samples.running or report is None \
                 or not self.samples.last_in:
             return
+        if self.expects_truth:
+            if not self.truth.last_in:
+                return
+            if self.truth.missing:
+                self.port.log(True, f"trial {self.trial}: {self.truth.missing} true-state "
+                              "samples lost; running the trial again")
+                self._retry("lost", [("lost_true", str(self.truth.missing))])
+                return
         trips = int(report.get("watchdog_trips", "0"))
         if trips:
             self.port.log(True, f"trial {self.trial}: the controller's watchdog tripped "
@@ -276,10 +301,14 @@ class TrialProtocol:
         assert session is not None and experiment is not None
         self.end_ns = self.samples.end_ns
         self.samples.stop()
+        self.truth.stop()
+        truth = self.expects_truth
         record = record_from_samples(experiment, session.trial, session.feedforward,
                                      self.samples.position, self.samples.velocity,
                                      session.levels, experiment.reference,
-                                     aborted if aborted >= 0 else None)
+                                     aborted if aborted >= 0 else None,
+                                     self.truth.position if truth else None,
+                                     self.truth.velocity if truth else None)
         self._stage_live_changes()
         try:
             conclusion = session.conclude(record)

@@ -70,6 +70,80 @@ def _margin_rule(value: Any) -> str | None:
     return None if value < 1.0 else f"must be < 1 (a share of the limit), got {value!r}"
 
 
+MAS_GRADES = ("custom", "0", "1", "1+", "2", "3")
+"""``patient.spasticity.mas_grade``: ``custom`` (the spasticity values given) or a Modified
+Ashworth grade (its preset, core/patient.py ``MAS_PRESETS``)."""
+
+
+def _fraction_rule(value: Any) -> str | None:
+    return None if value <= 1.0 else f"must be <= 1 (a share of the gain), got {value!r}"
+
+
+def _patient_parameters() -> list[Parameter]:
+    """The virtual patient's effects (core/patient.py), plant_simulator section, all off by
+    default."""
+    def p(name: str, kind: Kind, text: str, **rules: Any) -> Parameter:
+        return Parameter(f"patient.{name}", PLANT, kind, text, **rules)
+
+    joint = {"per_joint": True, "minimum": 0.0}
+    return [
+        p("seed", Kind.INTEGER, "seed of the patient's random numbers (trial k draws from "
+          "SeedSequence([seed, k]))", minimum=0.0),
+        p("sensor.quantisation", Kind.DOUBLE, "encoder resolution (rad); 0: none",
+          minimum=0.0),
+        p("sensor.position_noise", Kind.DOUBLE, "Gaussian noise on the measured q, sd (rad)",
+          minimum=0.0),
+        p("sensor.velocity_noise", Kind.DOUBLE, "Gaussian noise on the measured qdot, sd "
+          "(rad/s)", minimum=0.0),
+        p("sensor.differentiate_velocity", Kind.BOOL, "measured qdot = difference of the "
+          "measured (quantised) q over the period, as most exoskeletons do"),
+        p("sensor.velocity_filter", Kind.DOUBLE, "first-order low-pass on the measured qdot, "
+          "time constant (s); 0: none", minimum=0.0),
+        p("friction.viscous", Kind.DOUBLE_ARRAY, "viscous joint friction B (N m s/rad)",
+          **joint),
+        p("friction.coulomb", Kind.DOUBLE_ARRAY, "Coulomb friction F_c of F_c tanh(qdot / v_s) "
+          "(N m)", **joint),
+        p("friction.stribeck_velocity", Kind.DOUBLE, "v_s of the tanh Coulomb model (rad/s)",
+          strictly_positive=True),
+        p("passive.stiffness", Kind.DOUBLE_ARRAY, "passive joint stiffness K of "
+          "K (q - q_0) (N m/rad)", **joint),
+        p("passive.rest_position", Kind.DOUBLE_ARRAY, "q_0: where the passive (and spastic) "
+          "stiffness exerts no torque (rad)", per_joint=True),
+        p("spasticity.mas_grade", Kind.STRING, "custom (the values below) or a Modified "
+          "Ashworth grade 0, 1, 1+, 2, 3 (its preset replaces them)", choices=MAS_GRADES),
+        p("spasticity.stiffness", Kind.DOUBLE_ARRAY, "spastic stiffness added to "
+          "passive.stiffness (N m/rad)", **joint),
+        p("spasticity.damping", Kind.DOUBLE_ARRAY, "velocity-dependent resistance added to "
+          "the viscous friction (N m s/rad)", **joint),
+        p("spasticity.reflex_gain", Kind.DOUBLE_ARRAY, "stretch reflex torque per rad/s of "
+          "the delayed velocity above the threshold (N m s/rad)", **joint),
+        p("spasticity.reflex_threshold", Kind.DOUBLE_ARRAY, "velocity threshold of the "
+          "stretch reflex (rad/s)", **joint),
+        p("spasticity.reflex_delay", Kind.DOUBLE, "stretch reflex delay (s; rounded to "
+          "control periods)", minimum=0.0),
+        p("voluntary.stiffness", Kind.DOUBLE_ARRAY, "K_v: the patient's own torque toward the "
+          "reference per rad of error (N m/rad); 0: a passive patient", **joint),
+        p("voluntary.damping", Kind.DOUBLE_ARRAY, "D_v: the patient's torque per rad/s of "
+          "velocity error (N m s/rad)", **joint),
+        p("voluntary.time_constant", Kind.DOUBLE, "lag of the voluntary torque (s): sluggish "
+          "tracking; 0: none", minimum=0.0),
+        p("voluntary.amplitude_sd", Kind.DOUBLE, "trial-to-trial sd of the voluntary gain "
+          "(share of it)", minimum=0.0),
+        p("voluntary.timing_sd", Kind.DOUBLE, "trial-to-trial sd of the patient's timing "
+          "(s; rounded to control periods)", minimum=0.0),
+        p("voluntary.fatigue_rate", Kind.DOUBLE, "r of the fatigue f_k = f_min + (1 - f_min) "
+          "exp(-r (k - 1)) on the voluntary gain (per trial)", minimum=0.0),
+        p("voluntary.fatigue_floor", Kind.DOUBLE, "f_min: the share of the voluntary gain "
+          "fatigue leaves", minimum=0.0, extra_rule=_fraction_rule),
+        p("initial.position_sd", Kind.DOUBLE, "trial-to-trial sd of q(0) about q_d(0) (rad)",
+          minimum=0.0),
+        p("initial.velocity_sd", Kind.DOUBLE, "trial-to-trial sd of qdot(0) (rad/s)",
+          minimum=0.0),
+        p("effort_delay", Kind.INTEGER, "control periods between a command and its torque at "
+          "the joint", minimum=0.0),
+    ]
+
+
 def _schedule_parameters() -> list[Parameter]:
     out = []
     meaning = {"position": ("M", "|s e|"), "velocity": ("M'", "|s e_dot|"),
@@ -154,6 +228,7 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("clock_every", PLANT, Kind.INTEGER,
               "publish /clock every this many control periods (and at each trial's first "
               "sample); 1: every period", strictly_positive=True),
+    *_patient_parameters(),
     Parameter("law", SUPERVISOR, Kind.STRING,
               "learning law: sign (sgnPDD^2, eq (11)), linear (Arimoto PDD^2-type) or "
               "norm_optimal (model-based, core/norm_optimal.py)",
@@ -262,6 +337,9 @@ def coerce(param: Parameter, value: Any) -> Any:
             raise ConfigError(param.name, f"must be true or false, got {value!r}")
         return value
     if kind is Kind.STRING:
+        if param.choices and isinstance(value, int) and not isinstance(value, bool) \
+                and str(value) in param.choices:
+            return str(value)  # a choice YAML reads as a number: mas_grade: 2
         if not isinstance(value, str):
             raise ConfigError(param.name, f"must be a string, got {value!r}")
         return value
@@ -334,6 +412,12 @@ def check_consistency(values: Mapping[str, Any]) -> None:
         raise ConfigError("q_filter.cutoff_hz",
                           f"must be below the Nyquist frequency {nyquist:g} Hz of "
                           f"control.period {period:g} s")
+    if values["patient.spasticity.mas_grade"] != "custom":
+        for key in ("stiffness", "damping", "reflex_gain", "reflex_threshold"):
+            if any(values[f"patient.spasticity.{key}"]):
+                raise ConfigError(f"patient.spasticity.{key}",
+                                  "give either a mas_grade (its preset) or the custom values, "
+                                  "not both (set mas_grade: custom)")
     if len(set(values["joint_names"])) != len(values["joint_names"]):
         raise ConfigError("joint_names", "joint names must be unique")
     if any(not name for name in values["joint_names"]):

@@ -256,6 +256,11 @@ class RunResult:
         """(K, joints) table of max |e| per trial and joint."""
         return np.array([r.max_abs_error for r in self.records])
 
+    def true_max_abs_errors(self) -> np.ndarray:
+        """(K, joints) table of the true max |e| per trial and joint (the plant's state; equal
+        to :attr:`max_abs_errors`, the measured one, without sensor effects)."""
+        return np.array([r.true_max_abs_error for r in self.records])
+
     @property
     def max_abs_feedforward(self) -> np.ndarray:
         """(K, joints) table of max |u_ff| per trial and joint."""
@@ -267,8 +272,8 @@ class RunResult:
         return np.array([np.max(np.abs(r.effort), axis=0) for r in self.records])
 
     def iterations_to_bound(self) -> IterationsToBound:
-        """First and settled trial per joint within ``error_bound``."""
-        return iterations_to_bound(self.max_abs_errors, self.error_bound)
+        """First and settled trial per joint with the true max |e| within ``error_bound``."""
+        return iterations_to_bound(self.true_max_abs_errors(), self.error_bound)
 
 
 def run_trials(config: Config, mass_uncertainty: float | None = None,

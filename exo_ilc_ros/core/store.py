@@ -4,7 +4,8 @@ Layout, one directory per *learning key* under the store root::
 
     <root>/<key>/meta.json           what the key covers (written once)
     <root>/<key>/trial_0001.npz      trial 1: q, qdot, u_ff, u, effort, levels, aborted_at,
-                                     and next_feedforward / next_levels (what trial 2 uses)
+                                     next_feedforward / next_levels (what trial 2 uses), and
+                                     the true q, qdot when the sensors differ (else empty)
     <root>/<key>/index.json          the completed trials: file, sha256, summary
 
 Every file is written atomically: a temp file in the same directory, flush + fsync, os.replace,
@@ -54,9 +55,15 @@ _ARRAYS = ("position", "velocity", "feedforward", "control_input", "effort")
 
 
 def keyed_values(config: Config) -> dict[str, Any]:
-    """The parameter values the learning key covers (module docstring)."""
+    """The parameter values the learning key covers (module docstring). The virtual patient's
+    ``patient.*`` values only when one of its effects is on: a run without them keeps the key
+    it had before they existed."""
+    from .patient import PatientModel
+
+    patient = PatientModel(config).enabled
     return {p.name: config[p.name] for p in schema.PARAMETERS
-            if not p.live and p.name not in NOT_KEYED}
+            if not p.live and p.name not in NOT_KEYED
+            and (patient or not p.name.startswith("patient."))}
 
 
 def live_values(config: Config) -> dict[str, Any]:
@@ -180,7 +187,9 @@ class RunStore:
                  effort=arrays["effort"], levels=_optional(record.levels),
                  aborted_at=np.int64(-1 if record.aborted_at is None else record.aborted_at),
                  next_feedforward=np.asarray(next_update.feedforward, dtype=float),
-                 next_levels=_optional(next_update.levels))
+                 next_levels=_optional(next_update.levels),
+                 true_position=_optional(record.true_position),
+                 true_velocity=_optional(record.true_velocity))
         blob = buffer.getvalue()
         with _atomic(self.directory / name) as handle:
             handle.write(blob)
@@ -189,6 +198,7 @@ class RunStore:
             "trial": record.trial, "file": name, "sha256": hashlib.sha256(blob).hexdigest(),
             "aborted_at": record.aborted_at,
             "max_abs_error": [float(x) for x in record.max_abs_error],
+            "true_max_abs_error": [float(x) for x in record.true_max_abs_error],
             "max_abs_feedforward": [float(x) for x in np.max(np.abs(record.feedforward), 0)],
             "max_abs_effort": [float(x) for x in np.max(np.abs(record.effort), 0)],
             "saturated_samples": [int(x) for x in saturation_counts(record.effort, limit)],
@@ -215,10 +225,14 @@ class RunStore:
                 arrays = {k: np.array(data[k]) for k in data.files}
             levels = arrays["levels"] if arrays["levels"].size else None
             aborted = int(arrays["aborted_at"])
+            true_q = arrays.get("true_position", np.empty(0))
+            true_qd = arrays.get("true_velocity", np.empty(0))
             record = TrialRecord(entry["trial"], self.reference, arrays["position"],
                                  arrays["velocity"], arrays["feedforward"],
                                  arrays["control_input"], arrays["effort"], levels,
-                                 None if aborted < 0 else aborted)
+                                 None if aborted < 0 else aborted,
+                                 true_q if true_q.size else None,
+                                 true_qd if true_qd.size else None)
             next_levels = arrays["next_levels"] if arrays["next_levels"].size else None
             out.append(StoredTrial(record, FeedforwardUpdate(arrays["next_feedforward"],
                                                              next_levels), dict(entry)))

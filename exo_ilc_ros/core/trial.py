@@ -18,6 +18,7 @@ from numba import njit
 from .controller import control_into, outside_envelope, safe_hold_into
 from .dynamics import workspace
 from .laws import TrialRecord
+from .patient import measure_into, patient_period, start_state_into
 from .plant import clamp, rk4_period
 from .trajectory import SampledReference
 
@@ -29,8 +30,11 @@ if TYPE_CHECKING:
 def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray,
                            kp: np.ndarray, kd: np.ndarray, effort_limit: np.ndarray,
                            period: float, substeps: int, plant: tuple, nominal: tuple, mode: int,
-                           envelope: np.ndarray
-                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+                           envelope: np.ndarray, patient_joint: np.ndarray,
+                           patient_scalars: np.ndarray, noise: np.ndarray, initial: np.ndarray,
+                           trial_scalars: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int,
+                                      np.ndarray, np.ndarray]:
     """One trial at the samples t_i = i * period, i = 0..N, guarded by the error envelope.
 
     Starts at x_d(0) (assumption (ii), eq (21)). At each sample the controller reads
@@ -39,8 +43,14 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
     over [t_i, t_i+1) (eq (8), :func:`plant.rk4_period`). The command at t_N is recorded but
     never applied. At the first sample outside the envelope the trial is aborted: that sample
     and every later one command the safe hold around the pose measured there (the loop keeps
-    integrating so the record shows the hold). Returns q, qdot, u, effort and the abort index
-    (-1: not aborted).
+    integrating so the record shows the hold).
+
+    The virtual patient (:mod:`.patient`; off when ``patient_scalars`` is empty, then none of
+    it runs): the trial starts at x_d(0) plus ``initial``, the controller (and the envelope)
+    reads the measured state (:func:`patient.measure_into`) and the plant steps with
+    :func:`patient.patient_period`. Returns the measured q, qdot, u, effort, the abort index
+    (-1: not aborted) and the true q, qdot (the same arrays as the measured ones when the
+    patient is off).
     """
     n_samples, n = u_ff.shape
     q_log = np.empty((n_samples, n))
@@ -49,29 +59,56 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
     effort_log = np.empty((n_samples, n))
     ws = workspace(n)
     stage = np.empty((10, n))
-    extra = np.empty(2 * n)
+    extra = np.empty(3 * n)
     applied = np.empty(n)
     q = q_ref[0].copy()
     qd = qd_ref[0].copy()
+    patient = patient_scalars.shape[0] > 0
+    if patient:
+        start_state_into(q_ref[0], qd_ref[0], initial, q, qd)
+        q_true = np.empty((n_samples, n))
+        qd_true = np.empty((n_samples, n))
+        history = np.empty((2, n_samples, n))
+        memory = np.zeros((3, n))
+        held = np.empty(n)
+    else:
+        q_true = q_log
+        qd_true = qd_log
+        history = np.empty((2, 0, n))
+        memory = np.empty((3, n))
+        held = applied
     q_hold = q.copy()
     abort = -1
     for i in range(n_samples):
-        q_log[i] = q
-        qd_log[i] = qd
-        if abort < 0 and outside_envelope(q_ref[i], q, envelope):
-            abort = i
-            q_hold[:] = q
-        if abort < 0:
-            control_into(u_ff[i], q_ref[i], qd_ref[i], q, qd, kp, kd, nominal, effort_limit, ws,
-                         u_log[i], effort_log[i])
+        if patient:
+            q_true[i] = q
+            qd_true[i] = qd
+            measure_into(i, q, qd, patient_scalars, noise, memory, q_log[i], qd_log[i])
         else:
-            safe_hold_into(q_hold, q, qd, kp, kd, nominal, effort_limit, ws, u_log[i],
-                           effort_log[i])
+            q_log[i] = q
+            qd_log[i] = qd
+        q_seen = q_log[i]
+        qd_seen = qd_log[i]
+        if abort < 0 and outside_envelope(q_ref[i], q_seen, envelope):
+            abort = i
+            q_hold[:] = q_seen
+        if abort < 0:
+            control_into(u_ff[i], q_ref[i], qd_ref[i], q_seen, qd_seen, kp, kd, nominal,
+                         effort_limit, ws, u_log[i], effort_log[i])
+        else:
+            safe_hold_into(q_hold, q_seen, qd_seen, kp, kd, nominal, effort_limit, ws,
+                           u_log[i], effort_log[i])
         if i + 1 < n_samples:
             for j in range(n):
                 applied[j] = clamp(effort_log[i, j], effort_limit[j])
-            rk4_period(q, qd, applied, period, substeps, plant, nominal, mode, ws, stage, extra)
-    return q_log, qd_log, u_log, effort_log, abort
+            if patient:
+                patient_period(i, q, qd, applied, q_ref, qd_ref, period, substeps, plant,
+                               nominal, mode, ws, stage, extra, patient_joint, patient_scalars,
+                               trial_scalars, history, memory, held)
+            else:
+                rk4_period(q, qd, applied, period, substeps, plant, nominal, mode, ws, stage,
+                           extra[:2 * n])
+    return q_log, qd_log, u_log, effort_log, abort, q_true, qd_true
 
 
 @njit(cache=True, error_model="numpy")
@@ -128,10 +165,13 @@ def record_from_samples(experiment: Experiment, trial: int, feedforward: np.ndar
                         position: np.ndarray, velocity: np.ndarray,
                         levels: np.ndarray | None = None,
                         reference: SampledReference | None = None,
-                        aborted_at: int | None = None) -> TrialRecord:
-    """The :class:`TrialRecord` of a trial run elsewhere (the graph), from its sampled states:
-    u and effort are formed again exactly as the controller did (the safe hold from
-    ``aborted_at`` on, for a trial the error envelope aborted)."""
+                        aborted_at: int | None = None,
+                        true_position: np.ndarray | None = None,
+                        true_velocity: np.ndarray | None = None) -> TrialRecord:
+    """The :class:`TrialRecord` of a trial run elsewhere (the graph), from its sampled
+    (measured) states: u and effort are formed again exactly as the controller did (the safe
+    hold from ``aborted_at`` on, for a trial the error envelope aborted); ``true_position``,
+    ``true_velocity``: the plant's true state when the sensors differ from it."""
     ref = reference or experiment.reference
     u_ff = np.ascontiguousarray(feedforward, dtype=float)
     q = np.ascontiguousarray(position, dtype=float)
@@ -140,7 +180,11 @@ def record_from_samples(experiment: Experiment, trial: int, feedforward: np.ndar
                                experiment.kd, experiment.nominal.kernel_args,
                                experiment.effort_limit, -1 if aborted_at is None
                                else int(aborted_at))
-    return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels, aborted_at)
+    return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels, aborted_at,
+                       None if true_position is None
+                       else np.ascontiguousarray(true_position, dtype=float),
+                       None if true_velocity is None
+                       else np.ascontiguousarray(true_velocity, dtype=float))
 
 
 def period_ns(period: float) -> int:

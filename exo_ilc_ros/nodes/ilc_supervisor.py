@@ -71,10 +71,12 @@ class IlcSupervisor(Node):
                                                 DIAGNOSTICS_QOS)
         self.inbox = Inbox(self)  # the trial's samples, drained in batches (see Inbox)
         self.state_sub = self.inbox.subscribe(JointState, topics.JOINT_STATES)
+        self.inbox.subscribe(JointState, topics.TRUE_JOINT_STATES)  # the virtual patient's
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.on_diagnostics,
                                  DIAGNOSTICS_QOS)
         self.rejections = Rejections(self)
         self.gate = JointStateGate(self.joint_names, self.rejections)
+        self.truth_gate = JointStateGate(self.joint_names, self.rejections)
         self.health = Health(self, NAME)
         self.health.checks += [self._run_check,
                                rejections_check(self.rejections, "/joint_states")]
@@ -121,6 +123,7 @@ class IlcSupervisor(Node):
         samples = self.protocol.samples
         if t0 is not None and samples.t0_ns == t0:  # taken: the trial's own stamps only
             self.gate.restart((t0, samples.end_ns))
+            self.truth_gate.restart((t0, samples.end_ns))
 
     def on_start_done(self, future: Future) -> None:
         """Running, or refused (not linked yet: retried)."""
@@ -131,7 +134,12 @@ class IlcSupervisor(Node):
     def poll(self) -> None:
         """Every /joint_states message waiting in the inbox (called by the spin loop); every
         one is checked, bad input is counted even between trials."""
-        for _, _, raw in self.inbox.take():
+        for _, topic, raw in self.inbox.take():
+            if topic == topics.TRUE_JOINT_STATES:
+                true = self.truth_gate(raw)
+                if true is not None:
+                    self.protocol.on_true_sample(*true)
+                continue
             sample = self.gate(raw)
             if sample is not None:
                 self.protocol.on_sample(*sample)

@@ -44,6 +44,8 @@ def trial_summary(conclusion: TrialConclusion, joint_names: Sequence[str]) -> Di
                             joint_names, record.max_abs_error,
                             np.max(np.abs(record.feedforward), axis=0),
                             np.max(np.abs(record.effort), axis=0), record.levels,
-                            record.aborted_at, conclusion.applied)
+                            record.aborted_at, conclusion.applied,
+                            None if record.true_position is None
+                            else record.true_max_abs_error)
     level = DiagnosticStatus.OK if conclusion.within_bound else DiagnosticStatus.WARN
     return status(topics.SUMMARY_STATUS, f"trial {record.trial}", values, level, SUPERVISOR)

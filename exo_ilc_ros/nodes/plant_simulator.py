@@ -1,7 +1,10 @@
 """plant_simulator: the arm with its true masses, integrated one control period at a time.
 
 Publishes /joint_states and /clock, takes efforts on /effort_controller/commands, and offers
-the reset/start services of the trial protocol (see :mod:`exo_ilc_ros.wire.topics`). Lock-step mode
+the reset/start services of the trial protocol (see :mod:`exo_ilc_ros.wire.topics`). With a
+virtual patient (``patient.*``, :mod:`exo_ilc_ros.core.patient`) /joint_states carries what
+the sensors measure and /ground_truth/joint_states the true state; the trial number (for the
+patient's per-trial draws) comes from the frame of the trial's /ilc/feedforward. Lock-step mode
 advances one period per command; real-time mode steps on a wall-clock timer with the last
 command held.
 
@@ -25,6 +28,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
 
 from ..core import schema
 from ..core.controller import safe_hold_effort
@@ -35,13 +39,16 @@ from ..core.trial import period_ns
 from ..core.validation import Cause, Rejection, validate_effort_command
 from ..wire import topics
 from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
+from ..wire.protocol import trial_of_frame
 from .common import (
     CLOCK_QOS,
     DIAGNOSTICS_QOS,
+    LATCHED_QOS,
     SAMPLES_QOS,
     SchemaParameters,
     diagnostic_array,
     spin,
+    stamp_ns,
     wall_clock,
 )
 from .guard import Health, Rejections, rejections_check
@@ -87,6 +94,15 @@ class PlantSimulator(Node):
         self.clock_pub = self.create_publisher(Clock, topics.CLOCK, CLOCK_QOS)
         self.command_sub = self.create_subscription(
             Float64MultiArray, topics.EFFORT_COMMANDS, self.on_command, SAMPLES_QOS, raw=True)
+        self.patient = self.experiment.patient
+        self.next_trial: tuple[int, int] | None = None
+        """(trial k, t0) of the last /ilc/feedforward: the patient's draws are trial k's."""
+        self.truth = JointStateWriter(config["joint_names"])
+        self.truth_pub = self.create_publisher(JointState, topics.TRUE_JOINT_STATES,
+                                               SAMPLES_QOS) if self.patient.measures else None
+        if self.patient.enabled:
+            self.create_subscription(JointTrajectory, topics.FEEDFORWARD, self.on_feedforward,
+                                     LATCHED_QOS)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
                                                      DIAGNOSTICS_QOS)
         self.health = Health(self, NAME)
@@ -100,6 +116,10 @@ class PlantSimulator(Node):
             self.timer = self.create_timer(wall_period, self.on_tick, clock=wall_clock(),
                                            autostart=False)
         self.stepper.step(self.held)  # compile the kernels now, not in the first trial
+        if self.patient.enabled:
+            self.stepper.begin_trial(1)
+            self.stepper.measure()
+            self.stepper.step(self.held)
         self.stepper.reset()
         self.get_logger().info(
             f"{config['mode']} plant, mass uncertainty {self.experiment.mass_uncertainty:g}, "
@@ -118,6 +138,13 @@ class PlantSimulator(Node):
         response.message = f"{topics.T0_PREFIX}{self.t0_ns}"
         return response
 
+    def on_feedforward(self, msg: JointTrajectory) -> None:
+        """The trial number of the next trial (frame ``trial:<k>``, stamp t0): the virtual
+        patient draws trial k's random numbers (only the header is read)."""
+        trial = trial_of_frame(msg.header.frame_id)
+        if trial is not None:
+            self.next_trial = (trial, stamp_ns(msg.header.stamp))
+
     def on_start(self, request: Trigger.Request, response: Trigger.Response
                  ) -> Trigger.Response:
         """Publish sample 0 and step until the last sample."""
@@ -130,6 +157,13 @@ class PlantSimulator(Node):
             response.success = False
             response.message = "waiting for a controller on " + topics.EFFORT_COMMANDS
             return response
+        if self.patient.enabled:
+            if self.next_trial is None or self.next_trial[1] != self.t0_ns:
+                response.success = False
+                response.message = (f"waiting for the trial's {topics.FEEDFORWARD} (t0 "
+                                    f"{self.t0_ns} ns): the virtual patient draws per trial")
+                return response
+            self.stepper.begin_trial(self.next_trial[0])
         self.armed = False
         self.running = True
         self.index = 0
@@ -237,8 +271,12 @@ class PlantSimulator(Node):
 
     def _publish(self) -> None:
         stepper = self.stepper
-        self.state_pub.publish(self.state.write(self.now_ns, stepper.position, stepper.velocity,
+        position, velocity = stepper.measure()
+        self.state_pub.publish(self.state.write(self.now_ns, position, velocity,
                                                 stepper.applied))
+        if self.truth_pub is not None:
+            self.truth_pub.publish(self.truth.write(self.now_ns, stepper.position,
+                                                    stepper.velocity, stepper.applied))
         if self.index % self.clock_every and self.index < self.last_index:
             return  # /clock at every clock_every-th sample, the first and the last
         sec, nanosec = divmod(self.now_ns, 1_000_000_000)

@@ -63,7 +63,10 @@ def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSu
                       str(first.get("law", config["law"])), float(config["error_bound"]),
                       np.array([s.row("max_abs_error", joints) for s in summaries]),
                       np.array([s.row("max_abs_feedforward", joints) for s in summaries]),
-                      np.array([s.row("max_abs_effort", joints) for s in summaries]))
+                      np.array([s.row("max_abs_effort", joints) for s in summaries]),
+                      true_max_abs_error=np.array([s.row("true_max_abs_error", joints)
+                                                   for s in summaries])
+                      if f"true_max_abs_error/{joints[0]}" in first else None)
 
 
 def stored_summaries(config: Config) -> list[TrialSummary]:
@@ -82,7 +85,10 @@ def stored_summaries(config: Config) -> list[TrialSummary]:
                                 str(entry["live"].get("law", config["law"])), joints,
                                 entry["max_abs_error"], entry["max_abs_feedforward"],
                                 entry["max_abs_effort"], entry.get("levels"),
-                                entry.get("aborted_at"))
+                                entry.get("aborted_at"), None,
+                                entry.get("true_max_abs_error")
+                                if entry.get("true_max_abs_error") != entry["max_abs_error"]
+                                else None)
         out.append(TrialSummary(int(entry["trial"]), dict(values)))
     return out
 

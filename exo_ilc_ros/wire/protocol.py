@@ -20,16 +20,21 @@ PARAMETERS_CHANGED = "parameters_changed"
 def summary_values(trial: int, mass_uncertainty: float, law: str, names: Sequence[str],
                    max_abs_error: Any, max_abs_feedforward: Any, max_abs_effort: Any,
                    levels: Any | None, aborted_at: int | None = None,
-                   changed: Mapping[str, Any] | None = None) -> list[tuple[str, str]]:
+                   changed: Mapping[str, Any] | None = None,
+                   true_max_abs_error: Any | None = None) -> list[tuple[str, str]]:
     """The key-values of a trial summary (floats as ``repr`` so they parse back exactly):
     ``aborted_at`` for a trial the envelope aborted, ``parameters_changed`` (JSON) for the
-    live changes the session applied at this trial's end (in effect from the next trial)."""
+    live changes the session applied at this trial's end (in effect from the next trial),
+    ``true_max_abs_error/<joint>`` when the plant's true state differs from the measured one."""
     out = [("trial", str(trial)), ("mass_uncertainty", repr(float(mass_uncertainty))),
            ("law", law)]
     for key, row in (("max_abs_error", max_abs_error),
                      ("max_abs_feedforward", max_abs_feedforward),
                      ("max_abs_effort", max_abs_effort)):
         out += [(f"{key}/{n}", repr(float(x))) for n, x in zip(names, row, strict=True)]
+    if true_max_abs_error is not None:
+        out += [(f"true_max_abs_error/{n}", repr(float(x)))
+                for n, x in zip(names, true_max_abs_error, strict=True)]
     if levels is not None:
         for level_name, row in zip(topics.LEVEL_SYMBOLS, np.asarray(levels), strict=False):
             out += [(f"level/{level_name}/{n}", repr(float(x)))

@@ -11,6 +11,11 @@ Every array is in the joint order of the ``joint_names`` parameter; times are si
     Simulated time; monotonic over the whole run (it does not restart with each trial).
     Published at every ``clock_every``-th sample of a trial (plant parameter, default 10) and at
     each trial's first and last sample; the samples' own stamps are exact.
+``/ground_truth/joint_states`` (``sensor_msgs/msg/JointState``, plant_simulator)
+    Only when the virtual patient's sensors (``patient.sensor.*``) make the measured state
+    differ from the true one: the same samples as /joint_states with the plant's true position
+    and velocity (a simulator-only topic, as Gazebo offers ground truth); the supervisor reports
+    the true max |e| from it. Not recorded in bags.
 ``/effort_controller/commands`` (``std_msgs/msg/Float64MultiArray``, computed_torque_controller)
     data = effort per joint (N m), the ros2_control JointGroupEffortController convention.
 ``/ilc/feedforward`` (``trajectory_msgs/msg/JointTrajectory``, ilc_supervisor; transient local)
@@ -50,7 +55,9 @@ Trial protocol (the supervisor drives it; lock-step and real-time alike):
 ``/ilc/feedforward`` for that trial then carries header.stamp = t0 (the trial's first sample).
 ``/plant_simulator/start`` (``std_srvs/srv/Trigger``)
     Publishes sample 0 and steps until sample N (the command at t_N is never applied). Fails
-    (success false, with the reason) until the plant is linked to a controller.
+    (success false, with the reason) until the plant is linked to a controller, and, with a
+    virtual patient, until it has the trial's /ilc/feedforward (stamp t0): its frame
+    ``trial:<k>`` says which trial's random draws the patient uses.
 ``/ilc/trial_events`` message ``finished`` (values ``trials``) when the supervisor stops
 (``max_trials`` reached or ``stop_when_settled``).
 """
@@ -58,6 +65,7 @@ Trial protocol (the supervisor drives it; lock-step and real-time alike):
 from __future__ import annotations
 
 JOINT_STATES = "/joint_states"
+TRUE_JOINT_STATES = "/ground_truth/joint_states"
 CLOCK = "/clock"
 EFFORT_COMMANDS = "/effort_controller/commands"
 FEEDFORWARD = "/ilc/feedforward"

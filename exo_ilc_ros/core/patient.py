@@ -1,0 +1,357 @@
+"""The virtual patient: what a real arm in the exoskeleton adds to the paper's plant, eq (6)
+(which keeps the viscous, spring and friction forces Q^v, Q^c, Q^f and sets them to zero).
+
+Every effect is a ``patient.*`` parameter of the plant_simulator section, off by default (the
+shipped config gives the paper's numbers bit for bit). One code path: the compiled trial of
+:func:`trial.simulate_trial_guarded` and the plant_simulator node's :class:`plant.PlantStepper`
+call the same kernels below in the same order, so the graph equals the in-process runner.
+
+Per sample i of a trial (true state x_i = (q_i, qdot_i) of the plant):
+
+1. **Sensors** (:func:`measure_into`): the controller and the learning law see the measured
+   q^m_i = Q(q_i) + n^q_i, Q the encoder quantisation (round to the resolution), n^q Gaussian;
+   qdot^m_i = qdot_i + n^v_i, or, with ``differentiate_velocity``, (q^m_i - q^m_{i-1}) / T + n^v_i
+   (0 at i = 0), optionally low-passed, v_i = v_{i-1} + a (raw_i - v_{i-1}), a = T / (tau + T).
+2. **Held torques** over [t_i, t_i+1) (:func:`patient_period`): the actuator applies the command
+   of sample i - d (``effort_delay`` d control periods; the first command before that); the
+   **stretch reflex** adds -G sgn(v) max(0, |v| - v_th) with v = qdot at sample i - d_r
+   (``reflex_delay`` rounded to control periods); the **voluntary effort** adds
+   tau^v_i = tau^v_{i-1} + a_v (g_k (K_v (q_d(t_i + s_k) - q_i) + D_v (qdot_d(t_i + s_k) - qdot_i))
+   - tau^v_{i-1}): the patient's own sluggish tracking (first-order lag a_v = T / (tau_v + T)) of
+   the reference shifted by the trial's timing jitter s_k, with gain g_k = (1 + sigma_a z_k)
+   (amplitude jitter, >= 0) times the fatigue f_k = f_min + (1 - f_min) exp(-r (k - 1)).
+3. **Passive joint forces** at every RK4 stage (:func:`passive_effort_into`): -B qdot
+   - F_c tanh(qdot / v_s) - K (q - q_0), with B = viscous friction + spastic damping and K =
+   passive + spastic stiffness.
+
+Each trial k starts at x_d(0) plus a Gaussian offset. All randomness of trial k (noise per
+sample, the initial offset, the jitters) is drawn before the trial from
+``default_rng(SeedSequence([patient.seed, k]))`` (:meth:`PatientModel.draws`), so a resumed run,
+a rerun of trial k and the graph's plant draw the same numbers; fatigue is a function of k.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numba import njit
+
+from .dynamics import forward_dynamics_into
+from .plant import _acceleration_into, clamp_counted, rk4_period
+
+if TYPE_CHECKING:
+    from .config import Config
+
+# Rows of the per-joint parameter array ``joint`` (kernel argument):
+VISCOUS = 0  # B: viscous friction + spastic damping (N m s/rad)
+COULOMB = 1  # F_c (N m)
+STIFFNESS = 2  # K: passive + spastic stiffness (N m/rad)
+REST = 3  # q_0 (rad)
+REFLEX_GAIN = 4  # G (N m s/rad)
+REFLEX_THRESHOLD = 5  # v_th (rad/s)
+VOLUNTARY_STIFFNESS = 6  # K_v (N m/rad)
+VOLUNTARY_DAMPING = 7  # D_v (N m s/rad)
+_JOINT_ROWS = 8
+
+# Entries of the scalar array ``scalars`` (kernel argument):
+QUANTISATION = 0  # rad, 0: none
+DIFFERENTIATE = 1  # 1.0: velocity from differentiated measured position
+INVERSE_STRIBECK = 2  # 1 / v_s (s/rad)
+REFLEX_DELAY = 3  # control periods
+VOLUNTARY_ALPHA = 4  # a_v = T / (tau_v + T)
+EFFORT_DELAY = 5  # control periods
+PASSIVE_ON = 6  # 1.0: passive forces in the RK4 stages
+HELD_ON = 7  # 1.0: reflex or voluntary torque
+SENSOR_ON = 8  # 1.0: the measured state differs from the true one
+VELOCITY_ALPHA = 9  # a = T / (tau + T) of the velocity filter (1: none)
+PERIOD = 10  # T (s)
+_SCALARS = 11
+
+MAS_PRESETS: dict[str, tuple[float, float, float, float]] = {
+    "0": (0.0, 0.0, 0.0, 0.0),
+    "1": (1.0, 0.1, 0.25, 0.5),
+    "1+": (2.0, 0.2, 0.5, 0.35),
+    "2": (4.0, 0.4, 1.0, 0.2),
+    "3": (8.0, 0.8, 2.0, 0.1),
+}
+"""MAS grade -> (stiffness N m/rad, damping N m s/rad, reflex gain N m s/rad, reflex threshold
+rad/s), the same on every joint. Derived, not fitted: McCrea et al. 2003 (J Neurosci Methods
+128:121) found the spring-damper stiffness and damping of the hypertonic elbow to rise with the
+MAS (r = 0.82); here they double from grade to grade, grade 1 adding about the normal passive
+elbow stiffness (0.4-1.8 N m/rad, Wiegner and Watts 1986, JNNP 49:1171) and ten times the
+OpenSim arm damping (0.1 N m s/rad, Saul et al. 2015). Reflex: the delayed velocity-threshold
+reflex of SpasticMyoElbow (delay 0.1 s), its gain doubling and its threshold falling with the
+grade (reflex stiffness explains ~74 % of the velocity-dependent resistance, McPherson et al.
+2018). A fitted table for one patient should replace them."""
+
+
+def spasticity_values(config: Config) -> tuple[list[float], list[float], list[float],
+                                                list[float]]:
+    """Per joint: spastic stiffness, damping, reflex gain, reflex threshold (the MAS preset, or
+    the ``custom`` values)."""
+    grade = config["patient.spasticity.mas_grade"]
+    n = config.joints
+    if grade != "custom":
+        k, b, g, th = MAS_PRESETS[grade]
+        return [k] * n, [b] * n, [g] * n, [th] * n
+    return (config["patient.spasticity.stiffness"], config["patient.spasticity.damping"],
+            config["patient.spasticity.reflex_gain"],
+            config["patient.spasticity.reflex_threshold"])
+
+
+@dataclass(frozen=True, eq=False)
+class TrialDraws:
+    """Everything random about one trial, drawn before it runs (kernel arguments)."""
+
+    noise: np.ndarray
+    """(2, N+1, joints): position then velocity noise at every sample (rad, rad/s)."""
+    initial: np.ndarray
+    """(2, joints): offset of q(0) and qdot(0) from x_d(0)."""
+    trial_scalars: np.ndarray
+    """[voluntary gain g_k f_k, timing shift s_k in samples]."""
+
+
+class PatientModel:
+    """The ``patient.*`` parameters of a config as kernel arguments (module docstring)."""
+
+    def __init__(self, config: Config) -> None:
+        n = config.joints
+        period = float(config["control.period"])
+        self.seed = int(config["patient.seed"])
+        self.period = period
+        stiff, damp, gain, threshold = spasticity_values(config)
+        joint = np.zeros((_JOINT_ROWS, n))
+        joint[VISCOUS] = np.add(config["patient.friction.viscous"], damp)
+        joint[COULOMB] = config["patient.friction.coulomb"]
+        joint[STIFFNESS] = np.add(config["patient.passive.stiffness"], stiff)
+        joint[REST] = config["patient.passive.rest_position"]
+        joint[REFLEX_GAIN] = gain
+        joint[REFLEX_THRESHOLD] = threshold
+        joint[VOLUNTARY_STIFFNESS] = config["patient.voluntary.stiffness"]
+        joint[VOLUNTARY_DAMPING] = config["patient.voluntary.damping"]
+        self.joint = joint
+        self.position_noise = float(config["patient.sensor.position_noise"])
+        self.velocity_noise = float(config["patient.sensor.velocity_noise"])
+        self.initial_position = float(config["patient.initial.position_sd"])
+        self.initial_velocity = float(config["patient.initial.velocity_sd"])
+        self.amplitude_sd = float(config["patient.voluntary.amplitude_sd"])
+        self.timing_sd = float(config["patient.voluntary.timing_sd"])
+        self.fatigue_rate = float(config["patient.voluntary.fatigue_rate"])
+        self.fatigue_floor = float(config["patient.voluntary.fatigue_floor"])
+        quantisation = float(config["patient.sensor.quantisation"])
+        differentiate = bool(config["patient.sensor.differentiate_velocity"])
+        velocity_filter = float(config["patient.sensor.velocity_filter"])
+        voluntary_lag = float(config["patient.voluntary.time_constant"])
+        reflex_delay = int(round(float(config["patient.spasticity.reflex_delay"]) / period))
+        effort_delay = int(config["patient.effort_delay"])
+        self.measures = bool(quantisation > 0.0 or differentiate or velocity_filter > 0.0
+                             or self.position_noise > 0.0 or self.velocity_noise > 0.0)
+        """The measured state differs from the true one (the record carries both)."""
+        passive = bool(np.any(joint[[VISCOUS, COULOMB, STIFFNESS]] != 0.0))
+        reflex = bool(np.any(joint[REFLEX_GAIN] != 0.0))
+        voluntary = bool(np.any(joint[[VOLUNTARY_STIFFNESS, VOLUNTARY_DAMPING]] != 0.0))
+        self.enabled = bool(self.measures or passive or reflex or voluntary or effort_delay
+                            or self.initial_position > 0.0 or self.initial_velocity > 0.0)
+        """Any effect is on (else the plant is the paper's, and the kernels skip all this)."""
+        scalars = np.zeros(_SCALARS)
+        scalars[QUANTISATION] = quantisation
+        scalars[DIFFERENTIATE] = float(differentiate)
+        scalars[INVERSE_STRIBECK] = 1.0 / float(config["patient.friction.stribeck_velocity"])
+        scalars[REFLEX_DELAY] = float(reflex_delay)
+        scalars[VOLUNTARY_ALPHA] = period / (voluntary_lag + period)
+        scalars[EFFORT_DELAY] = float(effort_delay)
+        scalars[PASSIVE_ON] = float(passive)
+        scalars[HELD_ON] = float(reflex or voluntary)
+        scalars[SENSOR_ON] = float(self.measures)
+        scalars[VELOCITY_ALPHA] = period / (velocity_filter + period)
+        scalars[PERIOD] = period
+        self.scalars = scalars if self.enabled else np.zeros(0)
+        """Empty when no effect is on: the kernels then run the paper's plant unchanged."""
+
+    def fatigue(self, trial: int) -> float:
+        """f_k = f_min + (1 - f_min) exp(-r (k - 1)): the voluntary gain left at trial k."""
+        return self.fatigue_floor + (1.0 - self.fatigue_floor) * math.exp(
+            -self.fatigue_rate * (trial - 1))
+
+    def draws(self, trial: int, samples: int) -> TrialDraws:
+        """Trial ``trial``'s random numbers from ``SeedSequence([seed, trial])``, always drawn
+        in the same order and number (turning one effect on does not change the others'):
+        noise (2, samples, joints), initial offsets (2, joints), amplitude, timing."""
+        n = self.joint.shape[1]
+        if not self.enabled:
+            return TrialDraws(np.zeros((2, 0, 0)), np.zeros((2, 0)), np.zeros(2))
+        rng = np.random.default_rng(np.random.SeedSequence([self.seed, int(trial)]))
+        noise = rng.standard_normal((2, samples, n))
+        initial = rng.standard_normal((2, n))
+        amplitude, timing = rng.standard_normal(2)
+        noise[0] *= self.position_noise
+        noise[1] *= self.velocity_noise
+        initial[0] *= self.initial_position
+        initial[1] *= self.initial_velocity
+        gain = max(0.0, 1.0 + self.amplitude_sd * float(amplitude)) * self.fatigue(trial)
+        shift = float(round(self.timing_sd * float(timing) / self.period))
+        return TrialDraws(noise, initial, np.array([gain, shift]))
+
+
+@njit(cache=True, error_model="numpy")
+def measure_into(i: int, q: np.ndarray, qd: np.ndarray, scalars: np.ndarray, noise: np.ndarray,
+                 memory: np.ndarray, q_out: np.ndarray, qd_out: np.ndarray) -> None:
+    """The sensors at sample ``i`` (module docstring, step 1): measured q and qdot of the true
+    (q, qdot) into ``q_out``, ``qd_out``. ``memory`` rows 1 and 2 keep the previous measured
+    position and filtered velocity (the trial's sensor state)."""
+    resolution = scalars[QUANTISATION]
+    period = scalars[PERIOD]
+    alpha = scalars[VELOCITY_ALPHA]
+    differentiate = scalars[DIFFERENTIATE] > 0.0
+    for j in range(q.shape[0]):
+        x = q[j]
+        if resolution > 0.0:
+            x = np.floor(x / resolution + 0.5) * resolution
+        x += noise[0, i, j]
+        v = qd[j]
+        if differentiate:
+            v = 0.0 if i == 0 else (x - memory[1, j]) / period
+        v += noise[1, i, j]
+        if alpha < 1.0 and i > 0:
+            v = memory[2, j] + alpha * (v - memory[2, j])
+        memory[1, j] = x
+        memory[2, j] = v
+        q_out[j] = x
+        qd_out[j] = v
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def passive_effort_into(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, joint: np.ndarray,
+                        inverse_stribeck: float, out: np.ndarray) -> None:
+    """``effort`` plus the passive joint forces of eq (6)'s Q^v, Q^f, Q^c (module docstring,
+    step 3): Q - B qdot - F_c tanh(qdot / v_s) - K (q - q_0), into ``out``."""
+    for j in range(q.shape[0]):
+        out[j] = (effort[j] - joint[VISCOUS, j] * qd[j]
+                  - joint[COULOMB, j] * np.tanh(qd[j] * inverse_stribeck)
+                  - joint[STIFFNESS, j] * (q[j] - joint[REST, j]))
+
+
+@njit(cache=True, error_model="numpy")
+def rk4_period_passive(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, period: float,
+                       substeps: int, plant: tuple, nominal: tuple, mode: int, ws: tuple,
+                       stage: np.ndarray, extra: np.ndarray, joint: np.ndarray,
+                       inverse_stribeck: float, total: np.ndarray) -> None:
+    """:func:`plant.rk4_period` (eq (8), classic RK4 on the sub-steps, ``effort`` held) with the
+    passive joint forces of :func:`passive_effort_into` evaluated at every stage's state
+    (``total``: an (n,) scratch array)."""
+    n = q.shape[0]
+    h = period / substeps
+    masses, axes, offsets, coms, inertias, gravity = plant
+    k1v, k2v, k3v, k4v = stage[0], stage[1], stage[2], stage[3]
+    q2, v2, q3, v3, q4, v4 = stage[4], stage[5], stage[6], stage[7], stage[8], stage[9]
+    for _ in range(substeps):
+        passive_effort_into(q, qd, effort, joint, inverse_stribeck, total)
+        if mode == 0:
+            forward_dynamics_into(q, qd, total, masses, axes, offsets, coms, inertias, gravity,
+                                  ws, k1v)
+        else:
+            _acceleration_into(q, qd, total, plant, nominal, mode, ws, extra, k1v)
+        for j in range(n):
+            q2[j] = q[j] + 0.5 * h * qd[j]
+            v2[j] = qd[j] + 0.5 * h * k1v[j]
+        passive_effort_into(q2, v2, effort, joint, inverse_stribeck, total)
+        if mode == 0:
+            forward_dynamics_into(q2, v2, total, masses, axes, offsets, coms, inertias, gravity,
+                                  ws, k2v)
+        else:
+            _acceleration_into(q2, v2, total, plant, nominal, mode, ws, extra, k2v)
+        for j in range(n):
+            q3[j] = q[j] + 0.5 * h * v2[j]
+            v3[j] = qd[j] + 0.5 * h * k2v[j]
+        passive_effort_into(q3, v3, effort, joint, inverse_stribeck, total)
+        if mode == 0:
+            forward_dynamics_into(q3, v3, total, masses, axes, offsets, coms, inertias, gravity,
+                                  ws, k3v)
+        else:
+            _acceleration_into(q3, v3, total, plant, nominal, mode, ws, extra, k3v)
+        for j in range(n):
+            q4[j] = q[j] + h * v3[j]
+            v4[j] = qd[j] + h * k3v[j]
+        passive_effort_into(q4, v4, effort, joint, inverse_stribeck, total)
+        if mode == 0:
+            forward_dynamics_into(q4, v4, total, masses, axes, offsets, coms, inertias, gravity,
+                                  ws, k4v)
+        else:
+            _acceleration_into(q4, v4, total, plant, nominal, mode, ws, extra, k4v)
+        for j in range(n):
+            q[j] = q[j] + (h / 6.0) * (qd[j] + 2.0 * v2[j] + 2.0 * v3[j] + v4[j])
+            qd[j] = qd[j] + (h / 6.0) * (k1v[j] + 2.0 * k2v[j] + 2.0 * k3v[j] + k4v[j])
+
+
+@njit(cache=True, error_model="numpy")
+def patient_period(i: int, q: np.ndarray, qd: np.ndarray, command: np.ndarray,
+                   q_ref: np.ndarray, qd_ref: np.ndarray, period: float, substeps: int,
+                   plant: tuple, nominal: tuple, mode: int, ws: tuple, stage: np.ndarray,
+                   extra: np.ndarray, joint: np.ndarray, scalars: np.ndarray,
+                   trial_scalars: np.ndarray, history: np.ndarray, memory: np.ndarray,
+                   held: np.ndarray) -> None:
+    """In place: the true (q, qdot) of sample ``i`` advanced one period with the patient
+    (module docstring, steps 2 and 3). ``command`` is the clamped effort of sample i;
+    ``history`` (2, N+1, n) keeps the true velocities and commands of the trial so far,
+    ``memory`` row 0 the lagged voluntary torque, ``held`` (n,) receives the torque held over
+    the period (actuator plus reflex plus voluntary), ``extra`` must have 3n entries."""
+    n = q.shape[0]
+    last = q_ref.shape[0] - 1
+    for j in range(n):
+        history[0, i, j] = qd[j]
+        history[1, i, j] = command[j]
+    delay = int(scalars[EFFORT_DELAY])
+    k = i - delay if i >= delay else 0
+    for j in range(n):
+        held[j] = history[1, k, j]
+    if scalars[HELD_ON] > 0.0:
+        reflex_delay = int(scalars[REFLEX_DELAY])
+        r = i - reflex_delay if i >= reflex_delay else 0
+        s = i + int(trial_scalars[1])
+        s = 0 if s < 0 else (last if s > last else s)
+        gain = trial_scalars[0]
+        alpha = scalars[VOLUNTARY_ALPHA]
+        for j in range(n):
+            v = history[0, r, j]
+            excess = abs(v) - joint[REFLEX_THRESHOLD, j]
+            if excess > 0.0:
+                held[j] -= joint[REFLEX_GAIN, j] * excess * (1.0 if v > 0.0 else -1.0)
+            raw = gain * (joint[VOLUNTARY_STIFFNESS, j] * (q_ref[s, j] - q[j])
+                          + joint[VOLUNTARY_DAMPING, j] * (qd_ref[s, j] - qd[j]))
+            memory[0, j] += alpha * (raw - memory[0, j])
+            held[j] += memory[0, j]
+    if scalars[PASSIVE_ON] > 0.0:
+        rk4_period_passive(q, qd, held, period, substeps, plant, nominal, mode, ws, stage,
+                           extra[:2 * n], joint, scalars[INVERSE_STRIBECK], extra[2 * n:])
+    else:
+        rk4_period(q, qd, held, period, substeps, plant, nominal, mode, ws, stage, extra[:2 * n])
+
+
+@njit(cache=True, error_model="numpy")
+def start_state_into(q_ref0: np.ndarray, qd_ref0: np.ndarray, initial: np.ndarray,
+                     q: np.ndarray, qd: np.ndarray) -> None:
+    """The trial's true start: x_d(0) plus the trial's initial offset."""
+    for j in range(q.shape[0]):
+        q[j] = q_ref0[j] + initial[0, j]
+        qd[j] = qd_ref0[j] + initial[1, j]
+
+
+@njit(cache=True, error_model="numpy")
+def patient_plant_period(i: int, effort: np.ndarray, limit: np.ndarray, saturated: np.ndarray,
+                         q: np.ndarray, qd: np.ndarray, applied: np.ndarray, q_ref: np.ndarray,
+                         qd_ref: np.ndarray, period: float, substeps: int, plant: tuple,
+                         nominal: tuple, mode: int, ws: tuple, stage: np.ndarray,
+                         extra: np.ndarray, joint: np.ndarray, scalars: np.ndarray,
+                         trial_scalars: np.ndarray, history: np.ndarray, memory: np.ndarray,
+                         held: np.ndarray) -> int:
+    """:func:`plant.plant_period` with the patient: refuse a non-finite effort (-1, nothing
+    changes), count saturation, clamp into ``applied`` (:func:`plant.clamp_counted`), then
+    :func:`patient_period` from sample ``i``. Returns the number of joints beyond the limit."""
+    beyond = clamp_counted(effort, limit, saturated, applied)
+    if beyond >= 0:
+        patient_period(i, q, qd, applied, q_ref, qd_ref, period, substeps, plant, nominal, mode,
+                       ws, stage, extra, joint, scalars, trial_scalars, history, memory, held)
+    return beyond

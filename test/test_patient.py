@@ -1,0 +1,292 @@
+"""The virtual patient (core/patient.py): each effect against a hand computation or an
+independent integrator, the node's plant stepper against the compiled trial, per-trial draws,
+measured vs true error, resume, validation, and graph == in-process under ``realistic``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from exo_ilc_ros.core import schema
+from exo_ilc_ros.core.config import load_config, scenario_names, scenario_path
+from exo_ilc_ros.core.controller import GuardedControlStep
+from exo_ilc_ros.core.errors import ConfigError
+from exo_ilc_ros.core.experiment import Experiment
+from exo_ilc_ros.core.patient import (
+    MAS_PRESETS,
+    PatientModel,
+    measure_into,
+    passive_effort_into,
+    patient_period,
+    rk4_period_passive,
+)
+from exo_ilc_ros.core.plant import PlantStepper
+from exo_ilc_ros.core.session import run_trials
+from exo_ilc_ros.core.store import learning_key
+
+SHORT = {"trajectory.duration": 1.0}
+SHIPPED = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic")
+
+
+def _config(scenario: str = "ideal", **overrides: Any) -> Any:
+    return load_config(overlays=[scenario_path(scenario)], overrides={**SHORT, **overrides})
+
+
+def test_shipped_scenarios_load_and_only_ideal_is_off() -> None:
+    assert set(SHIPPED) <= set(scenario_names())
+    for name in SHIPPED:
+        model = PatientModel(_config(name))
+        assert model.enabled == (name != "ideal"), name
+        assert model.measures == (name in ("sensor", "realistic")), name
+
+
+def test_ideal_is_the_shipped_run_bit_for_bit() -> None:
+    """Every effect off: the same doubles as without the patient parameters' scenario, no true
+    state apart, and the store's learning key of a config without them."""
+    plain = run_trials(load_config(overrides=SHORT), 0.05, 4)
+    ideal = run_trials(_config("ideal"), 0.05, 4)
+    for a, b in zip(plain.records, ideal.records, strict=True):
+        assert np.array_equal(a.position, b.position) and np.array_equal(a.effort, b.effort)
+        assert b.true_position is None
+        np.testing.assert_array_equal(b.true_max_abs_error, b.max_abs_error)
+    config = _config("ideal")
+    seeded = config.replace({"patient.seed": 5})  # no effect on: not keyed
+    reference = Experiment(config).reference
+    assert learning_key(config, reference) == learning_key(seeded, reference)
+    noisy = config.replace({"patient.sensor.position_noise": 1e-4})
+    assert learning_key(noisy, reference) != learning_key(config, reference)
+
+
+def test_sensor_quantises_adds_noise_and_differentiates() -> None:
+    """By hand: resolution 0.01 rad, noise given per sample, velocity as the difference of
+    the measured positions over T = 0.01 s, then a first-order filter a = T / (tau + T)."""
+    config = _config("ideal", **{"patient.sensor.quantisation": 0.01,
+                                 "patient.sensor.differentiate_velocity": True,
+                                 "patient.sensor.velocity_filter": 0.01})
+    scalars = PatientModel(config).scalars
+    noise = np.zeros((2, 3, 3))
+    noise[0, 1] = [1e-4, 0.0, -1e-4]
+    noise[1, 1] = [0.5, 0.0, 0.0]
+    memory = np.zeros((3, 3))
+    q_m, qd_m = np.empty(3), np.empty(3)
+    measure_into(0, np.array([0.004, 0.016, -0.026]), np.array([9.0, 9.0, 9.0]), scalars,
+                 noise, memory, q_m, qd_m)
+    np.testing.assert_allclose(q_m, [0.0, 0.02, -0.03], atol=1e-15)
+    np.testing.assert_array_equal(qd_m, [0.0, 0.0, 0.0])  # no earlier sample: 0
+    measure_into(1, np.array([0.012, 0.016, -0.041]), np.array([9.0, 9.0, 9.0]), scalars,
+                 noise, memory, q_m, qd_m)
+    np.testing.assert_allclose(q_m, [0.0101, 0.02, -0.0401], atol=1e-15)
+    raw = np.array([(0.0101 - 0.0) / 0.01 + 0.5, 0.0, (-0.0401 + 0.03) / 0.01])
+    np.testing.assert_allclose(qd_m, 0.5 * raw, rtol=1e-12)  # a = 0.01 / (0.01 + 0.01)
+
+
+def test_passive_forces_by_hand() -> None:
+    config = _config("ideal", **{"patient.friction.viscous": [0.1, 0.2, 0.0],
+                                 "patient.friction.coulomb": [0.18, 0.0, 0.1],
+                                 "patient.friction.stribeck_velocity": 0.05,
+                                 "patient.passive.stiffness": [1.0, 0.0, 2.0],
+                                 "patient.passive.rest_position": [0.0, 0.0, 0.3]})
+    model = PatientModel(config)
+    q, qd = np.array([0.5, 0.1, 0.2]), np.array([0.04, -1.0, -0.02])
+    out = np.empty(3)
+    passive_effort_into(q, qd, np.array([1.0, 2.0, 3.0]), model.joint, 1.0 / 0.05, out)
+    expected = [1.0 - 0.1 * 0.04 - 0.18 * np.tanh(0.8) - 1.0 * 0.5,
+                2.0 - 0.2 * -1.0,
+                3.0 - 0.1 * np.tanh(-0.4) - 2.0 * (0.2 - 0.3)]
+    np.testing.assert_allclose(out, expected, rtol=1e-14)
+
+
+def test_passive_rk4_matches_an_independent_integrator() -> None:
+    """One period with friction, stiffness and a held effort, against scipy's adaptive RK45 on
+    a(q) qdd = Q + passive(q, qdot) - c(q, qdot) (the arm model's own forward dynamics)."""
+    config = _config("friction")
+    ex = Experiment(config)
+    model = PatientModel(config)
+    q0, qd0 = np.array([0.3, 0.2, 0.4]), np.array([0.5, -0.3, 0.8])
+    effort = np.array([2.0, -1.0, 0.5])
+
+    def rhs(_: float, x: np.ndarray) -> np.ndarray:
+        q, qd = x[:3], x[3:]
+        total = np.empty(3)
+        passive_effort_into(q, qd, effort, model.joint, 1.0 / 0.1, total)
+        return np.concatenate([qd, ex.plant.forward_dynamics(q, qd, total)])
+
+    exact = solve_ivp(rhs, (0.0, ex.period), np.concatenate([q0, qd0]), rtol=1e-12,
+                      atol=1e-14).y[:, -1]
+    from exo_ilc_ros.core.dynamics import workspace
+
+    q, qd = q0.copy(), qd0.copy()
+    rk4_period_passive(q, qd, effort, ex.period, ex.substeps, ex.plant.kernel_args,
+                       ex.nominal.kernel_args, 0, workspace(3), np.empty((10, 3)),
+                       np.empty(6), model.joint, model.scalars[2], np.empty(3))
+    np.testing.assert_allclose(np.concatenate([q, qd]), exact, atol=1e-9)
+
+
+def test_held_torque_delay_reflex_and_voluntary_by_hand() -> None:
+    """:func:`patient_period`'s held torque at sample 3: the command of sample 3 - d, the
+    reflex on the velocity d_r samples ago, and the lagged voluntary torque."""
+    config = _config("ideal", **{"patient.effort_delay": 2,
+                                 "patient.spasticity.reflex_gain": [1.5, 0.0, 0.0],
+                                 "patient.spasticity.reflex_threshold": [0.2, 0.0, 0.0],
+                                 "patient.spasticity.reflex_delay": 0.02,
+                                 "patient.voluntary.stiffness": [0.0, 4.0, 0.0],
+                                 "patient.voluntary.damping": [0.0, 1.0, 0.0],
+                                 "patient.voluntary.time_constant": 0.03})
+    ex = Experiment(config)
+    model = PatientModel(config)
+    ref = ex.reference
+    history = np.zeros((2, ref.samples, 3))
+    history[0, 1] = [-0.7, 0.0, 0.0]  # the velocity the reflex sees at i = 3 (d_r = 2)
+    history[1, 1] = [1.0, 2.0, 3.0]  # the command applied at i = 3 (d = 2)
+    memory = np.zeros((3, 3))
+    memory[0, 1] = 0.2  # the voluntary torque so far
+    held = np.empty(3)
+    q, qd = ref.position[3] + [0.0, -0.01, 0.0], ref.velocity[3].copy()
+    trial_scalars = np.array([0.8, 2.0])  # gain 0.8, the patient 2 samples ahead
+    q_start = q.copy()
+    patient_period(3, q, qd, np.zeros(3), ref.position, ref.velocity, ex.period, ex.substeps,
+                   ex.plant.kernel_args, ex.nominal.kernel_args, 0, *_scratch(),
+                   model.joint, model.scalars, trial_scalars, history, memory, held)
+    raw = 0.8 * (4.0 * (ref.position[5, 1] - q_start[1]) + 1.0 * (ref.velocity[5, 1]
+                                                                     - ref.velocity[3, 1]))
+    voluntary = 0.2 + 0.25 * (raw - 0.2)  # a = 0.01 / (0.03 + 0.01)
+    np.testing.assert_allclose(held, [1.0 + 1.5 * 0.5, 2.0 + voluntary, 3.0], rtol=1e-12)
+
+
+def _scratch() -> tuple[Any, ...]:
+    from exo_ilc_ros.core.dynamics import workspace
+
+    return workspace(3), np.empty((10, 3)), np.empty(9)
+
+
+def test_mas_grade_sets_the_preset() -> None:
+    config = _config("spastic")
+    k, b, g, th = MAS_PRESETS["2"]
+    joint = PatientModel(config).joint
+    np.testing.assert_array_equal(joint[2], [k] * 3)  # stiffness (no passive stiffness here)
+    np.testing.assert_array_equal(joint[0], [b] * 3)  # damping (no friction here)
+    np.testing.assert_array_equal(joint[4], [g] * 3)
+    np.testing.assert_array_equal(joint[5], [th] * 3)
+    assert _config("ideal", **{"patient.spasticity.mas_grade": 2})[
+        "patient.spasticity.mas_grade"] == "2"  # YAML's unquoted 2
+
+
+def test_draws_depend_only_on_seed_and_trial() -> None:
+    model = PatientModel(_config("realistic"))
+    a, b = model.draws(7, 101), model.draws(7, 101)
+    assert np.array_equal(a.noise, b.noise) and np.array_equal(a.initial, b.initial)
+    assert not np.array_equal(model.draws(8, 101).noise, a.noise)
+    other = PatientModel(_config("realistic", **{"patient.seed": 1}))
+    assert not np.array_equal(other.draws(7, 101).noise, a.noise)
+    assert model.fatigue(1) == 1.0
+    assert model.fatigue(1001) == pytest.approx(0.7 + 0.3 * np.exp(-1.0))
+
+
+@pytest.mark.parametrize("scenario", ["realistic", "sensor", "spastic", "voluntary"])
+def test_plant_stepper_is_the_compiled_trial_bit_for_bit(scenario: str) -> None:
+    """The node's stepper (begin_trial, measure, step) with the controller's step gives the
+    doubles of :func:`simulate_trial_guarded` (measured, true, effort) for trials 1 and 5."""
+    ex = Experiment(_config(scenario))
+    ref = ex.reference
+    u_ff = np.random.default_rng(3).standard_normal(ref.position.shape) * 0.5
+    for trial in (1, 5):
+        record = ex.run_trial(u_ff, trial)
+        stepper, control = PlantStepper(ex), GuardedControlStep(ex)
+        stepper.begin_trial(trial)
+        measured, true, efforts = [], [], []
+        for i in range(ref.samples):
+            true.append(stepper.position.copy())
+            q, qd = stepper.measure()
+            measured.append(q.copy())
+            efforts.append(control(u_ff[i], ref.position[i], ref.velocity[i], q, qd).copy())
+            if i + 1 < ref.samples:
+                stepper.step(efforts[-1])
+        assert record.aborted_at is None
+        assert np.array_equal(np.array(measured), record.position)
+        assert np.array_equal(np.array(efforts), record.effort)
+        expected_true = record.position if record.true_position is None \
+            else record.true_position
+        assert np.array_equal(np.array(true), expected_true)
+
+
+def test_true_error_is_the_plants_and_iterations_use_it() -> None:
+    result = run_trials(_config("sensor"), 0.05, 3)
+    record = result.records[-1]
+    assert record.true_position is not None and record.true_velocity is not None
+    assert not np.array_equal(record.position, record.true_position)
+    np.testing.assert_array_equal(
+        record.true_max_abs_error,
+        np.max(np.abs(record.reference.position - record.true_position), axis=0))
+    assert np.array_equal(result.true_max_abs_errors()[-1], record.true_max_abs_error)
+    friction = run_trials(_config("friction"), 0.05, 2)
+    assert friction.records[-1].true_position is None  # exact sensors: no state apart
+
+
+def test_resume_reproduces_the_patient_run(tmp_path: Path) -> None:
+    config = _config("realistic")
+    whole = run_trials(config, 0.05, 4)
+    run_trials(config, 0.05, 2, store=tmp_path)
+    resumed = run_trials(config, 0.05, 4, store=tmp_path, resume=True)
+    assert resumed.resumed == 2
+    for a, b in zip(whole.records, resumed.records, strict=True):
+        assert np.array_equal(a.position, b.position)
+        assert a.true_position is not None and b.true_position is not None
+        assert np.array_equal(a.true_position, b.true_position)
+
+
+@pytest.mark.parametrize(("yaml_body", "key", "rule"), [
+    ("sensor:\n        position_noise: -1.0e-4", "patient.sensor.position_noise", ">= 0"),
+    ("friction:\n        viscous: [-0.1, 0.0, 0.0]", "patient.friction.viscous", ">= 0"),
+    ("effort_delay: 1.5", "patient.effort_delay", "integer"),
+    ("spasticity:\n        reflex_delay: -0.1", "patient.spasticity.reflex_delay", ">= 0"),
+    ("spasticity:\n        mas_grade: \"4\"", "patient.spasticity.mas_grade", "one of"),
+    ("spasticity:\n        mas_grade: \"2\"\n        damping: [0.1, 0.0, 0.0]",
+     "patient.spasticity.damping", "either a mas_grade"),
+    ("sensr:\n        quantisation: 1.0e-4", "patient.sensr.quantisation", "unknown"),
+    ("seed: -1", "patient.seed", ">= 0"),
+])
+def test_bad_scenario_values_name_file_key_and_rule(tmp_path: Path, yaml_body: str, key: str,
+                                                    rule: str) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text("plant_simulator:\n  ros__parameters:\n    patient:\n      "
+                    + yaml_body + "\n")
+    with pytest.raises(ConfigError) as caught:
+        load_config(overlays=[scenario_path(path)])
+    assert caught.value.key == key and caught.value.source == str(path)
+    assert rule in caught.value.rule
+
+
+def test_every_patient_parameter_is_in_the_plant_section() -> None:
+    names = [p for p in schema.PARAMETERS if p.name.startswith("patient.")]
+    assert names and all(p.section == schema.PLANT and not p.live for p in names)
+
+
+@pytest.mark.graph
+def test_graph_equals_in_process_under_realistic(tmp_path: Path) -> None:
+    """3 trials of ``realistic`` through the graph: measured and true max |e|, u_ff and effort
+    of every trial equal the in-process run to 1e-9 (the plant's draws come from the trial
+    number in the feed-forward's frame); ``ideal`` through the graph equals it bit for bit."""
+    from exo_ilc_ros.orchestration.graph import run_graph
+
+    for name, tolerance in (("realistic", 1e-9), ("ideal", 0.0)):
+        config = _config(name, max_trials=3)
+        local = run_trials(config)
+        graph = run_graph(config, timeout=300.0).summary
+        np.testing.assert_allclose(graph.max_abs_error, local.max_abs_errors, rtol=0.0,
+                                   atol=tolerance, err_msg=name)
+        np.testing.assert_allclose(graph.true_errors, local.true_max_abs_errors(), rtol=0.0,
+                                   atol=tolerance, err_msg=name)
+        assert graph.max_abs_feedforward is not None and graph.max_abs_effort is not None
+        np.testing.assert_allclose(graph.max_abs_feedforward, local.max_abs_feedforward,
+                                   rtol=0.0, atol=tolerance, err_msg=name)
+        np.testing.assert_allclose(graph.max_abs_effort, local.max_abs_effort, rtol=0.0,
+                                   atol=tolerance, err_msg=name)
+        assert (graph.true_max_abs_error is not None) == (name == "realistic")
+        if name == "realistic":
+            assert not np.array_equal(graph.true_errors, graph.max_abs_error)
+    json.dumps(graph.to_json())  # the summary exports

@@ -140,6 +140,15 @@ def test_run_cell_tables_match_the_run_itself(tmp_path: Path) -> None:
     assert result.samples_at_limit.tolist() == counted and sum(counted) > 0
     assert result.samples == run.records[0].effort.shape[0] == 501
     assert result.failure is None and result.aborted == run.aborted
+    # under sensor noise the floor is the plant's true error, the measured one is kept beside it
+    [c] = study_cells([resolve_law("robust")], [resolve_scenario("sensor")], [0.1], [3], 3)
+    result = run_cell(c)
+    run = run_trials(load_config(ROOT / "config" / "robust.yaml",
+                                 {"max_trials": 3, "mass_uncertainty": 0.1, "patient.seed": 3},
+                                 overlays=[scenario_path("sensor")]))
+    np.testing.assert_array_equal(result.true_max_abs_error, run.true_max_abs_errors())
+    np.testing.assert_array_equal(result.max_abs_error, run.max_abs_errors)
+    assert not np.array_equal(result.true_max_abs_error, result.max_abs_error)
 
 
 def _outcome(results: list[CellResult], trials: int) -> str:
@@ -149,8 +158,9 @@ def _outcome(results: list[CellResult], trials: int) -> str:
 def test_pool_dask_and_one_process_give_the_same_table() -> None:
     from distributed import LocalCluster
 
-    cells = study_cells([resolve_law("sign"), resolve_law("robust")], [IDEAL], [0.05, 0.15],
-                        [0], 12)
+    realistic = resolve_scenario("realistic")  # random draws per (seed, trial)
+    cells = study_cells([resolve_law("sign"), resolve_law("robust")], [IDEAL, realistic], [0.1],
+                        [0, 1], 12)
     serial = run_cells(cells, workers=1)
     pooled = run_cells(cells, workers=2)
     with LocalCluster(processes=False, n_workers=1, threads_per_worker=2,
@@ -165,6 +175,12 @@ def test_pool_dask_and_one_process_give_the_same_table() -> None:
         assert _outcome(other, 12) == _outcome(serial, 12)
     assert format_study_table(study_rows(clustered, 12)) == \
         format_study_table(study_rows(serial, 12))
+    # the seeds of a random patient differ, those of the ideal one do not
+    by = {(r.law, r.scenario, r.seed): r for r in serial}
+    assert not np.array_equal(by["robust", "realistic", 0].max_abs_error,
+                              by["robust", "realistic", 1].max_abs_error)
+    assert by["robust", "ideal", 0].same_as(
+        CellResult(**{**vars(by["robust", "ideal", 1]), "seed": 0}))
 
 
 def test_study_command_table_json_and_figure(tmp_path: Path,

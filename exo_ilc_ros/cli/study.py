@@ -16,7 +16,6 @@ from ..core.errors import ConfigError
 from ..core.study import (
     SHIPPED_LAWS,
     StudyCell,
-    has_seed_parameter,
     resolve_law,
     resolve_scenario,
     study_cells,
@@ -69,9 +68,6 @@ def study(args: argparse.Namespace) -> int:
     if args.dask and args.workers is not None:
         raise ConfigError("--workers", "applies to the local process pool; with --dask the "
                           "cluster's workers run the cells (start them with --nworkers)")
-    if args.seeds > 1 and not has_seed_parameter():
-        raise ConfigError("--seeds", "this build has no random patient (no patient.seed): "
-                          "every seed would run the same; use --seeds 1")
     laws = [resolve_law(text) for text in args.laws]
     scenarios = [resolve_scenario(text) for text in (args.scenarios or scenario_names())]
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))

@@ -24,7 +24,6 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
-from . import schema
 from .config import Config, config_dir, load_config, scenario_path
 from .errors import ConfigError, ExoIlcError
 from .experiment import iterations_to_bound
@@ -110,12 +109,6 @@ def resolve_scenario(text: str) -> ScenarioSpec:
     return ScenarioSpec(path.stem, path)
 
 
-def has_seed_parameter() -> bool:
-    """True once the patient's random streams exist (the :data:`SEED_PARAMETER` is in the
-    schema); before, every seed of a cell would run the same."""
-    return SEED_PARAMETER in schema.BY_NAME
-
-
 @dataclass(frozen=True, eq=False)
 class StudyCell:
     """One law x scenario x mass uncertainty x seed, with its whole configuration."""
@@ -141,9 +134,7 @@ def cell_config(law: LawSpec, scenario: ScenarioSpec, mass_uncertainty: float, s
     ``stop_when_settled`` 0) and the seed. A broken file is named in the error."""
     overrides: dict[str, Any] = {**law.values, "max_trials": int(trials),
                                  "mass_uncertainty": float(mass_uncertainty),
-                                 "stop_when_settled": 0}
-    if has_seed_parameter():
-        overrides[SEED_PARAMETER] = int(seed)
+                                 "stop_when_settled": 0, SEED_PARAMETER: int(seed)}
     try:
         return load_config(law.path, overrides, overlays=[scenario.path])
     except ConfigError as exc:

@@ -183,6 +183,23 @@ def test_pool_dask_and_one_process_give_the_same_table() -> None:
         CellResult(**{**vars(by["robust", "ideal", 1]), "seed": 0}))
 
 
+def test_dask_refuses_another_version_and_an_unreachable_scheduler(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from distributed import LocalCluster
+
+    from exo_ilc_ros.analysis import study
+
+    cells = study_cells([resolve_law("sign")], [IDEAL], [0.1], [0], 2)
+    with LocalCluster(processes=False, n_workers=1, threads_per_worker=1,
+                      dashboard_address=None) as cluster:
+        monkeypatch.setattr(study, "__version__", "0.0.0-client")  # the workers run 0.1.0
+        with pytest.raises(study.ClusterError, match="same version on every worker"):
+            run_cells(cells, dask=cluster.scheduler_address)
+    monkeypatch.setattr(study, "CONNECT_TIMEOUT", "1s")
+    with pytest.raises(study.ClusterError, match="cannot reach the Dask scheduler"):
+        run_cells(cells, dask="tcp://127.0.0.1:9")
+
+
 def test_study_command_table_json_and_figure(tmp_path: Path,
                                              capsys: pytest.CaptureFixture[str]) -> None:
     out, png = tmp_path / "study.json", tmp_path / "fig" / "study.png"

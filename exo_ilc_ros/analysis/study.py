@@ -28,6 +28,10 @@ OnDone = Callable[[StudyCell], None]
 """Called in the caller's process once per finished cell (progress)."""
 
 
+CONNECT_TIMEOUT = "20s"
+"""How long to try to reach a Dask scheduler before giving up."""
+
+
 class ClusterError(ExoIlcError):
     """The Dask cluster cannot be reached or its workers cannot run the cells."""
 
@@ -102,7 +106,7 @@ def _run_on_dask(cells: Sequence[StudyCell], address: str | Any,
     except ImportError as exc:  # pragma: no cover - a dependency of the package
         raise ClusterError(f"--dask needs the 'distributed' package ({exc})") from None
     try:
-        client = Client(address, timeout="20s")
+        client = Client(address, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as exc:
         raise ClusterError(f"cannot reach the Dask scheduler {address!r}: {exc}") from None
     futures: list[Any] = []

@@ -22,7 +22,14 @@ import numpy as np
 
 from .. import __version__
 from ..core.errors import ExoIlcError
-from ..core.study import FLOOR_WINDOW, CellResult, StudyCell, StudyRow, run_cell
+from ..core.study import (
+    FLOOR_WINDOW,
+    CellResult,
+    StudyCell,
+    StudyRow,
+    growth_window,
+    run_cell,
+)
 
 OnDone = Callable[[StudyCell], None]
 """Called in the caller's process once per finished cell (progress)."""
@@ -187,8 +194,8 @@ def format_study_table(rows: Sequence[StudyRow]) -> str:
              f"until every joint's true max |e| <= {head.error_bound:g} rad ('-': never / not "
              f"at the end); floor: median true max |e| over the last {window} trials, worst "
              "joint ('*': above the bound); long run: growth check of the learned input over "
-             "the last 100 trials; at limit: share of samples with some joint at its effort "
-             "limit.",
+             f"the last {growth_window(head.trials)} trials; at limit: share of samples with "
+             "some joint at its effort limit.",
              line(header), line(["-" * w for w in widths])]
     lines += [line(b) for b in body]
     failures = [f"  {r.law} / {r.scenario} / {100 * r.mass_uncertainty:g} %: {f}"

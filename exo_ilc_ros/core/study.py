@@ -27,7 +27,7 @@ from .. import __version__
 from .config import Config, config_dir, load_config, scenario_path
 from .errors import ConfigError, ExoIlcError
 from .experiment import iterations_to_bound
-from .growth import fit_growth
+from .growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth
 from .laws import TrialRecord
 from .session import run_trials
 
@@ -282,6 +282,12 @@ class SeedOutcome:
         return float(np.max(self.floor_per_joint)) if self.floor_per_joint.size else np.nan
 
 
+def growth_window(trials: int) -> int:
+    """Trials the growth check fits, as ``exo-ilc simulate`` does: the last 100, at most the
+    second half of the run (the first trials' learning is not growth), at least 10."""
+    return min(DEFAULT_WINDOW, max(trials // 2, MIN_TRIALS))
+
+
 def seed_outcome(cell: CellResult, trials: int) -> SeedOutcome:
     """The numbers of one cell: first/settled on the worst joint's true error, the floor over the
     last min(100, K) trials, the growth check (``core.growth``) on max |u_ff|."""
@@ -298,7 +304,7 @@ def seed_outcome(cell: CellResult, trials: int) -> SeedOutcome:
     window = errors[-min(FLOOR_WINDOW, cell.trials):]
     floor = np.median(window, axis=0) if finite else np.full(joints, np.nan)  # none: not settled
     with np.errstate(invalid="ignore", divide="ignore"):
-        fit = fit_growth(cell.max_abs_feedforward)
+        fit = fit_growth(cell.max_abs_feedforward, growth_window(cell.trials))
     growing = np.zeros(joints, bool) if fit is None else np.asarray(fit.growing, bool)
     rate = np.full(joints, np.nan) if fit is None else np.asarray(fit.rate, float)
     late = sum(1 for k in cell.aborted if k > LATE_ABORT_AFTER)

@@ -263,3 +263,19 @@ def test_ctrl_c_stops_the_pool_without_worker_tracebacks(tmp_path: Path) -> None
     assert "Traceback" not in err and "KeyboardInterrupt" not in err
     assert err.strip().endswith("exo-ilc study: interrupted")
     assert "Robustness study" not in out
+
+
+def test_robust_config_survives_the_realistic_patient() -> None:
+    """config/robust.yaml under every patient effect at once (`realistic`, 15 %), 300 trials:
+    finite, no growth flag, no envelope abort after trial 10, and learning that works (the
+    floor well under 0.02 rad; with its old 20 rad/s^2 bound on |u_ff| the learning was
+    clipped at 0.36 rad, and the Q-filter at 5 Hz diverged under the first voluntary patient).
+    The full 1000-trial, every-scenario check is the README's study."""
+    [c] = study_cells([resolve_law("robust")], [resolve_scenario("realistic")], [0.15], [0],
+                      300)
+    result = run_cell(c)
+    [row] = study_rows([result], 300)
+    assert row.finite and row.growing_seeds == 0 and row.late_aborts == 0, row
+    assert row.bounded
+    assert row.floor < 0.02, row.floor_per_joint
+    assert np.all(result.max_abs_feedforward[-1] < 0.9 * np.asarray(c.values["feedforward_limit"]))

@@ -201,7 +201,7 @@ def format_study_table(rows: Sequence[StudyRow]) -> str:
     failures = [f"  {r.law} / {r.scenario} / {100 * r.mass_uncertainty:g} %: {f}"
                 for r in rows for f in r.failures]
     if failures:
-        lines += ["", "Runs that stopped early:", *failures]
+        lines += ["", "Runs that failed:", *failures]
     return "\n".join(lines)
 
 
@@ -217,6 +217,7 @@ def study_json(setup: dict[str, Any], rows: Sequence[StudyRow],
     measured max |e|, max |u_ff|; non-finite numbers as null)."""
     cells = [{"law": r.law, "scenario": r.scenario, "mass_uncertainty": r.mass_uncertainty,
               "seed": r.seed, "trials": r.trials, "aborted": r.aborted, "failure": r.failure,
+              "nonfinite": r.nonfinite, "seconds": r.seconds,
               "true_max_abs_error": _table(r.true_max_abs_error),
               "max_abs_error": _table(r.max_abs_error),
               "max_abs_feedforward": _table(r.max_abs_feedforward),

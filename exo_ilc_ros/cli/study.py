@@ -28,6 +28,17 @@ DEFAULT_LAWS = ("sign", "tuned", "linear", "robust", "norm_optimal")
 DEFAULT_TRIALS = 1000
 
 
+SCENARIO_ORDER = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic")
+"""The shipped scenarios from the paper's plant to every effect at once (the table's order)."""
+
+
+def shipped_scenarios() -> list[str]:
+    """Every shipped scenario: those of :data:`SCENARIO_ORDER` in that order, then the rest."""
+    names = scenario_names()
+    return [n for n in SCENARIO_ORDER if n in names] + \
+        [n for n in names if n not in SCENARIO_ORDER]
+
+
 def register(sub: Any) -> None:
     """Add the sub-command."""
     parser = sub.add_parser(
@@ -69,7 +80,7 @@ def study(args: argparse.Namespace) -> int:
         raise ConfigError("--workers", "applies to the local process pool; with --dask the "
                           "cluster's workers run the cells (start them with --nworkers)")
     laws = [resolve_law(text) for text in args.laws]
-    scenarios = [resolve_scenario(text) for text in (args.scenarios or scenario_names())]
+    scenarios = [resolve_scenario(text) for text in (args.scenarios or shipped_scenarios())]
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     cells = study_cells(laws, scenarios, args.mass_uncertainty, seeds, args.trials)
     workers = args.workers or default_jobs()

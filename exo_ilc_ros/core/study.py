@@ -190,6 +190,8 @@ class CellResult:
     """Trials the error envelope aborted."""
     failure: str | None = None
     """Why the run stopped before its last trial (a law that learned a non-finite input ...)."""
+    nonfinite: str | None = None
+    """Where the first non-finite state or effort appeared (the run itself went on)."""
     version: str = __version__
     """The exo_ilc_ros that ran the cell (a cluster must run the client's)."""
     seconds: float = 0.0
@@ -205,9 +207,9 @@ class CellResult:
         arrays = ("true_max_abs_error", "max_abs_error", "max_abs_feedforward",
                   "max_abs_effort", "samples_at_limit")
         return (self.law, self.scenario, self.mass_uncertainty, self.seed, self.aborted,
-                self.failure, self.samples) == \
+                self.failure, self.nonfinite, self.samples) == \
             (other.law, other.scenario, other.mass_uncertainty, other.seed, other.aborted,
-             other.failure, other.samples) and \
+             other.failure, other.nonfinite, other.samples) and \
             all(np.array_equal(getattr(self, a), getattr(other, a), equal_nan=True)
                 for a in arrays)
 
@@ -228,7 +230,17 @@ def run_cell(cell: StudyCell) -> CellResult:
     at_limit: list[int] = []
     aborted: list[int] = []
 
+    nonfinite: list[str] = []
+
     def reduce(record: TrialRecord) -> None:
+        if not nonfinite:
+            bad = ~(np.all(np.isfinite(record.effort), axis=1)
+                    & np.all(np.isfinite(record.position), axis=1))
+            if np.any(bad):
+                after = "" if record.aborted_at is None else \
+                    f", in the safe hold after the envelope abort at sample {record.aborted_at}"
+                nonfinite.append(f"non-finite state or effort from trial {record.trial}, "
+                                 f"sample {int(np.flatnonzero(bad)[0])}{after}")
         rows["true"].append(true_max_abs_error(record))
         rows["measured"].append(np.asarray(record.max_abs_error))
         rows["ff"].append(np.max(np.abs(record.feedforward), axis=0))
@@ -253,7 +265,7 @@ def run_cell(cell: StudyCell) -> CellResult:
     return CellResult(cell.law, cell.scenario, cell.mass_uncertainty, cell.seed,
                       float(config["error_bound"]), samples, table("true"), table("measured"),
                       table("ff"), table("effort"), np.array(at_limit, dtype=np.int64),
-                      aborted, failure, seconds=seconds)
+                      aborted, failure, nonfinite[0] if nonfinite else None, seconds=seconds)
 
 
 @dataclass(frozen=True)
@@ -292,7 +304,7 @@ def seed_outcome(cell: CellResult, trials: int) -> SeedOutcome:
     """The numbers of one cell: first/settled on the worst joint's true error, the floor over the
     last min(100, K) trials, the growth check (``core.growth``) on max |u_ff|."""
     errors = cell.true_max_abs_error
-    finite = cell.failure is None and cell.trials == trials and all(
+    finite = cell.failure is None and cell.nonfinite is None and cell.trials == trials and all(
         bool(np.all(np.isfinite(t))) for t in
         (errors, cell.max_abs_feedforward, cell.max_abs_effort))
     joints = errors.shape[1]
@@ -429,7 +441,8 @@ def study_row(results: Sequence[CellResult], trials: int) -> StudyRow:
         int(np.count_nonzero(np.any(growing, axis=1))),
         float(np.nanmax(rates)) if np.any(np.isfinite(rates)) else np.nan,
         all(o.finite for o in outcomes),
-        tuple(f"seed {r.seed}: {r.failure}" for r in results if r.failure),
+        tuple(f"seed {r.seed}: {why}" for r in results for why in (r.failure, r.nonfinite)
+              if why),
         peak, float(at_limit), len(aborted), sum(o.late_aborts for o in outcomes),
         max(aborted, default=None))
 

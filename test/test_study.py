@@ -82,6 +82,13 @@ def test_a_failed_or_short_run_is_not_bounded() -> None:
     assert row.verdict == "failed" and not row.finite and not row.bounded
     assert row.failures == ("seed 1: after trial 7: the law produced a bad feed-forward",)
     assert math.isnan(row.floor)
+    runaway = cell(5, [[0.001, 0.001]] * 12, aborted=[9])
+    runaway.nonfinite = "non-finite state or effort from trial 9, sample 462, in the safe hold"
+    [row] = study_rows([runaway], 12)
+    assert row.verdict == "failed" and math.isnan(row.floor)
+    assert row.failures == ("seed 5: non-finite state or effort from trial 9, sample 462, in "
+                            "the safe hold",)
+    assert "Runs that failed:" in format_study_table([row])
     late = cell(2, [[0.001, 0.001]] * 12, aborted=[11])
     [row] = study_rows([late], 12)
     assert row.verdict == "aborts" and not row.bounded

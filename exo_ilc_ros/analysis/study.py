@@ -22,6 +22,7 @@ import numpy as np
 
 from .. import __version__
 from ..core.errors import ExoIlcError
+from ..core.growth import MIN_TRIALS
 from ..core.study import (
     FLOOR_WINDOW,
     CellResult,
@@ -148,6 +149,8 @@ def _long_run(row: StudyRow) -> str:
     if not row.finite:
         return "FAILED"
     parts = []
+    if row.trials < MIN_TRIALS and not row.late_aborts:
+        return f"- (< {MIN_TRIALS} trials)"
     if row.growing_seeds:
         joints = ",".join(f"j{j}" for j in row.growing_joints)
         seeds = f" {row.growing_seeds}/{row.seeds}" if row.seeds > 1 else ""

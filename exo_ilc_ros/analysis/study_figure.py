@@ -29,7 +29,9 @@ def _ordered(values: Sequence[str]) -> list[str]:
 
 
 def _short(x: float) -> str:
-    """``4.5e-5``: a floor in few characters."""
+    """``4.5e-5``, ``1.04``: a floor in few characters."""
+    if x >= 0.1:
+        return f"{x:.2f}"
     mantissa, _, exponent = f"{x:.1e}".partition("e")
     return f"{mantissa}e{int(exponent)}"
 

@@ -9,17 +9,14 @@ most 1.5x an ``ideal`` one (issue #14).
 
 from __future__ import annotations
 
-import os
 import statistics
 import time
 
 import numpy as np
 
-os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-
-from exo_ilc_ros.core.config import load_config, scenario_path  # noqa: E402
-from exo_ilc_ros.core.experiment import Experiment  # noqa: E402
-from exo_ilc_ros.core.plant import PlantStepper  # noqa: E402
+from exo_ilc_ros.core.config import load_config, scenario_path
+from exo_ilc_ros.core.experiment import Experiment
+from exo_ilc_ros.core.plant import PlantStepper
 
 SCENARIOS = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic")
 

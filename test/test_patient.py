@@ -19,18 +19,20 @@ from exo_ilc_ros.core.errors import ConfigError
 from exo_ilc_ros.core.experiment import Experiment
 from exo_ilc_ros.core.patient import (
     MAS_PRESETS,
+    PatientLearning,
     PatientModel,
     measure_into,
     passive_effort_into,
     patient_period,
     rk4_period_passive,
+    true_error,
 )
 from exo_ilc_ros.core.plant import PlantStepper
 from exo_ilc_ros.core.session import run_trials
 from exo_ilc_ros.core.store import learning_key
 
 SHORT = {"trajectory.duration": 1.0}
-SHIPPED = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic")
+SHIPPED = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic", "learning")
 
 
 def _config(scenario: str = "ideal", **overrides: Any) -> Any:
@@ -151,7 +153,8 @@ def test_held_torque_delay_reflex_and_voluntary_by_hand() -> None:
     q_start = q.copy()
     patient_period(3, q, qd, np.zeros(3), ref.position, ref.velocity, ex.period, ex.substeps,
                    ex.plant.kernel_args, ex.nominal.kernel_args, 0, *_scratch(),
-                   model.joint, model.scalars, trial_scalars, history, memory, held)
+                   model.joint, model.scalars, trial_scalars, np.zeros((0, 0)), history, memory,
+                   held)
     raw = 0.8 * (4.0 * (ref.position[5, 1] - q_start[1]) + 1.0 * (ref.velocity[5, 1]
                                                                      - ref.velocity[3, 1]))
     voluntary = 0.2 + 0.25 * (raw - 0.2)  # a = 0.01 / (0.03 + 0.01)
@@ -187,16 +190,23 @@ def test_draws_depend_only_on_seed_and_trial() -> None:
     assert model.fatigue(1001) == pytest.approx(0.7 + 0.3 * np.exp(-1.0))
 
 
-@pytest.mark.parametrize("scenario", ["realistic", "sensor", "spastic", "voluntary"])
+@pytest.mark.parametrize("scenario", ["realistic", "sensor", "spastic", "voluntary",
+                                      "learning"])
 def test_plant_stepper_is_the_compiled_trial_bit_for_bit(scenario: str) -> None:
     """The node's stepper (begin_trial, measure, step) with the controller's step gives the
-    doubles of :func:`simulate_trial_guarded` (measured, true, effort) for trials 1 and 5."""
+    doubles of :func:`simulate_trial_guarded` (measured, true, effort) for trials 1 to 3, the
+    stepper's own learning patient against the in-process one (trial 2 run twice: a rerun)."""
     ex = Experiment(_config(scenario))
     ref = ex.reference
     u_ff = np.random.default_rng(3).standard_normal(ref.position.shape) * 0.5
-    for trial in (1, 5):
-        record = ex.run_trial(u_ff, trial)
-        stepper, control = PlantStepper(ex), GuardedControlStep(ex)
+    learning = PatientLearning(ex.patient, ref.samples)
+    stepper, control = PlantStepper(ex), GuardedControlStep(ex)
+    last_error: dict[int, np.ndarray] = {}
+    for trial in (1, 2, 2, 3):
+        while learning.learned_through < trial - 1:  # learn from the last run of each trial
+            done = learning.learned_through + 1
+            learning.learn(done, last_error[done])
+        record = ex.run_trial(u_ff, trial, None, learning.torque)
         stepper.begin_trial(trial)
         measured, true, efforts = [], [], []
         for i in range(ref.samples):
@@ -212,6 +222,36 @@ def test_plant_stepper_is_the_compiled_trial_bit_for_bit(scenario: str) -> None:
         expected_true = record.position if record.true_position is None \
             else record.true_position
         assert np.array_equal(np.array(true), expected_true)
+        last_error[trial] = true_error(record)
+    assert ex.patient.learns == (scenario == "learning")
+    if scenario == "learning":
+        assert learning.learned_through == 2 and np.any(learning.torque != 0.0)
+
+
+def test_learning_patient_two_state_by_hand_and_resumed(tmp_path: Path) -> None:
+    """After trial 1 the patient adds (B_f + B_s) K_e e_1; after trial 2
+    (A_f B_f + B_f) K_e e_1 ... by the recursion; a resumed in-process run rebuilds the
+    patient's state from the stored true errors and continues bit for bit."""
+    config = _config("learning")
+    model = PatientModel(config)
+    learning = PatientLearning(model, 101)
+    e1, e2 = np.full((101, 3), 0.01), np.full((101, 3), -0.02)
+    learning.learn(1, e1)
+    gain = np.array(config["patient.learning.gain"])
+    np.testing.assert_allclose(learning.torque, (0.06 + 0.02) * gain * e1, rtol=1e-14)
+    learning.learn(2, e2)
+    fast = 0.92 * 0.06 * gain * e1 + 0.06 * gain * e2
+    slow = 0.995 * 0.02 * gain * e1 + 0.02 * gain * e2
+    np.testing.assert_allclose(learning.torque, fast + slow, rtol=1e-13)
+    with pytest.raises(ValueError):
+        learning.learn(4, e1)
+    whole = run_trials(config, 0.05, 4)
+    run_trials(config, 0.05, 2, store=tmp_path)
+    resumed = run_trials(config, 0.05, 4, store=tmp_path, resume=True)
+    for a, b in zip(whole.records, resumed.records, strict=True):
+        assert np.array_equal(a.position, b.position) and np.array_equal(a.effort, b.effort)
+    plain = run_trials(config.replace({"patient.learning.gain": [0.0, 0.0, 0.0]}), 0.05, 4)
+    assert not np.array_equal(plain.records[-1].position, whole.records[-1].position)
 
 
 def test_true_error_is_the_plants_and_iterations_use_it() -> None:
@@ -266,14 +306,95 @@ def test_every_patient_parameter_is_in_the_plant_section() -> None:
     assert names and all(p.section == schema.PLANT and not p.live for p in names)
 
 
+class _Plant:
+    """The graph as the protocol sees it: the in-process trial answered sample by sample,
+    the measured samples, the controller's ``done``, then the true samples (one of them lost
+    in the first attempt)."""
+
+    def __init__(self, config: Any) -> None:
+        self.experiment = Experiment(config)
+        self.protocol: Any = None
+        self.t0 = 0
+        self.pushed: list[tuple[int, np.ndarray]] = []
+        self.records: list[Any] = []
+        self.events: list[tuple[str, dict[str, str]]] = []
+        self.drop_true = 5
+
+    def reset(self) -> None:
+        self.t0 += 10_000_000_000
+        self.protocol.on_reset(self.t0)
+
+    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray) -> None:
+        self.pushed.append((trial, feedforward.copy()))
+        self.protocol.on_acknowledged(trial, t0_ns)
+
+    def start(self) -> None:
+        pass
+
+    def publish_conclusion(self, conclusion: Any, end_ns: int) -> None:
+        record = conclusion.record  # its arrays are the protocol's buffers: copied now
+        self.records.append((record.trial, record.position.copy(),
+                             record.true_position.copy(), record.effort.copy()))
+
+    def event(self, message: str, values: Any, stamp_ns: int | None = None) -> None:
+        self.events.append((message, dict(values)))
+
+    def log(self, error: bool, text: str) -> None:
+        pass
+
+    def run_trial(self) -> None:
+        protocol = self.protocol
+        protocol.on_started(True)
+        trial, ff = self.pushed[-1]
+        record = self.experiment.run_trial(ff, trial, protocol.session.levels)
+        step = protocol.samples.step_ns
+        for i in range(record.position.shape[0]):
+            protocol.on_sample(self.t0 + i * step, record.position[i], record.velocity[i])
+        protocol.on_done(trial, self.t0, {"watchdog_trips": "0", "aborted_at": "-1"})
+        assert len(self.records) < trial, "ended before its true samples were in"
+        assert record.true_position is not None and record.true_velocity is not None
+        for i in range(record.position.shape[0]):
+            if i == self.drop_true:
+                self.drop_true = -1
+                continue
+            protocol.on_true_sample(self.t0 + i * step, record.true_position[i],
+                                    record.true_velocity[i])
+
+
+def test_protocol_waits_for_the_true_samples_and_reruns_a_trial_that_lost_one() -> None:
+    from exo_ilc_ros.core.protocol import Phase, TrialProtocol
+
+    config = _config("sensor", max_trials=3)
+    plant = _Plant(config)
+    protocol = TrialProtocol(config, plant, clock=lambda: 0.0)
+    plant.protocol = protocol
+    protocol.open({"mass_uncertainty": config["mass_uncertainty"]})
+    protocol.tick(graph_ready=True)
+    for _ in range(5):
+        if protocol.phase is Phase.FINISHED:
+            break
+        plant.run_trial()
+    assert protocol.phase is Phase.FINISHED
+    assert ("aborted", {"trial": "1", "reason": "lost", "lost_true": "1"}) in plant.events
+    local = run_trials(config)
+    assert [r[0] for r in plant.records] == [1, 2, 3]
+    for (_, position, true_position, effort), ref in zip(plant.records, local.records,
+                                                         strict=True):
+        assert np.array_equal(position, ref.position)
+        assert ref.true_position is not None
+        assert np.array_equal(true_position, ref.true_position)
+        assert np.array_equal(effort, ref.effort)
+
+
 @pytest.mark.graph
 def test_graph_equals_in_process_under_realistic(tmp_path: Path) -> None:
-    """3 trials of ``realistic`` through the graph: measured and true max |e|, u_ff and effort
-    of every trial equal the in-process run to 1e-9 (the plant's draws come from the trial
-    number in the feed-forward's frame); ``ideal`` through the graph equals it bit for bit."""
+    """3 trials of ``realistic`` and of ``learning`` through the graph: measured and true
+    max |e|, u_ff and effort of every trial equal the in-process run to 1e-9 (the plant's
+    draws come from the trial number in the feed-forward's frame, the learning patient lives
+    in the plant); ``ideal`` through the graph equals it bit for bit."""
     from exo_ilc_ros.orchestration.graph import run_graph
 
-    for name, tolerance in (("realistic", 1e-9), ("ideal", 0.0)):
+    for name, tolerance in (("realistic", 1e-9), ("learning", 1e-9), ("ideal", 0.0)):
         config = _config(name, max_trials=3)
         local = run_trials(config)
         graph = run_graph(config, timeout=300.0).summary
@@ -290,3 +411,20 @@ def test_graph_equals_in_process_under_realistic(tmp_path: Path) -> None:
         if name == "realistic":
             assert not np.array_equal(graph.true_errors, graph.max_abs_error)
     json.dumps(graph.to_json())  # the summary exports
+
+
+def test_bag_of_a_patient_run_keeps_the_true_error_and_replays_exactly(tmp_path: Path) -> None:
+    """A `sensor` run written as a bag: its summary has the measured and the true tables, and
+    `simulate --replay` (the bag's config, patient included) reproduces every trial."""
+    from exo_ilc_ros.bag import read_bag, write_run
+    from exo_ilc_ros.bag.replay import replay
+
+    config = _config("sensor")
+    result = run_trials(config, 0.05, 3)
+    write_run(tmp_path / "bag", config, result)
+    run = read_bag(tmp_path / "bag")
+    summary = run.summary()
+    assert summary.true_max_abs_error is not None
+    np.testing.assert_array_equal(summary.true_max_abs_error, result.true_max_abs_errors())
+    np.testing.assert_array_equal(summary.max_abs_error, result.max_abs_errors)
+    assert replay(run).identical

@@ -41,12 +41,12 @@ class ComparedRun:
     @property
     def floor(self) -> float:
         """max |e| of the last trial, over joints (rad)."""
-        return float(np.max(self.summary.max_abs_error[-1]))
+        return float(np.max(self.summary.true_errors[-1]))
 
     @property
     def peak(self) -> float:
         """max |e| over every trial and joint (rad)."""
-        return float(np.max(self.summary.max_abs_error))
+        return float(np.max(self.summary.true_errors))
 
     @property
     def final_feedforward(self) -> float | None:
@@ -130,7 +130,7 @@ def plot_comparison(runs: Sequence[ComparedRun], joint_names: Sequence[str],
             for r in runs:
                 if r.summary.mass_uncertainty != delta:
                     continue
-                errors = r.summary.max_abs_error[:, j]
+                errors = r.summary.true_errors[:, j]
                 trials = np.arange(1, len(errors) + 1)
                 ax.semilogy(trials, errors, lw=1.2, label=r.label,
                             color=colours[labels.index(r.label) % len(colours)])

@@ -35,8 +35,8 @@ def convergence_figure(runs: Sequence[RunSummary], joint_names: Sequence[str],
     bound = runs[0].error_bound if runs else 0.005
     for j, ax in enumerate(axes):
         for run, label in zip(runs, labels, strict=True):
-            trials = np.arange(1, len(run.max_abs_error) + 1)
-            ax.semilogy(trials, run.max_abs_error[:, j], marker=".", markersize=3,
+            trials = np.arange(1, len(run.true_errors) + 1)
+            ax.semilogy(trials, run.true_errors[:, j], marker=".", markersize=3,
                         linewidth=1.0, label=label)
         ax.axhline(bound, color="k", linestyle="--", linewidth=0.8,
                    label=f"bound {bound:g} rad")

@@ -316,8 +316,8 @@ def evaluate(config: Config, problem: TuningProblem) -> tuple[float, list[RunSco
         rows: list[np.ndarray] = []
 
         def guard(record: TrialRecord, rows: list[np.ndarray] = rows) -> None:
-            rows.append(record.max_abs_error)
-            worst = float(np.max(record.max_abs_error))
+            rows.append(record.true_max_abs_error)
+            worst = float(np.max(record.true_max_abs_error))
             if not math.isfinite(worst) or worst > DIVERGENCE_FACTOR * float(np.max(rows[0])):
                 raise _DivergedError
 

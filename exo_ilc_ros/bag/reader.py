@@ -199,6 +199,10 @@ class BagRun:
                 effort[k - 1] = v
             elif trial is not None and not np.all(np.isnan(trial.command)):
                 effort[k - 1] = np.nanmax(np.abs(trial.command), axis=0)
+        true_rows = [protocol.per_joint(self.summaries.get(k, {}), "true_max_abs_error",
+                                        self.joint_names) for k in range(1, count + 1)]
+        true = np.array(true_rows) if count and all(r is not None for r in true_rows) \
+            else None  # the virtual patient's true max |e|, from the summaries
         extra: dict[str, Any] = {"bag": str(self.path), "sources": sources}
         if self.incomplete:
             extra["incomplete_trials"] = self.incomplete
@@ -208,7 +212,7 @@ class BagRun:
             extra["resumed_after"] = self.resumed_after
         return RunSummary(self.mass_uncertainty, self.law, self.error_bound, errors,
                           None if np.isnan(ff).all() else ff,
-                          None if np.isnan(effort).all() else effort, extra)
+                          None if np.isnan(effort).all() else effort, extra, true)
 
 
 def read_metadata(path: Path) -> dict[str, Any]:

@@ -87,7 +87,8 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
             values = protocol.summary_values(
                 k, result.mass_uncertainty, result.law, names, record.max_abs_error,
                 np.max(np.abs(record.feedforward), axis=0), np.max(np.abs(record.effort), axis=0),
-                record.levels, record.aborted_at, result.applied.get(k + 1))
+                record.levels, record.aborted_at, result.applied.get(k + 1),
+                None if record.true_position is None else record.true_max_abs_error)
             within = bool(np.all(record.max_abs_error <= result.error_bound))
             writer.write(topics.TRIAL_SUMMARY, end, messages.trial_summary(end, values, within))
             writer.write(topics.TRIAL_EVENTS, end, messages.trial_event(end, "end", k, values))

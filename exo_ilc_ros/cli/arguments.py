@@ -206,7 +206,7 @@ def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
     """``--scenario NAME|FILE``: a virtual patient laid over ``--config``."""
     parser.add_argument("--scenario", type=scenario, metavar="NAME|FILE",
                         help="virtual patient laid over --config: a shipped scenario "
-                        "(ideal, sensor, friction, spastic, voluntary, realistic; "
+                        "(ideal, sensor, friction, spastic, voluntary, realistic, learning; "
                         "config/scenarios/) or a ROS parameter YAML of the same layout")
 
 

@@ -27,6 +27,8 @@ from .qfilter import QFilteredLaw, feedforward_limit_of, qfilter_of
 from .trajectory import QuinticTrajectory, SampledReference
 from .trial import simulate_trial_guarded
 
+_NO_TORQUE = np.zeros((0, 0))
+
 
 def build_arm(config: Config) -> ArmModel:
     """The nominal arm of the config (the model the computed torque uses)."""
@@ -130,10 +132,12 @@ class Experiment:
         """The virtual patient's effects (all off by default)."""
 
     def run_trial(self, feedforward: np.ndarray, trial: int,
-                  levels: np.ndarray | None = None) -> TrialRecord:
+                  levels: np.ndarray | None = None,
+                  learned: np.ndarray | None = None) -> TrialRecord:
         """One trial with the given feed-forward, from x_d(0), guarded by the error envelope
         (``record.aborted_at`` set if it left it: safe hold from that sample on), with the
-        virtual patient's effects and trial ``trial``'s draws (:mod:`.patient`)."""
+        virtual patient's effects and trial ``trial``'s draws (:mod:`.patient`); ``learned``:
+        the torque a learning patient adds (:class:`.patient.PatientLearning`; None: none)."""
         ref = self.reference
         u_ff = np.ascontiguousarray(feedforward, dtype=float)
         if u_ff.shape != ref.position.shape:
@@ -148,7 +152,8 @@ class Experiment:
             u_ff, ref.position, ref.velocity, self.kp, self.kd, self.effort_limit, self.period,
             self.substeps, self.plant.kernel_args, self.nominal.kernel_args, int(self.dynamics),
             self.error_envelope, patient.joint, patient.scalars, draws.noise, draws.initial,
-            draws.trial_scalars)
+            draws.trial_scalars, learned if learned is not None
+            else np.zeros(ref.position.shape) if patient.learns else _NO_TORQUE)
         measured = patient.measures
         return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels,
                            None if abort < 0 else int(abort), q_true if measured else None,

@@ -19,7 +19,8 @@ Per sample i of a trial (true state x_i = (q_i, qdot_i) of the plant):
    tau^v_i = tau^v_{i-1} + a_v (g_k (K_v (q_d(t_i + s_k) - q_i) + D_v (qdot_d(t_i + s_k) - qdot_i))
    - tau^v_{i-1}): the patient's own sluggish tracking (first-order lag a_v = T / (tau_v + T)) of
    the reference shifted by the trial's timing jitter s_k, with gain g_k = (1 + sigma_a z_k)
-   (amplitude jitter, >= 0) times the fatigue f_k = f_min + (1 - f_min) exp(-r (k - 1)).
+   (amplitude jitter, >= 0) times the fatigue f_k = f_min + (1 - f_min) exp(-r (k - 1)); a
+   **learning patient** adds the torque profile x_f + x_s of :class:`PatientLearning`.
 3. **Passive joint forces** at every RK4 stage (:func:`passive_effort_into`): -B qdot
    - F_c tanh(qdot / v_s) - K (q - q_0), with B = viscous friction + spastic damping and K =
    passive + spastic stiffness.
@@ -44,6 +45,7 @@ from .plant import _acceleration_into, clamp_counted, rk4_period
 
 if TYPE_CHECKING:
     from .config import Config
+    from .laws import TrialRecord
 
 # Rows of the per-joint parameter array ``joint`` (kernel argument):
 VISCOUS = 0  # B: viscous friction + spastic damping (N m s/rad)
@@ -68,7 +70,8 @@ HELD_ON = 7  # 1.0: reflex or voluntary torque
 SENSOR_ON = 8  # 1.0: the measured state differs from the true one
 VELOCITY_ALPHA = 9  # a = T / (tau + T) of the velocity filter (1: none)
 PERIOD = 10  # T (s)
-_SCALARS = 11
+LEARNING_ON = 11  # 1.0: the patient's learned torque profile is added
+_SCALARS = 12
 
 MAS_PRESETS: dict[str, tuple[float, float, float, float]] = {
     "0": (0.0, 0.0, 0.0, 0.0),
@@ -147,6 +150,13 @@ class PatientModel:
         voluntary_lag = float(config["patient.voluntary.time_constant"])
         reflex_delay = int(round(float(config["patient.spasticity.reflex_delay"]) / period))
         effort_delay = int(config["patient.effort_delay"])
+        self.learning_gain = np.asarray(config["patient.learning.gain"], dtype=float)
+        self.learning = (float(config["patient.learning.fast_retention"]),
+                         float(config["patient.learning.fast_rate"]),
+                         float(config["patient.learning.slow_retention"]),
+                         float(config["patient.learning.slow_rate"]))
+        self.learns = bool(np.any(self.learning_gain != 0.0))
+        """The patient learns across trials (:class:`PatientLearning`)."""
         self.measures = bool(quantisation > 0.0 or differentiate or velocity_filter > 0.0
                              or self.position_noise > 0.0 or self.velocity_noise > 0.0)
         """The measured state differs from the true one (the record carries both)."""
@@ -154,7 +164,8 @@ class PatientModel:
         reflex = bool(np.any(joint[REFLEX_GAIN] != 0.0))
         voluntary = bool(np.any(joint[[VOLUNTARY_STIFFNESS, VOLUNTARY_DAMPING]] != 0.0))
         self.enabled = bool(self.measures or passive or reflex or voluntary or effort_delay
-                            or self.initial_position > 0.0 or self.initial_velocity > 0.0)
+                            or self.initial_position > 0.0 or self.initial_velocity > 0.0
+                            or self.learns)
         """Any effect is on (else the plant is the paper's, and the kernels skip all this)."""
         scalars = np.zeros(_SCALARS)
         scalars[QUANTISATION] = quantisation
@@ -168,6 +179,7 @@ class PatientModel:
         scalars[SENSOR_ON] = float(self.measures)
         scalars[VELOCITY_ALPHA] = period / (velocity_filter + period)
         scalars[PERIOD] = period
+        scalars[LEARNING_ON] = float(self.learns)
         self.scalars = scalars if self.enabled else np.zeros(0)
         """Empty when no effect is on: the kernels then run the paper's plant unchanged."""
 
@@ -194,6 +206,47 @@ class PatientModel:
         gain = max(0.0, 1.0 + self.amplitude_sd * float(amplitude)) * self.fatigue(trial)
         shift = float(round(self.timing_sd * float(timing) / self.period))
         return TrialDraws(noise, initial, np.array([gain, shift]))
+
+
+class PatientLearning:
+    """A patient who learns across trials: the two-state model of motor adaptation (a fast and
+    a slow state, Smith, Ghazizadeh and Shadmehr 2006), per sample and joint,
+
+        x_f <- A_f x_f + B_f K_e e_k,   x_s <- A_s x_s + B_s K_e e_k,
+
+    e_k = q_d - q the true error of trial k at every sample; the patient adds x_f + x_s (N m) to
+    the next trial's torque (held over each period). The state after trial k is a function of
+    the true errors of trials 1..k, which the store keeps, so a resumed run rebuilds it
+    (:meth:`learn` over the restored records)."""
+
+    def __init__(self, model: PatientModel, samples: int) -> None:
+        n = model.learning_gain.shape[0]
+        self.model = model
+        self.fast = np.zeros((samples, n))
+        self.slow = np.zeros((samples, n))
+        self.torque = np.zeros((samples, n))
+        """x_f + x_s: what the patient adds in the next trial."""
+        self.learned_through = 0
+        """The last trial learned from (0: none)."""
+
+    def learn(self, trial: int, true_error: np.ndarray) -> None:
+        """Learn from trial ``trial`` (the next after :attr:`learned_through`) with its true
+        error q_d - q at every sample."""
+        if trial != self.learned_through + 1:
+            raise ValueError(f"the patient learns from trial {self.learned_through + 1} next, "
+                             f"not {trial}")
+        a_f, b_f, a_s, b_s = self.model.learning
+        drive = self.model.learning_gain * true_error
+        self.fast = a_f * self.fast + b_f * drive
+        self.slow = a_s * self.slow + b_s * drive
+        self.torque = self.fast + self.slow
+        self.learned_through = trial
+
+
+def true_error(record: TrialRecord) -> np.ndarray:
+    """q_d - q of the plant's true state at every sample of a record."""
+    true = record.position if record.true_position is None else record.true_position
+    return np.asarray(record.reference.position - true)
 
 
 @njit(cache=True, error_model="numpy")
@@ -291,13 +344,14 @@ def patient_period(i: int, q: np.ndarray, qd: np.ndarray, command: np.ndarray,
                    q_ref: np.ndarray, qd_ref: np.ndarray, period: float, substeps: int,
                    plant: tuple, nominal: tuple, mode: int, ws: tuple, stage: np.ndarray,
                    extra: np.ndarray, joint: np.ndarray, scalars: np.ndarray,
-                   trial_scalars: np.ndarray, history: np.ndarray, memory: np.ndarray,
-                   held: np.ndarray) -> None:
+                   trial_scalars: np.ndarray, learned: np.ndarray, history: np.ndarray,
+                   memory: np.ndarray, held: np.ndarray) -> None:
     """In place: the true (q, qdot) of sample ``i`` advanced one period with the patient
     (module docstring, steps 2 and 3). ``command`` is the clamped effort of sample i;
     ``history`` (2, N+1, n) keeps the true velocities and commands of the trial so far,
     ``memory`` row 0 the lagged voluntary torque, ``held`` (n,) receives the torque held over
-    the period (actuator plus reflex plus voluntary), ``extra`` must have 3n entries."""
+    the period (actuator plus reflex plus voluntary plus the ``learned`` (N+1, n) torque of a
+    learning patient, :class:`PatientLearning`), ``extra`` must have 3n entries."""
     n = q.shape[0]
     last = q_ref.shape[0] - 1
     for j in range(n):
@@ -323,6 +377,9 @@ def patient_period(i: int, q: np.ndarray, qd: np.ndarray, command: np.ndarray,
                           + joint[VOLUNTARY_DAMPING, j] * (qd_ref[s, j] - qd[j]))
             memory[0, j] += alpha * (raw - memory[0, j])
             held[j] += memory[0, j]
+    if scalars[LEARNING_ON] > 0.0:
+        for j in range(n):
+            held[j] += learned[i, j]
     if scalars[PASSIVE_ON] > 0.0:
         rk4_period_passive(q, qd, held, period, substeps, plant, nominal, mode, ws, stage,
                            extra[:2 * n], joint, scalars[INVERSE_STRIBECK], extra[2 * n:])
@@ -345,13 +402,14 @@ def patient_plant_period(i: int, effort: np.ndarray, limit: np.ndarray, saturate
                          qd_ref: np.ndarray, period: float, substeps: int, plant: tuple,
                          nominal: tuple, mode: int, ws: tuple, stage: np.ndarray,
                          extra: np.ndarray, joint: np.ndarray, scalars: np.ndarray,
-                         trial_scalars: np.ndarray, history: np.ndarray, memory: np.ndarray,
-                         held: np.ndarray) -> int:
+                         trial_scalars: np.ndarray, learned: np.ndarray, history: np.ndarray,
+                         memory: np.ndarray, held: np.ndarray) -> int:
     """:func:`plant.plant_period` with the patient: refuse a non-finite effort (-1, nothing
     changes), count saturation, clamp into ``applied`` (:func:`plant.clamp_counted`), then
     :func:`patient_period` from sample ``i``. Returns the number of joints beyond the limit."""
     beyond = clamp_counted(effort, limit, saturated, applied)
     if beyond >= 0:
         patient_period(i, q, qd, applied, q_ref, qd_ref, period, substeps, plant, nominal, mode,
-                       ws, stage, extra, joint, scalars, trial_scalars, history, memory, held)
+                       ws, stage, extra, joint, scalars, trial_scalars, learned, history, memory,
+                       held)
     return beyond

@@ -11,7 +11,7 @@ eq (8), is integrated by classic RK4 on ``substeps`` equal sub-steps. ``mode`` s
 from __future__ import annotations
 
 from enum import IntEnum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
@@ -212,6 +212,16 @@ class PlantStepper:
         self._held = np.empty(n)
         self._measured_position = np.empty(n)
         self._measured_velocity = np.empty(n)
+        self._no_torque = np.zeros((0, 0))
+        self._learning: Any = None
+        self._true = np.empty((samples, n))
+        self._runs: dict[int, np.ndarray] = {}
+        """A learning patient: the true error of the last run of each trial that reached its
+        last sample (the patient learns from it when the next trial begins)."""
+        if self.patient.learns:
+            from .patient import PatientLearning
+
+            self._learning = PatientLearning(self.patient, samples)
         self.reset()
 
     def reset(self) -> None:
@@ -225,10 +235,22 @@ class PlantStepper:
 
     def begin_trial(self, trial: int) -> None:
         """Trial ``trial`` starts at sample 0: the patient's draws of that trial, the start
-        state x_d(0) plus its offset, the patient's memory cleared (a no-op without patient)."""
+        state x_d(0) plus its offset, the patient's memory cleared (a no-op without patient).
+        A learning patient first learns from the last run of every earlier trial it has not
+        learned from (ValueError if this plant did not run one: the graph cannot resume it); a
+        rerun of trial k starts from the same learned state as its first run."""
         from .patient import start_state_into
 
         self.reset()
+        learning = self._learning
+        if learning is not None:
+            while learning.learned_through < trial - 1:
+                done = learning.learned_through + 1
+                if done not in self._runs:
+                    raise ValueError(f"the learning patient has not run trial {done} here, so "
+                                     f"it cannot begin trial {trial} (its adaptation lives in "
+                                     "this plant: no resume through the graph)")
+                learning.learn(done, self._runs.pop(done))
         self.trial = int(trial)
         if not self.patient.enabled:
             return
@@ -240,7 +262,12 @@ class PlantStepper:
 
     def measure(self) -> tuple[np.ndarray, np.ndarray]:
         """What the sensors read at the current sample (:func:`patient.measure_into`; the true
-        state itself without sensor effects). Call once per sample, before :meth:`step`."""
+        state itself without sensor effects). Call once per sample, before :meth:`step` (a
+        learning patient keeps the true state here for what it learns)."""
+        if self._learning is not None and self.trial is not None:
+            self._true[self.index] = self.position
+            if self.index == self.experiment.reference.samples - 1:
+                self._runs[self.trial] = self.experiment.reference.position - self._true
         if not self.patient.measures or self.trial is None:
             return self.position, self.velocity
         from .patient import measure_into
@@ -272,7 +299,8 @@ class PlantStepper:
                 self.applied, ref.position, ref.velocity, e.period, e.substeps,
                 e.plant.kernel_args, e.nominal.kernel_args, int(e.dynamics), self._ws,
                 self._stage, self._extra, self.patient.joint, self.patient.scalars,
-                self._draws.trial_scalars, self._history, self._memory, self._held))
+                self._draws.trial_scalars, self._learned(), self._history, self._memory,
+                self._held))
         else:
             beyond = int(plant_period(effort, self._limit, counts, self.position,
                                       self.velocity, self.applied, e.period, e.substeps,
@@ -281,3 +309,6 @@ class PlantStepper:
         if beyond >= 0:
             self.index += 1
         return beyond
+
+    def _learned(self) -> np.ndarray:
+        return self._no_torque if self._learning is None else self._learning.torque

@@ -137,6 +137,11 @@ class TrialProtocol:
             self.fail(str(exc), code=2)
             return
         self.experiment = Experiment(config)
+        if self.experiment.patient.learns and session.completed:
+            self.fail("a learning patient (patient.learning.gain) cannot be resumed through the "
+                      "graph: its adaptation lives in the plant node; resume in-process "
+                      "(exo-ilc simulate --store DIR --resume)", code=2)
+            return
         self.expects_truth = self.experiment.patient.measures
         self.session = session
         if self.store is not None:

@@ -79,6 +79,10 @@ def _fraction_rule(value: Any) -> str | None:
     return None if value <= 1.0 else f"must be <= 1 (a share of the gain), got {value!r}"
 
 
+def _retention_rule(value: Any) -> str | None:
+    return None if value <= 1.0 else f"must be <= 1 (a share kept per trial), got {value!r}"
+
+
 def _patient_parameters() -> list[Parameter]:
     """The virtual patient's effects (core/patient.py), plant_simulator section, all off by
     default."""
@@ -139,6 +143,15 @@ def _patient_parameters() -> list[Parameter]:
           minimum=0.0),
         p("initial.velocity_sd", Kind.DOUBLE, "trial-to-trial sd of qdot(0) (rad/s)",
           minimum=0.0),
+        p("learning.gain", Kind.DOUBLE_ARRAY, "K_e: torque the patient learns per rad of the "
+          "true error of a trial (N m/rad; two-state model, core/patient.py); 0: no learning",
+          **joint),
+        p("learning.fast_retention", Kind.DOUBLE, "A_f of the fast state x_f <- A_f x_f + "
+          "B_f K_e e", minimum=0.0, extra_rule=_retention_rule),
+        p("learning.fast_rate", Kind.DOUBLE, "B_f of the fast state", minimum=0.0),
+        p("learning.slow_retention", Kind.DOUBLE, "A_s of the slow state x_s <- A_s x_s + "
+          "B_s K_e e", minimum=0.0, extra_rule=_retention_rule),
+        p("learning.slow_rate", Kind.DOUBLE, "B_s of the slow state", minimum=0.0),
         p("effort_delay", Kind.INTEGER, "control periods between a command and its torque at "
           "the joint", minimum=0.0),
     ]

@@ -41,6 +41,7 @@ from .experiment import (
     iterations_to_bound,
 )
 from .laws import FeedforwardUpdate, LearningLaw, TrialRecord
+from .patient import PatientLearning, true_error
 from .store import RunStore, StoredTrial
 from .validation import Rejection, check_feedforward_array
 
@@ -310,13 +311,21 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
     experiment = Experiment(effective)
     result = RunResult(experiment.mass_uncertainty, effective["law"],
                        float(effective["error_bound"]))
+    patient = PatientLearning(experiment.patient, experiment.reference.samples) \
+        if experiment.patient.learns else None
     run_store: RunStore | None = None
     if store is not None:
         run_store, restored = session.open_store(store, resume)
         result.records.extend(item.record for item in restored)
         result.resumed = len(restored)
+        for item in restored:
+            if patient is not None:
+                patient.learn(item.record.trial, true_error(item.record))
     while not session.finished:
-        record = experiment.run_trial(session.feedforward, session.trial, session.levels)
+        record = experiment.run_trial(session.feedforward, session.trial, session.levels,
+                                      None if patient is None else patient.torque)
+        if patient is not None:
+            patient.learn(record.trial, true_error(record))
         if session.trial + 1 in pending:
             session.stage(pending.pop(session.trial + 1))
         conclusion = session.conclude(record)

@@ -32,7 +32,7 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
                            period: float, substeps: int, plant: tuple, nominal: tuple, mode: int,
                            envelope: np.ndarray, patient_joint: np.ndarray,
                            patient_scalars: np.ndarray, noise: np.ndarray, initial: np.ndarray,
-                           trial_scalars: np.ndarray
+                           trial_scalars: np.ndarray, learned: np.ndarray
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int,
                                       np.ndarray, np.ndarray]:
     """One trial at the samples t_i = i * period, i = 0..N, guarded by the error envelope.
@@ -48,9 +48,9 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
     The virtual patient (:mod:`.patient`; off when ``patient_scalars`` is empty, then none of
     it runs): the trial starts at x_d(0) plus ``initial``, the controller (and the envelope)
     reads the measured state (:func:`patient.measure_into`) and the plant steps with
-    :func:`patient.patient_period`. Returns the measured q, qdot, u, effort, the abort index
-    (-1: not aborted) and the true q, qdot (the same arrays as the measured ones when the
-    patient is off).
+    :func:`patient.patient_period` (``learned``: a learning patient's torque per sample).
+    Returns the measured q, qdot, u, effort, the abort index (-1: not aborted) and the true
+    q, qdot (the same arrays as the measured ones when the patient is off).
     """
     n_samples, n = u_ff.shape
     q_log = np.empty((n_samples, n))
@@ -104,7 +104,7 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
             if patient:
                 patient_period(i, q, qd, applied, q_ref, qd_ref, period, substeps, plant,
                                nominal, mode, ws, stage, extra, patient_joint, patient_scalars,
-                               trial_scalars, history, memory, held)
+                               trial_scalars, learned, history, memory, held)
             else:
                 rk4_period(q, qd, applied, period, substeps, plant, nominal, mode, ws, stage,
                            extra[:2 * n])

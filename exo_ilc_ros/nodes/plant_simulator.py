@@ -163,7 +163,12 @@ class PlantSimulator(Node):
                 response.message = (f"waiting for the trial's {topics.FEEDFORWARD} (t0 "
                                     f"{self.t0_ns} ns): the virtual patient draws per trial")
                 return response
-            self.stepper.begin_trial(self.next_trial[0])
+            try:
+                self.stepper.begin_trial(self.next_trial[0])
+            except ValueError as exc:
+                response.success = False
+                response.message = str(exc)
+                return response
         self.armed = False
         self.running = True
         self.index = 0

@@ -2,10 +2,12 @@
 patient" (issue 14's target: <= 10 min on 2 cores).
 
 Run with ``.venv/bin/python -m bench.study_bench`` (defaults: the laws sign, tuned, linear and
-robust x every shipped scenario x 5/10/15 % x 1000 trials x 1 seed on 2 worker processes).
+robust x the six scenarios of issue 14 (ideal .. realistic) x 5/10/15 % x 1000 trials x
+1 seed on 2 worker processes).
 Prints the wall time, the cost per trial (wall time x workers / trials, and the cells' own
-mean), the cost per trial per scenario (patient effects on against ``ideal``), then the table.
-Asserts nothing.
+mean), the cost per trial per scenario (patient effects on against ``ideal``; on a machine
+others load, that column follows the load over time more than the effects: the patient's own
+``bench.patient_bench`` measures them side by side), then the table. Asserts nothing.
 """
 
 from __future__ import annotations
@@ -18,8 +20,13 @@ import time
 import numpy as np
 
 from exo_ilc_ros.analysis.study import format_study_table, run_cells
-from exo_ilc_ros.core.config import scenario_names
-from exo_ilc_ros.core.study import resolve_law, resolve_scenario, study_cells, study_rows
+from exo_ilc_ros.core.study import (
+    SCENARIO_ORDER,
+    resolve_law,
+    resolve_scenario,
+    study_cells,
+    study_rows,
+)
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")  # no node here; house rule
 
@@ -34,7 +41,7 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
     laws = [resolve_law(x) for x in args.laws]
-    scenarios = [resolve_scenario(x) for x in (args.scenarios or scenario_names())]
+    scenarios = [resolve_scenario(x) for x in (args.scenarios or SCENARIO_ORDER)]
     cells = study_cells(laws, scenarios, args.mass_uncertainty, [0], args.trials)
     total = len(cells) * args.trials
     print(f"study bench: {len(laws)} laws x {len(scenarios)} scenarios x "

@@ -11,13 +11,13 @@ from typing import Any
 from tqdm import tqdm
 
 from ..analysis.study import format_study_table, run_cells, write_study_json
-from ..core.config import scenario_names
 from ..core.errors import ConfigError
 from ..core.study import (
     SHIPPED_LAWS,
     StudyCell,
     resolve_law,
     resolve_scenario,
+    shipped_scenarios,
     study_cells,
     study_rows,
 )
@@ -26,17 +26,6 @@ from .tune import default_jobs
 
 DEFAULT_LAWS = ("sign", "tuned", "linear", "robust", "norm_optimal")
 DEFAULT_TRIALS = 1000
-
-
-SCENARIO_ORDER = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic")
-"""The shipped scenarios from the paper's plant to every effect at once (the table's order)."""
-
-
-def shipped_scenarios() -> list[str]:
-    """Every shipped scenario: those of :data:`SCENARIO_ORDER` in that order, then the rest."""
-    names = scenario_names()
-    return [n for n in SCENARIO_ORDER if n in names] + \
-        [n for n in names if n not in SCENARIO_ORDER]
 
 
 def register(sub: Any) -> None:

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
-from .config import Config, config_dir, load_config, scenario_path
+from .config import Config, config_dir, load_config, scenario_names, scenario_path
 from .errors import ConfigError, ExoIlcError
 from .experiment import iterations_to_bound
 from .growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth
@@ -107,6 +107,17 @@ def resolve_scenario(text: str) -> ScenarioSpec:
         return ScenarioSpec(label, scenario_path(rest))
     path = scenario_path(text)
     return ScenarioSpec(path.stem, path)
+
+
+SCENARIO_ORDER = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic")
+"""The shipped scenarios from the paper's plant to every effect at once (the table's order)."""
+
+
+def shipped_scenarios() -> list[str]:
+    """Every shipped scenario: those of :data:`SCENARIO_ORDER` in that order, then the rest."""
+    names = scenario_names()
+    return [n for n in SCENARIO_ORDER if n in names] + \
+        [n for n in names if n not in SCENARIO_ORDER]
 
 
 @dataclass(frozen=True, eq=False)

@@ -55,6 +55,7 @@ setup(
         "optuna>=4",
         "clarabel>=0.9",
         "mujoco>=4",
+        "distributed>=2024.1",  # exo-ilc study --dask: cells on a Dask cluster
     ],
     extras_require={
         "test": ["pytest>=8", "hypothesis>=6.100", "pin>=3", "ruff>=0.6", "mypy>=1.10",

@@ -148,6 +148,17 @@ CASES += [
     (["urdf", "--out", "{tmp}/no/dir/arm.urdf"], ["argument --out", "arm.urdf",
                                                   "does not exist"]),
     (["urdf", "--out", "{tmp}"], ["argument --out", "directory"]),
+    (["study", "--trials", "0"], ["argument --trials", "0", "must be > 0"]),
+    (["study", "--seeds", "0"], ["argument --seeds", "0", ">= 1"]),
+    (["study", "--workers", "0"], ["argument --workers", "0", ">= 1"]),
+    (["study", "--figure", "{tmp}/f.txt"], ["argument --figure", "f.txt", ".png"]),
+    (["study", "--mass-uncertainty", "nan"], ["argument --mass-uncertainty", "nan", "finite"]),
+    (["study", "--laws", "nonsense", "--trials", "3"], ["--laws", "unknown law 'nonsense'"]),
+    (["study", "--laws", "{tmp}/none.yaml"], ["--laws", "no such config file"]),
+    (["study", "--laws", "{bad_key}", "--trials", "3"], ["bad_key.yaml", "max_trial",
+                                                         "unknown parameter"]),
+    (["study", "--scenarios", "{tmp}/none.yaml"], ["none.yaml", "no such scenario file"]),
+    (["study", "--scenarios", "nowhere"], ["unknown scenario 'nowhere'"]),
     (["frobnicate"], ["invalid choice", "'frobnicate'"]),
 ]
 

@@ -31,6 +31,7 @@ ROSDEP_KEYS: dict[str, str] = {
     "optuna": "python3-optuna-pip",
     "clarabel": "python3-clarabel-pip",
     "mujoco": "python3-mujoco-pip",
+    "distributed": "python3-distributed",
 }
 """pip name -> rosdep key (rosdistro's rosdep/python.yaml: the system package where there is
 one, a ``-pip`` key otherwise; ``mcap-ros2-support`` is that key's own name there)."""

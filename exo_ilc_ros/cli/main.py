@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from ..core.errors import ExoIlcError
 
 COMMANDS = ("simulate", "urdf", "tune", "compare", "run", "param", "analyze", "paper",
-            "analyze_loop", "clean", "profiles", "report")
+            "analyze_loop", "clean", "profiles", "report", "study")
 """Sub-command modules of this package; each has ``register(subparsers)`` setting ``func``."""
 
 

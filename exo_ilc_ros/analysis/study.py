@@ -1,0 +1,235 @@
+"""Running the robustness study's cells (a local process pool, or a Dask distributed cluster)
+and reporting it: one table, the JSON export. The cells and their reduction are
+:mod:`exo_ilc_ros.core.study`; the figure is :mod:`.study_figure`.
+
+Results are placed by the cell's index, never by the order they finish in, so every way of
+running gives the same table.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import signal
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import __version__
+from ..core.errors import ExoIlcError
+from ..core.growth import MIN_TRIALS
+from ..core.study import (
+    FLOOR_WINDOW,
+    CellResult,
+    StudyCell,
+    StudyRow,
+    growth_window,
+    run_cell,
+)
+
+OnDone = Callable[[StudyCell], None]
+"""Called in the caller's process once per finished cell (progress)."""
+
+
+CONNECT_TIMEOUT = "20s"
+"""How long to try to reach a Dask scheduler before giving up."""
+
+
+class ClusterError(ExoIlcError):
+    """The Dask cluster cannot be reached or its workers cannot run the cells."""
+
+
+def _ignore_interrupt() -> None:
+    """Worker initializer: Ctrl-C is the parent's to handle (no tracebacks from the workers)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextmanager
+def _interrupt_ignored() -> Iterator[None]:
+    """SIGINT ignored while worker processes are started: they inherit it, so a Ctrl-C while
+    they import (before the initializer runs) prints no KeyboardInterrupt of theirs either.
+    A no-op outside the main thread (only it may set signal handlers)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def run_cells(cells: Sequence[StudyCell], workers: int = 1, dask: str | Any | None = None,
+              on_done: OnDone | None = None) -> list[CellResult]:
+    """Every cell's result, in the cells' order: on a Dask cluster when ``dask`` is given (a
+    scheduler address such as ``tcp://host:8786``, or a cluster object), else over ``workers``
+    local processes (1: in this process). Ctrl-C stops the workers and raises KeyboardInterrupt."""
+    if dask is not None:
+        return _run_on_dask(cells, dask, on_done)
+    if workers <= 1 or len(cells) <= 1:
+        results = []
+        for cell in cells:
+            results.append(run_cell(cell))
+            if on_done is not None:
+                on_done(cell)
+        return results
+    return _run_on_pool(cells, min(workers, len(cells)), on_done)
+
+
+def _run_on_pool(cells: Sequence[StudyCell], workers: int,
+                 on_done: OnDone | None) -> list[CellResult]:
+    context = multiprocessing.get_context("spawn")  # no fork of numba's or tqdm's threads
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                               initializer=_ignore_interrupt)
+    results: list[CellResult | None] = [None] * len(cells)
+    try:
+        with _interrupt_ignored():  # the workers start (on submit) with SIGINT ignored
+            pending: dict[Future[CellResult], int] = {
+                pool.submit(run_cell, cell): i for i, cell in enumerate(cells)}
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                index = pending.pop(future)
+                results[index] = future.result()
+                if on_done is not None:
+                    on_done(cells[index])
+    except BaseException:  # Ctrl-C or a worker's error: stop every worker now, not after its cell
+        for process in list(getattr(pool, "_processes", {}).values()):
+            process.terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
+    return [r for r in results if r is not None]
+
+
+def _run_on_dask(cells: Sequence[StudyCell], address: str | Any,
+                 on_done: OnDone | None) -> list[CellResult]:
+    try:
+        from distributed import Client, as_completed
+    except ImportError as exc:  # pragma: no cover - a dependency of the package
+        raise ClusterError(f"--dask needs the 'distributed' package ({exc})") from None
+    try:
+        client = Client(address, timeout=CONNECT_TIMEOUT)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ClusterError(f"cannot reach the Dask scheduler {address!r}: {exc}") from None
+    futures: list[Any] = []
+    try:
+        futures = client.map(run_cell, list(cells), pure=False)
+        index = {future.key: i for i, future in enumerate(futures)}
+        results: list[CellResult | None] = [None] * len(cells)
+        for future in as_completed(futures):
+            i = index[future.key]
+            result = future.result()
+            if result.version != __version__:
+                raise ClusterError(f"a Dask worker runs exo_ilc_ros {result.version}, this "
+                                   f"client {__version__}: install the same version on every "
+                                   "worker")
+            results[i] = result
+            if on_done is not None:
+                on_done(cells[i])
+        return [r for r in results if r is not None]
+    finally:
+        if futures:
+            client.cancel(futures)
+        client.close()
+
+
+# --- the table --------------------------------------------------------------------------------
+
+def _trial(value: int | None) -> str:
+    return "-" if value is None else str(value)
+
+
+def _long_run(row: StudyRow) -> str:
+    if not row.finite:
+        return "FAILED"
+    parts = []
+    if row.trials < MIN_TRIALS and not row.late_aborts:
+        return f"- (< {MIN_TRIALS} trials)"
+    if row.growing_seeds:
+        joints = ",".join(f"j{j}" for j in row.growing_joints)
+        seeds = f" {row.growing_seeds}/{row.seeds}" if row.seeds > 1 else ""
+        parts.append(f"GROWING {joints}{seeds} {100 * row.max_growth_rate:+.1f}%/tr")
+    if row.late_aborts:
+        parts.append("ABORTS")
+    return ", ".join(parts) if parts else "bounded"
+
+
+def _floor(row: StudyRow) -> str:
+    if not np.isfinite(row.floor):
+        return "-"
+    text = f"{row.floor:.2e}"
+    if row.seeds > 1:
+        text += f" [{row.floor_low:.1e}-{row.floor_high:.1e}]"
+    return text + ("*" if row.floor > row.error_bound else " ")
+
+
+def format_study_table(rows: Sequence[StudyRow]) -> str:
+    """The study's table: one row per law x scenario x uncertainty (seeds reduced)."""
+    if not rows:
+        return "(no cells)"
+    head = rows[0]
+    window = min(FLOOR_WINDOW, head.trials)
+    seeds = f", {head.seeds} seeds: the latest seed / floor median [min-max]" \
+        if head.seeds > 1 else ""
+    header = ["law", "scenario", "delta", "first", "settled", "floor (rad)", "long run",
+              "peak effort", "at limit", "aborts"]
+    body = []
+    for r in rows:
+        aborts = "0" if not r.aborts else f"{r.aborts} (last {r.last_abort})"
+        body.append([r.law, r.scenario, f"{100 * r.mass_uncertainty:g} %", _trial(r.first),
+                     _trial(r.settled), _floor(r), _long_run(r), f"{r.peak_effort:.1f} N m"
+                     if np.isfinite(r.peak_effort) else "-", f"{100 * r.at_limit:.1f} %",
+                     aborts])
+    widths = [max(len(header[i]), *(len(b[i]) for b in body)) for i in range(len(header))]
+    right = {2, 3, 4, 7, 8}
+
+    def line(cells: Sequence[str]) -> str:
+        return "  ".join(c.rjust(w) if i in right else c.ljust(w)
+                         for i, (c, w) in enumerate(zip(cells, widths, strict=True))).rstrip()
+
+    lines = [f"Robustness study: {head.trials} trials per cell{seeds}. first/settled: trials "
+             f"until every joint's true max |e| <= {head.error_bound:g} rad ('-': never / not "
+             f"at the end); floor: median true max |e| over the last {window} trials, worst "
+             "joint ('*': above the bound); long run: growth check of the learned input over "
+             f"the last {growth_window(head.trials)} trials; at limit: share of samples with "
+             "some joint at its effort limit.",
+             line(header), line(["-" * w for w in widths])]
+    lines += [line(b) for b in body]
+    failures = [f"  {r.law} / {r.scenario} / {100 * r.mass_uncertainty:g} %: {f}"
+                for r in rows for f in r.failures]
+    if failures:
+        lines += ["", "Runs that failed:", *failures]
+    return "\n".join(lines)
+
+
+# --- JSON ------------------------------------------------------------------------------------
+
+def _table(a: np.ndarray) -> list[list[float | None]]:
+    return [[float(x) if np.isfinite(x) else None for x in row] for row in a]
+
+
+def study_json(setup: dict[str, Any], rows: Sequence[StudyRow],
+               results: Sequence[CellResult]) -> dict[str, Any]:
+    """The study as JSON: what was run, the rows, and per cell its per-trial tables (true and
+    measured max |e|, max |u_ff|; non-finite numbers as null)."""
+    cells = [{"law": r.law, "scenario": r.scenario, "mass_uncertainty": r.mass_uncertainty,
+              "seed": r.seed, "trials": r.trials, "aborted": r.aborted, "failure": r.failure,
+              "nonfinite": r.nonfinite, "seconds": r.seconds,
+              "true_max_abs_error": _table(r.true_max_abs_error),
+              "max_abs_error": _table(r.max_abs_error),
+              "max_abs_feedforward": _table(r.max_abs_feedforward),
+              "samples_at_limit": [int(x) for x in r.samples_at_limit]}
+             for r in results]
+    return {"study": setup, "rows": [row.to_json() for row in rows], "cells": cells}
+
+
+def write_study_json(path: Path | str, setup: dict[str, Any], rows: Sequence[StudyRow],
+                     results: Sequence[CellResult]) -> None:
+    """Write :func:`study_json` to ``path``."""
+    Path(path).write_text(json.dumps(study_json(setup, rows, results)) + "\n")

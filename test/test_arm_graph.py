@@ -122,8 +122,11 @@ def test_our_simulator_without_services_converges_then_homing_times_out(tmp_path
         _diagnostics(session, found)
         session.spin_until(lambda: session.finished, timeout=120.0)
         assert session.error is not None  # run_graph raises GraphError with it
-        assert "trial 1 not started: homing failed: did not settle within 0.3 s" in \
-            session.error
+        # the arm starts at rest at q_d(0), so homing may begin its dwell at once and see the
+        # heavier arm sag out of the 1e-12 tolerance, or it never settles: either is a failure
+        assert "trial 1 not started: homing failed: " in session.error
+        assert "did not settle within 0.3 s" in session.error or \
+            "the arm moved during the dwell" in session.error, session.error
         deadline = time.monotonic() + 5.0
         while time.monotonic() < deadline and not any(
                 name == topics.CONTROLLER_HEALTH_STATUS and "homing failed" in message
@@ -131,7 +134,8 @@ def test_our_simulator_without_services_converges_then_homing_times_out(tmp_path
             session.executor.spin_once(timeout_sec=0.05)
     reports = [values for name, message, values in found
                if name == topics.CONTROLLER_TRIAL_STATUS and message == "homing_failed"]
-    assert reports and "did not settle" in reports[0]["reason"]
+    assert reports and ("did not settle" in reports[0]["reason"] or
+                        "moved during the dwell" in reports[0]["reason"])
     assert any(name == topics.CONTROLLER_HEALTH_STATUS and "homing failed" in message
                for name, message, _ in found)
     assert stored_summaries(stuck) == []  # nothing was learned, nothing half-stored

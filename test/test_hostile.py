@@ -62,6 +62,20 @@ def test_only_the_contracts_publisher_is_trusted_and_others_are_counted() -> Non
     assert dict(check.as_values())["publishers/effort_controller/commands"] == "1"
 
 
+def test_a_writer_the_graph_cannot_name_yet_is_looked_at_again_not_refused_for_good() -> None:
+    """Under load the graph lists a new writer before its node's name arrives
+    (``_NODE_NAME_UNKNOWN_``): it is not judged then (no ERROR, no lasting refusal), and once
+    the name is there, the trusted node's messages are admitted (a controller's
+    acknowledgements refused for good once stalled a trial for 30 s twice)."""
+    check = PublisherCheck(topics.DIAGNOSTICS, "/computed_torque_controller")
+    gid = b"c" * 16
+    check.census([Endpoint("/_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_", gid)])
+    assert check.admit(gid) == UNKNOWN and check.fault() == (0, "")
+    assert not check.admit_after_census(gid)  # this one message is refused, as unknown
+    check.census([Endpoint("/computed_torque_controller", gid)])
+    assert check.admit(gid) == TRUSTED
+
+
 def test_status_owner_and_sizes() -> None:
     assert status_owner("computed_torque_controller/trial") == "/computed_torque_controller"
     assert status_owner("bag_recorder/status", "/arm") == "/arm/bag_recorder"

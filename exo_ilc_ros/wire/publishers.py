@@ -43,6 +43,9 @@ PUBLISHER_OF: dict[str, str] = {
 }
 """Topic -> the name of the one node whose messages on it are acted on."""
 
+UNNAMED = "_NODE_NAME_UNKNOWN_"
+"""What the ROS graph gives as the node name of a writer whose node it does not know yet."""
+
 TRUSTED = "trusted"
 REFUSED = "refused"
 UNKNOWN = "unknown"
@@ -76,8 +79,12 @@ class PublisherCheck:
         """Sending node (or ``unknown``) -> messages refused."""
 
     def census(self, endpoints: Iterable[Endpoint]) -> None:
-        """The graph's publishers on the topic now."""
-        self.known = {e.gid: e.node for e in endpoints}
+        """The graph's publishers on the topic now. A writer whose node the graph cannot name
+        yet (``_NODE_NAME_UNKNOWN_``: its participant's ROS discovery data has not arrived) is
+        left out, not judged: its messages stay :data:`UNKNOWN`, so each one looks at the graph
+        again until it names the node (a trusted node's first messages are refused, never all
+        of them)."""
+        self.known = {e.gid: e.node for e in endpoints if UNNAMED not in e.node}
         if self.trusted_gid not in self.known:
             self.trusted_gid = None
             candidates = [gid for gid, node in self.known.items() if node == self.trusted_node]

@@ -506,7 +506,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     return code
 
 
-def _deliver(nodes: Sequence[Node], timeout: float = 1.0) -> None:
+def _deliver(nodes: Sequence[Node], timeout: float = 3.0) -> None:
     """Wait (at most ``timeout`` s in all) until every reliable publisher's last messages were
     acknowledged by the subscribers matched now: a node that stops right after publishing (the
     supervisor's ``finished``, a last summary) would otherwise take them with it."""

@@ -239,7 +239,7 @@ class GraphSession:
                 last_check = now
             self.executor.spin_once(timeout_sec=0.05)
 
-    def _drained(self, done: Callable[[], bool], seconds: float = 1.0) -> bool:
+    def _drained(self, done: Callable[[], bool], seconds: float = 3.0) -> bool:
         """Take what a node sent before it exited (its ``finished``, say) for up to
         ``seconds``; whether ``done()`` came true."""
         deadline = time.monotonic() + seconds

@@ -200,3 +200,19 @@ def rejections_check(rejections: Rejections, what: str
         causes = ", ".join(f"{c.value} x{n}" for c, n in log.counts.items())
         return DiagnosticStatus.WARN, f"{what} rejected: {causes}", log.as_values()
     return check
+
+
+def effort_limit_reasons(names: Sequence[str], saturated: np.ndarray, over_limit: int
+                         ) -> tuple[bytes, list[str]]:
+    """A plant's effort-limit health: WARN with the joints whose effort reached the limit
+    (samples per joint) and the count of commands clamped beyond it; OK and none otherwise."""
+    level = DiagnosticStatus.OK
+    reasons = []
+    if saturated.any():
+        level = DiagnosticStatus.WARN
+        reasons.append("effort at the limit in " + ", ".join(
+            f"{n} x{int(c)}" for n, c in zip(names, saturated, strict=True) if c))
+    if over_limit:
+        level = DiagnosticStatus.WARN
+        reasons.append(f"{over_limit} commands beyond the limit clamped")
+    return level, reasons

@@ -82,11 +82,7 @@ class IlcSupervisor(Node):
                                                 DIAGNOSTICS_QOS)
         self.rejections = Rejections(self)
         self.gate = JointStateGate(self.joint_names, self.rejections)
-        self.samples_from = Admission(  # the plant's samples only (wire.publishers)
-            self, topics.JOINT_STATES, self.rejections,
-            max_bytes(topics.JOINT_STATES, config.joints, 0),
-            gate_classifier(JointStateGate(self.joint_names, self.rejections)),
-            trusted=config["joint_states_publisher"])
+        self.samples_from = self._state_admission(topics.JOINT_STATES)  # the plant's only
         self.inbox = Inbox(self)  # the trial's samples, drained in batches (see Inbox)
         self.state_sub = self.inbox.subscribe(JointState, topics.JOINT_STATES,
                                               admit=self.samples_from.admit_raw)
@@ -94,11 +90,7 @@ class IlcSupervisor(Node):
                              admit=StatusAdmission(self, self.rejections))  # own statuses only
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.on_status_bell,
                                  STATUS_READER_QOS, raw=True)  # wakes poll at once
-        self.truth_from = Admission(  # the plant's true state only (wire.publishers)
-            self, topics.TRUE_JOINT_STATES, self.rejections,
-            max_bytes(topics.TRUE_JOINT_STATES, config.joints, 0),
-            gate_classifier(JointStateGate(self.joint_names, self.rejections)),
-            trusted=config["joint_states_publisher"])
+        self.truth_from = self._state_admission(topics.TRUE_JOINT_STATES)
         self.inbox.subscribe(JointState, topics.TRUE_JOINT_STATES,  # the virtual patient's
                              admit=self.truth_from.admit_raw)
         self.truth_gate = JointStateGate(self.joint_names, self.rejections)
@@ -115,6 +107,14 @@ class IlcSupervisor(Node):
     def exit_code(self) -> int | None:
         """Set when the node must stop (read by common.spin)."""
         return self.protocol.exit_code
+
+    def _state_admission(self, topic: str) -> Admission:
+        """JointStates on ``topic`` admitted only from ``joint_states_publisher``
+        (wire.publishers); a foreign one is checked like the plant's to count its cause."""
+        config = self.params.config
+        return Admission(self, topic, self.rejections, max_bytes(topic, config.joints, 0),
+                         gate_classifier(JointStateGate(self.joint_names, self.rejections)),
+                         trusted=config["joint_states_publisher"])
 
     # --- inputs -----------------------------------------------------------------------------
     def on_timer(self) -> None:

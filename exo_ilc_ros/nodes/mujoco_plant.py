@@ -45,7 +45,7 @@ from .common import (
     spin,
     wall_clock,
 )
-from .guard import Health, Rejections, rejections_check
+from .guard import Health, Rejections, effort_limit_reasons, rejections_check
 from .identified import TRUSTED_READER_QOS, TrustedInput, effort_classifier
 
 NAME = schema.PLANT
@@ -209,14 +209,9 @@ class FreeRunningPlant(Node):
         if self.hold_pose is not None:
             level = DiagnosticStatus.ERROR
             reasons.append("no effort command; safe hold")
-        if self.saturated.any():
-            level = max(level, DiagnosticStatus.WARN)
-            reasons.append("effort at the limit in " + ", ".join(
-                f"{n} x{int(c)}" for n, c in zip(names, self.saturated, strict=True) if c))
-        if self.over_limit:
-            level = max(level, DiagnosticStatus.WARN)
-            reasons.append(f"{self.over_limit} commands beyond the limit clamped")
-        return level, "; ".join(reasons), values
+        limit_level, limit_reasons = effort_limit_reasons(names, self.saturated,
+                                                          self.over_limit)
+        return max(level, limit_level), "; ".join(reasons + limit_reasons), values
 
 
 class MujocoPlant(FreeRunningPlant):

@@ -52,7 +52,7 @@ from .common import (
     status,
     wall_clock,
 )
-from .guard import Health, Rejections, rejections_check
+from .guard import Health, Rejections, effort_limit_reasons, rejections_check
 from .identified import (
     FEEDFORWARD_READER_QOS,
     TRUSTED_READER_QOS,
@@ -277,14 +277,9 @@ class PlantSimulator(Node):
         if self.hold_pose is not None:
             level = DiagnosticStatus.ERROR
             reasons.append("watchdog: no effort command; safe hold")
-        if self.saturated.any():
-            level = max(level, DiagnosticStatus.WARN)
-            reasons.append("effort at the limit in " + ", ".join(
-                f"{n} x{int(c)}" for n, c in zip(names, self.saturated, strict=True) if c))
-        if self.over_limit:
-            level = max(level, DiagnosticStatus.WARN)
-            reasons.append(f"{self.over_limit} commands beyond the limit clamped")
-        return level, "; ".join(reasons), values
+        limit_level, limit_reasons = effort_limit_reasons(names, self.saturated,
+                                                          self.over_limit)
+        return max(level, limit_level), "; ".join(reasons + limit_reasons), values
 
     def _advance(self, effort: np.ndarray) -> None:
         self.stepper.step(effort)

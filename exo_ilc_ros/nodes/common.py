@@ -31,6 +31,7 @@ from ..core import schema
 from ..core.config import Config, flatten_tree, load_config, load_ros_yaml
 from ..core.errors import ConfigError, ExoIlcError
 from ..core.validation import validate_update
+from ..wire import topics
 
 RCLError = rclpy_implementation.RCLError
 
@@ -506,15 +507,25 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     return code
 
 
+HEARD_TOPICS = (topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY)
+"""The run's verdict: a node stopping waits (within
+:func:`_deliver`'s budget) until some subscriber is matched on them, so a run that fails at
+once is still heard (its ``finished``, transient local, reaches a reader matched late)."""
+
+
 def _deliver(nodes: Sequence[Node], timeout: float = 3.0) -> None:
     """Wait (at most ``timeout`` s in all) until every reliable publisher's last messages were
-    acknowledged by the subscribers matched now: a node that stops right after publishing (the
-    supervisor's ``finished``, a last summary) would otherwise take them with it."""
+    acknowledged by the subscribers matched now, and the :data:`HEARD_TOPICS` have a subscriber:
+    a node that stops right after publishing (the supervisor's ``finished``, a last summary)
+    would otherwise take them with it."""
     from rclpy.duration import Duration
 
     deadline = time.monotonic() + timeout
     for node in nodes:
         for publisher in list(node.publishers):
+            while publisher.topic_name in HEARD_TOPICS and \
+                    publisher.get_subscription_count() < 1 and time.monotonic() < deadline:
+                time.sleep(0.01)
             left = deadline - time.monotonic()
             if left <= 0:
                 return

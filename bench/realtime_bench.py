@@ -1,7 +1,7 @@
 """Real time: late commands and watchdog trips of the real-time graph (figures only, no asserts).
 
     .venv/bin/python -m bench.realtime_bench [--runs 10] [--trials 5] [--duration 1.0]
-                                             [--rates 100 200 1000]
+                                             [--rates 100 200 1000] [--priority 50 0]
 
 For each control rate, ``--runs`` runs of ``--trials`` trials (real_time mode, real time,
 ``trajectory.duration`` shortened to keep it fast; ``max_late_commands: 1`` so that every trial is
@@ -24,11 +24,13 @@ START_PERIODS = 10
 """A late command within a trial's first this many periods counts as "at start"."""
 
 
-def one_run(rate_hz: float, trials: int, duration: float) -> dict[str, float]:
+def one_run(rate_hz: float, trials: int, duration: float, priority: int
+            ) -> dict[str, float]:
     """One real-time run: late commands per trial (from the summaries) and re-runs."""
     config = load_config(overrides={"mode": "real_time", "control.period": 1.0 / rate_hz,
                                     "trajectory.duration": duration, "max_trials": trials,
-                                    "max_late_commands": 1.0, "law": "linear"})
+                                    "max_late_commands": 1.0, "law": "linear",
+                                    "thread_priority": priority})
     started = time.monotonic()
     with GraphSession(config) as session:
         session.spin_until(lambda: session.finished, timeout=60.0 + 4 * trials * duration,
@@ -52,13 +54,19 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=5)
     parser.add_argument("--duration", type=float, default=1.0)
     parser.add_argument("--rates", type=float, nargs="+", default=[100.0, 200.0, 1000.0])
+    parser.add_argument("--priority", type=int, nargs="+", default=[50],
+                        help="thread_priority of the control loop (SCHED_FIFO; 0: the normal "
+                        "scheduler); several: one pass each, to compare")
     args = parser.parse_args()
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    for rate in args.rates:
-        runs = [one_run(rate, args.trials, args.duration) for _ in range(args.runs)]
+    for priority, rate in ((p, r) for p in args.priority for r in args.rates):
+        load = os.getloadavg()[0]
+        runs = [one_run(rate, args.trials, args.duration, priority) for _ in range(args.runs)]
         late = sum(r["late_total"] for r in runs)
         periods = sum(r["periods"] for r in runs)
-        print(f"{rate:g} Hz, {args.runs} runs x {args.trials} trials of {args.duration:g} s: "
+        print(f"thread_priority {priority} (root here: {os.geteuid() == 0}), load average "
+              f"{load:.1f} -> {os.getloadavg()[0]:.1f}: "
+              f"{rate:g} Hz, {args.runs} runs x {args.trials} trials of {args.duration:g} s: "
               f"watchdog trips {sum(r['watchdog'] for r in runs):g}, runs with a late command "
               f"in trial 1: {sum(1 for r in runs if r['late_trial_1'] > 0)}, trials with a "
               f"late command {sum(r['trials_late'] for r in runs):g} of "

@@ -17,6 +17,7 @@ import pytest
 
 from exo_ilc_ros.core.config import load_config
 from exo_ilc_ros.core.session import run_trials
+from exo_ilc_ros.core.validation import Cause
 from exo_ilc_ros.wire import topics
 from exo_ilc_ros.wire.publishers import (
     PUBLISHER_OF,
@@ -74,6 +75,44 @@ def test_a_writer_the_graph_cannot_name_yet_is_looked_at_again_not_refused_for_g
     assert not check.admit_after_census(gid)  # this one message is refused, as unknown
     check.census([Endpoint("/computed_torque_controller", gid)])
     assert check.admit(gid) == TRUSTED
+
+
+def test_a_writer_not_yet_listed_is_a_warning_another_node_an_error() -> None:
+    """Admission (nodes/identified.py) over a stand-in graph: a message from a writer the graph
+    does not list even after a fresh look is refused as ``unlisted_publisher`` and logged as a
+    warning (a free-running plant's first samples at start-up); once the graph names another
+    node for that writer, its messages are ``foreign_publisher`` errors; the contract's
+    node is admitted."""
+    from types import SimpleNamespace
+
+    from exo_ilc_ros.nodes.guard import Rejections
+    from exo_ilc_ros.nodes.identified import Admission
+
+    graph: list[Any] = []
+    logged: list[tuple[str, str]] = []
+
+    class Logger:
+        def warning(self, text: str) -> None:
+            logged.append(("warning", text))
+
+        def error(self, text: str) -> None:
+            logged.append(("error", text))
+
+    node = SimpleNamespace(get_namespace=lambda: "/", get_logger=Logger,
+                           get_publishers_info_by_topic=lambda topic: list(graph))
+    rejections = Rejections(node)
+    admission = Admission(node, topics.JOINT_STATES, rejections, 1000)
+    plant, teleop = b"p" * 16, b"t" * 16
+    assert not admission.admit_raw(b"x", plant)  # the graph lists no one yet
+    assert rejections.log.counts == {Cause.UNLISTED_PUBLISHER: 1}
+    assert logged[0][0] == "warning" and "does not list yet" in logged[0][1]
+    graph += [SimpleNamespace(node_namespace="/", node_name="plant_simulator",
+                              endpoint_gid=plant),
+              SimpleNamespace(node_namespace="/", node_name="teleop", endpoint_gid=teleop)]
+    assert admission.admit_raw(b"x", plant)
+    assert not admission.admit_raw(b"x", teleop)
+    assert rejections.log.counts[Cause.FOREIGN_PUBLISHER] == 1
+    assert logged[1][0] == "error" and "from /teleop" in logged[1][1]
 
 
 def test_status_owner_and_sizes() -> None:
@@ -364,7 +403,8 @@ def test_fuzzing_a_running_graph_changes_nothing_learned() -> None:
             for cause in ("not_numeric", "non_finite", "wrong_length", "unknown_joint",
                           "duplicate_joint", "missing_joint", "oversized", "bad_stamp"):
                 assert found.get(cause, 0) > 0, (who, cause, found)
-        assert supervisor.get("foreign_publisher", 0) >= sent["forged_done"], supervisor
+        assert supervisor.get("foreign_publisher", 0) + supervisor.get(
+            "unlisted_publisher", 0) >= sent["forged_done"], supervisor
         refused = {kv.key: int(kv.value) for kv in latest["plant_simulator/health"].values
                    if kv.key.startswith("refused/")}
         assert refused.get("refused/effort_controller/commands/exo_ilc_run", 0) >= \

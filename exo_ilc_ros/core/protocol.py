@@ -165,6 +165,8 @@ class TrialProtocol:
         self.expects_truth = self.experiment.patient.measures
         self.real_time = config["mode"] == "real_time"
         self.session = session
+        if not session.finished:
+            session.rehearse(self.experiment)  # the kernels now, not after trial 1
         if self.store is not None:
             if session.completed:
                 self.port.log(False, f"resumed from {self.store.directory}: trials 1.."

@@ -70,6 +70,10 @@ def _margin_rule(value: Any) -> str | None:
     return None if value < 1.0 else f"must be < 1 (a share of the limit), got {value!r}"
 
 
+def _priority_rule(value: Any) -> str | None:
+    return None if value <= 99 else f"must be 0..99 (SCHED_FIFO priorities), got {value!r}"
+
+
 def _forgetting_rule(value: Any) -> str | None:
     return None if 0.0 < value <= 1.0 else f"must be in (0, 1] (1: no forgetting), got {value!r}"
 
@@ -247,6 +251,12 @@ PARAMETERS: tuple[Parameter, ...] = (
               "wall-clock floor of every watchdog (s; the controller's and the real-time "
               "plant's, core.safety.watchdog_for): a loaded machine may deliver late without "
               "any fault; 0 on hardware", minimum=0.0),
+    Parameter("thread_priority", SHARED, Kind.INTEGER,
+              "SCHED_FIFO priority of the control loop's threads (the computed-torque "
+              "controller's; a plant's in real_time mode), as ros2_control's controller_manager "
+              "(nodes/realtime.py); 0: the normal scheduler. Refused without CAP_SYS_NICE or an "
+              "rtprio limit: the node says so and runs normally", minimum=0.0,
+              extra_rule=_priority_rule),
     Parameter("joint_states_publisher", SHARED, Kind.STRING,
               "the node whose /joint_states the controller and the supervisor act on (others "
               "are refused and reported; wire/publishers.py): plant_simulator (our plants) or "

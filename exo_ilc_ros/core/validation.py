@@ -39,6 +39,10 @@ class Cause(Enum):
     """More bytes than a message of the contract may have: refused before decoding."""
     FOREIGN_PUBLISHER = "foreign_publisher"
     """A well-formed message from a publisher other than the contract's (wire.publishers)."""
+    UNLISTED_PUBLISHER = "unlisted_publisher"
+    """A well-formed message from a writer the ROS graph does not list yet, even after a fresh
+    look (discovery lags a publisher's first messages at start-up): refused like a foreign
+    one, but reported as a warning, not as another publisher."""
 
 
 @dataclass(frozen=True)

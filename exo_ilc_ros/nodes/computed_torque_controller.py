@@ -56,6 +56,7 @@ from .identified import (
     decodes,
     gate_classifier,
 )
+from .realtime import fifo_scheduling
 
 NAME = schema.CONTROLLER
 LATENCY_WINDOW = 100_000
@@ -124,6 +125,9 @@ class ComputedTorqueController(Node):
         ref = experiment.reference
         self.step(ref.acceleration[0], ref.position[0], ref.velocity[0], ref.position[0],
                   ref.velocity[0])  # compile the kernels before the first trial
+        self.realtime, self.scheduler = fifo_scheduling(config["thread_priority"])
+        if config["thread_priority"] and not self.realtime:
+            self.get_logger().warning(f"control loop at the {self.scheduler}")
 
     def on_feedforward(self, msg: JointTrajectory) -> None:
         """Load the next trial's reference and feed-forward profile (validated first)."""
@@ -251,7 +255,8 @@ class ComputedTorqueController(Node):
     def _loop_check(self) -> tuple[bytes, str, list[tuple[str, str]]]:
         level = DiagnosticStatus.OK
         reasons = []
-        values = [("aborted_trials", " ".join(map(str, self.aborted_trials))),
+        values = [("scheduler", self.scheduler),
+                  ("aborted_trials", " ".join(map(str, self.aborted_trials))),
                   ("watchdog_tripped_trials", " ".join(map(str, self.tripped_trials))),
                   *(("watchdog/" + k, v) for k, v in self.watchdog.as_values())]
         if self.holding:

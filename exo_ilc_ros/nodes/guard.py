@@ -41,8 +41,8 @@ def health_status_name(node: str) -> str:
 
 
 class Rejections:
-    """LogOnce plus the node's logger: the first rejection of each cause is logged (error),
-    later ones only counted."""
+    """LogOnce plus the node's logger: the first rejection of each cause is logged (error; a
+    warning for a writer discovery has not listed yet), later ones only counted."""
 
     def __init__(self, node: Node) -> None:
         self.node = node
@@ -51,7 +51,8 @@ class Rejections:
     def reject(self, rejection: Rejection) -> None:
         """Count ``rejection``; log it if its cause is new."""
         if self.log.record(rejection):
-            self.node.get_logger().error(
+            logger = self.node.get_logger()
+            (logger.warning if rejection.cause is Cause.UNLISTED_PUBLISHER else logger.error)(
                 f"rejected ({rejection.cause.value}): {rejection.message}; further "
                 f"{rejection.cause.value} rejections are counted on /diagnostics")
 

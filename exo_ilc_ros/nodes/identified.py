@@ -336,10 +336,16 @@ class Admission:
             return False  # a flood: counted per sender only, the loop's messages go first
         self._tokens -= 1.0
         if self.classify is None or self.classify(raw):
-            sender = self.check.known.get(gid, "a publisher not in the graph")
-            self.rejections.reject_cause(
-                Cause.FOREIGN_PUBLISHER, f"{topic}: a message from {sender}; only "
-                f"{self.check.trusted_node} may publish here")
+            sender = self.check.known.get(gid)
+            if sender is None:
+                self.rejections.reject_cause(
+                    Cause.UNLISTED_PUBLISHER, f"{topic}: a message from a writer the ROS graph "
+                    "does not list yet (discovery still running: usual for a publisher's first "
+                    f"messages at start-up); only {self.check.trusted_node}'s are acted on")
+            else:
+                self.rejections.reject_cause(
+                    Cause.FOREIGN_PUBLISHER, f"{topic}: a message from {sender}; only "
+                    f"{self.check.trusted_node} may publish here")
         return False
 
     def admit_raw(self, raw: bytes, gid: bytes) -> bool:
@@ -488,8 +494,14 @@ class StatusAdmission:
         for item in msg.status:
             owner = status_owner(item.name, namespace)
             if owner is not None and owner != sender:
-                self.rejections.reject_cause(
-                    Cause.FOREIGN_PUBLISHER, f"/diagnostics: status {item.name!r} from "
-                    f"{sender or 'a publisher not in the graph'}, not {owner}")
+                if sender:
+                    self.rejections.reject_cause(
+                        Cause.FOREIGN_PUBLISHER, f"/diagnostics: status {item.name!r} from "
+                        f"{sender}, not {owner}")
+                else:
+                    self.rejections.reject_cause(
+                        Cause.UNLISTED_PUBLISHER, f"/diagnostics: status {item.name!r} from a "
+                        "writer the ROS graph does not list yet (discovery still running); "
+                        f"acted on only from {owner}")
                 return False
         return True

@@ -61,6 +61,7 @@ from .identified import (
     decodes,
     effort_classifier,
 )
+from .realtime import fifo_scheduling
 
 NAME = schema.PLANT
 
@@ -138,6 +139,10 @@ class PlantSimulator(Node):
             self.stepper.measure()
             self.stepper.step(self.held)
         self.stepper.reset()
+        self.realtime, self.scheduler = fifo_scheduling(
+            0 if self.lock_step else config["thread_priority"])  # lock-step: nothing to keep
+        if config["thread_priority"] and not self.lock_step and not self.realtime:
+            self.get_logger().warning(f"real-time plant at the {self.scheduler}")
         self.get_logger().info(
             f"{config['mode']} plant, mass uncertainty {self.experiment.mass_uncertainty:g}, "
             f"{self.last_index + 1} samples per trial")
@@ -271,7 +276,7 @@ class PlantSimulator(Node):
                   *((f"saturated/{n}", str(int(c))) for n, c in zip(names, self.saturated,
                                                                       strict=True)),
                   *(("watchdog/" + k, v) for k, v in self.watchdog.as_values()),
-                  *self.late.as_values()]
+                  *self.late.as_values(), ("scheduler", self.scheduler)]
         reasons = []
         level = DiagnosticStatus.OK
         if self.hold_pose is not None:

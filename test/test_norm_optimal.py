@@ -182,3 +182,28 @@ def _short_yaml(tmp_path: Path) -> Path:
     path.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n'
                     "ilc_supervisor:\n  ros__parameters:\n    law: norm_optimal\n")
     return path
+
+
+def test_active_constraints_reach_the_trial_summary_and_the_bag(tmp_path: Path) -> None:
+    """What the constrained QP says (the constraints active) is not only logged: the
+    supervisor's trial summary and a bag's summary carry it as ``learning_notes``."""
+    from exo_ilc_ros.bag import read_bag, write_run
+    from exo_ilc_ros.nodes.messages import trial_summary
+    from exo_ilc_ros.wire import topics
+
+    loose = _config(**{"norm_optimal.constrained": True, "max_trials": 2})
+    need = np.max(np.abs(Experiment(loose, 0.15).run_trial(np.zeros((101, 3)), 1).effort),
+                  axis=0)
+    tight = loose.replace({"control.effort_limit": [float(x) for x in 0.98 * need],
+                           "feedforward_limit": [0.3, 0.3, 0.3], "mass_uncertainty": 0.15})
+    result = run_trials(tight)
+    assert result.notes.get(1), "trial 1's update ran into the limits"
+    expected = "; ".join(result.notes[1])
+    session = LearningSession(tight)
+    conclusion = session.conclude(result.records[0])
+    values = {kv.key: kv.value for kv in trial_summary(conclusion, tight["joint_names"]).values}
+    assert values[topics.LEARNING_NOTES] == expected
+    bag = read_bag(write_run(tmp_path / "bag", tight, result))
+    assert bag.trials[1].summary[topics.LEARNING_NOTES] == expected
+    assert all(topics.LEARNING_NOTES not in t.summary for k, t in bag.trials.items()
+               if not result.notes.get(k))

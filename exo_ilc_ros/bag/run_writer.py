@@ -97,6 +97,8 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                 values += metrics[k - 1].summary_values(names)
             else:  # as the supervisor files them (core/metrics.py)
                 values += metric_summary_values(record, measured, names)
+            if result.notes.get(k):  # as the supervisor files them (nodes/messages.py)
+                values.append((topics.LEARNING_NOTES, "; ".join(result.notes[k])))
             within = bool(np.all(record.max_abs_error <= result.error_bound))
             writer.write(topics.TRIAL_SUMMARY, end, messages.trial_summary(end, values, within))
             writer.write(topics.TRIAL_EVENTS, end, messages.trial_event(end, "end", k, values))

@@ -16,6 +16,7 @@ from tqdm import tqdm
 from ..core.config import Config
 from ..core.errors import ConfigError
 from ..core.summary import RunSummary
+from ..wire import topics
 from .arguments import directory, domain_id
 from .simulate import add_config_arguments, config_from_args, print_report
 
@@ -170,6 +171,10 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
               file=sys.stderr, disable=None) as bar:
         def progress(summary: TrialSummary, bar: Any = bar) -> None:
             bar.update(1)
+            notes = summary.values.get(topics.LEARNING_NOTES)
+            if notes:  # as simulate prints them (e.g. norm_optimal's active constraints)
+                bar.write(f"delta {delta:g}, learning from trial {summary.trial}: {notes}",
+                          file=sys.stderr)
             errors = summary.row("max_abs_error", config["joint_names"])
             bar.set_postfix_str("max|e| " + " ".join(f"{x:.1e}" for x in errors))
         if args.no_bag:

@@ -94,6 +94,9 @@ START_SERVICE = "/plant_simulator/start"
 
 TRIAL_STATUS = "ilc_supervisor/trial"
 SUMMARY_STATUS = "ilc_supervisor/trial_summary"
+LEARNING_NOTES = "learning_notes"
+"""Trial summary key: what the learning law said about its update from this trial, "; "-joined
+(``norm_optimal.constrained``: the constraints active in the QP); absent when it said nothing."""
 LEVEL_SYMBOLS = ("M", "M'", "M''")
 """The step gains in the summary keys ``level/<symbol>/<joint>``, in eq (11)'s order."""
 FEEDFORWARD_FRAME_PREFIX = "trial:"

@@ -84,6 +84,26 @@ def test_package_xml_declares_every_install_requirement() -> None:
     assert not missing, f"package.xml lacks <exec_depend> for {sorted(missing)}"
 
 
+def test_the_shipped_rosdep_file_resolves_our_own_keys() -> None:
+    """rosdep.yaml (for rosdep users whose rosdistro lacks a key) maps every ``-pip`` key and
+    the others we declare beyond the common ones to the package setup.py requires."""
+    import yaml
+
+    rules = yaml.safe_load((ROOT / "rosdep.yaml").read_text())
+    declared = declared_run_dependencies()
+    own = {pip: key for pip, key in ROSDEP_KEYS.items()
+           if key.endswith("-pip") or key in ("mcap-ros2-support", "python3-distributed")}
+    assert "mujoco" in own and "distributed" in own
+    for pip_name, key in own.items():
+        assert key in declared and key in rules, key
+        for system in ("ubuntu", "debian"):
+            rule = rules[key][system]
+            if isinstance(rule, dict):
+                assert rule == {"pip": {"packages": [pip_name]}}, (key, rule)
+            else:  # a system package of that library
+                assert rule == [f"python3-{pip_name}"], (key, rule)
+
+
 def test_package_xml_declares_the_launch_files_imports() -> None:
     declared = declared_run_dependencies()
     for launch_file in (ROOT / "launch").glob("*.py"):

@@ -46,7 +46,7 @@ from .trajectory import SampledReference
 
 STORE_VERSION = 1
 NOT_KEYED = frozenset({"max_trials", "mode", "real_time_rate", "wait_for_recorder",
-                       "max_late_commands",
+                       "max_late_commands", "thread_priority",
                        "safety.watchdog_periods", "watchdog_min_timeout",
                        "store.directory",
                        "store.resume"})

@@ -178,3 +178,23 @@ def test_concurrent_sessions_get_distinct_versions_none_lost(tmp_path: Path) -> 
     for w in range(WORKERS):
         mine = [n for worker, n in markers if worker == w]
         assert mine == sorted(mine)
+
+
+def test_the_bag_of_a_later_session_replays_it_exactly(tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]
+                                                       ) -> None:
+    """The documented rerun: `exo-ilc simulate --replay BAG` of session 2's bag (its config
+    holds patient.session 2 and the profile it started from) gives every trial again."""
+    config = tmp_path / "c.yaml"
+    config.write_text('"/**":\n  ros__parameters:\n    trajectory: {duration: 1.0}\n'
+                      "plant_simulator:\n  ros__parameters:\n    patient:\n"
+                      "      sensor: {position_noise: 2.0e-5}\n"
+                      "      initial: {position_sd: 0.0005, velocity_sd: 0.003}\n")
+    common = ["simulate", "--config", str(config), "--patient", "p1", "--trials", "2",
+              "--profiles", str(tmp_path / "p"), "--quiet"]
+    assert main([*common, "--new-patient"]) == 0
+    assert main([*common, "--bag", str(tmp_path / "bags")]) == 0
+    (bag,) = (tmp_path / "bags").iterdir()
+    capsys.readouterr()
+    assert main(["simulate", "--replay", str(bag)]) == 0
+    assert "2 trials compared, identical to the recording" in capsys.readouterr().out

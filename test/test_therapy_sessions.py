@@ -124,6 +124,7 @@ def test_a_session_that_others_overtook_keeps_its_own_version(
     again = book.begin("p1", "paper_quintic", ROBUST, build_reference(ROBUST), early.start,
                        reopen=True)
     assert again.version == 4 and again.config["patient.session"] == 4
+    assert again.created == writer.created
     assert len(book.require_index("p1", "paper_quintic")["versions"]) == 4
 
 

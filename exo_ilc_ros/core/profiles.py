@@ -277,7 +277,9 @@ class ProfileBook:
             not_included = [v["version"] for v in versions if after < v["version"] < version]
             writer = ProfileWriter(directory, version, config, reference, started_from,
                                    session, not_included)
-            if reopened is None:
+            if reopened is not None:  # keep when the version was begun
+                writer.created = writer.base["created"] = versions[reopened - 1]["created"]
+            else:
                 index["versions"] = [*versions, {**writer.base, "status": "started",
                                                  "trials": 0,
                                                  "trials_total": writer.base["trials_before"]}]

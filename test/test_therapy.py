@@ -218,7 +218,9 @@ def test_sparc_prefers_smooth_movements() -> None:
 def test_graph_session_from_the_profile_equals_in_process(tmp_path: Path) -> None:
     """`exo-ilc run --patient` twice (the second from the profile the first wrote through the
     graph) gives the per-trial numbers and the profile of `exo-ilc simulate --patient` twice,
-    to 1e-9; the metrics are in the JSON. A short exercise of the user's own file (1 s)."""
+    to 1e-9; the metrics are in the JSON. A short exercise of the user's own file (1 s), a
+    patient with sensor noise and start offsets: session 2 draws its own (patient.session 2)
+    in the graph's plant as in-process."""
     import subprocess
     import sys
 
@@ -226,7 +228,10 @@ def test_graph_session_from_the_profile_equals_in_process(tmp_path: Path) -> Non
     exercises.write_text("exercises:\n  lift:\n    points: [[0, 0, 0], [0.4, 0.2, 0.3], "
                          "[0.1, 0.1, 0.1]]\n    durations: [0.5, 0.5]\n")
     config = tmp_path / "therapy.yaml"
-    config.write_text(f'"/**":\n  ros__parameters:\n    exercise:\n      file: "{exercises}"\n')
+    config.write_text(f'"/**":\n  ros__parameters:\n    exercise:\n      file: "{exercises}"\n'
+                      "plant_simulator:\n  ros__parameters:\n    patient:\n"
+                      "      sensor: {position_noise: 2.0e-5}\n"
+                      "      initial: {position_sd: 0.0005, velocity_sd: 0.003}\n")
 
     def exo_ilc(*args: str) -> subprocess.CompletedProcess[str]:
         return subprocess.run([sys.executable, "-m", "exo_ilc_ros.cli.main", *args], text=True,
@@ -256,6 +261,9 @@ def test_graph_session_from_the_profile_equals_in_process(tmp_path: Path) -> Non
                                    rtol=0.0, atol=1e-9, err_msg=key)
     assert graph_profile.version == local_profile.version == 2
     assert graph_profile.provenance["started_from"] == 1
+    assert graph_profile.provenance["patient_session"] == 2
+    assert local_profile.provenance["patient_session"] == 2
+    assert g["therapy"]["patient_session"] == r["therapy"]["patient_session"] == 2
     np.testing.assert_allclose(graph_profile.feedforward, local_profile.feedforward, atol=1e-9)
     assert [m["trial"] for m in g["therapy"]["metrics"]] == [1, 2]
     np.testing.assert_allclose(g["therapy"]["metrics"][-1]["max_error"],

@@ -51,8 +51,17 @@ def _version_line(entry: dict[str, Any], current: int | None) -> str:
             f"({entry.get('trials_total', 0)} in all), law {entry.get('law', '?')}"
             f"{', assist-as-needed' if entry.get('assist_as_needed') else ''}, "
             f"final max |e| {error} rad{share_text}, from "
-            f"{'v' + str(entry['started_from']) if entry.get('started_from') else 'zero'}, "
-            f"config {entry.get('config_digest', '?')}")
+            f"{'v' + str(entry['started_from']) if entry.get('started_from') else 'zero'}"
+            f"{_not_included(entry)}, config {entry.get('config_digest', '?')}")
+
+
+def _not_included(entry: dict[str, Any]) -> str:
+    """' (without v3, v4: begun before it by other sessions)' when the session did not start
+    from every version before its own (concurrent sessions, or versions rolled back over)."""
+    others = entry.get("not_included") or []
+    if not others:
+        return ""
+    return f" (without {', '.join(f'v{v}' for v in others)}: begun before it, not learned from)"
 
 
 def run(args: argparse.Namespace) -> int:

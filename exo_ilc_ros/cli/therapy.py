@@ -98,7 +98,8 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
         summary = RunSummary.from_result(done.result)
         summary.extra["therapy"] = done.to_json()
         runs.append(summary)
-        print(f"profile: {book.directory(args.patient, name)} v{done.version}", file=sys.stderr)
+        print(f"profile: {book.directory(args.patient, name)} v{done.version} (the patient's "
+              f"session {done.config['patient.session']} of {name})", file=sys.stderr)
         if args.bag:
             from ..bag import run_name, unique_path, write_run
 
@@ -143,9 +144,11 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
     plan = plan_of(args, config)
     prepared = [prepare(config, book, args.patient, name, args.new_patient)
                 for name, _ in plan]
-    for item, (_, trials) in zip(prepared, plan, strict=True):  # before any node starts
+    for item, (name, trials) in zip(prepared, plan, strict=True):  # before any node starts
+        version = book.next_version(args.patient, name, item.start, bool(args.resume))
         _check_store(item.config.replace({"max_trials": trials or item.config["max_trials"],
-                                          "store.directory": str(store_root)}), args.resume)
+                                          "store.directory": str(store_root),
+                                          "patient.session": version}), args.resume)
     session = session_id()
     runs: list[RunSummary] = []
     for item, (name, trials) in zip(prepared, plan, strict=True):
@@ -153,10 +156,14 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
         cfg = item.config.replace({"max_trials": count, "store.directory": str(store_root),
                                    "store.resume": bool(args.resume)})
         reference = build_reference(cfg)
+        # The version (the patient's session: its own noise) first, under the profile's lock;
+        # --resume continues the unfinished version a killed exo-ilc left (the store's key).
+        writer = book.begin(args.patient, name, cfg, reference, item.start, session,
+                            reopen=bool(args.resume))
+        cfg = writer.config
         start = "from zero" if item.start is None else f"from profile v{item.start.version}"
         print(f"patient {args.patient}, exercise {name}: {count} trials through the graph, "
-              f"{start}", file=sys.stderr, flush=True)
-        writer = book.begin(args.patient, name, cfg, reference, item.start, session)
+              f"{start}, session {writer.version}", file=sys.stderr, flush=True)
         summary: RunSummary | None = None
         try:
             summary = run_one(args, cfg, cfg["mass_uncertainty"], count)
@@ -168,6 +175,7 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
                                             "profile_started_from": None if item.start is None
                                             else item.start.version,
                                             "profile_version": writer.version,
+                                            "patient_session": writer.version,
                                             "metrics": [m.to_json() for m in done]}
                 bag = summary.extra.get("bag")
                 if bag:

@@ -27,8 +27,10 @@ Per sample i of a trial (true state x_i = (q_i, qdot_i) of the plant):
 
 Each trial k starts at x_d(0) plus a Gaussian offset. All randomness of trial k (noise per
 sample, the initial offset, the jitters) is drawn before the trial from
-``default_rng(SeedSequence([patient.seed, k]))`` (:meth:`PatientModel.draws`), so a resumed run,
-a rerun of trial k and the graph's plant draw the same numbers; fatigue is a function of k.
+``default_rng(SeedSequence([patient.seed, k]))``, or, in the patient's therapy session s >= 2
+(``patient.session``), from ``SeedSequence([patient.seed, s, k])`` (:meth:`PatientModel.draws`),
+so a resumed run, a rerun of trial k and the graph's plant draw the same numbers while each
+session draws its own; fatigue is a function of k.
 """
 
 from __future__ import annotations
@@ -124,6 +126,8 @@ class PatientModel:
         n = config.joints
         period = float(config["control.period"])
         self.seed = int(config["patient.seed"])
+        self.session = int(config["patient.session"])
+        """The patient's therapy session (1: the first, or none)."""
         self.period = period
         stiff, damp, gain, threshold = spasticity_values(config)
         joint = np.zeros((_JOINT_ROWS, n))
@@ -188,14 +192,22 @@ class PatientModel:
         return self.fatigue_floor + (1.0 - self.fatigue_floor) * math.exp(
             -self.fatigue_rate * (trial - 1))
 
+    def entropy(self, trial: int) -> list[int]:
+        """What trial ``trial``'s draws are seeded with: [seed, trial] in session 1 (and outside
+        a therapy session: the numbers of every run before sessions existed), [seed, session,
+        trial] in session 2 and later."""
+        if self.session <= 1:
+            return [self.seed, int(trial)]
+        return [self.seed, self.session, int(trial)]
+
     def draws(self, trial: int, samples: int) -> TrialDraws:
-        """Trial ``trial``'s random numbers from ``SeedSequence([seed, trial])``, always drawn
+        """Trial ``trial``'s random numbers from ``SeedSequence(entropy(trial))``, always drawn
         in the same order and number (turning one effect on does not change the others'):
         noise (2, samples, joints), initial offsets (2, joints), amplitude, timing."""
         n = self.joint.shape[1]
         if not self.enabled:
             return TrialDraws(np.zeros((2, 0, 0)), np.zeros((2, 0)), np.zeros(2))
-        rng = np.random.default_rng(np.random.SeedSequence([self.seed, int(trial)]))
+        rng = np.random.default_rng(np.random.SeedSequence(self.entropy(trial)))
         noise = rng.standard_normal((2, samples, n))
         initial = rng.standard_normal((2, n))
         amplitude, timing = rng.standard_normal(2)

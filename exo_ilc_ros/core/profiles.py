@@ -12,6 +12,16 @@ completed trial. Versions are never deleted; ``rollback`` only moves ``current``
 written atomically (temp file, fsync, rename, as :mod:`.store`) and each version's sha256 is in
 the index; a file that does not match is refused, never overwritten.
 
+Sessions of the same patient and exercise may run at once (two terminals, a study): every change
+of the index (a version begun, a trial saved, a rollback) reads, changes and writes it under an
+exclusive ``flock`` of ``<root>/<patient>/<exercise>/.lock`` (:func:`locked`). A session's version
+number is allocated there when it begins (an entry with status ``started``), so a concurrent
+session gets the next number and never overwrites another's. A session that started from
+version N while N+1.. were begun by others still writes its own version; its provenance names
+them (``not_included``) and ``current`` moves to it only if no higher version is current. The
+version number is also the session's number for the virtual patient (``patient.session``:
+each session draws its own noise, :mod:`.patient`).
+
 A profile is used only with the model and reference it was learned with: the nominal model
 and the loop (:data:`MODEL_KEYS`) and the sampled reference (sha256 of its arrays). The plant
 (the patient's arm, mass uncertainty, ...) is deliberately not part of it: it is what changes
@@ -20,11 +30,14 @@ between sessions. A mismatch is a :class:`ProfileError` naming what differs.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
 import io
 import json
 import os
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -43,6 +56,31 @@ MODEL_KEYS = ("joint_names", "model.link_masses", "model.link_lengths", "model.r
               "control.kp", "control.kd")
 """What a feed-forward was learned *for*: the controller's nominal model and loop."""
 ROOT_ENVIRONMENT = "EXO_ILC_PROFILES"
+LOCK = ".lock"
+"""Beside the index: the file every index change of a patient's exercise is locked on."""
+SESSION_KEY = "patient.session"
+"""The config key a session's version number goes to (the virtual patient's session)."""
+
+
+@contextlib.contextmanager
+def locked(directory: Path, shared: bool = False) -> Iterator[None]:
+    """An exclusive ``flock`` of ``directory``/.lock (created, never deleted) for one
+    read-change-write of the index and a version file; released when the block ends, or when
+    the process dies. ``shared``: a reader's lock (index and file read as one state); without
+    a lock file (no session has written here since locking existed) it reads unlocked."""
+    if shared:
+        try:
+            fd = os.open(directory / LOCK, os.O_RDONLY)
+        except FileNotFoundError:
+            yield
+            return
+    else:
+        fd = os.open(directory / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH if shared else fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
 
 
 def default_root() -> Path:
@@ -157,22 +195,7 @@ class ProfileBook:
     def index(self, patient: str, exercise: str) -> dict[str, Any] | None:
         """The index of ``patient``'s profile of ``exercise`` (None if there is none);
         ProfileError for an unreadable or inconsistent index."""
-        path = self.directory(patient, exercise) / "index.json"
-        if not path.exists():
-            return None
-        try:
-            document = json.loads(path.read_text())
-            if document.get("format") != PROFILE_FORMAT:
-                raise ValueError(f"format {document.get('format')!r}, expected {PROFILE_FORMAT}")
-            versions = document["versions"]
-            if [v["version"] for v in versions] != list(range(1, len(versions) + 1)):
-                raise ValueError("versions are not 1..n in order")
-            current = document["current"]
-            if current is not None and not 1 <= current <= len(versions):
-                raise ValueError(f"current version {current} does not exist")
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise ProfileError(f"{path}: corrupt profile index: {exc}") from None
-        return dict(document)
+        return read_index(self.directory(patient, exercise) / "index.json")
 
     def require_index(self, patient: str, exercise: str) -> dict[str, Any]:
         """The index, or ProfileError naming the unknown patient or exercise."""
@@ -184,13 +207,22 @@ class ProfileBook:
         return index
 
     def load(self, patient: str, exercise: str, version: int | None = None) -> Profile:
-        """Version ``version`` (default: the current one) of the profile, sha256 checked."""
+        """Version ``version`` (default: the current one) of the profile, sha256 checked (index
+        and file read under the shared lock: a consistent pair while a session writes)."""
+        with locked(self.directory(patient, exercise), shared=True):
+            return self._load(patient, exercise, version)
+
+    def _load(self, patient: str, exercise: str, version: int | None) -> Profile:
         index = self.require_index(patient, exercise)
         number = index["current"] if version is None else version
         if number is None or not 1 <= number <= len(index["versions"]):
             raise ProfileError(f"patient {patient!r}, exercise {exercise!r} has no version "
                                f"{number} (versions 1-{len(index['versions'])})")
         entry = index["versions"][number - 1]
+        if "sha256" not in entry:
+            raise ProfileError(f"patient {patient!r}, exercise {exercise!r}: version {number} "
+                               f"holds no trial yet (status {entry.get('status')!r}: its "
+                               "session is running, or stopped before its first trial)")
         path = self.directory(patient, exercise) / entry["file"]
         data = _read_npz(path, entry["sha256"])
         levels = data.get("levels")
@@ -207,32 +239,95 @@ class ProfileBook:
     def rollback(self, patient: str, exercise: str, version: int) -> dict[str, Any]:
         """Make ``version`` the current one (its file checked first); nothing is deleted."""
         profile = self.load(patient, exercise, version)
-        index = self.require_index(patient, exercise)
-        index["current"] = profile.version
-        write_json_atomic(self.directory(patient, exercise) / "index.json", index)
+        directory = self.directory(patient, exercise)
+        with locked(directory):
+            index = self.require_index(patient, exercise)
+            index["current"] = profile.version
+            write_json_atomic(directory / "index.json", index)
         return index
 
+    def next_version(self, patient: str, exercise: str, started_from: Profile | None,
+                     reopen: bool = False) -> int:
+        """The version :meth:`begin` would allocate now (a look without the lock, for checks
+        before anything starts; a concurrent session may take it meanwhile)."""
+        index = self.index(patient, exercise)
+        if index is None:
+            return 1
+        reopened = _reopenable(index, started_from) if reopen else None
+        return reopened or len(index["versions"]) + 1
+
     def begin(self, patient: str, exercise: str, config: Config, reference: SampledReference,
-              started_from: Profile | None, session: str = "") -> ProfileWriter:
-        """A new version for the session about to run (written at its first trial)."""
+              started_from: Profile | None, session: str = "",
+              reopen: bool = False) -> ProfileWriter:
+        """The version of the session about to run, allocated under the lock (module
+        docstring): the next number, its entry (status ``started``) written at once, so that
+        a concurrent session takes the one after. With ``reopen`` (a resumed run) the newest
+        unfinished version begun from the same ``started_from`` is continued instead, if any.
+        The writer's ``config`` is ``config`` with ``patient.session`` = the version."""
         directory = self.directory(patient, exercise)
         directory.mkdir(parents=True, exist_ok=True)
-        index = self.index(patient, exercise) or {"format": PROFILE_FORMAT, "patient": patient,
-                                                  "exercise": exercise, "current": None,
-                                                  "versions": []}
-        return ProfileWriter(directory, index, config, reference, started_from, session)
+        with locked(directory):
+            index = self.index(patient, exercise) or {
+                "format": PROFILE_FORMAT, "patient": patient, "exercise": exercise,
+                "current": None, "versions": []}
+            versions = index["versions"]
+            reopened = _reopenable(index, started_from) if reopen else None
+            version = reopened or len(versions) + 1
+            after = 0 if started_from is None else started_from.version
+            not_included = [v["version"] for v in versions if after < v["version"] < version]
+            writer = ProfileWriter(directory, version, config, reference, started_from,
+                                   session, not_included)
+            if reopened is not None:  # keep when the version was begun
+                writer.created = writer.base["created"] = versions[reopened - 1]["created"]
+            else:
+                index["versions"] = [*versions, {**writer.base, "status": "started",
+                                                 "trials": 0,
+                                                 "trials_total": writer.base["trials_before"]}]
+                write_json_atomic(directory / "index.json", index)
+        return writer
+
+
+def read_index(path: Path) -> dict[str, Any] | None:
+    """The profile index at ``path`` (None if there is none); ProfileError for an unreadable
+    or inconsistent one."""
+    if not path.exists():
+        return None
+    try:
+        document = json.loads(path.read_text())
+        if document.get("format") != PROFILE_FORMAT:
+            raise ValueError(f"format {document.get('format')!r}, expected {PROFILE_FORMAT}")
+        versions = document["versions"]
+        if [v["version"] for v in versions] != list(range(1, len(versions) + 1)):
+            raise ValueError("versions are not 1..n in order")
+        current = document["current"]
+        if current is not None and not 1 <= current <= len(versions):
+            raise ValueError(f"current version {current} does not exist")
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ProfileError(f"{path}: corrupt profile index: {exc}") from None
+    return dict(document)
+
+
+def _reopenable(index: dict[str, Any], started_from: Profile | None) -> int | None:
+    """The newest version not ``complete`` that began from ``started_from`` (None: none)."""
+    start = None if started_from is None else started_from.version
+    for entry in reversed(index["versions"]):
+        if entry.get("status") != "complete" and entry.get("started_from") == start:
+            return int(entry["version"])
+    return None
 
 
 class ProfileWriter:
-    """Writes one session's version of a profile after every trial (atomic)."""
+    """Writes one session's version of a profile after every trial (atomic, under the lock)."""
 
-    def __init__(self, directory: Path, index: dict[str, Any], config: Config,
-                 reference: SampledReference, started_from: Profile | None,
-                 session: str) -> None:
+    def __init__(self, directory: Path, version: int, config: Config,
+                 reference: SampledReference, started_from: Profile | None, session: str,
+                 not_included: list[int]) -> None:
         self.directory = directory
-        self.index = index
-        self.version = len(index["versions"]) + 1
+        self.version = version
+        self.config = config.replace({SESSION_KEY: version})
+        """The session's config: ``patient.session`` is its version number."""
         self.created = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+        config = self.config
         self.base = {
             "version": self.version, "file": f"v{self.version:04d}.npz",
             "created": self.created, "session": session,
@@ -241,7 +336,10 @@ class ProfileWriter:
             "exercise_name": config["exercise.name"], "law": config["law"],
             "assist_as_needed": bool(config["assist_as_needed.enabled"]),
             "mass_uncertainty": config["mass_uncertainty"],
+            "patient_seed": int(config["patient.seed"]),
+            "patient_session": int(config[SESSION_KEY]),
             "started_from": None if started_from is None else started_from.version,
+            "not_included": list(not_included),
             "trials_before": 0 if started_from is None else
             int(started_from.provenance.get("trials_total", 0)),
         }
@@ -249,14 +347,13 @@ class ProfileWriter:
     def save(self, trials: int, update: FeedforwardUpdate, final_max_abs_error: Any,
              complete: bool = False, metrics: dict[str, Any] | None = None) -> Path:
         """The feed-forward after ``trials`` trials of this session (and their last max |e|
-        per joint, rad) as this version, made current; returns the file written."""
+        per joint, rad) as this version, made current unless a higher version is; returns the
+        file written. The index is read, changed and written under the lock."""
         buffer = io.BytesIO()
         levels = np.empty((0,)) if update.levels is None else np.asarray(update.levels, float)
         np.savez(buffer, feedforward=np.asarray(update.feedforward, dtype=float), levels=levels)
         blob = buffer.getvalue()
         path = self.directory / self.base["file"]
-        with _atomic(path) as handle:
-            handle.write(blob)
         entry = dict(self.base)
         entry.update({
             "updated": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
@@ -267,9 +364,19 @@ class ProfileWriter:
         })
         if metrics:
             entry["metrics"] = metrics
-        versions = [v for v in self.index["versions"] if v["version"] != self.version]
-        self.index = {**self.index, "versions": [*versions, entry], "current": self.version}
-        write_json_atomic(self.directory / "index.json", self.index)
+        index_path = self.directory / "index.json"
+        with locked(self.directory):
+            index = read_index(index_path)
+            if index is None or len(index["versions"]) < self.version:
+                raise ProfileError(f"{index_path}: version {self.version} of this session is "
+                                   "no longer listed (index replaced meanwhile?); nothing "
+                                   "written")
+            with _atomic(path) as handle:
+                handle.write(blob)
+            index["versions"][self.version - 1] = entry
+            if index["current"] is None or index["current"] <= self.version:
+                index["current"] = self.version
+            write_json_atomic(index_path, index)
         return path
 
 
@@ -307,6 +414,11 @@ def load_initial(path: Path | str, config: Config,
     its sha256 checked against the index beside it, its model and reference against
     ``config``'s (:meth:`Profile.check_compatible`)."""
     path = Path(path)
+    with locked(path.parent, shared=True):
+        return _load_initial(path, config, reference)
+
+
+def _load_initial(path: Path, config: Config, reference: SampledReference) -> FeedforwardUpdate:
     index_path = path.parent / "index.json"
     try:
         index = json.loads(index_path.read_text())
@@ -314,6 +426,9 @@ def load_initial(path: Path | str, config: Config,
     except (OSError, ValueError, KeyError, TypeError, StopIteration) as exc:
         raise ProfileError(f"{path}: not a profile version listed in {index_path} "
                            f"({type(exc).__name__}: {exc})") from None
+    if "sha256" not in entry:
+        raise ProfileError(f"{path}: version {entry.get('version')} holds no trial yet "
+                           f"(status {entry.get('status')!r})")
     data = _read_npz(path, entry["sha256"])
     levels = data.get("levels")
     profile = Profile(str(index.get("patient")), str(index.get("exercise")),

@@ -111,6 +111,9 @@ def _patient_parameters() -> list[Parameter]:
     return [
         p("seed", Kind.INTEGER, "seed of the patient's random numbers (trial k draws from "
           "SeedSequence([seed, k]))", minimum=0.0),
+        p("session", Kind.INTEGER, "the patient's therapy session the run is (1: the first, "
+          "or no session): session s >= 2 draws trial k from SeedSequence([seed, s, k]); "
+          "--patient sets it to the profile version the session writes", minimum=1.0),
         p("sensor.quantisation", Kind.DOUBLE, "encoder resolution (rad); 0: none",
           minimum=0.0),
         p("sensor.position_noise", Kind.DOUBLE, "Gaussian noise on the measured q, sd (rad)",

@@ -65,6 +65,7 @@ class ExerciseResult:
         summary = self.session
         return {"patient": self.patient, "exercise": self.exercise,
                 "profile_started_from": self.started_from, "profile_version": self.version,
+                "patient_session": self.config["patient.session"],
                 "metrics": [m.to_json() for m in self.metrics],
                 "session": None if summary is None else summary.to_json()}
 
@@ -92,13 +93,16 @@ def run_exercise(prepared: PreparedExercise, book: ProfileBook, trials: int | No
                  on_trial: Callable[[TrialRecord], None] | None = None,
                  session: str = "") -> ExerciseResult:
     """Run ``prepared``: trial 1 from its profile, the profile saved after every trial (a
-    killed session keeps what it learned up to its last trial), metrics per trial."""
+    killed session keeps what it learned up to its last trial), metrics per trial. The
+    session's version is allocated first (:meth:`.ProfileBook.begin`, under the profile's
+    lock) and is the virtual patient's session (``patient.session``): its own noise."""
     cfg = prepared.config
     if trials is not None:
         cfg = cfg.replace({"max_trials": int(trials)})
-    experiment = Experiment(cfg)
     writer: ProfileWriter = book.begin(prepared.patient, prepared.exercise, cfg,
-                                       experiment.reference, prepared.start, session)
+                                       build_reference(cfg), prepared.start, session)
+    cfg = writer.config
+    experiment = Experiment(cfg)
     metrics: list[TrialMetrics] = []
 
     def conclude(conclusion: TrialConclusion) -> None:

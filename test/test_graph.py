@@ -23,6 +23,7 @@ import pytest
 from exo_ilc_ros.core.config import Config, load_config
 from exo_ilc_ros.core.experiment import Experiment, build_law
 from exo_ilc_ros.core.session import run_trials
+from exo_ilc_ros.nodes.realtime import thread_policies
 from exo_ilc_ros.orchestration.launcher import claim_domain_id
 
 pytestmark = pytest.mark.graph
@@ -138,6 +139,14 @@ def test_live_threshold_changes_next_trial_and_bad_values_are_rejected() -> None
         assert not fixed.successful and "cannot change" in fixed.reason
         assert _set(session, "schedule.position.threshold_low", [0.0, 0.0, 0.0]).successful
         seen = len(session.summaries)
+        # Lock-step: the controller asked the plant its mode and kept the normal scheduler (at
+        # SCHED_FIFO the ping-pong starved the machine; nodes/realtime.py).
+        session.spin_until(lambda: "plant_simulator is lock-step" in session.processes.log_tail(
+            "computed_torque_controller", 200), timeout=30.0)
+        assert {n: set(thread_policies(p.pid).values())
+                for n, p in session.processes.processes.items()} == dict.fromkeys(
+            ("plant_simulator", "computed_torque_controller", "ilc_supervisor"),
+            {os.SCHED_OTHER})
         session.spin_until(lambda: session.finished, timeout=120.0, stall_timeout=60.0)
     joints = config["joint_names"]
     assert [s.trial for s in session.summaries] == list(range(1, trials + 1))
@@ -229,13 +238,15 @@ def test_real_time_mode_runs_trials() -> None:
                            max_late_commands=1.0)  # late ones expected here: see above
     with GraphSession(config) as session:
         session.spin_until(lambda: session.started_at is not None, timeout=90.0)
-        policies = {name: {os.sched_getscheduler(int(tid))
-                           for tid in os.listdir(f"/proc/{process.pid}/task")}
+        session.spin_until(lambda: "control loop at" in session.processes.log_tail(
+            "computed_torque_controller", 200), timeout=30.0)  # asked the plant its mode
+        policies = {name: set(thread_policies(process.pid).values())
                     for name, process in session.processes.processes.items()}
         session.spin_until(lambda: session.finished, timeout=120.0, stall_timeout=60.0)
         errors = summaries_to_run(session.summaries, config).max_abs_error
     # The control loop (controller, real-time plant) runs at SCHED_FIFO thread_priority (50)
-    # on every thread where the OS allows it (nodes/realtime.py), the rest normally.
+    # on every thread where the OS allows it (nodes/realtime.py; the controller once the plant
+    # said it is real time: a 2-trial run is long enough), the rest normally.
     fifo = {os.SCHED_FIFO} if _fifo_allowed() else {os.SCHED_OTHER}
     assert policies == {"plant_simulator": fifo, "computed_torque_controller": fifo,
                         "ilc_supervisor": {os.SCHED_OTHER}}, policies

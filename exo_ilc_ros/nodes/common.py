@@ -32,6 +32,7 @@ from ..core.config import Config, flatten_tree, load_config, load_ros_yaml
 from ..core.errors import ConfigError, ExoIlcError
 from ..core.validation import validate_update
 from ..wire import topics
+from . import realtime
 
 RCLError = rclpy_implementation.RCLError
 
@@ -457,6 +458,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
 
     global _ARGV
     _ARGV = list(sys.argv if args is None else args)
+    realtime.node_process()  # this process is the nodes': their SCHED_FIFO requests apply
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:  # a bad --ros-args value: rcl says which and why

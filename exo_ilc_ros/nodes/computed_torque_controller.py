@@ -56,7 +56,7 @@ from .identified import (
     decodes,
     gate_classifier,
 )
-from .realtime import fifo_scheduling
+from .realtime import LoopPriority
 
 NAME = schema.CONTROLLER
 LATENCY_WINDOW = 100_000
@@ -125,9 +125,17 @@ class ComputedTorqueController(Node):
         ref = experiment.reference
         self.step(ref.acceleration[0], ref.position[0], ref.velocity[0], ref.position[0],
                   ref.velocity[0])  # compile the kernels before the first trial
-        self.realtime, self.scheduler = fifo_scheduling(config["thread_priority"])
-        if config["thread_priority"] and not self.realtime:
-            self.get_logger().warning(f"control loop at the {self.scheduler}")
+        self.loop_priority = LoopPriority(self, config["joint_states_publisher"],
+                                          config["thread_priority"])
+        """SCHED_FIFO once the plant is known to be real time (nodes/realtime.py)."""
+        self.priority_timer = self.create_timer(0.2, self.on_priority_timer,
+                                                clock=wall_clock())
+
+    def on_priority_timer(self) -> None:
+        """Decide the loop's scheduling (the plant's mode), then stop asking."""
+        self.loop_priority.poll()
+        if self.loop_priority.decided:
+            self.priority_timer.cancel()
 
     def on_feedforward(self, msg: JointTrajectory) -> None:
         """Load the next trial's reference and feed-forward profile (validated first)."""
@@ -255,7 +263,7 @@ class ComputedTorqueController(Node):
     def _loop_check(self) -> tuple[bytes, str, list[tuple[str, str]]]:
         level = DiagnosticStatus.OK
         reasons = []
-        values = [("scheduler", self.scheduler),
+        values = [("scheduler", self.loop_priority.scheduler),
                   ("aborted_trials", " ".join(map(str, self.aborted_trials))),
                   ("watchdog_tripped_trials", " ".join(map(str, self.tripped_trials))),
                   *(("watchdog/" + k, v) for k, v in self.watchdog.as_values())]

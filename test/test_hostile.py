@@ -113,6 +113,58 @@ def test_a_writer_not_yet_listed_is_a_warning_another_node_an_error() -> None:
     assert not admission.admit_raw(b"x", teleop)
     assert rejections.log.counts[Cause.FOREIGN_PUBLISHER] == 1
     assert logged[1][0] == "error" and "from /teleop" in logged[1][1]
+    # rclpy's own logger: one call site may not log at two severities (it raised ValueError,
+    # and raised in a waitable the EventsExecutor segfaulted: the plant died under the fuzz).
+    from rclpy.logging import get_logger
+
+    real = Rejections(SimpleNamespace(get_logger=lambda: get_logger("admission_test")))
+    for cause in (Cause.UNLISTED_PUBLISHER, Cause.FOREIGN_PUBLISHER, Cause.NOT_NUMERIC):
+        real.reject_cause(cause, "a test message")
+    assert real.log.total == 3
+
+
+HANDLER = """
+import os, sys, time
+import rclpy
+from rclpy.experimental import EventsExecutor
+from std_msgs.msg import Float64MultiArray
+from exo_ilc_ros.nodes.common import SAMPLES_QOS
+from exo_ilc_ros.nodes.identified import IdentifiedSubscription
+rclpy.init()
+node = rclpy.create_node("handler_test")
+delivered = []
+def deliver(raw, length, gid):
+    delivered.append(length)
+    if len(delivered) % 2:
+        raise ValueError("a bug of ours on some input")
+sub = IdentifiedSubscription(node, Float64MultiArray, "/handler_test", SAMPLES_QOS, deliver, 1000)
+publisher = node.create_publisher(Float64MultiArray, "/handler_test", SAMPLES_QOS)
+executor = EventsExecutor()
+executor.add_node(node)
+deadline = time.monotonic() + 20
+while len(delivered) < 10 and time.monotonic() < deadline:
+    publisher.publish(Float64MultiArray(data=[1.0]))
+    executor.spin_once(timeout_sec=0.05)
+print(len(delivered), sub.errors)
+"""
+
+
+def test_a_handler_that_raises_costs_the_message_not_the_node(tmp_path: Any) -> None:
+    """Jazzy's EventsExecutor segfaults when an exception leaves a waitable's task
+    (ros2/rclpy#1641): IdentifiedSubscription catches it, logs the traceback, counts it, and
+    the node goes on taking messages."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "ROS_DOMAIN_ID": os.environ.get("ROS_DOMAIN_ID", "0")}
+    done = subprocess.run([sys.executable, "-c", HANDLER], capture_output=True, text=True,
+                          timeout=120, env=env, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    delivered, errors = map(int, done.stdout.split())
+    assert delivered >= 10 and errors == (delivered + 1) // 2
+    assert "raised in its handler and was dropped" in done.stderr
+    assert "ValueError: a bug of ours on some input" in done.stderr
 
 
 def test_status_owner_and_sizes() -> None:

@@ -45,23 +45,28 @@ class ClusterError(ExoIlcError):
 
 
 def _ignore_interrupt() -> None:
-    """Worker initializer: Ctrl-C is the parent's to handle (no tracebacks from the workers)."""
+    """Worker initializer: Ctrl-C is the parent's to handle (no tracebacks from the workers);
+    the SIGINT the worker was started with blocked (:func:`_interrupt_deferred`) is ignored
+    from here on, one already pending with it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 @contextmanager
-def _interrupt_ignored() -> Iterator[None]:
-    """SIGINT ignored while worker processes are started: they inherit it, so a Ctrl-C while
-    they import (before the initializer runs) prints no KeyboardInterrupt of theirs either.
-    A no-op outside the main thread (only it may set signal handlers)."""
+def _interrupt_deferred() -> Iterator[None]:
+    """SIGINT blocked while worker processes are started: they inherit the mask, so a Ctrl-C
+    while they import (before the initializer runs) prints no KeyboardInterrupt of theirs, and
+    here it stays pending and is raised as soon as the workers are started. (Ignoring it instead
+    lost a Ctrl-C that came in that window: the study ran on; seen in CI under load.) A no-op
+    outside the main thread (only it handles signals)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def run_cells(cells: Sequence[StudyCell], workers: int = 1, dask: str | Any | None = None,
@@ -88,7 +93,7 @@ def _run_on_pool(cells: Sequence[StudyCell], workers: int,
                                initializer=_ignore_interrupt)
     results: list[CellResult | None] = [None] * len(cells)
     try:
-        with _interrupt_ignored():  # the workers start (on submit) with SIGINT ignored
+        with _interrupt_deferred():  # the workers start (on submit) with SIGINT blocked
             pending: dict[Future[CellResult], int] = {
                 pool.submit(run_cell, cell): i for i, cell in enumerate(cells)}
         while pending:
@@ -99,9 +104,14 @@ def _run_on_pool(cells: Sequence[StudyCell], workers: int,
                 if on_done is not None:
                     on_done(cells[index])
     except BaseException:  # Ctrl-C or a worker's error: stop every worker now, not after its cell
-        for process in list(getattr(pool, "_processes", {}).values()):
+        processes = list(getattr(pool, "_processes", {}).values())
+        for process in processes:
             process.terminate()
-        pool.shutdown(wait=True, cancel_futures=True)
+        for process in processes:  # joined here with a bound: shutdown(wait=True) waits for the
+            process.join(timeout=10.0)  # pool's manager thread, which a killed worker may stall
+            if process.is_alive():
+                process.kill()
+        pool.shutdown(wait=False, cancel_futures=True)
         raise
     pool.shutdown(wait=True)
     return [r for r in results if r is not None]

@@ -50,11 +50,15 @@ class Rejections:
 
     def reject(self, rejection: Rejection) -> None:
         """Count ``rejection``; log it if its cause is new."""
-        if self.log.record(rejection):
-            logger = self.node.get_logger()
-            (logger.warning if rejection.cause is Cause.UNLISTED_PUBLISHER else logger.error)(
-                f"rejected ({rejection.cause.value}): {rejection.message}; further "
+        if not self.log.record(rejection):
+            return
+        text = (f"rejected ({rejection.cause.value}): {rejection.message}; further "
                 f"{rejection.cause.value} rejections are counted on /diagnostics")
+        # Two call sites: rclpy's logger refuses one call site with two severities (ValueError).
+        if rejection.cause is Cause.UNLISTED_PUBLISHER:
+            self.node.get_logger().warning(text)
+        else:
+            self.node.get_logger().error(text)
 
     def reject_cause(self, cause: Cause, message: str) -> None:
         """Count a rejection given as cause and message."""

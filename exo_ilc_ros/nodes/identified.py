@@ -22,6 +22,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import time
+import traceback
 from collections.abc import Callable
 from typing import Any
 
@@ -81,6 +82,8 @@ KEEP_BUFFER = 1 << 20
 """A take buffer grown beyond this (by an oversized message) is shrunk again."""
 GID_SIZE = 16
 """RMW_GID_STORAGE_SIZE in Jazzy's rmw."""
+HANDLER_ERRORS_LOGGED = 3
+"""Tracebacks logged per subscription for messages whose handler raised; later ones counted."""
 
 
 class _Allocator(ctypes.Structure):
@@ -231,6 +234,8 @@ class IdentifiedSubscription(Waitable):
         self.topic = topic
         self.taker = RawTaker(self.handle, max_bytes)
         self.deliver = deliver
+        self.errors = 0
+        """Messages whose handler raised (dropped; see :meth:`execute`)."""
         self._index = 0
         node.add_waitable(self)
 
@@ -255,8 +260,21 @@ class IdentifiedSubscription(Waitable):
         return self.taker.take()
 
     async def execute(self, taken: tuple[bytes | None, int, bytes, int] | None) -> None:
-        if taken is not None:
+        """Deliver a taken message. Nothing may escape: Jazzy's EventsExecutor segfaults on an
+        exception raised in a waitable's task (ros2/rclpy#1641; reproduced here, and a plant
+        died so under the fuzz test), so an error of ours on some input costs that message,
+        is logged with its traceback (the first few) and counted (``handler_errors``)."""
+        if taken is None:
+            return
+        try:
             self.deliver(taken[0], taken[1], taken[2])
+        except Exception:
+            self.errors += 1
+            if self.errors <= HANDLER_ERRORS_LOGGED:
+                self.node.get_logger().error(
+                    f"{self.topic}: a message ({taken[1]} bytes) raised in its handler and was "
+                    f"dropped (the node keeps running; counted as handler_errors):\n"
+                    f"{traceback.format_exc()}")
 
     def get_num_entities(self) -> NumberOfEntities:
         return NumberOfEntities(1)
@@ -376,6 +394,18 @@ class TrustedInput(Admission):
     def get_publisher_count(self) -> int:
         """Publishers matched (any sender)."""
         return self.subscription.get_publisher_count()
+
+    def health(self) -> tuple[bytes, str, list[tuple[str, str]]]:
+        """:meth:`Admission.health`, and ERROR once a message's handler raised (a bug: the
+        message was dropped, the node kept running)."""
+        level, reason, values = super().health()
+        errors = self.subscription.errors
+        if not errors:
+            return level, reason, values
+        dropped = f"{errors} message(s) on {self.check.topic} dropped: their handler raised " \
+            "(see the log)"
+        return DiagnosticStatus.ERROR, "; ".join(r for r in (reason, dropped) if r), \
+            [*values, (f"handler_errors{self.check.topic}", str(errors))]
 
     def on_message(self, raw: bytes | None, length: int, gid: bytes) -> None:
         """The callback, for an admitted message."""

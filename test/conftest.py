@@ -10,6 +10,7 @@ from __future__ import annotations
 import fcntl
 import os
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
@@ -72,3 +73,13 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     threading.Thread(target=watchdog, name="exit-watchdog", daemon=True).start()
     # Last resort for a hang in C-level finalisation, where no Python thread runs any more.
     faulthandler.dump_traceback_later(EXIT_GRACE * 2, exit=True)
+
+
+@pytest.fixture(autouse=True)
+def _test_process_keeps_the_normal_scheduler() -> Iterator[None]:
+    """No test may leave this process at SCHED_FIFO: every graph and command it starts later
+    inherits the policy (a lock-step graph and a study's workers at FIFO starved the machine and
+    ate a Ctrl-C in CI). nodes/realtime.py changes scheduling only inside ``run_nodes``."""
+    yield
+    if hasattr(os, "sched_getscheduler"):
+        assert os.sched_getscheduler(0) == os.SCHED_OTHER, "a test left the process at FIFO"

@@ -174,5 +174,9 @@ def test_run_nodes_polls_stops_on_exit_code_and_drains_last() -> None:
             super().destroy_node()
 
     assert common.run_nodes([Plain, Failing, Draining], ["run_nodes"]) == 7
+    from exo_ilc_ros.nodes import realtime  # its nodes' SCHED_FIFO requests stop with it
+
+    assert realtime.fifo_scheduling(50) == (
+        False, "normal (a node inside another program: its scheduling is left alone)")
     assert log[:2] == ["plain destroyed", "failing destroyed after 3 polls"]
     assert log[2].startswith("draining destroyed") and int(log[2].split()[3]) > 3

@@ -19,8 +19,9 @@ from exo_ilc_ros.nodes import realtime
 CHILD = """
 import json, os, threading
 from exo_ilc_ros.nodes.realtime import fifo_scheduling, node_process, thread_policies, policy_of
-if {node}:
-    node_process()
+import contextlib
+context = node_process() if {node} else contextlib.nullcontext()
+context.__enter__()
 gate = threading.Event()
 before = [threading.Thread(target=gate.wait) for _ in range(3)]
 for t in before:

@@ -451,6 +451,11 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     and then destroyed (the recorder closes its bag). Returns the exit code: 0, 2 for a
     configuration or bag error, or the first ``exit_code`` a polling node sets.
     """
+    with realtime.node_process():  # the nodes' SCHED_FIFO requests apply while they run
+        return _run_nodes(factories, args)
+
+
+def _run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None) -> int:
     stop: list[int] = []
 
     def on_signal(signum: int, frame: Any) -> None:
@@ -458,7 +463,6 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
 
     global _ARGV
     _ARGV = list(sys.argv if args is None else args)
-    realtime.node_process()  # this process is the nodes': their SCHED_FIFO requests apply
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:  # a bad --ros-args value: rcl says which and why

@@ -28,6 +28,7 @@ import contextlib
 import os
 import resource
 import time
+from collections.abc import Iterator
 from typing import Any
 
 NORMAL = "normal"
@@ -37,10 +38,18 @@ by then: an arm of your own, real time."""
 _NODE_PROCESS = False
 
 
-def node_process() -> None:
-    """This process runs nodes (``nodes.common.run_nodes``): their requests are carried out."""
+@contextlib.contextmanager
+def node_process() -> Iterator[None]:
+    """While ``nodes.common.run_nodes`` runs nodes in this process: their requests are carried
+    out. Only while: a test that ran ``run_nodes`` in-process and then built a real-time plant
+    put the pytest process at SCHED_FIFO, and a study it started later (its workers at FIFO
+    too) never let its main thread handle Ctrl-C (seen in CI)."""
     global _NODE_PROCESS
-    _NODE_PROCESS = True
+    before, _NODE_PROCESS = _NODE_PROCESS, True
+    try:
+        yield
+    finally:
+        _NODE_PROCESS = before
 
 
 def fifo_scheduling(priority: int) -> tuple[bool, str]:

@@ -117,7 +117,7 @@ def test_patient_keys_map_to_native_joint_effects() -> None:
                                - np.array([0.0, 0.5, 3.0]) * (q - np.array([0.0, 0.1, 0.3])),
                                rtol=1e-12, atol=1e-15)
     graded = config.replace({"patient.spasticity.mas_grade": "2"})
-    k, b, _, _ = MAS_PRESETS["2"]
+    k, b, _, _, _ = MAS_PRESETS["2"]
     np.testing.assert_allclose(effects_from_config(graded).stiffness, [k] * 3)
     np.testing.assert_allclose(effects_from_config(graded).damping, [b] * 3)
     assert effects_not_simulated(graded) == ["spasticity reflex"]

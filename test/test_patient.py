@@ -17,19 +17,25 @@ from exo_ilc_ros.core.config import load_config, scenario_names, scenario_path
 from exo_ilc_ros.core.controller import GuardedControlStep
 from exo_ilc_ros.core.errors import ConfigError
 from exo_ilc_ros.core.experiment import Experiment
+from exo_ilc_ros.core.joint_forces import passive_effort_into
 from exo_ilc_ros.core.patient import (
     MAS_PRESETS,
     PatientLearning,
     PatientModel,
     measure_into,
-    passive_effort_into,
     patient_period,
-    rk4_period_passive,
     true_error,
 )
-from exo_ilc_ros.core.plant import PlantStepper
+from exo_ilc_ros.core.plant import PlantStepper, rk4_period, rk4_period_with_joint_forces
 from exo_ilc_ros.core.session import run_trials
 from exo_ilc_ros.core.store import learning_key
+from exo_ilc_ros.core.study import (
+    StudyCell,
+    resolve_law,
+    resolve_scenario,
+    run_cell,
+    study_cells,
+)
 
 SHORT = {"trajectory.duration": 1.0}
 SHIPPED = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic", "learning")
@@ -123,10 +129,20 @@ def test_passive_rk4_matches_an_independent_integrator() -> None:
     from exo_ilc_ros.core.dynamics import workspace
 
     q, qd = q0.copy(), qd0.copy()
-    rk4_period_passive(q, qd, effort, ex.period, ex.substeps, ex.plant.kernel_args,
-                       ex.nominal.kernel_args, 0, workspace(3), np.empty((10, 3)),
-                       np.empty(6), model.joint, model.scalars[2], np.empty(3))
+    rk4_period_with_joint_forces(q, qd, effort, ex.period, ex.substeps, ex.plant.kernel_args,
+                                 ex.nominal.kernel_args, 0, workspace(3), np.empty((10, 3)),
+                                 np.empty(6), True, model.joint, model.scalars[2], np.empty(3))
     np.testing.assert_allclose(np.concatenate([q, qd]), exact, atol=1e-9)
+    # without the joint forces: rk4_period's doubles exactly, whatever the joint array holds
+    plain_q, plain_qd = q0.copy(), qd0.copy()
+    rk4_period(plain_q, plain_qd, effort, ex.period, ex.substeps, ex.plant.kernel_args,
+               ex.nominal.kernel_args, 0, workspace(3), np.empty((10, 3)), np.empty(6))
+    q, qd = q0.copy(), qd0.copy()
+    rk4_period_with_joint_forces(q, qd, effort, ex.period, ex.substeps, ex.plant.kernel_args,
+                                 ex.nominal.kernel_args, 0, workspace(3), np.empty((10, 3)),
+                                 np.empty(6), False, model.joint, model.scalars[2], np.empty(3))
+    assert np.array_equal(q, plain_q) and np.array_equal(qd, plain_qd)
+    assert not np.array_equal(q, exact[:3])
 
 
 def test_held_torque_delay_reflex_and_voluntary_by_hand() -> None:
@@ -167,14 +183,71 @@ def _scratch() -> tuple[Any, ...]:
     return workspace(3), np.empty((10, 3)), np.empty(9)
 
 
+def _reflex_torque(config: Any, velocity: list[float]) -> np.ndarray:
+    """The torque :func:`patient_period` holds over sample 0 with no command and the true
+    velocity ``velocity`` (reflex delay 0: the reflex sees it at once): the reflex alone."""
+    ex = Experiment(config)
+    model = PatientModel(config)
+    ref = ex.reference
+    held = np.empty(3)
+    patient_period(0, ref.position[0].copy(), np.array(velocity), np.zeros(3), ref.position,
+                   ref.velocity, ex.period, ex.substeps, ex.plant.kernel_args,
+                   ex.nominal.kernel_args, 0, *_scratch(), model.joint, model.scalars,
+                   np.array([1.0, 0.0]), np.zeros((0, 0)), np.zeros((2, ref.samples, 3)),
+                   np.zeros((3, 3)), held)
+    return held
+
+
+def test_reflex_is_clipped_at_its_ceiling_by_hand() -> None:
+    """-sgn(v) min(G max(0, |v| - v_th), R): 0 at or below the threshold, G (|v| - v_th) up to
+    the ceiling R, then R, against the stretch; R = 0 is no ceiling."""
+    config = _config("ideal", **{"patient.spasticity.reflex_gain": [2.0, 2.0, 2.0],
+                                 "patient.spasticity.reflex_threshold": [0.5, 0.5, 0.5],
+                                 "patient.spasticity.reflex_max": [1.0, 1.0, 0.0],
+                                 "patient.spasticity.reflex_delay": 0.0})
+    np.testing.assert_array_equal(_reflex_torque(config, [0.4, -0.5, 0.5]), [0.0, 0.0, 0.0])
+    # 0.9 rad/s: 2 x 0.4 = 0.8 < 1; -3 rad/s: 2 x 2.5 = 5 > 1 -> 1; no ceiling on joint 3: 5
+    np.testing.assert_allclose(_reflex_torque(config, [-3.0, 0.9, -3.0]), [1.0, -0.8, 5.0],
+                               rtol=1e-15)
+    np.testing.assert_allclose(_reflex_torque(config, [3.0, -0.9, 3.0]), [-1.0, 0.8, -5.0],
+                               rtol=1e-15)
+    np.testing.assert_allclose(_reflex_torque(config, [1.0, -1.0, 1.0]), [-1.0, 1.0, -1.0],
+                               rtol=1e-15)  # 2 x 0.5 = the ceiling exactly
+    grade = PatientModel(_config("spastic"))
+    g, th, ceiling = MAS_PRESETS["2"][2:]
+    assert ceiling == pytest.approx(g * (np.pi - th), abs=0.05)  # the reflex at 180 deg/s
+    np.testing.assert_array_equal(grade.joint[8], [ceiling] * 3)
+
+
+def test_the_reflex_ceiling_keeps_the_safe_hold_finite() -> None:
+    """The tuned sign law under ``spastic`` at 10 %: with the MAS 2 reflex unbounded (the
+    preset's values as ``custom``, no ceiling) the safe hold after the envelope abort of trial
+    161 runs away to a non-finite state (the study's FAILED cell before the ceiling); with the
+    preset's ceiling the envelope aborts trials too, and every trial stays finite."""
+    law, scenario = resolve_law("tuned"), resolve_scenario("spastic")
+    k, b, g, th, _ = MAS_PRESETS["2"]
+    [unbounded] = study_cells([law], [scenario], [0.1], [0], 162)
+    values = {**unbounded.values, "patient.spasticity.mas_grade": "custom",
+              "patient.spasticity.stiffness": [k] * 3, "patient.spasticity.damping": [b] * 3,
+              "patient.spasticity.reflex_gain": [g] * 3,
+              "patient.spasticity.reflex_threshold": [th] * 3}
+    old = run_cell(StudyCell("tuned", "spastic", 0.1, 0, values))
+    assert old.aborted and old.nonfinite is not None and "safe hold" in old.nonfinite
+    [bounded] = study_cells([law], [scenario], [0.1], [0], 220)
+    new = run_cell(bounded)
+    assert new.aborted and new.aborted[-1] == 220  # the safe hold ran
+    assert new.nonfinite is None and new.failure is None
+    assert np.all(np.isfinite(new.max_abs_effort)) and np.all(new.max_abs_effort <= 40.0)
+
 def test_mas_grade_sets_the_preset() -> None:
     config = _config("spastic")
-    k, b, g, th = MAS_PRESETS["2"]
+    k, b, g, th, ceiling = MAS_PRESETS["2"]
     joint = PatientModel(config).joint
     np.testing.assert_array_equal(joint[2], [k] * 3)  # stiffness (no passive stiffness here)
     np.testing.assert_array_equal(joint[0], [b] * 3)  # damping (no friction here)
     np.testing.assert_array_equal(joint[4], [g] * 3)
     np.testing.assert_array_equal(joint[5], [th] * 3)
+    np.testing.assert_array_equal(joint[8], [ceiling] * 3)
     assert _config("ideal", **{"patient.spasticity.mas_grade": 2})[
         "patient.spasticity.mas_grade"] == "2"  # YAML's unquoted 2
 
@@ -287,6 +360,9 @@ def test_resume_reproduces_the_patient_run(tmp_path: Path) -> None:
     ("spasticity:\n        mas_grade: \"4\"", "patient.spasticity.mas_grade", "one of"),
     ("spasticity:\n        mas_grade: \"2\"\n        damping: [0.1, 0.0, 0.0]",
      "patient.spasticity.damping", "either a mas_grade"),
+    ("spasticity:\n        reflex_max: [2.0, -1.0, 0.0]", "patient.spasticity.reflex_max", ">= 0"),
+    ("spasticity:\n        mas_grade: \"1\"\n        reflex_max: [2.0, 2.0, 2.0]",
+     "patient.spasticity.reflex_max", "either a mas_grade"),
     ("sensr:\n        quantisation: 1.0e-4", "patient.sensr.quantisation", "unknown"),
     ("seed: -1", "patient.seed", ">= 0"),
 ])

@@ -124,7 +124,7 @@ def effects_from_config(config: Config) -> JointEffects:
     :func:`effects_not_simulated`. All zero: the MJCF has no effect attributes."""
     from .patient import spasticity_values
 
-    k_spastic, b_spastic, _, _ = spasticity_values(config)
+    k_spastic, b_spastic, _, _, _ = spasticity_values(config)
 
     def joint(name: str) -> np.ndarray:
         return np.asarray(config[f"patient.{name}"], dtype=float)
@@ -143,7 +143,7 @@ def effects_not_simulated(config: Config) -> list[str]:
     from .patient import spasticity_values
 
     out = []
-    _, _, reflex_gain, _ = spasticity_values(config)
+    _, _, reflex_gain, _, _ = spasticity_values(config)
     if any(reflex_gain):
         out.append("spasticity reflex")
     checks = {

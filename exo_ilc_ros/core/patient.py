@@ -14,14 +14,16 @@ Per sample i of a trial (true state x_i = (q_i, qdot_i) of the plant):
    (0 at i = 0), optionally low-passed, v_i = v_{i-1} + a (raw_i - v_{i-1}), a = T / (tau + T).
 2. **Held torques** over [t_i, t_i+1) (:func:`patient_period`): the actuator applies the command
    of sample i - d (``effort_delay`` d control periods; the first command before that); the
-   **stretch reflex** adds -G sgn(v) max(0, |v| - v_th) with v = qdot at sample i - d_r
-   (``reflex_delay`` rounded to control periods); the **voluntary effort** adds
+   **stretch reflex** adds -sgn(v) min(G max(0, |v| - v_th), R) with v = qdot at sample
+   i - d_r (``reflex_delay`` rounded to control periods) and R the reflex's ceiling
+   ``reflex_max`` (a muscle's force saturates; 0: no ceiling); the **voluntary effort** adds
    tau^v_i = tau^v_{i-1} + a_v (g_k (K_v (q_d(t_i + s_k) - q_i) + D_v (qdot_d(t_i + s_k) - qdot_i))
    - tau^v_{i-1}): the patient's own sluggish tracking (first-order lag a_v = T / (tau_v + T)) of
    the reference shifted by the trial's timing jitter s_k, with gain g_k = (1 + sigma_a z_k)
    (amplitude jitter, >= 0) times the fatigue f_k = f_min + (1 - f_min) exp(-r (k - 1)); a
    **learning patient** adds the torque profile x_f + x_s of :class:`PatientLearning`.
-3. **Passive joint forces** at every RK4 stage (:func:`passive_effort_into`): -B qdot
+3. **Passive joint forces** at every RK4 stage (:func:`joint_forces.passive_effort_into`,
+   in :func:`plant.rk4_period_with_joint_forces`): -B qdot
    - F_c tanh(qdot / v_s) - K (q - q_0), with B = viscous friction + spastic damping and K =
    passive + spastic stiffness.
 
@@ -42,23 +44,21 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from .dynamics import forward_dynamics_into
-from .plant import _acceleration_into, clamp_counted, rk4_period
+from .joint_forces import COULOMB, REST, STIFFNESS, VISCOUS
+from .plant import clamp_counted, rk4_period_with_joint_forces
 
 if TYPE_CHECKING:
     from .config import Config
     from .laws import TrialRecord
 
-# Rows of the per-joint parameter array ``joint`` (kernel argument):
-VISCOUS = 0  # B: viscous friction + spastic damping (N m s/rad)
-COULOMB = 1  # F_c (N m)
-STIFFNESS = 2  # K: passive + spastic stiffness (N m/rad)
-REST = 3  # q_0 (rad)
+# Rows of the per-joint parameter array ``joint`` (kernel argument); rows 0-3 (VISCOUS B,
+# COULOMB F_c, STIFFNESS K, REST q_0) are the passive forces' (:mod:`.joint_forces`):
 REFLEX_GAIN = 4  # G (N m s/rad)
 REFLEX_THRESHOLD = 5  # v_th (rad/s)
 VOLUNTARY_STIFFNESS = 6  # K_v (N m/rad)
 VOLUNTARY_DAMPING = 7  # D_v (N m s/rad)
-_JOINT_ROWS = 8
+REFLEX_MAX = 8  # the reflex torque's ceiling (N m); 0: none
+_JOINT_ROWS = 9
 
 # Entries of the scalar array ``scalars`` (kernel argument):
 QUANTISATION = 0  # rad, 0: none
@@ -75,36 +75,42 @@ PERIOD = 10  # T (s)
 LEARNING_ON = 11  # 1.0: the patient's learned torque profile is added
 _SCALARS = 12
 
-MAS_PRESETS: dict[str, tuple[float, float, float, float]] = {
-    "0": (0.0, 0.0, 0.0, 0.0),
-    "1": (1.0, 0.1, 0.25, 0.5),
-    "1+": (2.0, 0.2, 0.5, 0.35),
-    "2": (4.0, 0.4, 1.0, 0.2),
-    "3": (8.0, 0.8, 2.0, 0.1),
+MAS_PRESETS: dict[str, tuple[float, float, float, float, float]] = {
+    "0": (0.0, 0.0, 0.0, 0.0, 0.0),
+    "1": (1.0, 0.1, 0.25, 0.5, 0.66),
+    "1+": (2.0, 0.2, 0.5, 0.35, 1.4),
+    "2": (4.0, 0.4, 1.0, 0.2, 2.9),
+    "3": (8.0, 0.8, 2.0, 0.1, 6.1),
 }
 """MAS grade -> (stiffness N m/rad, damping N m s/rad, reflex gain N m s/rad, reflex threshold
-rad/s), the same on every joint. Derived, not fitted: McCrea et al. 2003 (J Neurosci Methods
-128:121) found the spring-damper stiffness and damping of the hypertonic elbow to rise with the
-MAS (r = 0.82); here they double from grade to grade, grade 1 adding about the normal passive
-elbow stiffness (0.4-1.8 N m/rad, Wiegner and Watts 1986, JNNP 49:1171) and ten times the
-OpenSim arm damping (0.1 N m s/rad, Saul et al. 2015). Reflex: the delayed velocity-threshold
-reflex of SpasticMyoElbow (delay 0.1 s), its gain doubling and its threshold falling with the
-grade (reflex stiffness explains ~74 % of the velocity-dependent resistance, McPherson et al.
-2018). A fitted table for one patient should replace them."""
+rad/s, reflex ceiling N m), the same on every joint. Derived, not fitted: McCrea et al. 2003 (J
+Neurosci Methods 128:121) found the spring-damper stiffness and damping of the hypertonic elbow
+to rise with the MAS (r = 0.82); here they double from grade to grade, grade 1 adding about the
+normal passive elbow stiffness (0.4-1.8 N m/rad, Wiegner and Watts 1986, JNNP 49:1171) and ten
+times the OpenSim arm damping (0.1 N m s/rad, Saul et al. 2015). Reflex: the delayed
+velocity-threshold reflex of SpasticMyoElbow (delay 0.1 s), its gain doubling and its threshold
+falling with the grade (reflex stiffness explains ~74 % of the velocity-dependent resistance,
+McPherson et al. 2018). Ceiling: the preset's own reflex at 180 deg/s (pi rad/s), G (pi - v_th)
+to two digits, the fastest stretch of the data behind it (McCrea et al. 2003 stretched at 30-180
+deg/s, McPherson et al. 2018 at 15-150 deg/s): the linear reflex is not extrapolated beyond the
+velocities measured, and stays there above them (a judgement: a muscle's force and reflex EMG
+saturate; stretch-evoked torque depends only weakly on velocity, Powers, Campbell and Rymer
+1989, Ann Neurol 26:32). A fitted table for one patient should replace them."""
 
 
 def spasticity_values(config: Config) -> tuple[list[float], list[float], list[float],
-                                                list[float]]:
-    """Per joint: spastic stiffness, damping, reflex gain, reflex threshold (the MAS preset, or
-    the ``custom`` values)."""
+                                                list[float], list[float]]:
+    """Per joint: spastic stiffness, damping, reflex gain, reflex threshold, reflex ceiling
+    (0: none) (the MAS preset, or the ``custom`` values)."""
     grade = config["patient.spasticity.mas_grade"]
     n = config.joints
     if grade != "custom":
-        k, b, g, th = MAS_PRESETS[grade]
-        return [k] * n, [b] * n, [g] * n, [th] * n
+        k, b, g, th, ceiling = MAS_PRESETS[grade]
+        return [k] * n, [b] * n, [g] * n, [th] * n, [ceiling] * n
     return (config["patient.spasticity.stiffness"], config["patient.spasticity.damping"],
             config["patient.spasticity.reflex_gain"],
-            config["patient.spasticity.reflex_threshold"])
+            config["patient.spasticity.reflex_threshold"],
+            config["patient.spasticity.reflex_max"])
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,7 +135,7 @@ class PatientModel:
         self.session = int(config["patient.session"])
         """The patient's therapy session (1: the first, or none)."""
         self.period = period
-        stiff, damp, gain, threshold = spasticity_values(config)
+        stiff, damp, gain, threshold, reflex_max = spasticity_values(config)
         joint = np.zeros((_JOINT_ROWS, n))
         joint[VISCOUS] = np.add(config["patient.friction.viscous"], damp)
         joint[COULOMB] = config["patient.friction.coulomb"]
@@ -137,6 +143,7 @@ class PatientModel:
         joint[REST] = config["patient.passive.rest_position"]
         joint[REFLEX_GAIN] = gain
         joint[REFLEX_THRESHOLD] = threshold
+        joint[REFLEX_MAX] = reflex_max
         joint[VOLUNTARY_STIFFNESS] = config["patient.voluntary.stiffness"]
         joint[VOLUNTARY_DAMPING] = config["patient.voluntary.damping"]
         self.joint = joint
@@ -288,69 +295,6 @@ def measure_into(i: int, q: np.ndarray, qd: np.ndarray, scalars: np.ndarray, noi
         qd_out[j] = v
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def passive_effort_into(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, joint: np.ndarray,
-                        inverse_stribeck: float, out: np.ndarray) -> None:
-    """``effort`` plus the passive joint forces of eq (6)'s Q^v, Q^f, Q^c (module docstring,
-    step 3): Q - B qdot - F_c tanh(qdot / v_s) - K (q - q_0), into ``out``."""
-    for j in range(q.shape[0]):
-        out[j] = (effort[j] - joint[VISCOUS, j] * qd[j]
-                  - joint[COULOMB, j] * np.tanh(qd[j] * inverse_stribeck)
-                  - joint[STIFFNESS, j] * (q[j] - joint[REST, j]))
-
-
-@njit(cache=True, error_model="numpy")
-def rk4_period_passive(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, period: float,
-                       substeps: int, plant: tuple, nominal: tuple, mode: int, ws: tuple,
-                       stage: np.ndarray, extra: np.ndarray, joint: np.ndarray,
-                       inverse_stribeck: float, total: np.ndarray) -> None:
-    """:func:`plant.rk4_period` (eq (8), classic RK4 on the sub-steps, ``effort`` held) with the
-    passive joint forces of :func:`passive_effort_into` evaluated at every stage's state
-    (``total``: an (n,) scratch array)."""
-    n = q.shape[0]
-    h = period / substeps
-    masses, axes, offsets, coms, inertias, gravity = plant
-    k1v, k2v, k3v, k4v = stage[0], stage[1], stage[2], stage[3]
-    q2, v2, q3, v3, q4, v4 = stage[4], stage[5], stage[6], stage[7], stage[8], stage[9]
-    for _ in range(substeps):
-        passive_effort_into(q, qd, effort, joint, inverse_stribeck, total)
-        if mode == 0:
-            forward_dynamics_into(q, qd, total, masses, axes, offsets, coms, inertias, gravity,
-                                  ws, k1v)
-        else:
-            _acceleration_into(q, qd, total, plant, nominal, mode, ws, extra, k1v)
-        for j in range(n):
-            q2[j] = q[j] + 0.5 * h * qd[j]
-            v2[j] = qd[j] + 0.5 * h * k1v[j]
-        passive_effort_into(q2, v2, effort, joint, inverse_stribeck, total)
-        if mode == 0:
-            forward_dynamics_into(q2, v2, total, masses, axes, offsets, coms, inertias, gravity,
-                                  ws, k2v)
-        else:
-            _acceleration_into(q2, v2, total, plant, nominal, mode, ws, extra, k2v)
-        for j in range(n):
-            q3[j] = q[j] + 0.5 * h * v2[j]
-            v3[j] = qd[j] + 0.5 * h * k2v[j]
-        passive_effort_into(q3, v3, effort, joint, inverse_stribeck, total)
-        if mode == 0:
-            forward_dynamics_into(q3, v3, total, masses, axes, offsets, coms, inertias, gravity,
-                                  ws, k3v)
-        else:
-            _acceleration_into(q3, v3, total, plant, nominal, mode, ws, extra, k3v)
-        for j in range(n):
-            q4[j] = q[j] + h * v3[j]
-            v4[j] = qd[j] + h * k3v[j]
-        passive_effort_into(q4, v4, effort, joint, inverse_stribeck, total)
-        if mode == 0:
-            forward_dynamics_into(q4, v4, total, masses, axes, offsets, coms, inertias, gravity,
-                                  ws, k4v)
-        else:
-            _acceleration_into(q4, v4, total, plant, nominal, mode, ws, extra, k4v)
-        for j in range(n):
-            q[j] = q[j] + (h / 6.0) * (qd[j] + 2.0 * v2[j] + 2.0 * v3[j] + v4[j])
-            qd[j] = qd[j] + (h / 6.0) * (k1v[j] + 2.0 * k2v[j] + 2.0 * k3v[j] + k4v[j])
-
-
 @njit(cache=True, error_model="numpy")
 def patient_period(i: int, q: np.ndarray, qd: np.ndarray, command: np.ndarray,
                    q_ref: np.ndarray, qd_ref: np.ndarray, period: float, substeps: int,
@@ -384,7 +328,11 @@ def patient_period(i: int, q: np.ndarray, qd: np.ndarray, command: np.ndarray,
             v = history[0, r, j]
             excess = abs(v) - joint[REFLEX_THRESHOLD, j]
             if excess > 0.0:
-                held[j] -= joint[REFLEX_GAIN, j] * excess * (1.0 if v > 0.0 else -1.0)
+                reflex = joint[REFLEX_GAIN, j] * excess
+                ceiling = joint[REFLEX_MAX, j]
+                if 0.0 < ceiling < reflex:
+                    reflex = ceiling
+                held[j] -= reflex * (1.0 if v > 0.0 else -1.0)
             raw = gain * (joint[VOLUNTARY_STIFFNESS, j] * (q_ref[s, j] - q[j])
                           + joint[VOLUNTARY_DAMPING, j] * (qd_ref[s, j] - qd[j]))
             memory[0, j] += alpha * (raw - memory[0, j])
@@ -392,11 +340,9 @@ def patient_period(i: int, q: np.ndarray, qd: np.ndarray, command: np.ndarray,
     if scalars[LEARNING_ON] > 0.0:
         for j in range(n):
             held[j] += learned[i, j]
-    if scalars[PASSIVE_ON] > 0.0:
-        rk4_period_passive(q, qd, held, period, substeps, plant, nominal, mode, ws, stage,
-                           extra[:2 * n], joint, scalars[INVERSE_STRIBECK], extra[2 * n:])
-    else:
-        rk4_period(q, qd, held, period, substeps, plant, nominal, mode, ws, stage, extra[:2 * n])
+    rk4_period_with_joint_forces(q, qd, held, period, substeps, plant, nominal, mode, ws, stage,
+                                 extra[:2 * n], scalars[PASSIVE_ON] > 0.0, joint,
+                                 scalars[INVERSE_STRIBECK], extra[2 * n:])
 
 
 @njit(cache=True, error_model="numpy")

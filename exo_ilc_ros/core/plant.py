@@ -17,6 +17,7 @@ import numpy as np
 from numba import njit
 
 from .dynamics import forward_dynamics_into, inertia_and_bias_into, workspace
+from .joint_forces import passive_effort_into
 
 if TYPE_CHECKING:
     from .experiment import Experiment
@@ -98,57 +99,87 @@ def _acceleration_into(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, plant:
         out[j] += extra[j]
 
 
-@njit(cache=True, error_model="numpy")
-def rk4_period(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, period: float, substeps: int,
-               plant: tuple, nominal: tuple, mode: int, ws: tuple, stage: np.ndarray,
-               extra: np.ndarray) -> None:
+@njit(cache=True, error_model="numpy", inline="always")
+def rk4_period_with_joint_forces(q: np.ndarray, qd: np.ndarray, effort: np.ndarray,
+                                 period: float, substeps: int, plant: tuple, nominal: tuple,
+                                 mode: int, ws: tuple, stage: np.ndarray, extra: np.ndarray,
+                                 passive: bool, joint: np.ndarray, inverse_stribeck: float,
+                                 total: np.ndarray) -> None:
     """In place: (q, qdot) advanced by one period with ``effort`` held (ZOH), eq (8) integrated
-    by classic 4-stage Runge-Kutta on each of ``substeps`` sub-steps. ``ws`` is a
-    :func:`dynamics.workspace`, ``stage`` a (10, n) and ``extra`` a (2n,) scratch array.
+    by classic 4-stage Runge-Kutta on each of ``substeps`` sub-steps; with ``passive``, the
+    passive joint forces of eq (6) (:func:`joint_forces.passive_effort_into`, the patient's
+    ``joint`` array and 1 / v_s) are added at every stage's state. ``ws`` is a
+    :func:`dynamics.workspace`, ``stage`` a (10, n) and ``extra`` a (2n,) scratch array,
+    ``total`` (n,) receives the torque each stage integrates (without ``passive``: a copy of
+    ``effort``, or ``effort`` itself; ``joint`` is then not read).
 
-    With the true plant (``mode`` 0) each stage calls :func:`forward_dynamics_into` directly,
-    with ``plant`` unpacked once before the loop: through :func:`_acceleration_into` (or with a
-    ``*plant`` call inside the loop) numba increfs and decrefs every array argument at every
-    stage, about a third of the cost of a plant evaluation.
+    One body for the paper's plant (:func:`rk4_period`) and the patient's
+    (:func:`patient.patient_period`), inlined into both. With the true plant (``mode`` 0) each
+    stage calls :func:`forward_dynamics_into` directly, with ``plant`` unpacked once before the
+    loop: through :func:`_acceleration_into` (or with a ``*plant`` call inside the loop, or a
+    helper function per stage, inlined or not) numba increfs and decrefs every array argument
+    at every stage, about a third of the cost of a plant evaluation.
     """
     n = q.shape[0]
     h = period / substeps
     masses, axes, offsets, coms, inertias, gravity = plant
     k1v, k2v, k3v, k4v = stage[0], stage[1], stage[2], stage[3]
     q2, v2, q3, v3, q4, v4 = stage[4], stage[5], stage[6], stage[7], stage[8], stage[9]
+    if not passive:
+        for j in range(n):
+            total[j] = effort[j]
     for _ in range(substeps):
+        if passive:
+            passive_effort_into(q, qd, effort, joint, inverse_stribeck, total)
         if mode == 0:
-            forward_dynamics_into(q, qd, effort, masses, axes, offsets, coms, inertias, gravity,
+            forward_dynamics_into(q, qd, total, masses, axes, offsets, coms, inertias, gravity,
                                   ws, k1v)
         else:
-            _acceleration_into(q, qd, effort, plant, nominal, mode, ws, extra, k1v)
+            _acceleration_into(q, qd, total, plant, nominal, mode, ws, extra, k1v)
         for j in range(n):
             q2[j] = q[j] + 0.5 * h * qd[j]
             v2[j] = qd[j] + 0.5 * h * k1v[j]
+        if passive:
+            passive_effort_into(q2, v2, effort, joint, inverse_stribeck, total)
         if mode == 0:
-            forward_dynamics_into(q2, v2, effort, masses, axes, offsets, coms, inertias, gravity,
+            forward_dynamics_into(q2, v2, total, masses, axes, offsets, coms, inertias, gravity,
                                   ws, k2v)
         else:
-            _acceleration_into(q2, v2, effort, plant, nominal, mode, ws, extra, k2v)
+            _acceleration_into(q2, v2, total, plant, nominal, mode, ws, extra, k2v)
         for j in range(n):
             q3[j] = q[j] + 0.5 * h * v2[j]
             v3[j] = qd[j] + 0.5 * h * k2v[j]
+        if passive:
+            passive_effort_into(q3, v3, effort, joint, inverse_stribeck, total)
         if mode == 0:
-            forward_dynamics_into(q3, v3, effort, masses, axes, offsets, coms, inertias, gravity,
+            forward_dynamics_into(q3, v3, total, masses, axes, offsets, coms, inertias, gravity,
                                   ws, k3v)
         else:
-            _acceleration_into(q3, v3, effort, plant, nominal, mode, ws, extra, k3v)
+            _acceleration_into(q3, v3, total, plant, nominal, mode, ws, extra, k3v)
         for j in range(n):
             q4[j] = q[j] + h * v3[j]
             v4[j] = qd[j] + h * k3v[j]
+        if passive:
+            passive_effort_into(q4, v4, effort, joint, inverse_stribeck, total)
         if mode == 0:
-            forward_dynamics_into(q4, v4, effort, masses, axes, offsets, coms, inertias, gravity,
+            forward_dynamics_into(q4, v4, total, masses, axes, offsets, coms, inertias, gravity,
                                   ws, k4v)
         else:
-            _acceleration_into(q4, v4, effort, plant, nominal, mode, ws, extra, k4v)
+            _acceleration_into(q4, v4, total, plant, nominal, mode, ws, extra, k4v)
         for j in range(n):
             q[j] = q[j] + (h / 6.0) * (qd[j] + 2.0 * v2[j] + 2.0 * v3[j] + v4[j])
             qd[j] = qd[j] + (h / 6.0) * (k1v[j] + 2.0 * k2v[j] + 2.0 * k3v[j] + k4v[j])
+
+
+@njit(cache=True, error_model="numpy")
+def rk4_period(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, period: float, substeps: int,
+               plant: tuple, nominal: tuple, mode: int, ws: tuple, stage: np.ndarray,
+               extra: np.ndarray) -> None:
+    """In place: (q, qdot) advanced by one period with ``effort`` held (ZOH), eq (8) by classic
+    RK4 on the sub-steps: :func:`rk4_period_with_joint_forces` without joint forces (``stage``
+    a (10, n), ``extra`` a (2n,) scratch array)."""
+    rk4_period_with_joint_forces(q, qd, effort, period, substeps, plant, nominal, mode, ws,
+                                 stage, extra, False, stage, 0.0, effort)
 
 
 @njit(cache=True, error_model="numpy")

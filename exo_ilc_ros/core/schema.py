@@ -144,6 +144,8 @@ def _patient_parameters() -> list[Parameter]:
           "the delayed velocity above the threshold (N m s/rad)", **joint),
         p("spasticity.reflex_threshold", Kind.DOUBLE_ARRAY, "velocity threshold of the "
           "stretch reflex (rad/s)", **joint),
+        p("spasticity.reflex_max", Kind.DOUBLE_ARRAY, "ceiling of the stretch reflex torque "
+          "(N m; the reflex is clipped to +-reflex_max); 0: no ceiling", **joint),
         p("spasticity.reflex_delay", Kind.DOUBLE, "stretch reflex delay (s; rounded to "
           "control periods)", minimum=0.0),
         p("voluntary.stiffness", Kind.DOUBLE_ARRAY, "K_v: the patient's own torque toward the "
@@ -513,7 +515,7 @@ def check_consistency(values: Mapping[str, Any]) -> None:
                           f"must be below the Nyquist frequency {nyquist:g} Hz of "
                           f"control.period {period:g} s")
     if values["patient.spasticity.mas_grade"] != "custom":
-        for key in ("stiffness", "damping", "reflex_gain", "reflex_threshold"):
+        for key in ("stiffness", "damping", "reflex_gain", "reflex_threshold", "reflex_max"):
             if any(values[f"patient.spasticity.{key}"]):
                 raise ConfigError(f"patient.spasticity.{key}",
                                   "give either a mas_grade (its preset) or the custom values, "

@@ -33,6 +33,7 @@ class FakeGraph:
         self.conclusions: list[TrialConclusion] = []
         self.events: list[tuple[str, dict[str, str]]] = []
         self.errors: list[str] = []
+        self.infos: list[str] = []
         self.auto_file = auto_file
         self.drop_sample: int | None = None
         self.watchdog_once = False
@@ -63,6 +64,8 @@ class FakeGraph:
     def log(self, error: bool, text: str) -> None:
         if error:
             self.errors.append(text)
+        else:
+            self.infos.append(text)
 
     # driving
     def run_started_trial(self) -> None:
@@ -349,3 +352,42 @@ def test_real_time_warms_up_then_reruns_a_trial_with_too_many_late_commands() ->
         run(periods // 2)
     assert protocol.phase is Phase.FINISHED and protocol.exit_code == 1
     assert "does not keep the control rate" in graph.events[-1][1]["error"]
+
+
+def test_opening_rehearses_the_conclusion_without_changing_the_session(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The protocol warms the conclusion's kernels up when it opens the session (the graph's
+    first conclusion paid 0.2-0.3 s of numba cache load); the session is untouched, and a law
+    that fails on the throwaway record only costs the warm-up."""
+    from exo_ilc_ros.core.config import load_config
+    from exo_ilc_ros.core.experiment import Experiment
+    from exo_ilc_ros.core.session import LearningSession
+
+    config = load_config(overrides={"trajectory.duration": 1.0, "max_trials": 3})
+    session = LearningSession(config)
+    before = session.feedforward.copy()
+    session.rehearse(Experiment(config))
+    assert session.trial == 1 and session.completed == 0
+    np.testing.assert_array_equal(session.feedforward, before)
+
+    class Failing:
+        def initial_feedforward(self, reference: Any) -> np.ndarray:
+            return np.zeros((reference.samples, 3))
+
+        def update(self, record: Any) -> Any:
+            raise RuntimeError("no update on a throwaway record")
+
+    failing = LearningSession(config, law=Failing())  # type: ignore[arg-type]
+    with pytest.raises(RuntimeError):
+        failing.rehearse(Experiment(config))
+
+    def refuse(self: Any, experiment: Any) -> None:
+        raise RuntimeError("no update on a throwaway record")
+
+    monkeypatch.setattr(LearningSession, "rehearse", refuse)
+    graph = FakeGraph(config)
+    protocol = TrialProtocol(config, graph, clock=graph.clock)
+    graph.protocol = protocol
+    protocol.open(PLANT)
+    assert protocol.session is not None and not graph.errors
+    assert any("warm-up of the trial conclusion skipped" in t for t in graph.infos)

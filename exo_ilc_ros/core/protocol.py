@@ -166,7 +166,10 @@ class TrialProtocol:
         self.real_time = config["mode"] == "real_time"
         self.session = session
         if not session.finished:
-            session.rehearse(self.experiment)  # the kernels now, not after trial 1
+            try:
+                session.rehearse(self.experiment)  # the kernels now, not after trial 1
+            except Exception as exc:  # a warm-up only: the real conclusion reports errors
+                self.port.log(False, f"warm-up of the trial conclusion skipped: {exc}")
         if self.store is not None:
             if session.completed:
                 self.port.log(False, f"resumed from {self.store.directory}: trials 1.."

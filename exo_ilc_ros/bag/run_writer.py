@@ -92,13 +92,12 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                 k, result.mass_uncertainty, result.law, names, record.max_abs_error,
                 np.max(np.abs(record.feedforward), axis=0), np.max(np.abs(record.effort), axis=0),
                 record.levels, record.aborted_at, result.applied.get(k + 1),
-                None if record.true_position is None else record.true_max_abs_error)
+                None if record.true_position is None else record.true_max_abs_error,
+                result.notes.get(k, ()))
             if metrics is not None:
                 values += metrics[k - 1].summary_values(names)
             else:  # as the supervisor files them (core/metrics.py)
                 values += metric_summary_values(record, measured, names)
-            if result.notes.get(k):  # as the supervisor files them (nodes/messages.py)
-                values.append((topics.LEARNING_NOTES, "; ".join(result.notes[k])))
             within = bool(np.all(record.max_abs_error <= result.error_bound))
             writer.write(topics.TRIAL_SUMMARY, end, messages.trial_summary(end, values, within))
             writer.write(topics.TRIAL_EVENTS, end, messages.trial_event(end, "end", k, values))

@@ -47,9 +47,8 @@ def trial_summary(conclusion: TrialConclusion, joint_names: Sequence[str]) -> Di
                             np.max(np.abs(record.effort), axis=0), record.levels,
                             record.aborted_at, conclusion.applied,
                             None if record.true_position is None
-                            else record.true_max_abs_error)
+                            else record.true_max_abs_error,
+                            conclusion.update.notes if conclusion.learned else ())
     values += metric_summary_values(record, config, joint_names)  # core/metrics.py
-    if conclusion.learned and conclusion.update.notes:  # e.g. norm_optimal's active constraints
-        values.append((topics.LEARNING_NOTES, "; ".join(conclusion.update.notes)))
     level = DiagnosticStatus.OK if conclusion.within_bound else DiagnosticStatus.WARN
     return status(topics.SUMMARY_STATUS, f"trial {record.trial}", values, level, SUPERVISOR)

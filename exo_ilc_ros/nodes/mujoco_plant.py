@@ -47,7 +47,7 @@ from .common import (
 )
 from .guard import Health, Rejections, effort_limit_reasons, rejections_check
 from .identified import TRUSTED_READER_QOS, TrustedInput, effort_classifier
-from .realtime import fifo_scheduling
+from .realtime import plant_scheduling
 
 NAME = schema.PLANT
 FIRST_SAMPLE_AGAIN = 1.0
@@ -105,10 +105,7 @@ class FreeRunningPlant(Node):
         wall_period = self.experiment.period / config["real_time_rate"]
         self.create_timer(wall_period if not self.lock_step else 0.05, self.on_tick,
                           clock=wall_clock())
-        self.realtime, self.scheduler = fifo_scheduling(
-            0 if self.lock_step else config["thread_priority"])
-        if config["thread_priority"] and not self.lock_step and not self.realtime:
-            self.get_logger().warning(f"real-time plant at the {self.scheduler}")
+        self.scheduler = plant_scheduling(self, config["thread_priority"], self.lock_step)
         self.get_logger().info(
             f"{self.engine} plant without services ({config['mode']}), mass uncertainty "
             f"{self.experiment.mass_uncertainty:g}; trials need protocol: homing")

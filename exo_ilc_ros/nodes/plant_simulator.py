@@ -61,7 +61,7 @@ from .identified import (
     decodes,
     effort_classifier,
 )
-from .realtime import fifo_scheduling
+from .realtime import plant_scheduling
 
 NAME = schema.PLANT
 
@@ -139,10 +139,7 @@ class PlantSimulator(Node):
             self.stepper.measure()
             self.stepper.step(self.held)
         self.stepper.reset()
-        self.realtime, self.scheduler = fifo_scheduling(
-            0 if self.lock_step else config["thread_priority"])  # lock-step: nothing to keep
-        if config["thread_priority"] and not self.lock_step and not self.realtime:
-            self.get_logger().warning(f"real-time plant at the {self.scheduler}")
+        self.scheduler = plant_scheduling(self, config["thread_priority"], self.lock_step)
         self.get_logger().info(
             f"{config['mode']} plant, mass uncertainty {self.experiment.mass_uncertainty:g}, "
             f"{self.last_index + 1} samples per trial")

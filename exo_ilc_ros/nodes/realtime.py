@@ -86,9 +86,18 @@ def fifo_scheduling(priority: int) -> tuple[bool, str]:
     return True, f"SCHED_FIFO {priority}"
 
 
+def plant_scheduling(node: Any, priority: int, lock_step: bool) -> str:
+    """A plant's side: ``SCHED_FIFO`` ``priority`` in real time, nothing in lock-step (no
+    clock to keep); warns when refused. Returns what the process runs at, for the health."""
+    applied, scheduler = fifo_scheduling(0 if lock_step else priority)
+    if priority and not lock_step and not applied:
+        node.get_logger().warning(f"real-time plant at the {scheduler}")
+    return scheduler
+
+
 def policy_of(tid: int) -> int:
-    """The scheduling policy of thread (or process) ``tid``, without the reset-on-fork flag."""
-    return os.sched_getscheduler(tid) & ~getattr(os, "SCHED_RESET_ON_FORK", 0)
+    """The scheduling policy of thread (or process) ``tid``."""
+    return os.sched_getscheduler(tid)
 
 
 def thread_policies(pid: int | str = "self") -> dict[int, int]:

@@ -21,11 +21,13 @@ def summary_values(trial: int, mass_uncertainty: float, law: str, names: Sequenc
                    max_abs_error: Any, max_abs_feedforward: Any, max_abs_effort: Any,
                    levels: Any | None, aborted_at: int | None = None,
                    changed: Mapping[str, Any] | None = None,
-                   true_max_abs_error: Any | None = None) -> list[tuple[str, str]]:
+                   true_max_abs_error: Any | None = None,
+                   learning_notes: Sequence[str] = ()) -> list[tuple[str, str]]:
     """The key-values of a trial summary (floats as ``repr`` so they parse back exactly):
     ``aborted_at`` for a trial the envelope aborted, ``parameters_changed`` (JSON) for the
     live changes the session applied at this trial's end (in effect from the next trial),
-    ``true_max_abs_error/<joint>`` when the plant's true state differs from the measured one."""
+    ``true_max_abs_error/<joint>`` when the plant's true state differs from the measured one,
+    ``learning_notes`` when the law said something about its update (:data:`LEARNING_NOTES`)."""
     out = [("trial", str(trial)), ("mass_uncertainty", repr(float(mass_uncertainty))),
            ("law", law)]
     for key, row in (("max_abs_error", max_abs_error),
@@ -43,6 +45,8 @@ def summary_values(trial: int, mass_uncertainty: float, law: str, names: Sequenc
         out.append(("aborted_at", str(aborted_at)))
     if changed:
         out.append((PARAMETERS_CHANGED, json.dumps(dict(changed), sort_keys=True)))
+    if learning_notes:
+        out.append((topics.LEARNING_NOTES, "; ".join(learning_notes)))
     return out
 
 

@@ -71,8 +71,8 @@ def bench_recording(trials: int, repeats: int, bag_dir: Path,
     modes = ("without", *(m for m in modes if m != "without"))
     recorded = [m for m in modes if m != "without"]
     rates: dict[str, list[dict[str, float]]] = {mode: [] for mode in modes}
-    for _ in range(repeats):
-        for mode in modes:
+    for round_ in range(repeats):  # ABBA: alternate the order, so a drift costs both alike
+        for mode in modes if round_ % 2 == 0 else modes[::-1]:
             rates[mode].append(graph_steps_per_second(config, mode, bag_dir))
         print("  steps/s within trials (overall): " + ", ".join(
             f"{MODES[mode]} {runs[-1]['steps_per_s_in_trial']:.0f} "
@@ -84,14 +84,27 @@ def bench_recording(trials: int, repeats: int, bag_dir: Path,
         paired = {mode: float(np.median([1 - r[key] / b[key] for r, b in
                                          zip(rates[mode], rates["without"], strict=True)]))
                   for mode in recorded}
+        spread = {mode: _bootstrap_interval([1 - r[key] / b[key] for r, b in
+                                             zip(rates[mode], rates["without"], strict=True)])
+                  for mode in recorded}
         costs = ", ".join(f"{MODES[mode]} {median[mode]:.0f} steps/s, costs "
                           f"{100 * (1 - median[mode] / median['without']):.1f} % (median of "
-                          f"the rounds' costs {100 * paired[mode]:.1f} %)"
+                          f"the rounds' costs {100 * paired[mode]:.1f} %, 90 % interval "
+                          f"{100 * spread[mode][0]:.1f} to {100 * spread[mode][1]:.1f} %)"
                           for mode in recorded)
         print(f"(a) lock-step graph {label}, {trials} trials x 501 samples, medians of "
               f"{repeats}: no recorder {median['without']:.0f} steps/s; {costs} "
               f"(target <= {5 if key == 'steps_per_s_in_trial' else 10} %)")
     return float(np.median([r["steps_per_s_in_trial"] for r in rates["without"]]))
+
+
+def _bootstrap_interval(costs: Sequence[float], draws: int = 10_000) -> tuple[float, float]:
+    """The 5th and 95th percentiles of the median of ``costs`` resampled with replacement
+    (how far the rounds' median cost could move with other rounds on this machine)."""
+    rng = np.random.default_rng(0)
+    values = np.asarray(costs, dtype=float)
+    medians = np.median(rng.choice(values, size=(draws, values.size)), axis=1)
+    return float(np.percentile(medians, 5)), float(np.percentile(medians, 95))
 
 
 def bench_listener_floor(repeats: int, count: int = 8000) -> None:
@@ -141,8 +154,9 @@ def _cpu_seconds(pids: Sequence[int]) -> float:
     return total / tick
 
 
-def graph_cpu_per_step(config: Config, recorded: bool, bag_dir: Path) -> float:
-    """(e): CPU seconds of all the graph's processes per control step, trials 4 to the end."""
+def graph_cpu_per_step(config: Config, recorded: bool, bag_dir: Path) -> dict[str, float]:
+    """(e): CPU seconds per control step, trials 4 to the end, of each of the graph's
+    processes (by name) and of all of them (``total``)."""
     from exo_ilc_ros.orchestration.graph import GraphSession
     from exo_ilc_ros.orchestration.launcher import GRAPH_NODES
     from exo_ilc_ros.orchestration.recording import Recording
@@ -156,12 +170,15 @@ def graph_cpu_per_step(config: Config, recorded: bool, bag_dir: Path) -> float:
             nodes = stack.enter_context(Recording(config, bag_dir)).graph_nodes()
         session = stack.enter_context(GraphSession(config, nodes=nodes))
         session.spin_until(lambda: len(session.summaries) >= 3, timeout=600.0)
-        pids = [p.pid for p in session.processes.processes.values()]
-        start = _cpu_seconds(pids)
+        pids = {name: p.pid for name, p in session.processes.processes.items()}
+        start = {name: _cpu_seconds([pid]) for name, pid in pids.items()}
         session.spin_until(lambda: len(session.summaries) >= trials, timeout=1800.0,
                            stall_timeout=120.0)
-        used = _cpu_seconds(pids) - start
-    return used / ((trials - 3) * samples)
+        used = {name: _cpu_seconds([pid]) - start[name] for name, pid in pids.items()}
+    steps = (trials - 3) * samples
+    per_step = {name: seconds / steps for name, seconds in used.items()}
+    per_step["total"] = sum(used.values()) / steps
+    return per_step
 
 
 def bench_cpu(trials: int, repeats: int, rate: float, bag_dir: Path) -> None:
@@ -170,11 +187,14 @@ def bench_cpu(trials: int, repeats: int, rate: float, bag_dir: Path) -> None:
     without: list[float] = []
     with_recorder: list[float] = []
     for _ in range(repeats):
-        without.append(graph_cpu_per_step(config, False, bag_dir))
-        with_recorder.append(graph_cpu_per_step(config, True, bag_dir))
-        print(f"  graph CPU per control step: no recorder {1e6 * without[-1]:.1f} us, "
-              f"recorder in the supervisor's process {1e6 * with_recorder[-1]:.1f} us",
-              flush=True)
+        runs = [graph_cpu_per_step(config, recorded, bag_dir) for recorded in (False, True)]
+        without.append(runs[0]["total"])
+        with_recorder.append(runs[1]["total"])
+        print("  graph CPU per control step (us): " + "; ".join(
+            f"{label} {1e6 * run['total']:.1f} (" + ", ".join(
+                f"{name} {1e6 * value:.1f}" for name, value in run.items() if name != "total")
+            + ")" for label, run in zip(("no recorder", "recorder in the supervisor's process"),
+                                        runs, strict=True)), flush=True)
     bare, recorded = float(np.median(without)), float(np.median(with_recorder))
     cost = recorded - bare
     print(f"(e) graph CPU per control step, trials 4-{trials}, medians of {repeats}: no "

@@ -58,16 +58,17 @@ def pong(raw: bool) -> None:
         executor.spin_once(timeout_sec=0.1)
 
 
-def listen() -> None:
-    """Subscribe to both topics and drain them every 10 ms without waking per message (the
-    recorder's :class:`~exo_ilc_ros.nodes.common.Inbox`): what one more subscriber process
-    costs the ping-pong."""
+def listen(commands: bool = True) -> None:
+    """Subscribe to both topics (``commands`` False: the states only) and drain them every
+    10 ms without waking per message (the recorder's :class:`~exo_ilc_ros.nodes.common.Inbox`):
+    what one more subscriber process costs the ping-pong."""
     from exo_ilc_ros.nodes.common import INBOX_PERIOD, INBOX_QOS, Inbox
 
     owner = Node("bench_listener")
     inbox = Inbox(owner)
     inbox.subscribe(JointState, "/bench/joint_states", INBOX_QOS)
-    inbox.subscribe(Float64MultiArray, "/bench/commands", INBOX_QOS)
+    if commands:
+        inbox.subscribe(Float64MultiArray, "/bench/commands", INBOX_QOS)
     while rclpy.ok():
         time.sleep(INBOX_PERIOD)
         inbox.take()
@@ -138,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
         if args[0] == "pong":
             pong(raw)
         elif args[0] == "listen":
-            listen()
+            listen(commands="states" not in args)
         else:
             print(json.dumps(ping(int(args[1]), raw, listeners=int("listen" in args))),
                   flush=True)

@@ -3,6 +3,7 @@ same table from one process, a process pool and a Dask cluster, the command and 
 
 from __future__ import annotations
 
+import ctypes
 import json
 import math
 import os
@@ -243,16 +244,21 @@ def test_figure_marks_growth_failure_and_aborts() -> None:
     assert [t.get_text() for t in ax.get_yticklabels()] == ["good", "grows", "fails", "aborts"]
 
 
-def test_ctrl_c_stops_the_pool_without_worker_tracebacks(tmp_path: Path) -> None:
-    """SIGINT to the whole process group (what Ctrl-C in a terminal does) while the pool runs:
-    exit 130, one line, no traceback from the workers or the command."""
+def _study_in_its_pool(tmp_path: Path) -> tuple[subprocess.Popen[str], list[str]]:
+    """``exo-ilc study`` (2 workers, cells far longer than a test) in a session of its own,
+    SIGKILLed if this process dies (no study left running after a killed test run), once its
+    workers are inside their first cells; and its stderr so far."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+
+    def child() -> None:
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        ctypes.CDLL("libc.so.6").prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+
     process = subprocess.Popen(
         [sys.executable, "-m", "exo_ilc_ros.cli.main", "study", "--laws", "sign", "robust",
          "--scenarios", "ideal", "--trials", "3000", "--workers", "2"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
-        start_new_session=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        start_new_session=True, preexec_fn=child)
     assert process.stderr is not None
     lines = []
     for line in process.stderr:  # the study has started its pool once the laws are listed
@@ -260,6 +266,17 @@ def test_ctrl_c_stops_the_pool_without_worker_tracebacks(tmp_path: Path) -> None
         if "law robust" in line:
             break
     time.sleep(3.0)  # the workers are inside their first cells (3000 trials take much longer)
+    return process, lines
+
+
+def _children(pid: int) -> list[int]:
+    return [int(p) for p in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+
+
+def test_ctrl_c_stops_the_pool_without_worker_tracebacks(tmp_path: Path) -> None:
+    """SIGINT to the whole process group (what Ctrl-C in a terminal does) while the pool runs:
+    exit 130, one line, no traceback from the workers or the command."""
+    process, lines = _study_in_its_pool(tmp_path)
     os.killpg(process.pid, signal.SIGINT)
     out, err = process.communicate(timeout=60)
     err = "".join(lines) + err
@@ -267,6 +284,31 @@ def test_ctrl_c_stops_the_pool_without_worker_tracebacks(tmp_path: Path) -> None
     assert "Traceback" not in err and "KeyboardInterrupt" not in err
     assert err.strip().endswith("exo-ilc study: interrupted")
     assert "Robustness study" not in out
+
+
+def test_workers_die_with_a_killed_study(tmp_path: Path) -> None:
+    """kill -9 of the study (not its group: what an OOM kill or a killed parent does) leaves no
+    worker computing on: each gets SIGTERM from the kernel as its parent dies."""
+    process, _ = _study_in_its_pool(tmp_path)
+    workers = [pid for pid in _children(process.pid)
+               if "multiprocessing" in Path(f"/proc/{pid}/cmdline").read_text()]
+    assert len(workers) >= 2, workers  # the pool's workers (and its resource tracker)
+    process.kill()
+    process.communicate(timeout=30)
+    deadline = time.monotonic() + 20.0
+    alive = workers
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.1)
+        alive = [pid for pid in workers if _running(pid)]
+    assert not alive, f"workers {alive} outlived their study"
+
+
+def _running(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except FileNotFoundError:
+        return False
+    return state != "Z"
 
 
 def test_robust_config_survives_the_realistic_patient() -> None:

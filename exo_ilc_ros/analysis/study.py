@@ -8,8 +8,10 @@ running gives the same table.
 
 from __future__ import annotations
 
+import ctypes
 import json
 import multiprocessing
+import os
 import signal
 import threading
 from collections.abc import Callable, Iterator, Sequence
@@ -36,6 +38,8 @@ OnDone = Callable[[StudyCell], None]
 """Called in the caller's process once per finished cell (progress)."""
 
 
+PR_SET_PDEATHSIG = 1
+"""prctl(2): the signal a process gets when its parent dies."""
 CONNECT_TIMEOUT = "20s"
 """How long to try to reach a Dask scheduler before giving up."""
 
@@ -47,9 +51,17 @@ class ClusterError(ExoIlcError):
 def _ignore_interrupt() -> None:
     """Worker initializer: Ctrl-C is the parent's to handle (no tracebacks from the workers);
     the SIGINT the worker was started with blocked (:func:`_interrupt_deferred`) is ignored
-    from here on, one already pending with it."""
+    from here on, one already pending with it. A worker dies with the study (SIGTERM when its
+    parent dies): a killed study leaves no worker computing on."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    parent = multiprocessing.parent_process()
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):  # not Linux: workers end when their queue breaks
+        return
+    if parent is not None and os.getppid() != parent.pid:  # the study died before that
+        os._exit(1)
 
 
 @contextmanager

@@ -368,16 +368,12 @@ class _SharedReader:
     def drain(self) -> None:
         """Take every waiting message and hand it to each inbox of the topic (to those with
         an ``admit`` rule only the messages it admits)."""
-        topic, take = self.topic, self.taker.take
-        taken: list[tuple[int, str, bytes, bytes]] = []
-        while (message := take()) is not None:
-            raw, _, gid, received = message
-            assert raw is not None  # no size limit here: the recorder keeps everything
-            taken.append((received, topic, raw, gid))
+        taken = self.taker.take_all()
         if taken:
+            topic = self.topic
             for inbox in self.inboxes:
                 admit = inbox._admit.get(id(self))
-                inbox._pending.extend((t, name, raw) for t, name, raw, gid in taken
+                inbox._pending.extend((t, topic, raw) for t, raw, gid in taken
                                       if admit is None or admit(raw, gid))
 
     def leave(self, inbox: Inbox) -> None:

@@ -12,10 +12,12 @@ figures; asserts nothing (wall-clock timing is noisy on a shared 2-core machine)
 (c) Why a recorder process of its own costs more: the raw ping-pong of graph_bench with and
     without one more, silent subscriber process on both topics (what such a process adds to
     the round trip).
-(e) The CPU time the graph's processes spend per control step from trial 4 to the end, without
-    and with the composed recorder, read from /proc (CPU time, unlike a rate, barely moves
-    when other tenants load the machine): the difference is what recording costs per step,
-    shown as a share of the in-trial time at ``--rate``. ``--cpu-only`` runs only (e).
+(e) The CPU time the graph's processes spend per control step within trials (start to end
+    event, trial 4 on), without and with the composed recorder, read from /proc (CPU time,
+    unlike a rate, barely moves when other tenants load the machine): the difference is what
+    recording costs per step, shown as a share of the in-trial time at ``--rate`` (an upper
+    bound of the rate's loss: only the part on the plant-controller round trip slows it).
+    ``--cpu-only`` runs only (e).
 (d) The writer alone, in-process (steadier than (a) on a shared machine): the recorder's
     message mix (per control step a JointState and an effort command, a /clock every tenth)
     written in the batches of a 10 ms drain, a file finished per 501-sample trial; CPU time
@@ -144,19 +146,43 @@ def bench_analysis(trials: int, bag_dir: Path) -> None:
           f"analysed in {min(times):.2f} s (best of 3; target < 5 s)")
 
 
-def _cpu_seconds(pids: Sequence[int]) -> float:
-    """utime + stime of the processes ``pids`` (from /proc), seconds."""
-    tick = os.sysconf("SC_CLK_TCK")
+def _cpu_seconds(pid: int) -> float:
+    """CPU time of every thread of process ``pid`` so far (``/proc/<pid>/task/*/schedstat``,
+    nanoseconds; ``/proc/<pid>/stat`` counts 10 ms ticks, too coarse for one trial)."""
     total = 0
-    for pid in pids:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-        total += int(fields[11]) + int(fields[12])  # utime, stime (fields 14, 15)
-    return total / tick
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        with contextlib.suppress(FileNotFoundError, ProcessLookupError):
+            total += int((task / "schedstat").read_text().split()[0])
+    return total * 1e-9
+
+
+class _InTrialCpu:
+    """The CPU time each process spends between a trial's start and end events (as the
+    monitor receives them), summed over trials 4 to the last."""
+
+    def __init__(self, pids: dict[str, int]) -> None:
+        self.pids = pids
+        self.used = dict.fromkeys(pids, 0.0)
+        self.trials = 0
+        self._seen = 0
+        self._at_start: dict[str, float] | None = None
+
+    def watch(self, events: Sequence[tuple[str, dict[str, str], float]]) -> None:
+        """Called after every executor event: snapshot at each new start, add at its end."""
+        for message, values, _ in events[self._seen:]:
+            if message == "start" and int(values.get("trial", 0)) > 3:
+                self._at_start = {name: _cpu_seconds(pid) for name, pid in self.pids.items()}
+            elif message == "end" and self._at_start is not None:
+                for name, pid in self.pids.items():
+                    self.used[name] += _cpu_seconds(pid) - self._at_start[name]
+                self.trials += 1
+                self._at_start = None
+        self._seen = len(events)
 
 
 def graph_cpu_per_step(config: Config, recorded: bool, bag_dir: Path) -> dict[str, float]:
-    """(e): CPU seconds per control step, trials 4 to the end, of each of the graph's
-    processes (by name) and of all of them (``total``)."""
+    """(e): CPU seconds per control step within trials (start to end event, trials 4 to the
+    end) of each of the graph's processes (by name) and of all of them (``total``)."""
     from exo_ilc_ros.orchestration.graph import GraphSession
     from exo_ilc_ros.orchestration.launcher import GRAPH_NODES
     from exo_ilc_ros.orchestration.recording import Recording
@@ -170,34 +196,39 @@ def graph_cpu_per_step(config: Config, recorded: bool, bag_dir: Path) -> dict[st
             nodes = stack.enter_context(Recording(config, bag_dir)).graph_nodes()
         session = stack.enter_context(GraphSession(config, nodes=nodes))
         session.spin_until(lambda: len(session.summaries) >= 3, timeout=600.0)
-        pids = {name: p.pid for name, p in session.processes.processes.items()}
-        start = {name: _cpu_seconds([pid]) for name, pid in pids.items()}
-        session.spin_until(lambda: len(session.summaries) >= trials, timeout=1800.0,
-                           stall_timeout=120.0)
-        used = {name: _cpu_seconds([pid]) - start[name] for name, pid in pids.items()}
-    steps = (trials - 3) * samples
-    per_step = {name: seconds / steps for name, seconds in used.items()}
-    per_step["total"] = sum(used.values()) / steps
+        cpu = _InTrialCpu({name: p.pid for name, p in session.processes.processes.items()})
+
+        def done() -> bool:
+            cpu.watch(session.events)
+            return len(session.summaries) >= trials
+
+        session.spin_until(done, timeout=1800.0, stall_timeout=120.0)
+    steps = max(cpu.trials, 1) * samples
+    per_step = {name: seconds / steps for name, seconds in cpu.used.items()}
+    per_step["total"] = sum(cpu.used.values()) / steps
     return per_step
 
 
 def bench_cpu(trials: int, repeats: int, rate: float, bag_dir: Path) -> None:
-    """(e): without and with the composed recorder in turn, ``repeats`` times."""
+    """(e): without and with the composed recorder in turn (ABBA), ``repeats`` times."""
     config = load_config(overrides={"max_trials": trials})
     without: list[float] = []
     with_recorder: list[float] = []
-    for _ in range(repeats):
-        runs = [graph_cpu_per_step(config, recorded, bag_dir) for recorded in (False, True)]
-        without.append(runs[0]["total"])
-        with_recorder.append(runs[1]["total"])
-        print("  graph CPU per control step (us): " + "; ".join(
+    for round_ in range(repeats):
+        order = (False, True) if round_ % 2 == 0 else (True, False)
+        runs = dict(zip(order, (graph_cpu_per_step(config, recorded, bag_dir)
+                                for recorded in order), strict=True))
+        without.append(runs[False]["total"])
+        with_recorder.append(runs[True]["total"])
+        print("  graph CPU per control step within trials (us): " + "; ".join(
             f"{label} {1e6 * run['total']:.1f} (" + ", ".join(
                 f"{name} {1e6 * value:.1f}" for name, value in run.items() if name != "total")
-            + ")" for label, run in zip(("no recorder", "recorder in the supervisor's process"),
-                                        runs, strict=True)), flush=True)
+            + ")" for label, run in (("no recorder", runs[False]),
+                                     ("recorder in the supervisor's process", runs[True]))),
+            flush=True)
     bare, recorded = float(np.median(without)), float(np.median(with_recorder))
     cost = recorded - bare
-    print(f"(e) graph CPU per control step, trials 4-{trials}, medians of {repeats}: no "
+    print(f"(e) graph CPU per control step within trials 4-{trials}, medians of {repeats}: no "
           f"recorder {1e6 * bare:.1f} us, with the recorder {1e6 * recorded:.1f} us: recording "
           f"costs {1e6 * cost:.1f} us per step, {100 * cost * rate:.2f} % of the in-trial time "
           f"at {rate:.0f} steps/s (target <= 5 %)")

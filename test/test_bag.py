@@ -434,6 +434,67 @@ def test_recorder_status_reports_received_then_filed(tmp_path: Path) -> None:
 
 
 @pytest.mark.graph
+def test_recorder_takes_the_samples_at_trial_events_not_within_a_trial(tmp_path: Path) -> None:
+    """Within a trial the recorder only looks at the trial events: the commands wait in DDS
+    (not taken, not written) until the next event, then reach the bag in receive order before
+    it; ``drain`` (after a stop) takes everything at once."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from rclpy.duration import Duration
+    from rclpy.node import Node
+    from std_msgs.msg import Float64MultiArray
+
+    from exo_ilc_ros.nodes.bag_recorder import BagRecorder
+    from exo_ilc_ros.nodes.common import EVENTS_QOS
+
+    rclpy.init(args=["--ros-args", "-p", f"bag_path:={tmp_path / 'bag'}"])
+    try:
+        recorder = BagRecorder()
+        graph = Node("recorder_test_graph")
+        commands = graph.create_publisher(Float64MultiArray, topics.EFFORT_COMMANDS, 10)
+        events = graph.create_publisher(DiagnosticArray, topics.TRIAL_EVENTS, EVENTS_QOS)
+        try:
+            deadline = time.monotonic() + 10.0
+            while commands.get_subscription_count() < 1 or events.get_subscription_count() < 1:
+                assert time.monotonic() < deadline, "recorder not matched"
+                time.sleep(0.05)
+            time.sleep(0.5)  # the nodes' own start-up messages (parameter events) are in
+            recorder.poll()  # the first poll takes everything and starts the period
+            before = recorder.messages
+
+            def publish(count: int) -> None:
+                for i in range(count):
+                    commands.publish(Float64MultiArray(data=[float(i), 0.0, 0.0]))
+                assert commands.wait_for_all_acked(Duration(seconds=5))  # in the reader
+
+            publish(5)
+            assert recorder.poll() == 0 and recorder.messages == before  # in a trial: left
+            start = DiagnosticStatus(name=topics.TRIAL_STATUS, message="start",
+                                     values=[KeyValue(key="trial", value="1")])
+            events.publish(DiagnosticArray(status=[start]))
+            assert events.wait_for_all_acked(Duration(seconds=5))
+            assert recorder.poll() == 6 and recorder.messages == before + 6
+            assert recorder.started == 1
+            publish(3)
+            assert recorder.poll() == 0
+            assert recorder.drain() == 3 and recorder.messages == before + 9
+        finally:
+            graph.destroy_node()
+            recorder.destroy_node()
+        counts = _bag_topic_counts(tmp_path / "bag")
+        assert (counts[topics.EFFORT_COMMANDS], counts[topics.TRIAL_EVENTS]) == (8, 1)
+    finally:
+        rclpy.try_shutdown()
+
+
+def _bag_topic_counts(path: Path) -> dict[str, int]:
+    """Messages per topic in the bag's metadata.yaml."""
+    info = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    return {item["topic_metadata"]["name"]: int(item["message_count"])
+            for item in info["topics_with_message_count"]}
+
+
+@pytest.mark.graph
 def test_recorder_sigkill_leaves_the_filed_trials(tmp_path: Path) -> None:
     """The real recorder on the real graph, killed with SIGKILL once it has filed trial 2 while
     the run goes on: its bag holds those trials, equal to the in-process run to 1e-12, and the

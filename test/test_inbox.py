@@ -164,13 +164,18 @@ def test_run_nodes_polls_stops_on_exit_code_and_drains_last() -> None:
             super().__init__("run_nodes_draining")
             self.exit_code: int | None = None
             self.polls = 0
+            self.drains = 0
 
         def poll(self) -> int:
             self.polls += 1
             return 0
 
+        def drain(self) -> int:
+            self.drains += 1
+            return 0
+
         def destroy_node(self) -> None:
-            log.append(f"draining destroyed after {self.polls} polls")
+            log.append(f"draining destroyed after {self.polls} polls, {self.drains} drains")
             super().destroy_node()
 
     assert common.run_nodes([Plain, Failing, Draining], ["run_nodes"]) == 7
@@ -179,4 +184,5 @@ def test_run_nodes_polls_stops_on_exit_code_and_drains_last() -> None:
     assert realtime.fifo_scheduling(50) == (
         False, "normal (a node inside another program: its scheduling is left alone)")
     assert log[:2] == ["plain destroyed", "failing destroyed after 3 polls"]
-    assert log[2].startswith("draining destroyed") and int(log[2].split()[3]) > 3
+    assert log[2].startswith("draining destroyed") and int(log[2].split()[3]) >= 3
+    assert int(log[2].split()[5]) > 1  # drained on after the stop, not polled

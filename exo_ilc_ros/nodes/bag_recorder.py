@@ -3,9 +3,12 @@
 Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.wire.topics.TYPES` (depth
 ``RECORDER_DEPTH``; the feed-forward transient local, as published) and stores the CDR bytes
 untouched, stamped with the wall-clock time DDS received them (what ``ros2 bag record`` does
-without ``--use-sim-time``). The subscriptions are an :class:`~.common.Inbox` drained every
-``INBOX_PERIOD``, so the recorder does not wake once per message next to the control loop; the
-samples between two trial events go to the bag as one batch (``BagWriter.write_many``).
+without ``--use-sim-time``). The subscriptions are :class:`~.common.Inbox` es, so the recorder
+does not wake once per message next to the control loop. Within a trial it stays out of the
+loop's way: it reads only the trial events every ``INBOX_PERIOD``, and takes and writes the
+other topics (the samples, commands, /clock) at the next trial event, or after
+:data:`DATA_PERIOD` at the latest; DDS holds them meanwhile (``RECORDER_DEPTH``). The samples
+between two trial events go to the bag as one batch (``BagWriter.write_many``).
 ``exo-ilc run`` starts it in the supervisor's process (``container ilc_supervisor
 bag_recorder``), where it shares the supervisor's /joint_states subscription.
 A new storage file starts after each trial (``split_every`` trials), so a SIGKILL loses at most
@@ -23,6 +26,7 @@ from __future__ import annotations
 import importlib
 import json
 import sys
+import time
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -56,6 +60,10 @@ READY_TOPICS = (topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
 PROTOCOL_TOPICS = frozenset({topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.PARAMETER_EVENTS})
 """Topics the recorder reads as well as writes (trial boundaries, parameter changes); the rest
 are written in batches."""
+DATA_PERIOD = 1.0
+"""s: the other topics are taken and written at least this often (and at every trial event).
+Within it DDS holds them: at most ``RECORDER_DEPTH`` (10 000) messages per topic, 10 000 / s,
+four times the lock-step graph's fastest rate seen here and ten times 1 kHz."""
 
 
 def message_class(msgtype: str) -> Any:
@@ -119,10 +127,14 @@ class BagRecorder(Node):
         self.exit_code: int | None = None
         """Never set: the recorder has no fatal error of its own (a bag error raises)."""
 
-        self.inbox = Inbox(self)  # every topic, drained in batches (see Inbox)
+        self.events = Inbox(self, "events")  # PROTOCOL_TOPICS, read at every poll
+        self.inbox = Inbox(self)  # every other topic, taken at events (see poll)
         for topic, msgtype in topics.TYPES.items():
             self.writer.add_topic(topic, msgtype, offered_qos(topic))
-            self.inbox.subscribe(message_class(msgtype), topic, subscription_qos(topic))
+            inbox = self.events if topic in PROTOCOL_TOPICS else self.inbox
+            inbox.subscribe(message_class(msgtype), topic, subscription_qos(topic))
+        self.data_due = 0.0
+        """Monotonic time by which the other topics are taken again (:data:`DATA_PERIOD`)."""
         self.status_pub = self.create_publisher(
             message_class(topics.TYPES[topics.DIAGNOSTICS]), topics.DIAGNOSTICS, EVENTS_QOS)
         self.create_timer(0.2, self.on_status_timer, clock=wall_clock())
@@ -144,10 +156,15 @@ class BagRecorder(Node):
         return [("bag", str(self.writer.path)), ("messages", str(self.messages)),
                 ("trials_received", str(self.completed)), ("trials_filed", str(self.filed))]
 
-    def poll(self) -> int:
-        """Write every message waiting in the inbox, in the order DDS received them; returns
-        how many."""
-        taken = self.inbox.take()
+    def poll(self, everything: bool = False) -> int:
+        """Write what waits, in the order DDS received it; returns how many messages. The
+        other topics only with a trial event or parameter change, after :data:`DATA_PERIOD`,
+        or with ``everything``; else only the (mostly empty) protocol topics are looked at."""
+        taken = self.events.take()
+        now = time.monotonic()
+        if taken or everything or now >= self.data_due:
+            self.data_due = now + DATA_PERIOD
+            taken = sorted([*taken, *self.inbox.take()], key=_receive_time)
         samples: list[tuple[int, str, bytes]] = []  # written as one batch up to an event
         for item in taken:
             if item[1] in PROTOCOL_TOPICS:
@@ -158,6 +175,10 @@ class BagRecorder(Node):
                 samples.append(item)
         self.messages += self.writer.write_many(samples)
         return len(taken)
+
+    def drain(self) -> int:
+        """Write everything waiting (after a stop; see :class:`~.common.DrainingNode`)."""
+        return self.poll(everything=True)
 
     def on_message(self, topic: str, raw: bytes, received_ns: int) -> None:
         """Store the bytes stamped with their DDS receive time (wall clock, ns); follow the
@@ -242,7 +263,8 @@ class BagRecorder(Node):
 
     def destroy_node(self) -> None:
         """Close the bag (writes the last file and metadata.yaml), then the node."""
-        self.poll()
+        self.poll(everything=True)
+        self.events.destroy()
         self.inbox.destroy()
         self.writer.set_custom_data(TRIALS_COMPLETED, str(self.completed))
         for key, text in parameter_changes_data(self.changes).items():
@@ -251,6 +273,10 @@ class BagRecorder(Node):
         print(f"[{NAME}] bag {self.writer.path} closed: {self.messages} messages, "
               f"{self.completed} trials", file=sys.stderr, flush=True)  # rclpy may be shut down
         super().destroy_node()
+
+
+def _receive_time(item: tuple[int, str, bytes]) -> int:
+    return item[0]
 
 
 def main(args: list[str] | None = None) -> int:

@@ -302,8 +302,8 @@ class Inbox:
     it once from whichever drains first.
     """
 
-    def __init__(self, owner: Node) -> None:
-        self.node = Node(f"{owner.get_name()}_inbox", namespace=owner.get_namespace(),
+    def __init__(self, owner: Node, name: str = "inbox") -> None:
+        self.node = Node(f"{owner.get_name()}_{name}", namespace=owner.get_namespace(),
                          parameter_overrides=[Parameter("use_sim_time", value=False)],
                          start_parameter_services=False, enable_rosout=False)
         self._readers: list[_SharedReader] = []
@@ -401,8 +401,8 @@ def _receive_time(item: tuple[int, str, bytes]) -> int:
 DRAIN_IDLE = 0.3
 DRAIN_MAX = 3.0
 """After a stop (SIGINT/SIGTERM, or a node's fatal error), a node with ``DRAINS_ON_STOP`` is
-spun on until its ``poll()`` handled nothing for DRAIN_IDLE s (at most DRAIN_MAX s), so what the
-graph published before it was told to stop is still taken (the recorder writes it)."""
+spun on until its ``drain()`` handled nothing for DRAIN_IDLE s (at most DRAIN_MAX s), so what
+the graph published before it was told to stop is still taken (the recorder writes it)."""
 
 
 @runtime_checkable
@@ -423,11 +423,16 @@ class PollingNode(Protocol):
 
 @runtime_checkable
 class DrainingNode(PollingNode, Protocol):
-    """A :class:`PollingNode` that is polled on after a stop until its inbox is quiet
+    """A :class:`PollingNode` that is drained after a stop until its inbox is quiet
     (:data:`DRAIN_IDLE`) and destroyed last (the bag recorder: what the graph published before
     the stop still reaches the bag)."""
 
     DRAINS_ON_STOP: ClassVar[bool]
+
+    def drain(self) -> int:
+        """Handle everything waiting, what ``poll`` defers included; returns how many
+        messages."""
+        ...
 
 
 def spin(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
@@ -493,7 +498,7 @@ def _run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None) 
         _settle(executor)  # the executor lets go of their entities before they are destroyed
         for node in leaving:
             destroy(node)
-        _drain(executor, [node.poll for node in draining])
+        _drain(executor, [node.drain for node in draining])
     except ExoIlcError as exc:
         print(f"error: {exc}", file=sys.stderr, flush=True)
         code = 2
@@ -559,7 +564,8 @@ def destroy(node: Node) -> None:
 
 
 def _drain(executor: EventsExecutor, polls: Sequence[Callable[[], int | None]]) -> None:
-    """Spin and call ``polls`` until none took a message for DRAIN_IDLE s (at most DRAIN_MAX)."""
+    """Spin and call ``polls`` (the nodes' ``drain``) until none took a message for DRAIN_IDLE
+    s (at most DRAIN_MAX)."""
     if not polls:
         return
     now = time.monotonic()

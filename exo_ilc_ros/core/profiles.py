@@ -47,6 +47,8 @@ import numpy as np
 from .config import Config
 from .errors import ProfileError
 from .laws import FeedforwardUpdate
+from .patient_states import START_FILE, START_KEY, STATE_FILE, STATE_KEY, PatientState, \
+    file_entry, read_state
 from .store import _atomic, write_json_atomic
 from .trajectory import SampledReference
 
@@ -120,6 +122,9 @@ class Profile:
     feedforward: np.ndarray
     levels: np.ndarray | None
     provenance: dict[str, Any]
+    patient_state: PatientState | None = None
+    """A learning virtual patient's state after the version's last trial (None: none,
+    :mod:`.patient_states`)."""
 
     @property
     def update(self) -> FeedforwardUpdate:
@@ -226,8 +231,10 @@ class ProfileBook:
         path = self.directory(patient, exercise) / entry["file"]
         data = _read_npz(path, entry["sha256"])
         levels = data.get("levels")
+        state = entry.get(STATE_KEY)
         return Profile(patient, exercise, number, path, data["feedforward"],
-                       levels if levels is not None and levels.size else None, dict(entry))
+                       levels if levels is not None and levels.size else None, dict(entry),
+                       None if state is None else read_state(path.parent, state))
 
     def latest(self, patient: str, exercise: str) -> Profile | None:
         """The current version, or None if the patient has no profile for the exercise."""
@@ -253,17 +260,24 @@ class ProfileBook:
         index = self.index(patient, exercise)
         if index is None:
             return 1
-        reopened = _reopenable(index, started_from) if reopen else None
+        reopened = _reopenable(index, started_from, self.directory(patient, exercise)) \
+            if reopen else None
         return reopened or len(index["versions"]) + 1
 
     def begin(self, patient: str, exercise: str, config: Config, reference: SampledReference,
-              started_from: Profile | None, session: str = "",
-              reopen: bool = False) -> ProfileWriter:
+              started_from: Profile | None, session: str = "", reopen: bool | int = False,
+              patient_start: PatientState | None = None,
+              run_store: str | None = None) -> ProfileWriter:
         """The version of the session about to run, allocated under the lock (module
         docstring): the next number, its entry (status ``started``) written at once, so that
-        a concurrent session takes the one after. With ``reopen`` (a resumed run) the newest
-        unfinished version begun from the same ``started_from`` is continued instead, if any.
-        The writer's ``config`` is ``config`` with ``patient.session`` = the version."""
+        a concurrent session takes the one after. ``reopen`` (a resumed run) continues an
+        unfinished version instead: the one numbered ``reopen``, or with ``True`` the only
+        unfinished one begun from ``started_from`` (ProfileError naming them if there are
+        several, :func:`_reopenable`); its config must be the one it began with (but
+        ``store.resume``). ``patient_start``: a learning virtual patient's state the session
+        starts from, written once beside the version (:mod:`.patient_states`). ``run_store``:
+        the run store a graph session saves its trials in (recorded: what ``--resume`` looks
+        for). The writer's ``config`` is ``config`` with ``patient.session`` = the version."""
         directory = self.directory(patient, exercise)
         directory.mkdir(parents=True, exist_ok=True)
         with locked(directory):
@@ -271,15 +285,26 @@ class ProfileBook:
                 "format": PROFILE_FORMAT, "patient": patient, "exercise": exercise,
                 "current": None, "versions": []}
             versions = index["versions"]
-            reopened = _reopenable(index, started_from) if reopen else None
+            reopened: int | None = None
+            if reopen is True:
+                reopened = _reopenable(index, started_from, directory)
+            elif reopen is not False:
+                reopened = int(reopen)
             version = reopened or len(versions) + 1
             after = 0 if started_from is None else started_from.version
             not_included = [v["version"] for v in versions if after < v["version"] < version]
             writer = ProfileWriter(directory, version, config, reference, started_from,
                                    session, not_included)
-            if reopened is not None:  # keep when the version was begun
-                writer.created = writer.base["created"] = versions[reopened - 1]["created"]
+            if run_store is not None:
+                writer.base["run_store"] = run_store
+            if reopened is not None:
+                writer.reopen(_unfinished_entry(index, reopened, directory), session)
             else:
+                if patient_start is not None:
+                    blob = patient_start.encode()
+                    name = START_FILE.format(version=version)
+                    write_bytes_atomic(directory / name, blob)  # not listed yet: no overwrite
+                    writer.base[START_KEY] = file_entry(name, blob)
                 index["versions"] = [*versions, {**writer.base, "status": "started",
                                                  "trials": 0,
                                                  "trials_total": writer.base["trials_before"]}]
@@ -307,13 +332,33 @@ def read_index(path: Path) -> dict[str, Any] | None:
     return dict(document)
 
 
-def _reopenable(index: dict[str, Any], started_from: Profile | None) -> int | None:
-    """The newest version not ``complete`` that began from ``started_from`` (None: none)."""
+def _reopenable(index: dict[str, Any], started_from: Profile | None,
+                directory: Path) -> int | None:
+    """The only version not ``complete`` that began from ``started_from`` (None: none);
+    ProfileError listing them if there are several (which one a resume continues must be
+    said: :meth:`ProfileBook.begin` with its number)."""
     start = None if started_from is None else started_from.version
-    for entry in reversed(index["versions"]):
-        if entry.get("status") != "complete" and entry.get("started_from") == start:
-            return int(entry["version"])
-    return None
+    found = [int(e["version"]) for e in index["versions"]
+             if e.get("status") != "complete" and e.get("started_from") == start]
+    if len(found) > 1:
+        raise ProfileError(f"{directory}: versions {', '.join(f'v{v}' for v in found)} are "
+                           f"all unfinished sessions begun from "
+                           f"{'zero' if start is None else f'v{start}'}; say which to resume")
+    return found[0] if found else None
+
+
+def _unfinished_entry(index: dict[str, Any], version: int, directory: Path) -> dict[str, Any]:
+    """The index entry of version ``version``, which a resume continues: ProfileError if
+    there is none or it is complete (nothing of it is rewritten)."""
+    versions = index["versions"]
+    if not 1 <= version <= len(versions):
+        raise ProfileError(f"{directory}: no version {version} to resume (versions "
+                           f"1-{len(versions)})")
+    entry = dict(versions[version - 1])
+    if entry.get("status") == "complete":
+        raise ProfileError(f"{directory}: version {version} is complete; a resume continues "
+                           "only an unfinished session (nothing overwritten)")
+    return entry
 
 
 class ProfileWriter:
@@ -343,12 +388,36 @@ class ProfileWriter:
             "trials_before": 0 if started_from is None else
             int(started_from.provenance.get("trials_total", 0)),
         }
+        if config["store.resume"]:  # a resumed run's digest is its first run's
+            self.base["config_digest"] = config.replace({"store.resume": False}).digest()
+
+    def reopen(self, entry: dict[str, Any], session: str) -> None:
+        """Continue the unfinished version ``entry`` (a resumed run): its config must be the
+        one it began with (ProfileError naming both digests); it keeps when and by which
+        session it was begun, its patient start state, and lists this run in ``resumed``."""
+        if entry.get("config_digest") != self.base["config_digest"] or \
+                entry.get("started_from") != self.base["started_from"]:
+            raise ProfileError(
+                f"{self.directory}: version {self.version} began from "
+                f"v{entry.get('started_from')} with config {entry.get('config_digest')}; this "
+                f"run would continue it from v{self.base['started_from']} with config "
+                f"{self.base['config_digest']}: resume it with the options it was begun with")
+        for key in ("created", "session", START_KEY, "not_included"):
+            if key in entry:
+                self.base[key] = entry[key]
+        self.created = str(self.base["created"])
+        self.base["resumed"] = [*entry.get("resumed", []), {
+            "session": session, "after_trials": int(entry.get("trials", 0)),
+            "at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}]
 
     def save(self, trials: int, update: FeedforwardUpdate, final_max_abs_error: Any,
-             complete: bool = False, metrics: dict[str, Any] | None = None) -> Path:
+             complete: bool = False, metrics: dict[str, Any] | None = None,
+             patient_state: PatientState | None = None) -> Path:
         """The feed-forward after ``trials`` trials of this session (and their last max |e|
         per joint, rad) as this version, made current unless a higher version is; returns the
-        file written. The index is read, changed and written under the lock."""
+        file written. ``patient_state``: a learning virtual patient's state after the same
+        trial, written with it (:mod:`.patient_states`). The index is read, changed and
+        written under the lock; a version already complete is never rewritten."""
         buffer = io.BytesIO()
         levels = np.empty((0,)) if update.levels is None else np.asarray(update.levels, float)
         np.savez(buffer, feedforward=np.asarray(update.feedforward, dtype=float), levels=levels)
@@ -371,6 +440,14 @@ class ProfileWriter:
                 raise ProfileError(f"{index_path}: version {self.version} of this session is "
                                    "no longer listed (index replaced meanwhile?); nothing "
                                    "written")
+            if index["versions"][self.version - 1].get("status") == "complete":
+                raise ProfileError(f"{path}: version {self.version} is complete; nothing "
+                                   "rewritten")
+            if patient_state is not None:
+                state = patient_state.encode()
+                name = STATE_FILE.format(version=self.version)
+                write_bytes_atomic(self.directory / name, state)
+                entry[STATE_KEY] = file_entry(name, state)
             with _atomic(path) as handle:
                 handle.write(blob)
             index["versions"][self.version - 1] = entry

@@ -146,3 +146,228 @@ def test_resume_says_which_unfinished_session(tmp_path: Path) -> None:
     with pytest.raises(ProfileError, match="began from v1 with config"):
         book.begin("p1", EXERCISE, config.replace({"control.kp": [1.0, 1.0, 1.0]}),
                    reference, start, "se", reopen=2)
+
+
+# --- which session a resume continues (the CLI, before any node starts) ----------------------
+
+def _unfinished_pair(tmp_path: Path) -> tuple[ProfileBook, Path, Path]:
+    """v1 complete; v2 and v3 both begun from v1 (sessions s-a, s-b) and left unfinished, v2
+    saving its trials in store A, v3 in store B."""
+    config = load_config(ROOT / "config" / "robust.yaml", {"trajectory.duration": 1.0})
+    book = ProfileBook(tmp_path / "profiles")
+    run_exercise(prepare(config, book, "p1", EXERCISE, True), book, 1)
+    start = book.latest("p1", EXERCISE)
+    reference = build_reference(config)
+    stores = tmp_path / "a", tmp_path / "b"
+    for name, store in zip(("s-a", "s-b"), stores, strict=True):
+        writer = book.begin("p1", EXERCISE, config, reference, start, name,
+                            run_store=str(store))
+        writer.save(1, FeedforwardUpdate(np.zeros(reference.position.shape)), [0.0] * 3)
+    return book, *stores
+
+
+def test_a_resume_that_could_continue_two_sessions_is_refused_naming_both(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Two unfinished sessions of one start: `--resume` with the store of one continues that
+    one; where both saved in the same store, or the store is neither's, it is refused (exit 2,
+    nothing written) with both sessions listed and the exact command resuming each; a session
+    id names one; an in-process session is not resumable through the graph."""
+    import argparse
+
+    from exo_ilc_ros.cli.therapy_resume import resumed_steps
+
+    book, store_a, store_b = _unfinished_pair(tmp_path)
+    config = load_config(ROOT / "config" / "robust.yaml", {"trajectory.duration": 1.0})
+    plan: list[tuple[str, int | None]] = [(EXERCISE, 3)]
+
+    def steps(resume: object, store: Path, argv: list[str] | None = None):  # type: ignore
+        args = argparse.Namespace(patient="p1", resume=resume, argv=argv or ["run"])
+        return resumed_steps(args, config, book, plan, store)
+
+    for resume, store, version in ((True, store_a, 2), (True, store_b, 3), ("s-b", store_b, 3),
+                                   ("v2", store_a, 2)):
+        key, (step,) = steps(resume, store)
+        assert step.reopen == version and key == f"s-{'ab'[version - 2]}"
+        assert step.prepared is not None and step.prepared.start is not None
+        assert step.prepared.start.version == 1
+    with pytest.raises(ProfileError, match=r"saved its trials in .*/b, not .*/a"):
+        steps("s-b", store_a)
+
+    # The same store for both (their keys differ: the session number is in them).
+    index_path = book.directory("p1", EXERCISE) / "index.json"
+    index = json.loads(index_path.read_text())
+    index["versions"][2]["run_store"] = str(store_a)
+    index_path.write_text(json.dumps(index))
+    profiles = str(tmp_path / "profiles")
+    base = ["run", "--no-bag", "--patient", "p1", "--trials", "3", "--profiles", profiles,
+            "--config", str(ROOT / "config" / "robust.yaml")]
+    for store, says in ((store_a, f"2 unfinished sessions of patient 'p1' saved their trials "
+                                  f"in {store_a}"),
+                        (tmp_path / "c", f"no unfinished session of patient 'p1' saved its "
+                                         f"trials in {tmp_path / 'c'}")):
+        before = (tmp_path / "profiles").rglob("*")
+        snapshot = {p: p.read_bytes() for p in before if p.is_file()}
+        assert main([*base, "--store", str(store), "--resume"]) == 2
+        err = capsys.readouterr().err
+        assert says in err, err
+        for key, version in (("s-a", 2), ("s-b", 3)):
+            assert f"  session {key}: {EXERCISE} v{version} (in_progress, 1 trials, from v1" in err
+            command = "exo-ilc " + " ".join([*base, "--store", str(store_a), "--resume", key])
+            assert command in err, err
+        assert {p: p.read_bytes() for p in (tmp_path / "profiles").rglob("*")
+                if p.is_file()} == snapshot
+    assert main([*base, "--store", str(store_a), "--resume", "s-x"]) == 2
+    assert "no session s-x of patient 'p1'" in capsys.readouterr().err
+    assert main(["run", "--no-bag", "--store", str(store_a), "--resume", "s-a"]) == 2
+    assert "takes a session ('s-a') only with --patient" in capsys.readouterr().err
+
+    # A session begun in-process keeps no run store: named, not resumed.
+    config_short = load_config(ROOT / "config" / "robust.yaml", {"trajectory.duration": 1.0})
+    start = book.load("p1", EXERCISE, 1)
+    book.begin("p1", EXERCISE, config_short, build_reference(config_short), start, "s-c")
+    with pytest.raises(ProfileError, match="began in-process"):
+        steps("s-c", store_a)
+
+
+def test_a_resumed_plan_skips_what_its_session_completed(tmp_path: Path) -> None:
+    """Session s1 of a plan of three exercises stopped in the second: its resume skips the
+    first (complete in s1), continues the second's unfinished version from the version it
+    began from, and begins the third (not begun in s1) from its latest profile."""
+    import argparse
+
+    from exo_ilc_ros.cli.therapy_resume import resumed_steps
+
+    exercises = tmp_path / "exercises.yaml"
+    exercises.write_text(
+        "exercises:\n  up: {points: [[0, 0, 0], [0.3, 0.2, 0.2]], durations: [0.5]}\n"
+        "  down: {points: [[0.3, 0.2, 0.2], [0, 0, 0]], durations: [0.5]}\n"
+        "  left: {points: [[0, 0, 0], [0.1, 0.3, 0.0]], durations: [0.5]}\n")
+    config = load_config(ROOT / "config" / "robust.yaml", {"exercise.file": str(exercises)})
+    book = ProfileBook(tmp_path / "p")
+    store = tmp_path / "s"
+
+    def version(name: str, session: str, complete: bool) -> int:
+        start = book.latest("p1", name) if book.index("p1", name) else None
+        cfg = config.replace({"exercise.name": name, "profile.initial":
+                              "" if start is None else str(start.path.resolve())})
+        shape = build_reference(cfg).position.shape
+        writer = book.begin("p1", name, cfg, build_reference(cfg), start, session,
+                            run_store=str(store))
+        writer.save(1, FeedforwardUpdate(np.full(shape, 1.0)), [0.0] * 3, complete=complete)
+        return writer.version
+
+    for name in ("up", "down", "left"):
+        version(name, "s0", True)  # an earlier session, complete
+    assert version("up", "s1", True) == 2
+    assert version("down", "s1", False) == 2
+    args = argparse.Namespace(patient="p1", resume=True, argv=["run"])
+    key, (up, down, left) = resumed_steps(args, config, book, [("up", 2), ("down", 2),
+                                                                ("left", 2)], store)
+    assert key == "s1"
+    assert up.prepared is None and up.done is not None and up.done["version"] == 2
+    assert down.reopen == 2 and down.prepared is not None
+    assert down.prepared.start is not None and down.prepared.start.version == 1
+    assert left.reopen is None and left.prepared is not None
+    assert left.prepared.start is not None and left.prepared.start.version == 1
+
+
+# --- through the graph: killed mid-session, resumed -----------------------------------------
+
+@pytest.mark.graph
+def test_a_graph_session_killed_mid_session_resumes_exactly(tmp_path: Path) -> None:
+    """`exo-ilc run --patient` (session 2 of a patient with sensor noise and start offsets,
+    4 trials of 1 s) killed with kill -9 of ilc_supervisor after 2 trials: exit 3, the profile
+    holds v2 in progress, and the command printed resumes exactly this session, even with
+    another unfinished session begun from v1 meanwhile (v3, which the resume must not take).
+    The resumed run ends with the table, the v2 file's bytes and the provenance of the same
+    session run uninterrupted (in-process, from a copy of the profiles), but for the times,
+    the session id and the record of the resume."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    config_file = tmp_path / "c.yaml"
+    config_file.write_text('"/**":\n  ros__parameters:\n    trajectory: {duration: 1.0}\n'
+                           "plant_simulator:\n  ros__parameters:\n    patient:\n"
+                           "      sensor: {position_noise: 2.0e-5}\n"
+                           "      initial: {position_sd: 0.0005, velocity_sd: 0.003}\n")
+    profiles, reference_profiles = tmp_path / "p", tmp_path / "p_ref"
+    store = tmp_path / "store"
+
+    def common(root: Path) -> list[str]:
+        return ["--config", str(config_file), "--patient", "p1", "--trials", "4",
+                "--profiles", str(root), "--quiet"]
+
+    assert main(["simulate", *common(profiles)[:-1], "--trials", "2", "--new-patient",
+                 "--quiet"]) == 0
+    shutil.copytree(profiles, reference_profiles)
+    exo_ilc = [sys.executable, "-m", "exo_ilc_ros.cli.main"]
+    process = subprocess.Popen([*exo_ilc, "run", "--no-bag", *common(profiles), "--store",
+                                str(store)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               stdin=subprocess.DEVNULL, text=True)
+    try:
+        deadline = time.monotonic() + 180.0
+        stored = 0
+        while time.monotonic() < deadline and process.poll() is None and stored < 2:
+            found = list(store.glob("*/index.json"))
+            stored = len(json.loads(found[0].read_text())["trials"]) if found else 0
+            time.sleep(0.01)
+        assert stored >= 2, "two trials stored"
+        children = Path(f"/proc/{process.pid}/task/{process.pid}/children").read_text().split()
+        (victim,) = [int(pid) for pid in children
+                     if "ilc_supervisor" in Path(f"/proc/{pid}/cmdline").read_text()]
+        os.kill(victim, signal.SIGKILL)
+        err = process.communicate(timeout=60)[1]
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 3, err[-3000:]
+    assert "node ilc_supervisor exited with code -9" in err
+    assert f"to continue this session exactly (v2 of {EXERCISE})" in err
+    book = ProfileBook(profiles)
+    killed = book.require_index("p1", EXERCISE)["versions"][1]
+    assert killed["status"] == "in_progress" and killed["trials"] in (2, 3), killed
+    assert killed["run_store"] == str(store.resolve())
+    session = killed["session"]
+    line = next(x for x in err.splitlines() if x.startswith("  exo-ilc "))
+    assert line.split()[-2:] == ["--resume", session] and "--store" in line, line
+
+    # Another session begun from v1 and left unfinished, in a store of its own.
+    config = load_config(config_file)
+    start = book.load("p1", EXERCISE, 1)
+    book.begin("p1", EXERCISE, config.replace({"profile.initial": str(start.path.resolve())}),
+               build_reference(config), start, "other", run_store=str(tmp_path / "other"))
+
+    out = tmp_path / "resumed.json"
+    command = [*exo_ilc, *line.split()[1:], "--json", str(out)]
+    resumed = subprocess.run(command, capture_output=True, text=True, timeout=240,
+                             stdin=subprocess.DEVNULL, check=False)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert "(resuming v2)" in resumed.stderr, resumed.stderr[-3000:]
+
+    local = tmp_path / "local.json"
+    assert main(["simulate", *common(reference_profiles), "--json", str(local)]) == 0
+    (graph,), (uninterrupted,) = (json.loads(p.read_text())["runs"] for p in (out, local))
+    assert graph["trials"] == uninterrupted["trials"]  # exactly: floats through JSON
+    assert graph["therapy"]["metrics"] == uninterrupted["therapy"]["metrics"]
+    assert graph["therapy"]["profile_version"] == 2
+
+    index = book.require_index("p1", EXERCISE)
+    mine, theirs = index["versions"][1], index["versions"][2]
+    assert theirs["status"] == "started" and theirs["session"] == "other"  # untouched
+    assert index["current"] == 2
+    directory, reference_directory = (ProfileBook(r).directory("p1", EXERCISE)
+                                      for r in (profiles, reference_profiles))
+    assert (directory / "v0002.npz").read_bytes() == \
+        (reference_directory / "v0002.npz").read_bytes()
+    expected = ProfileBook(reference_profiles).require_index("p1", EXERCISE)["versions"][1]
+    differ = {"created", "updated", "session", "config_digest", "run_store", "resumed"}
+    assert {k: v for k, v in mine.items() if k not in differ} == \
+        {k: v for k, v in expected.items() if k not in differ}
+    assert mine["status"] == "complete" and mine["trials"] == 4
+    assert (mine["session"], mine["created"]) == (session, killed["created"])
+    assert mine["config_digest"] == killed["config_digest"]  # the run it continues
+    assert [r["after_trials"] for r in mine["resumed"]] == [killed["trials"]]

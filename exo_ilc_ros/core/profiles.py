@@ -47,8 +47,15 @@ import numpy as np
 from .config import Config
 from .errors import ProfileError
 from .laws import FeedforwardUpdate
-from .patient_states import START_FILE, START_KEY, STATE_FILE, STATE_KEY, PatientState, \
-    file_entry, read_state
+from .patient_states import (
+    START_FILE,
+    START_KEY,
+    STATE_FILE,
+    STATE_KEY,
+    PatientState,
+    file_entry,
+    read_state,
+)
 from .store import _atomic, write_json_atomic
 from .trajectory import SampledReference
 
@@ -276,8 +283,9 @@ class ProfileBook:
         several, :func:`_reopenable`); its config must be the one it began with (but
         ``store.resume``). ``patient_start``: a learning virtual patient's state the session
         starts from, written once beside the version (:mod:`.patient_states`). ``run_store``:
-        the run store a graph session saves its trials in (recorded: what ``--resume`` looks
-        for). The writer's ``config`` is ``config`` with ``patient.session`` = the version."""
+        the run store a graph session saves its trials in (None: in-process, none; recorded:
+        what ``--resume`` looks for, cli/therapy_resume.py). The writer's ``config`` is
+        ``config`` with ``patient.session`` = the version."""
         directory = self.directory(patient, exercise)
         directory.mkdir(parents=True, exist_ok=True)
         with locked(directory):
@@ -295,8 +303,7 @@ class ProfileBook:
             not_included = [v["version"] for v in versions if after < v["version"] < version]
             writer = ProfileWriter(directory, version, config, reference, started_from,
                                    session, not_included)
-            if run_store is not None:
-                writer.base["run_store"] = run_store
+            writer.base["run_store"] = run_store
             if reopened is not None:
                 writer.reopen(_unfinished_entry(index, reopened, directory), session)
             else:

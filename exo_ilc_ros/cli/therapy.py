@@ -188,7 +188,8 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
         start = "from zero" if item.start is None else f"from profile v{item.start.version}"
         again = f" (resuming v{writer.version})" if step.reopen else ""
         print(f"patient {args.patient}, exercise {name}: {count} trials through the graph, "
-              f"{start}, session {writer.version}{again}, session id {session}",
+              f"{start}, session {writer.version}{again}, session id {session}, store "
+              f"{store_root}",
               file=sys.stderr, flush=True)
         summary: RunSummary | None = None
         try:

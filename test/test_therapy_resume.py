@@ -103,6 +103,12 @@ def test_a_learning_patients_session_reruns_exactly(tmp_path: Path,
     captured = capsys.readouterr()
     assert "3 trials compared, identical to the recording" in captured.out, captured
 
+    # Through the graph a learning patient is refused before any node starts (its plant can
+    # neither start from the stored state nor resume it).
+    assert main(["run", "--no-bag", *common[1:], "--store", str(tmp_path / "s")]) == 2
+    assert "patient.learning.gain: a learning virtual patient's therapy sessions run " \
+        "in-process" in capsys.readouterr().err
+
     # A rollback comes with the patient state its version ended with.
     assert main(["profiles", "--profiles", str(tmp_path / "a"), "rollback", "p1", EXERCISE,
                  "1"]) == 0

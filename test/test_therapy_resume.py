@@ -126,7 +126,8 @@ def test_a_learning_patients_session_reruns_exactly(tmp_path: Path,
     assert _files(directory) == before
 
 
-def test_resume_says_which_unfinished_session(tmp_path: Path) -> None:
+def test_resume_says_which_unfinished_session(tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
     """Two sessions begun from v1 at once and both left unfinished: a resume that does not
     say which is refused naming both; `begin` with the version continues exactly that one and
     lists the resume in its provenance; a complete version is never reopened."""
@@ -147,6 +148,11 @@ def test_resume_says_which_unfinished_session(tmp_path: Path) -> None:
     entry = book.require_index("p1", EXERCISE)["versions"][2]
     assert entry["session"] == "sb" and [r["session"] for r in entry["resumed"]] == ["sc"]
     assert entry["resumed"][0]["after_trials"] == 0
+    capsys.readouterr()
+    assert main(["profiles", "--profiles", str(tmp_path), "show", "p1", EXERCISE]) == 0
+    shown = capsys.readouterr().out.splitlines()
+    assert "in_progress" in shown[-3] and shown[-3].endswith("session sa"), shown
+    assert shown[-2].endswith("session sb, resumed after 0 trials"), shown
     with pytest.raises(ProfileError, match="version 3 is complete"):
         book.begin("p1", EXERCISE, config, reference, start, "sd", reopen=3)
     with pytest.raises(ProfileError, match="began from v1 with config"):

@@ -242,12 +242,15 @@ def test_a_resume_that_could_continue_two_sessions_is_refused_naming_both(
 
 
 def test_a_resumed_plan_skips_what_its_session_completed(tmp_path: Path) -> None:
-    """Session s1 of a plan of three exercises stopped in the second: its resume skips the
-    first (complete in s1), continues the second's unfinished version from the version it
-    began from, and begins the third (not begun in s1) from its latest profile."""
+    """Session s1 of a plan of three exercises stopped in the second: its resume does not run
+    the first again (complete in s1; reported from its run store), continues the second's
+    unfinished version from the version it began from, and begins the third (not begun in
+    s1) from its latest profile."""
     import argparse
 
-    from exo_ilc_ros.cli.therapy_resume import resumed_steps
+    from exo_ilc_ros.cli.therapy_resume import resumed_steps, stored_summary
+    from exo_ilc_ros.core.session import run_trials
+    from exo_ilc_ros.core.summary import RunSummary
 
     exercises = tmp_path / "exercises.yaml"
     exercises.write_text(
@@ -271,12 +274,22 @@ def test_a_resumed_plan_skips_what_its_session_completed(tmp_path: Path) -> None
     for name in ("up", "down", "left"):
         version(name, "s0", True)  # an earlier session, complete
     assert version("up", "s1", True) == 2
+    # Its trials in the run store, as the graph (or simulate --store: the same key) left them.
+    v1 = book.load("p1", "up", 1)
+    ran = run_trials(config.replace({"exercise.name": "up", "max_trials": 2,
+                                     "profile.initial": str(v1.path.resolve()),
+                                     "patient.session": 2}), store=store)
     assert version("down", "s1", False) == 2
     args = argparse.Namespace(patient="p1", resume=True, argv=["run"])
     key, (up, down, left) = resumed_steps(args, config, book, [("up", 2), ("down", 2),
                                                                 ("left", 2)], store)
     assert key == "s1"
-    assert up.prepared is None and up.done is not None and up.done["version"] == 2
+    assert up.done is not None and up.done["version"] == 2
+    summary = stored_summary(up, store)  # the report includes it, as the first run gave it
+    assert summary is not None
+    assert summary.to_json()["trials"] == RunSummary.from_result(ran).to_json()["trials"]
+    assert summary.extra["therapy"]["profile_version"] == 2
+    assert len(summary.extra["therapy"]["metrics"]) == 2
     assert down.reopen == 2 and down.prepared is not None
     assert down.prepared.start is not None and down.prepared.start.version == 1
     assert left.reopen is None and left.prepared is not None

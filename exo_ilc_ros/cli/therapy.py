@@ -135,7 +135,7 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
     from ..core.patient import PatientModel
     from ..core.store import RunStore
     from ..orchestration.launcher import GraphError
-    from .therapy_resume import Step, resume_command, resumed_steps
+    from .therapy_resume import Step, resume_command, resumed_steps, stored_summary
 
     if args.mass_uncertainty and len(args.mass_uncertainty) > 1:
         raise ConfigError("--mass-uncertainty", "one value with --patient (one patient's arm)")
@@ -158,7 +158,7 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
         steps = [Step(name, trials, prepare(config, book, args.patient, name, args.new_patient))
                  for name, trials in plan]
     for step in steps:  # before any node starts
-        if step.prepared is None:
+        if step.done is not None:
             continue
         item = step.prepared
         version = step.reopen or book.next_version(args.patient, step.name, item.start)
@@ -168,11 +168,13 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
     runs: list[RunSummary] = []
     for step in steps:
         name = step.name
-        if step.prepared is None:
-            done_entry = step.done or {}
+        if step.done is not None:  # reported from its store, as the first run would have
             print(f"patient {args.patient}, exercise {name}: session {session}'s "
-                  f"v{done_entry.get('version')} is complete ({done_entry.get('trials')} "
-                  "trials); skipped", file=sys.stderr, flush=True)
+                  f"v{step.done.get('version')} is complete ({step.done.get('trials')} "
+                  "trials); not run again", file=sys.stderr, flush=True)
+            earlier = stored_summary(step, store_root)
+            if earlier is not None:
+                runs.append(earlier)
             continue
         item = step.prepared
         count = step.trials or item.config["max_trials"]

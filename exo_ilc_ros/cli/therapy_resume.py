@@ -22,6 +22,7 @@ from ..core.config import Config
 from ..core.errors import ProfileError
 from ..core.experiment import build_reference
 from ..core.profiles import ProfileBook
+from ..core.summary import RunSummary
 from ..core.therapy import PreparedExercise, prepare
 
 RUN_STORE = "run_store"
@@ -52,11 +53,11 @@ class Unfinished:
 @dataclass
 class Step:
     """One exercise of a resumed session: run it (``reopen``: the version it continues, None:
-    a new one) or skip it (``done``: its complete version)."""
+    a new one) or skip it (``done``: its complete version; ``prepared`` as it was run)."""
 
     name: str
     trials: int | None
-    prepared: PreparedExercise | None
+    prepared: PreparedExercise
     reopen: int | None = None
     done: dict[str, Any] | None = None
 
@@ -161,6 +162,34 @@ def _versions_of(book: ProfileBook, patient: str, exercises: list[str],
     return out
 
 
+def stored_summary(step: Step, store: Path) -> RunSummary | None:
+    """The report of an exercise its session completed before it was stopped (``step.done``),
+    from the trials its run store holds, as the uninterrupted run reported it (None: the
+    store no longer holds them)."""
+    from ..core.metrics import config_metrics
+    from ..core.session import RunResult
+    from ..core.store import RunStore
+
+    entry = step.done or {}
+    cfg = step.prepared.config.replace({
+        "max_trials": int(entry.get("trials") or 1), "store.directory": str(store),
+        "patient.session": int(entry["version"])})
+    stored = RunStore(store, cfg, build_reference(cfg)).load()
+    if not stored:
+        return None
+    result = RunResult(float(cfg["mass_uncertainty"]), str(cfg["law"]),
+                       float(cfg["error_bound"]), [s.record for s in stored])
+    summary = RunSummary.from_result(result)
+    metrics = [config_metrics(s.record, cfg).to_json() for s in stored]
+    summary.extra["metrics"] = metrics
+    summary.extra["therapy"] = {
+        "patient": step.prepared.patient, "exercise": step.name,
+        "profile_started_from": entry.get("started_from"),
+        "profile_version": entry["version"], "patient_session": entry["version"],
+        "metrics": metrics}
+    return summary
+
+
 def resumed_steps(args: argparse.Namespace, config: Config, book: ProfileBook,
                   plan: list[tuple[str, int | None]], store: Path) -> tuple[str, list[Step]]:
     """The session a resume continues and what it does with each exercise of the plan: a
@@ -176,7 +205,9 @@ def resumed_steps(args: argparse.Namespace, config: Config, book: ProfileBook,
         if entry is None:
             steps.append(Step(name, trials, prepare(config, book, args.patient, name)))
         elif entry.get("status") == "complete":
-            steps.append(Step(name, trials, None, done=entry))
+            steps.append(Step(name, trials, prepare_from(config, book, args.patient, name,
+                                                         entry.get("started_from")),
+                              done=entry))
         else:
             if RUN_STORE in entry and entry[RUN_STORE] is None:
                 raise ProfileError(f"--resume {key}: {Unfinished(name, entry).describe()} began "

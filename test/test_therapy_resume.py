@@ -396,3 +396,40 @@ def test_a_graph_session_killed_mid_session_resumes_exactly(tmp_path: Path) -> N
     assert (mine["session"], mine["created"]) == (session, killed["created"])
     assert mine["config_digest"] == killed["config_digest"]  # the run it continues
     assert [r["after_trials"] for r in mine["resumed"]] == [killed["trials"]]
+
+
+def test_a_save_interrupted_before_its_index_loses_nothing(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C (or kill -9) after a save replaced the version and patient state files but
+    before it wrote the index: the index's sha256 no longer matches the files, which used to
+    make the version refused as corrupt (every trial of the session lost). Now the listed files
+    were kept as `.previous`: the version loads as the last completed save (trial 2 of 3, the
+    same arrays as a 2-trial session), with its patient state, and the next session starts."""
+    from exo_ilc_ros.core import profiles
+
+    book = ProfileBook(tmp_path / "a")
+    calls = {"index": 0}
+    write = profiles.write_json_atomic
+
+    def interrupted(path: Path, document: object) -> None:
+        calls["index"] += 1
+        if calls["index"] == 4:  # begin, trial 1, trial 2, then trial 3's save
+            raise KeyboardInterrupt
+        write(path, document)
+
+    monkeypatch.setattr(profiles, "write_json_atomic", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        _session(book, trials=3, new=True)
+    monkeypatch.setattr(profiles, "write_json_atomic", write)
+    directory = book.directory("p1", EXERCISE)
+    assert (directory / "v0001.npz.previous").is_file()
+    profile = book.load("p1", EXERCISE)
+    assert profile.provenance["trials"] == 2
+    two = _session(ProfileBook(tmp_path / "b"), trials=2, new=True)
+    reference = ProfileBook(tmp_path / "b").load("p1", EXERCISE)
+    np.testing.assert_array_equal(profile.feedforward, reference.feedforward)
+    assert profile.patient_state is not None and reference.patient_state is not None
+    assert profile.patient_state.equals(reference.patient_state)
+    assert two.version == 1
+    after = _session(book, trials=1)
+    assert after.version == 2 and after.started_from == 1

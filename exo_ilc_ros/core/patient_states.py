@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ProfileError
+from .listed_files import read_listed
 
 START_FILE = "v{version:04d}.patient-start.npz"
 STATE_FILE = "v{version:04d}.patient.npz"
@@ -81,11 +82,11 @@ def read_state(directory: Path, entry: dict[str, Any]) -> PatientState:
         raise ProfileError(f"{directory / 'index.json'}: corrupt patient state entry {entry!r}: "
                            f"{exc}") from None
     try:
-        blob = path.read_bytes()
+        blob = read_listed(path, expected)  # or the one a save interrupted kept (.previous)
     except OSError as exc:
         raise ProfileError(f"{path}: cannot read the virtual patient's state: "
                            f"{exc.strerror}") from None
-    if hashlib.sha256(blob).hexdigest() != expected:
+    if blob is None:
         raise ProfileError(f"{path}: corrupt virtual patient state (sha256 does not match its "
                            "index); kept as it is, nothing overwritten")
     try:

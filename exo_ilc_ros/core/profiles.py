@@ -10,7 +10,9 @@ Each session writes one new version and rewrites it after every trial (status ``
 ``complete`` at the end), so a killed session leaves the feed-forward learned up to its last
 completed trial. Versions are never deleted; ``rollback`` only moves ``current``. Every file is
 written atomically (temp file, fsync, rename, as :mod:`.store`) and each version's sha256 is in
-the index; a file that does not match is refused, never overwritten.
+the index; a file that does not match is refused, never overwritten. A save keeps the file the
+index lists as ``vNNNN.npz.previous`` until the index names the new one, so a save interrupted
+between the two leaves the last completed trial readable (:mod:`.listed_files`).
 
 Sessions of the same patient and exercise may run at once (two terminals, a study): every change
 of the index (a version begun, a trial saved, a rollback) reads, changes and writes it under an
@@ -47,6 +49,7 @@ import numpy as np
 from .config import Config
 from .errors import ProfileError
 from .laws import FeedforwardUpdate
+from .listed_files import read_listed, replace_keeping_listed
 from .patient_states import (
     START_FILE,
     START_KEY,
@@ -160,10 +163,10 @@ class Profile:
 
 def _read_npz(path: Path, sha256: str) -> dict[str, np.ndarray]:
     try:
-        blob = path.read_bytes()
+        blob = read_listed(path, sha256)  # or the one a save interrupted kept (.previous)
     except OSError as exc:
         raise ProfileError(f"{path}: cannot read: {exc.strerror}") from None
-    if hashlib.sha256(blob).hexdigest() != sha256:
+    if blob is None:
         raise ProfileError(f"{path}: corrupt profile file (sha256 does not match its index); "
                            "roll back to an earlier version (exo-ilc profiles rollback)")
     try:
@@ -450,13 +453,14 @@ class ProfileWriter:
             if index["versions"][self.version - 1].get("status") == "complete":
                 raise ProfileError(f"{path}: version {self.version} is complete; nothing "
                                    "rewritten")
+            listed = index["versions"][self.version - 1]
             if patient_state is not None:
                 state = patient_state.encode()
                 name = STATE_FILE.format(version=self.version)
-                write_bytes_atomic(self.directory / name, state)
+                replace_keeping_listed(self.directory / name, state,
+                                       (listed.get(STATE_KEY) or {}).get("sha256"))
                 entry[STATE_KEY] = file_entry(name, state)
-            with _atomic(path) as handle:
-                handle.write(blob)
+            replace_keeping_listed(path, blob, listed.get("sha256"))
             index["versions"][self.version - 1] = entry
             if index["current"] is None or index["current"] <= self.version:
                 index["current"] = self.version

@@ -5,6 +5,9 @@ Layout under the profiles root (``--profiles DIR``, default :func:`default_root`
 
     <root>/<patient>/<exercise>/index.json    versions, their provenance, the current one
     <root>/<patient>/<exercise>/v0001.npz     version 1: feedforward (N+1, joints), levels
+    <root>/<patient>/<exercise>/v0001.patient-start.npz, v0001.patient.npz
+                                              a learning virtual patient's states with it
+                                              (:mod:`.patient_states`)
 
 Each session writes one new version and rewrites it after every trial (status ``in_progress``;
 ``complete`` at the end), so a killed session leaves the feed-forward learned up to its last

@@ -318,7 +318,7 @@ def test_learning_patient_second_session_and_assist_as_needed(tmp_path: Path) ->
     assert uff[-1] < 0.8 * uff.max()  # the robot hands over
     errors = np.array([m.max_error.max() for m in first.metrics])
     assert np.all(errors[5:] < 0.05)  # safety envelope 1 rad
-    assert (tmp_path / "p1" / "paper_quintic" / "virtual_patient.npz").is_file()
+    assert (tmp_path / "p1" / "paper_quintic" / "v0001.patient.npz").is_file()
     second = session(book, trials=2, config=config)
     final = np.max(first.result.records[-1].true_max_abs_error)
     start = np.max(second.result.records[0].true_max_abs_error)

@@ -91,11 +91,40 @@ class Replay:
         return self.first_different is None
 
 
+def _patient_start(run: BagRun, plan: ReplayPlan) -> tuple[np.ndarray, np.ndarray] | None:
+    """A therapy session's learning virtual patient starts from the state stored with its
+    profile version (:mod:`..core.patient_states`; None: from zero). The bag says it is a
+    session (custom data ``profile_version``); ``profile.initial`` names the profile's
+    directory (empty: the session started from no version, so from zero)."""
+    from pathlib import Path
+
+    from ..core.patient import PatientModel
+    from ..core.patient_states import session_start
+    from .provenance import PREFIX
+    from .reader import read_metadata
+
+    config = plan.config
+    if not PatientModel(config).learns:
+        return None
+    custom = read_metadata(run.path).get("custom_data") or {}
+    version = str(custom.get(PREFIX + "profile_version") or "")
+    if not version or not config["profile.initial"]:
+        return None
+    state = session_start(Path(config["profile.initial"]).parent, int(version))
+    if state is None:
+        plan.notes.append(f"the learning patient's state session {version} started from is "
+                          "not stored with its profile (written before states were kept per "
+                          "version): replayed from zero")
+        return None
+    return state.fast, state.slow
+
+
 def replay(run: BagRun, on_trial: Callable[[TrialRecord], None] | None = None) -> Replay:
     """Run the bag's experiment again in-process and compare it with the bag's summaries."""
     plan = replay_plan(run)
+    memory = _patient_start(run, plan)
     result = run_trials(plan.config, trials=plan.trials, changes=plan.changes,
-                        on_trial=on_trial)
+                        on_trial=on_trial, patient_memory=memory)
     tables = {"max_abs_error": result.max_abs_errors,
               "max_abs_feedforward": result.max_abs_feedforward,
               "max_abs_effort": result.max_abs_effort}

@@ -33,6 +33,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or a refused value (2, message printed)
         return exc.code if isinstance(exc.code, int) else 2
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # to print commands that resume
     try:
         return int(args.func(args) or 0)
     except ExoIlcError as exc:

@@ -52,7 +52,19 @@ def _version_line(entry: dict[str, Any], current: int | None) -> str:
             f"{', assist-as-needed' if entry.get('assist_as_needed') else ''}, "
             f"final max |e| {error} rad{share_text}, from "
             f"{'v' + str(entry['started_from']) if entry.get('started_from') else 'zero'}"
-            f"{_not_included(entry)}, config {entry.get('config_digest', '?')}")
+            f"{_not_included(entry)}, config {entry.get('config_digest', '?')}"
+            f"{_resumed(entry)}")
+
+
+def _resumed(entry: dict[str, Any]) -> str:
+    """', session S, resumed after 2 trials' for a session stopped and resumed (and, while
+    unfinished, the session id ``exo-ilc run --resume`` takes)."""
+    resumed = entry.get("resumed") or []
+    if not resumed and entry.get("status") == "complete":
+        return ""
+    after = ", ".join(str(r.get("after_trials")) for r in resumed)
+    return f", session {entry.get('session') or '?'}" + \
+        (f", resumed after {after} trials" if resumed else "")
 
 
 def _not_included(entry: dict[str, Any]) -> str:

@@ -48,10 +48,11 @@ def register(sub: Any) -> None:
     parser.add_argument("--store", metavar="DIR", type=directory,
                         help="save every completed trial and the feed-forward it led to under "
                         "DIR (default: a new .exo-ilc/runs/<date-time>-<pid>/store per run)")
-    parser.add_argument("--resume", action="store_true",
+    parser.add_argument("--resume", nargs="?", const=True, default=False, metavar="SESSION",
                         help="with --store DIR: continue after the last trial stored there "
                         "(after a crash or a killed node), bit-identical to an uninterrupted "
-                        "run")
+                        "run; with --patient, SESSION (the id the stopped run printed, or vN) "
+                        "says which unfinished session to continue")
     parser.add_argument("--no-store", action="store_true", help="do not save the trials")
     from .therapy import add_therapy_arguments
 
@@ -110,6 +111,9 @@ def run(args: argparse.Namespace) -> int:
     root = _store_root(args)
     from .therapy import run_session_graph, uses_therapy
 
+    if isinstance(args.resume, str) and not uses_therapy(args):
+        raise ConfigError("--resume", f"takes a session ({args.resume!r}) only with --patient")
+
     if uses_therapy(args):  # each exercise from the patient's profile, saved from the store
         if root is None:
             raise ConfigError("--no-store", "cannot be combined with --patient (the profile "
@@ -119,6 +123,9 @@ def run(args: argparse.Namespace) -> int:
         except GraphError as exc:
             print(f"exo-ilc run: {exc}\nexo-ilc run: the graph was stopped; the profile holds "
                   f"every completed trial (and the store {root})", file=sys.stderr)
+            resume = getattr(exc, "resume", None)  # set by run_session_graph
+            if resume:
+                print(f"exo-ilc run: {resume}", file=sys.stderr)
             return 3
         return 0
     runs: list[RunSummary] = []

@@ -128,11 +128,14 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
     """``exo-ilc run --patient``: the same checks as in-process, then each exercise through
     the graph (the supervisor starts from the profile: ``profile.initial``). The profile is
     written from the run's store (every completed trial) when the graph ends, also when it
-    was stopped, so a killed session keeps what it learned. Should ``exo-ilc`` itself be
-    killed before it writes the profile, the same command with ``--store DIR --resume``
-    continues the run from its store and writes it."""
+    was stopped, so a killed session keeps what it learned; it then prints the command that
+    resumes exactly this session. ``--resume [SESSION]`` continues it (its unfinished
+    versions, the same session numbers, so the same store keys: cli/therapy_resume.py)."""
     from ..core.experiment import build_reference
+    from ..core.patient import PatientModel
     from ..core.store import RunStore
+    from ..orchestration.launcher import GraphError
+    from .therapy_resume import Step, resume_command, resumed_steps, stored_summary
 
     if args.mass_uncertainty and len(args.mass_uncertainty) > 1:
         raise ConfigError("--mass-uncertainty", "one value with --patient (one patient's arm)")
@@ -140,33 +143,64 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
 
     if args.mass_uncertainty:
         config = config.replace({"mass_uncertainty": args.mass_uncertainty[0]})
+    if PatientModel(config).learns:
+        raise ConfigError("patient.learning.gain", "a learning virtual patient's therapy "
+                          "sessions run in-process (exo-ilc simulate --patient): in the graph "
+                          "its adaptation lives in the plant node, which neither starts from "
+                          "the state stored with the profile nor resumes it")
     book = ProfileBook(profiles_root(args.profiles))
     plan = plan_of(args, config)
-    prepared = [prepare(config, book, args.patient, name, args.new_patient)
-                for name, _ in plan]
-    for item, (name, trials) in zip(prepared, plan, strict=True):  # before any node starts
-        version = book.next_version(args.patient, name, item.start, bool(args.resume))
-        _check_store(item.config.replace({"max_trials": trials or item.config["max_trials"],
-                                          "store.directory": str(store_root),
-                                          "patient.session": version}), args.resume)
-    session = session_id()
+    invocation = session_id()
+    if args.resume:
+        session, steps = resumed_steps(args, config, book, plan, store_root)
+    else:
+        session = invocation
+        steps = [Step(name, trials, prepare(config, book, args.patient, name, args.new_patient))
+                 for name, trials in plan]
+    for step in steps:  # before any node starts
+        if step.done is not None:
+            continue
+        item = step.prepared
+        version = step.reopen or book.next_version(args.patient, step.name, item.start)
+        _check_store(item.config.replace({
+            "max_trials": step.trials or item.config["max_trials"],
+            "store.directory": str(store_root), "patient.session": version}), args.resume)
     runs: list[RunSummary] = []
-    for item, (name, trials) in zip(prepared, plan, strict=True):
-        count = trials or item.config["max_trials"]
+    for step in steps:
+        name = step.name
+        if step.done is not None:  # reported from its store, as the first run would have
+            print(f"patient {args.patient}, exercise {name}: session {session}'s "
+                  f"v{step.done.get('version')} is complete ({step.done.get('trials')} "
+                  "trials); not run again", file=sys.stderr, flush=True)
+            earlier = stored_summary(step, store_root)
+            if earlier is not None:
+                runs.append(earlier)
+            continue
+        item = step.prepared
+        count = step.trials or item.config["max_trials"]
         cfg = item.config.replace({"max_trials": count, "store.directory": str(store_root),
                                    "store.resume": bool(args.resume)})
         reference = build_reference(cfg)
         # The version (the patient's session: its own noise) first, under the profile's lock;
-        # --resume continues the unfinished version a killed exo-ilc left (the store's key).
-        writer = book.begin(args.patient, name, cfg, reference, item.start, session,
-                            reopen=bool(args.resume))
+        # a resume continues the very version the stopped run began (the store's key).
+        writer = book.begin(args.patient, name, cfg, reference, item.start,
+                            invocation if step.reopen else session,
+                            reopen=step.reopen or False, run_store=str(store_root))
         cfg = writer.config
         start = "from zero" if item.start is None else f"from profile v{item.start.version}"
+        again = f" (resuming v{writer.version})" if step.reopen else ""
         print(f"patient {args.patient}, exercise {name}: {count} trials through the graph, "
-              f"{start}, session {writer.version}", file=sys.stderr, flush=True)
+              f"{start}, session {writer.version}{again}, session id {session}, store "
+              f"{store_root}",
+              file=sys.stderr, flush=True)
         summary: RunSummary | None = None
         try:
             summary = run_one(args, cfg, cfg["mass_uncertainty"], count)
+        except GraphError as exc:  # run.py prints it with the error
+            setattr(exc, "resume",  # noqa: B010 (an attribute GraphError does not declare)
+                    f"to continue this session exactly (v{writer.version} of {name}):\n  "
+                    + resume_command(list(args.argv), str(store_root), session))
+            raise
         finally:
             stored = RunStore(store_root, cfg, reference).load()
             done = _profile_from_store(writer, cfg, stored, count)
@@ -200,7 +234,8 @@ def _profile_from_store(writer: Any, config: Any, stored: list[Any],
         return None
     metrics = [config_metrics(s.record, config) for s in stored]
     last = stored[-1]
-    writer.save(last.record.trial, last.next_update, last.record.max_abs_error,
+    true_error = getattr(last.record, "true_max_abs_error", last.record.max_abs_error)
+    writer.save(last.record.trial, last.next_update, true_error,
                 complete=len(stored) >= count, metrics=metrics[-1].to_json())
     return metrics
 

@@ -5,12 +5,17 @@ Layout under the profiles root (``--profiles DIR``, default :func:`default_root`
 
     <root>/<patient>/<exercise>/index.json    versions, their provenance, the current one
     <root>/<patient>/<exercise>/v0001.npz     version 1: feedforward (N+1, joints), levels
+    <root>/<patient>/<exercise>/v0001.patient-start.npz, v0001.patient.npz
+                                              a learning virtual patient's states with it
+                                              (:mod:`.patient_states`)
 
 Each session writes one new version and rewrites it after every trial (status ``in_progress``;
 ``complete`` at the end), so a killed session leaves the feed-forward learned up to its last
 completed trial. Versions are never deleted; ``rollback`` only moves ``current``. Every file is
 written atomically (temp file, fsync, rename, as :mod:`.store`) and each version's sha256 is in
-the index; a file that does not match is refused, never overwritten.
+the index; a file that does not match is refused, never overwritten. A save keeps the file the
+index lists as ``vNNNN.npz.previous`` until the index names the new one, so a save interrupted
+between the two leaves the last completed trial readable (:mod:`.listed_files`).
 
 Sessions of the same patient and exercise may run at once (two terminals, a study): every change
 of the index (a version begun, a trial saved, a rollback) reads, changes and writes it under an
@@ -47,6 +52,16 @@ import numpy as np
 from .config import Config
 from .errors import ProfileError
 from .laws import FeedforwardUpdate
+from .listed_files import read_listed, replace_keeping_listed
+from .patient_states import (
+    START_FILE,
+    START_KEY,
+    STATE_FILE,
+    STATE_KEY,
+    PatientState,
+    file_entry,
+    read_state,
+)
 from .store import _atomic, write_json_atomic
 from .trajectory import SampledReference
 
@@ -120,6 +135,9 @@ class Profile:
     feedforward: np.ndarray
     levels: np.ndarray | None
     provenance: dict[str, Any]
+    patient_state: PatientState | None = None
+    """A learning virtual patient's state after the version's last trial (None: none,
+    :mod:`.patient_states`)."""
 
     @property
     def update(self) -> FeedforwardUpdate:
@@ -148,10 +166,10 @@ class Profile:
 
 def _read_npz(path: Path, sha256: str) -> dict[str, np.ndarray]:
     try:
-        blob = path.read_bytes()
+        blob = read_listed(path, sha256)  # or the one a save interrupted kept (.previous)
     except OSError as exc:
         raise ProfileError(f"{path}: cannot read: {exc.strerror}") from None
-    if hashlib.sha256(blob).hexdigest() != sha256:
+    if blob is None:
         raise ProfileError(f"{path}: corrupt profile file (sha256 does not match its index); "
                            "roll back to an earlier version (exo-ilc profiles rollback)")
     try:
@@ -226,8 +244,10 @@ class ProfileBook:
         path = self.directory(patient, exercise) / entry["file"]
         data = _read_npz(path, entry["sha256"])
         levels = data.get("levels")
+        state = entry.get(STATE_KEY)
         return Profile(patient, exercise, number, path, data["feedforward"],
-                       levels if levels is not None and levels.size else None, dict(entry))
+                       levels if levels is not None and levels.size else None, dict(entry),
+                       None if state is None else read_state(path.parent, state))
 
     def latest(self, patient: str, exercise: str) -> Profile | None:
         """The current version, or None if the patient has no profile for the exercise."""
@@ -253,17 +273,25 @@ class ProfileBook:
         index = self.index(patient, exercise)
         if index is None:
             return 1
-        reopened = _reopenable(index, started_from) if reopen else None
+        reopened = _reopenable(index, started_from, self.directory(patient, exercise)) \
+            if reopen else None
         return reopened or len(index["versions"]) + 1
 
     def begin(self, patient: str, exercise: str, config: Config, reference: SampledReference,
-              started_from: Profile | None, session: str = "",
-              reopen: bool = False) -> ProfileWriter:
+              started_from: Profile | None, session: str = "", reopen: bool | int = False,
+              patient_start: PatientState | None = None,
+              run_store: str | None = None) -> ProfileWriter:
         """The version of the session about to run, allocated under the lock (module
         docstring): the next number, its entry (status ``started``) written at once, so that
-        a concurrent session takes the one after. With ``reopen`` (a resumed run) the newest
-        unfinished version begun from the same ``started_from`` is continued instead, if any.
-        The writer's ``config`` is ``config`` with ``patient.session`` = the version."""
+        a concurrent session takes the one after. ``reopen`` (a resumed run) continues an
+        unfinished version instead: the one numbered ``reopen``, or with ``True`` the only
+        unfinished one begun from ``started_from`` (ProfileError naming them if there are
+        several, :func:`_reopenable`); its config must be the one it began with (but
+        ``store.resume``). ``patient_start``: a learning virtual patient's state the session
+        starts from, written once beside the version (:mod:`.patient_states`). ``run_store``:
+        the run store a graph session saves its trials in (None: in-process, none; recorded:
+        what ``--resume`` looks for, cli/therapy_resume.py). The writer's ``config`` is
+        ``config`` with ``patient.session`` = the version."""
         directory = self.directory(patient, exercise)
         directory.mkdir(parents=True, exist_ok=True)
         with locked(directory):
@@ -271,15 +299,25 @@ class ProfileBook:
                 "format": PROFILE_FORMAT, "patient": patient, "exercise": exercise,
                 "current": None, "versions": []}
             versions = index["versions"]
-            reopened = _reopenable(index, started_from) if reopen else None
+            reopened: int | None = None
+            if reopen is True:
+                reopened = _reopenable(index, started_from, directory)
+            elif reopen is not False:
+                reopened = int(reopen)
             version = reopened or len(versions) + 1
             after = 0 if started_from is None else started_from.version
             not_included = [v["version"] for v in versions if after < v["version"] < version]
             writer = ProfileWriter(directory, version, config, reference, started_from,
                                    session, not_included)
-            if reopened is not None:  # keep when the version was begun
-                writer.created = writer.base["created"] = versions[reopened - 1]["created"]
+            writer.base["run_store"] = run_store
+            if reopened is not None:
+                writer.reopen(_unfinished_entry(index, reopened, directory), session)
             else:
+                if patient_start is not None:
+                    blob = patient_start.encode()
+                    name = START_FILE.format(version=version)
+                    write_bytes_atomic(directory / name, blob)  # not listed yet: no overwrite
+                    writer.base[START_KEY] = file_entry(name, blob)
                 index["versions"] = [*versions, {**writer.base, "status": "started",
                                                  "trials": 0,
                                                  "trials_total": writer.base["trials_before"]}]
@@ -307,13 +345,33 @@ def read_index(path: Path) -> dict[str, Any] | None:
     return dict(document)
 
 
-def _reopenable(index: dict[str, Any], started_from: Profile | None) -> int | None:
-    """The newest version not ``complete`` that began from ``started_from`` (None: none)."""
+def _reopenable(index: dict[str, Any], started_from: Profile | None,
+                directory: Path) -> int | None:
+    """The only version not ``complete`` that began from ``started_from`` (None: none);
+    ProfileError listing them if there are several (which one a resume continues must be
+    said: :meth:`ProfileBook.begin` with its number)."""
     start = None if started_from is None else started_from.version
-    for entry in reversed(index["versions"]):
-        if entry.get("status") != "complete" and entry.get("started_from") == start:
-            return int(entry["version"])
-    return None
+    found = [int(e["version"]) for e in index["versions"]
+             if e.get("status") != "complete" and e.get("started_from") == start]
+    if len(found) > 1:
+        raise ProfileError(f"{directory}: versions {', '.join(f'v{v}' for v in found)} are "
+                           f"all unfinished sessions begun from "
+                           f"{'zero' if start is None else f'v{start}'}; say which to resume")
+    return found[0] if found else None
+
+
+def _unfinished_entry(index: dict[str, Any], version: int, directory: Path) -> dict[str, Any]:
+    """The index entry of version ``version``, which a resume continues: ProfileError if
+    there is none or it is complete (nothing of it is rewritten)."""
+    versions = index["versions"]
+    if not 1 <= version <= len(versions):
+        raise ProfileError(f"{directory}: no version {version} to resume (versions "
+                           f"1-{len(versions)})")
+    entry = dict(versions[version - 1])
+    if entry.get("status") == "complete":
+        raise ProfileError(f"{directory}: version {version} is complete; a resume continues "
+                           "only an unfinished session (nothing overwritten)")
+    return entry
 
 
 class ProfileWriter:
@@ -343,12 +401,36 @@ class ProfileWriter:
             "trials_before": 0 if started_from is None else
             int(started_from.provenance.get("trials_total", 0)),
         }
+        if config["store.resume"]:  # a resumed run's digest is its first run's
+            self.base["config_digest"] = config.replace({"store.resume": False}).digest()
+
+    def reopen(self, entry: dict[str, Any], session: str) -> None:
+        """Continue the unfinished version ``entry`` (a resumed run): its config must be the
+        one it began with (ProfileError naming both digests); it keeps when and by which
+        session it was begun, its patient start state, and lists this run in ``resumed``."""
+        if entry.get("config_digest") != self.base["config_digest"] or \
+                entry.get("started_from") != self.base["started_from"]:
+            raise ProfileError(
+                f"{self.directory}: version {self.version} began from "
+                f"v{entry.get('started_from')} with config {entry.get('config_digest')}; this "
+                f"run would continue it from v{self.base['started_from']} with config "
+                f"{self.base['config_digest']}: resume it with the options it was begun with")
+        for key in ("created", "session", START_KEY, "not_included"):
+            if key in entry:
+                self.base[key] = entry[key]
+        self.created = str(self.base["created"])
+        self.base["resumed"] = [*entry.get("resumed", []), {
+            "session": session, "after_trials": int(entry.get("trials", 0)),
+            "at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}]
 
     def save(self, trials: int, update: FeedforwardUpdate, final_max_abs_error: Any,
-             complete: bool = False, metrics: dict[str, Any] | None = None) -> Path:
+             complete: bool = False, metrics: dict[str, Any] | None = None,
+             patient_state: PatientState | None = None) -> Path:
         """The feed-forward after ``trials`` trials of this session (and their last max |e|
         per joint, rad) as this version, made current unless a higher version is; returns the
-        file written. The index is read, changed and written under the lock."""
+        file written. ``patient_state``: a learning virtual patient's state after the same
+        trial, written with it (:mod:`.patient_states`). The index is read, changed and
+        written under the lock; a version already complete is never rewritten."""
         buffer = io.BytesIO()
         levels = np.empty((0,)) if update.levels is None else np.asarray(update.levels, float)
         np.savez(buffer, feedforward=np.asarray(update.feedforward, dtype=float), levels=levels)
@@ -371,8 +453,17 @@ class ProfileWriter:
                 raise ProfileError(f"{index_path}: version {self.version} of this session is "
                                    "no longer listed (index replaced meanwhile?); nothing "
                                    "written")
-            with _atomic(path) as handle:
-                handle.write(blob)
+            if index["versions"][self.version - 1].get("status") == "complete":
+                raise ProfileError(f"{path}: version {self.version} is complete; nothing "
+                                   "rewritten")
+            listed = index["versions"][self.version - 1]
+            if patient_state is not None:
+                state = patient_state.encode()
+                name = STATE_FILE.format(version=self.version)
+                replace_keeping_listed(self.directory / name, state,
+                                       (listed.get(STATE_KEY) or {}).get("sha256"))
+                entry[STATE_KEY] = file_entry(name, state)
+            replace_keeping_listed(path, blob, listed.get("sha256"))
             index["versions"][self.version - 1] = entry
             if index["current"] is None or index["current"] <= self.version:
                 index["current"] = self.version

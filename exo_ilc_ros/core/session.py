@@ -304,7 +304,8 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
                store: Path | str | None = None, resume: bool = False,
                changes: Mapping[int, Mapping[str, Any]] | None = None,
                on_conclusion: Callable[[TrialConclusion], None] | None = None,
-               patient_memory: tuple[np.ndarray, np.ndarray] | None = None) -> RunResult:
+               patient_memory: tuple[np.ndarray, np.ndarray] | None = None,
+               patient: PatientLearning | None = None) -> RunResult:
     """Run the experiment in-process, learning between trials: a loop over a
     :class:`LearningSession` (its rules, including ``stop_when_settled``, are the graph's).
 
@@ -319,7 +320,9 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
     overwritten). ``on_conclusion`` sees each trial's conclusion (what the next trial uses)
     once the store holds it (a patient's profile is saved from it, core/profiles.py).
     ``patient_memory`` (fast, slow) starts a learning patient with what an earlier session left
-    (core/therapy.py); ``result.patient_memory`` is what this run leaves.
+    (core/therapy.py); ``result.patient_memory`` is what this run leaves. ``patient``: the
+    learning patient itself (its state read by ``on_conclusion``: the state after the trial
+    concluded), instead of a new one.
     """
     overrides: dict[str, Any] = {}
     if trials is not None:
@@ -336,8 +339,8 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
     experiment = Experiment(effective)
     result = RunResult(experiment.mass_uncertainty, effective["law"],
                        float(effective["error_bound"]))
-    patient = PatientLearning(experiment.patient, experiment.reference.samples) \
-        if experiment.patient.learns else None
+    if patient is None and experiment.patient.learns:
+        patient = PatientLearning(experiment.patient, experiment.reference.samples)
     if patient is not None and patient_memory is not None:  # the same patient, a new session
         patient.fast, patient.slow = (np.array(x, dtype=float) for x in patient_memory)
         patient.torque = patient.fast + patient.slow

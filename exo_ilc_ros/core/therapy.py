@@ -18,9 +18,11 @@ from typing import Any
 
 from .config import Config
 from .errors import ProfileError
-from .experiment import Experiment, build_reference
+from .experiment import build_reference
 from .laws import TrialRecord
 from .metrics import SessionMetrics, TrialMetrics, config_metrics, session_metrics
+from .patient import PatientLearning, PatientModel
+from .patient_states import PatientState, read_legacy
 from .profiles import Profile, ProfileBook, ProfileWriter, check_name
 from .session import RunResult, TrialConclusion, run_trials
 
@@ -99,10 +101,17 @@ def run_exercise(prepared: PreparedExercise, book: ProfileBook, trials: int | No
     cfg = prepared.config
     if trials is not None:
         cfg = cfg.replace({"max_trials": int(trials)})
-    writer: ProfileWriter = book.begin(prepared.patient, prepared.exercise, cfg,
-                                       build_reference(cfg), prepared.start, session)
+    reference = build_reference(cfg)
+    patient = None
+    if PatientModel(cfg).learns:  # the state it starts from, kept with the version
+        patient = PatientLearning(PatientModel(cfg), reference.samples)
+        start = patient_start_state(prepared, patient)
+        patient.fast, patient.slow = start.fast.copy(), start.slow.copy()
+        patient.torque = patient.fast + patient.slow
+    writer: ProfileWriter = book.begin(
+        prepared.patient, prepared.exercise, cfg, reference, prepared.start, session,
+        patient_start=None if patient is None else PatientState(patient.fast, patient.slow))
     cfg = writer.config
-    experiment = Experiment(cfg)
     metrics: list[TrialMetrics] = []
 
     def conclude(conclusion: TrialConclusion) -> None:
@@ -111,15 +120,30 @@ def run_exercise(prepared: PreparedExercise, book: ProfileBook, trials: int | No
         metrics.append(measured)
         true_error = getattr(record, "true_max_abs_error", record.max_abs_error)
         writer.save(record.trial, conclusion.update, true_error,
-                    complete=conclusion.stop is not None, metrics=measured.to_json())
+                    complete=conclusion.stop is not None, metrics=measured.to_json(),
+                    patient_state=None if patient is None else
+                    PatientState(patient.fast, patient.slow))
 
-    memory = load_patient_memory(writer.directory, experiment.reference.samples)
-    result = run_trials(cfg, on_trial=on_trial, on_conclusion=conclude, patient_memory=memory)
-    if result.patient_memory is not None:
-        save_patient_memory(writer.directory, result.patient_memory)
+    result = run_trials(cfg, on_trial=on_trial, on_conclusion=conclude, patient=patient)
     return ExerciseResult(prepared.patient, prepared.exercise, cfg, result, metrics,
                           None if prepared.start is None else prepared.start.version,
                           writer.version if metrics else None)
+
+
+def patient_start_state(prepared: PreparedExercise, patient: PatientLearning) -> PatientState:
+    """The learning virtual patient's state a session starts from: the state stored with the
+    profile version it starts from, else (a version written before states were kept per
+    version) the exercise's ``virtual_patient.npz``, else zeros (:mod:`.patient_states`)."""
+    samples, joints = patient.fast.shape
+    start = prepared.start
+    if start is not None:
+        if start.patient_state is not None and start.patient_state.fast.shape == (samples,
+                                                                                  joints):
+            return start.patient_state
+        legacy = read_legacy(start.path.parent, samples)
+        if legacy is not None:
+            return legacy
+    return PatientState.zeros(samples, joints)
 
 
 def profiles_root(given: str | None) -> Path:
@@ -129,36 +153,3 @@ def profiles_root(given: str | None) -> Path:
     return Path(given) if given else default_root()
 
 
-VIRTUAL_PATIENT = "virtual_patient.npz"
-"""Beside a profile: what a *learning virtual patient* (``patient.learning.*``) had learned at
-the end of the last in-process session, so that the next session simulates the same patient
-(simulation only; a real patient keeps it themselves)."""
-
-
-def load_patient_memory(directory: Path, samples: int) -> tuple[Any, Any] | None:
-    """The virtual patient's (fast, slow) states saved beside the profile (None: none, or
-    of another movement)."""
-    import numpy as np
-
-    path = directory / VIRTUAL_PATIENT
-    if not path.is_file():
-        return None
-    try:
-        with np.load(path) as data:
-            fast, slow = np.array(data["fast"]), np.array(data["slow"])
-    except (OSError, ValueError, KeyError) as exc:
-        raise ProfileError(f"{path}: unreadable virtual patient state: {exc}") from None
-    return (fast, slow) if fast.shape[0] == samples == slow.shape[0] else None
-
-
-def save_patient_memory(directory: Path, memory: tuple[Any, Any]) -> None:
-    """Save the virtual patient's (fast, slow) states beside the profile, atomically."""
-    import io
-
-    import numpy as np
-
-    from .profiles import write_bytes_atomic
-
-    buffer = io.BytesIO()
-    np.savez(buffer, fast=memory[0], slow=memory[1])
-    write_bytes_atomic(directory / VIRTUAL_PATIENT, buffer.getvalue())

@@ -50,7 +50,7 @@ if TYPE_CHECKING:
 
 REST_SPEED = 0.05
 """rad/s: every joint's true |qdot| below it counts as at rest."""
-RULE_DELAY_PERIODS = 2
+RULE_DELAY_PERIODS = 1
 """The schema's rule: the hold must be stable with the command this many periods late."""
 
 

@@ -30,7 +30,7 @@ OLD = {"safety.hold_kp": [16.0, 10.0, 10.0], "safety.hold_kd": [8.0, 5.0, 7.0],
 """The hold before ``safety.hold_*``: the controller's gains, no ramp."""
 
 
-class _Aborted(Exception):
+class _FirstAbortError(Exception):
     def __init__(self, record: TrialRecord) -> None:
         super().__init__(record.trial)
         self.record = record
@@ -40,10 +40,10 @@ def first_abort(values: dict[str, Any], trials: int) -> TrialRecord | None:
     """The first trial the envelope aborts in this cell (None: none within ``trials``)."""
     def on_trial(record: TrialRecord) -> None:
         if record.aborted:
-            raise _Aborted(record)
+            raise _FirstAbortError(record)
     try:
         run_trials(Config({**values, "max_trials": trials}, "hold bench"), on_trial=on_trial)
-    except _Aborted as stop:
+    except _FirstAbortError as stop:
         return stop.record
     return None
 

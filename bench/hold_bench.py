@@ -1,11 +1,12 @@
 """The safe hold before and after ``safety.hold_*``: does the arm come to rest after an abort?
 
-Run with ``.venv/bin/python -m bench.hold_bench`` (about 1-2 min on the shared machine). For each
-law (sign, tuned, linear) x patient scenario at 10 % it runs the study's cell up to its first
-envelope abort and replays that trial with the hold on the controller's gains (``old``: the
-hold before ``safety.hold_*``) and with the shipped hold (``new``); then the same for aborts
-provoked under ``spastic`` by a constant feed-forward on one joint, and the hold's discrete-time
-decay rate at 0.001-0.01 s. Prints the numbers of README "The safe hold"; asserts nothing.
+Run with ``.venv/bin/python -m bench.hold_bench`` (about 1-2 min on the shared machine). For
+each law (sign, tuned, linear) x patient scenario at 10 % (and ``spastic`` at MAS 3) it runs
+the study's cell up to its first envelope abort and replays that trial with the hold on the
+controller's gains (``old``: the hold before ``safety.hold_*``) and with the shipped hold
+(``new``); then the same for aborts provoked under ``spastic`` by a constant feed-forward on
+one joint, and the hold's discrete-time decay rate at 0.001-0.01 s. Prints the numbers of
+README "The safe hold"; asserts nothing.
 """
 
 from __future__ import annotations
@@ -77,6 +78,13 @@ def main() -> None:
                 print(f"{law} / {scenario}: no abort in 1000 trials")
                 continue
             replay(f"{law}/{scenario} trial {record.trial}", cell.values, record)
+    print("\nspastic at Modified Ashworth 3 (not covered by the shipped hold):")
+    for law in ("sign", "linear"):
+        [cell] = study_cells([resolve_law(law)], [resolve_scenario("spastic")], [0.1], [0], 1000)
+        values = {**cell.values, "patient.spasticity.mas_grade": "3"}
+        record = first_abort(values, 1000)
+        if record is not None:
+            replay(f"{law}/MAS 3 trial {record.trial}", values, record)
     print("\nspastic (MAS 2), 10 %: a constant feed-forward (rad/s^2) on one joint from t = 0:")
     spastic = load_config(overlays=[scenario_path("spastic")], overrides={
         "mass_uncertainty": 0.1}).values

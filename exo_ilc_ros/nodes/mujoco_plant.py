@@ -89,6 +89,9 @@ class FreeRunningPlant(Node):
         self.hold_pose: np.ndarray | None = None
         self.safe_hold = GuardedControlStep(self.experiment)
         """The controller's safe hold (its gains and ramp, core/hold.py), latched at the trip."""
+        here = np.zeros(config.joints)  # load its kernels now, not at a trip
+        self.safe_hold.hold_at(here)
+        self.safe_hold.hold(here, here)
         self.state = JointStateWriter(config["joint_names"])
         self.clock = Clock()
         self.state_pub = self.create_publisher(JointState, topics.JOINT_STATES, SAMPLES_QOS)

@@ -100,6 +100,9 @@ class PlantSimulator(Node):
         """Real-time mode: the pose the plant's safe hold keeps after a watchdog trip."""
         self.safe_hold = GuardedControlStep(self.experiment)
         """The controller's safe hold (its gains and ramp, core/hold.py), latched at the trip."""
+        here = np.zeros(config.joints)  # load its kernels now, not at a trip
+        self.safe_hold.hold_at(here)
+        self.safe_hold.hold(here, here)
 
         self.state = JointStateWriter(config["joint_names"])
         self.clock = Clock()

@@ -16,22 +16,24 @@ the forearm, softer than the delayed stretch reflex of a Modified Ashworth 2 arm
 delayed velocity feedback G the hold needs undelayed damping D > G - b (b the arm's own
 damping; I s^2 + (D + G e^{-s tau}) s + K has no root crossing the imaginary axis for any delay
 tau when D > |G|). Computed torque gives damping a_N(q) K_D,h, and the light mode of the coupled
-shoulder-elbow flexion has an inertia down to ~0.02 kg m^2 in the workspace (the smallest
-eigenvalue of a_N), so K_D,h = 40 s^-1 on the elbow is ~0.8 N m s/rad there, ~1.6 on the
-forearm alone. Measured (README "The safe hold"): every MAS 2 abort of the study comes to rest.
+shoulder-elbow flexion has an inertia down to ~0.01 kg m^2 (the smallest eigenvalue of a_N, at
+the straight arm): K_D,h = 60 s^-1 on the elbow brings every MAS 2 abort we provoked or the
+study met to rest; 40 left an abort near the straight arm swinging (README "The safe hold").
 
 Why not stiffer. A discrete PD of period T with the command d periods late is stable only for
 K_D,h T below ~2 (d = 0), 0.85 (d = 1), 0.52 (d = 2) (critically damped, K_P,h = K_D,h^2 / 4;
-:func:`hold_radius`). The ``realistic`` patient's loop is ~2.5 periods late at 100 Hz (one
-period of actuator delay, a differentiated and 10 ms low-passed velocity): at K_D,h = 60 s^-1 its
-hold oscillates, at 80 it diverges into a limit cycle. The schema refuses hold gains that are not
-stable with two periods of delay at ``control.period`` (:func:`hold_gain_problem`). A MAS 3
-reflex (2 N m s/rad) would need ~120 s^-1 on the elbow: not reachable at 100 Hz with those
-sensors, and not claimed.
+:func:`hold_radius`). The ``realistic`` patient's loop is ~2-2.5 periods late at 100 Hz (one
+period of actuator delay, a differentiated and 10 ms low-passed velocity): it still comes to
+rest with 60 on the elbow (the arm's own damping helps), but 80 on the elbow or 60 on the
+shoulder flexion keep it oscillating. The schema refuses hold gains that are not stable with the
+command :data:`RULE_DELAY_PERIODS` period late at ``control.period`` (:func:`hold_gain_problem`);
+a longer loop must be checked on the arm. A MAS 3 reflex (2 N m s/rad) would need ~120 s^-1 on
+the elbow: not reachable at 100 Hz with those sensors, and not claimed.
 
 Why a ramp. Stepping to the stiff damping at the abort brakes a fast arm on a lagging velocity
-estimate: under ``realistic`` the elbow overshot to 15 rad/s (7-8 at the abort) and the shoulder
-saturated; a 50 ms ramp keeps the peak at the abort's speed and halves the peak effort.
+estimate: under ``realistic`` the elbow overshot to 16 rad/s (5-8 at the abort) and the
+shoulder saturated; a 50 ms ramp keeps the peak at the abort's speed and the hold's peak effort
+under ``spastic`` at 14 N m instead of the 40 N m limit.
 
 "At rest" (:func:`rest_after_abort`): every joint's true speed below :data:`REST_SPEED` from some
 time after the abort to the end of the trial; that time is the time to rest.

@@ -255,7 +255,7 @@ PARAMETERS: tuple[Parameter, ...] = (
               per_joint=True, minimum=0.0),
     Parameter("safety.hold_kd", SHARED, Kind.DOUBLE_ARRAY,
               "K_D of the safe hold (s^-1, as control.kd): its damping; with hold_kp it must be "
-              "stable at control.period with the command two periods late (core/hold.py)",
+              "stable at control.period with the command one period late (core/hold.py)",
               per_joint=True, minimum=0.0),
     Parameter("safety.hold_ramp", SHARED, Kind.DOUBLE,
               "s over which the safe hold's gains go linearly from control.kp/kd to "

@@ -221,9 +221,11 @@ def test_reflex_is_clipped_at_its_ceiling_by_hand() -> None:
 
 def test_the_reflex_ceiling_keeps_the_safe_hold_finite() -> None:
     """The tuned sign law under ``spastic`` at 10 %: with the MAS 2 reflex unbounded (the
-    preset's values as ``custom``, no ceiling) the safe hold after the envelope abort of trial
-    161 runs away to a non-finite state (the study's FAILED cell before the ceiling); with the
-    preset's ceiling the envelope aborts trials too, and every trial stays finite."""
+    preset's values as ``custom``, no ceiling) and the safe hold on the controller's gains (as
+    before ``safety.hold_*``) the hold after the envelope abort of trial 161 runs away to a
+    non-finite state (the study's FAILED cell before the ceiling); the shipped hold's damping
+    keeps even the unbounded reflex finite; with the preset's ceiling the envelope aborts
+    trials too, and every trial stays finite."""
     law, scenario = resolve_law("tuned"), resolve_scenario("spastic")
     k, b, g, th, _ = MAS_PRESETS["2"]
     [unbounded] = study_cells([law], [scenario], [0.1], [0], 162)
@@ -231,8 +233,12 @@ def test_the_reflex_ceiling_keeps_the_safe_hold_finite() -> None:
               "patient.spasticity.stiffness": [k] * 3, "patient.spasticity.damping": [b] * 3,
               "patient.spasticity.reflex_gain": [g] * 3,
               "patient.spasticity.reflex_threshold": [th] * 3}
-    old = run_cell(StudyCell("tuned", "spastic", 0.1, 0, values))
+    soft = {**values, "safety.hold_kp": values["control.kp"],
+            "safety.hold_kd": values["control.kd"], "safety.hold_ramp": 0.0}
+    old = run_cell(StudyCell("tuned", "spastic", 0.1, 0, soft))
     assert old.aborted and old.nonfinite is not None and "safe hold" in old.nonfinite
+    held = run_cell(StudyCell("tuned", "spastic", 0.1, 0, values))
+    assert held.aborted == old.aborted and held.nonfinite is None
     [bounded] = study_cells([law], [scenario], [0.1], [0], 220)
     new = run_cell(bounded)
     assert new.aborted and new.aborted[-1] == 220  # the safe hold ran

@@ -220,7 +220,8 @@ def test_plant_watchdog_in_real_time_mode_stops_holding_the_last_command(tmp_pat
                                                                          ) -> None:
     """Real-time plant, commands fed for the first ticks, then none: the last command is held
     until ``safety.watchdog_periods`` periods of wall time passed; from then on every tick
-    applies the safe hold around the pose at the trip (exactly ``safe_hold_effort``), reported
+    applies the safe hold around the pose at the trip (exactly ``safe_hold_effort`` with the
+    hold's gains, ramped from the controller's over ``safety.hold_ramp``), reported
     on /joint_states and as ERROR on /diagnostics; a late command is ignored (counted). The next
     trial (reset + start) clears it and holds commands again."""
     import rclpy
@@ -301,9 +302,12 @@ def test_plant_watchdog_in_real_time_mode_stops_holding_the_last_command(tmp_pat
         hold_pose = steps[first_hold][1]
         np.testing.assert_array_equal(plant.hold_pose, hold_pose)
         e = plant.experiment
-        for effort, q, qd, _, tripped in steps[first_hold:]:
-            assert tripped
-            expected = safe_hold_effort(hold_pose, q, qd, e.kp, e.kd, e.nominal.kernel_args,
+        for m, (effort, q, qd, _, tripped) in enumerate(steps[first_hold:]):
+            assert tripped  # the hold's gains ramp from the controller's over hold_ramp ticks
+            w = min(1.0, m / e.hold_ramp)
+            kp, kd = (e.hold_kp, e.hold_kd) if w == 1.0 else \
+                (e.kp + w * (e.hold_kp - e.kp), e.kd + w * (e.hold_kd - e.kd))
+            expected = safe_hold_effort(hold_pose, q, qd, kp, kd, e.nominal.kernel_args,
                                         plant.limit)
             np.testing.assert_array_equal(effort, expected)
             assert not np.array_equal(effort, command)

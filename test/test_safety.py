@@ -43,8 +43,13 @@ def test_envelope_aborts_at_the_first_sample_outside_and_holds() -> None:
     assert np.all(np.abs(record.error[:k]) <= env)
     assert np.any(np.abs(record.error[k]) > env)
     q_hold = record.position[k]
-    for i in (k, k + 1, len(record.effort) - 1):  # the safe hold from the abort sample on
-        expect = safe_hold_effort(q_hold, record.position[i], record.velocity[i], e.kp, e.kd,
+    assert e.hold_ramp == 5  # safety.hold_ramp 0.05 s at 0.01 s
+    hold = np.array([e.hold_kp, e.hold_kd])
+    ramp = {k: np.array([e.kp, e.kd]),  # the safe hold from the abort sample on, its gains
+            k + 1: np.array([e.kp, e.kd]) + 0.2 * (hold - np.array([e.kp, e.kd])),  # ramped
+            k + 5: hold, len(record.effort) - 1: hold}
+    for i, (kp, kd) in ramp.items():
+        expect = safe_hold_effort(q_hold, record.position[i], record.velocity[i], kp, kd,
                                   e.nominal.kernel_args, e.effort_limit)
         assert np.array_equal(record.effort[i], expect)
     # the arm comes to rest near the abort pose (gravity compensated, PD-damped)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numba
 
 KERNEL_MODULES = ("dynamics.py", "plant.py", "controller.py", "trial.py", "patient.py",
-                  "joint_forces.py")
+                  "joint_forces.py", "hold.py")
 
 if not os.environ.get("NUMBA_CACHE_DIR"):
     here = Path(__file__).resolve().parent

@@ -9,14 +9,16 @@ the first sample where any joint is outside (or the state is not finite) the tri
 trial reuses the same feed-forward).
 
 Safe hold: the same computed-torque controller with the reference frozen at the pose measured at
-the abort, zero reference velocity and no feed-forward:
+the abort, zero reference velocity and no feed-forward, with the hold's own gains:
 
-    Q = a_N(q) (K_P (q_hold - q) - K_D qdot) + c_N(q, qdot), clamped to +-effort_limit,
+    Q = a_N(q) (K_P,h (q_hold - q) - K_D,h qdot) + c_N(q, qdot), clamped to +-effort_limit,
 
-i.e. nominal gravity (and Coriolis) compensation at the current pose, plus the controller's own
-PD gains as stiffness and damping around the abort pose. It brings the arm to rest near where the
-fault was seen instead of following the reference on or letting the limb drop; with mass
-uncertainty delta it rests with a small gravity sag (delta times the gravity torque over K_P).
+i.e. nominal gravity (and Coriolis) compensation at the current pose, plus ``safety.hold_kp``,
+``safety.hold_kd`` as stiffness and damping around the abort pose, reached from the controller's
+gains over ``safety.hold_ramp`` (:mod:`.hold`: why those gains, and what "at rest" means). It
+brings the arm to rest near where the fault was seen instead of following the reference on or
+letting the limb drop; with mass uncertainty delta it rests with a small gravity sag (delta
+times the gravity torque over K_P,h).
 
 Every command is clamped to +-effort_limit by the plant's rule (:func:`plant.clamp`), so the
 plant's own limit never changes it.
@@ -30,6 +32,7 @@ import numpy as np
 from numba import njit
 
 from .dynamics import inertia_and_bias_into, workspace
+from .hold import hold_gains_into
 from .plant import clamp
 
 if TYPE_CHECKING:
@@ -144,17 +147,29 @@ class GuardedControlStep(ControlStep):
         super().__init__(experiment)
         self.envelope = np.asarray(experiment.error_envelope, dtype=float).copy()
         self.q_hold = np.empty(experiment.reference.position.shape[1])
+        self._hold_kp = experiment.hold_kp
+        self._hold_kd = experiment.hold_kd
+        self._hold_ramp = experiment.hold_ramp
+        self._hold_gains = np.empty((2, self.q_hold.shape[0]))
+        self.hold_samples = 0
+        """Hold commands since :meth:`hold_at` (the ramp's sample count, :mod:`.hold`)."""
 
     def outside(self, q_ref: np.ndarray, q: np.ndarray) -> bool:
         """True if any |q_ref_j - q_j| exceeds the envelope (or is not finite)."""
         return bool(outside_envelope(q_ref, q, self.envelope))
 
     def hold_at(self, q: np.ndarray) -> None:
-        """Latch the pose the safe hold keeps."""
+        """Latch the pose the safe hold keeps (its gains ramp from the controller's again)."""
         self.q_hold[:] = q
+        self.hold_samples = 0
 
     def hold(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """The safe-hold effort at (q, qdot) around the latched pose (clamped)."""
-        safe_hold_into(self.q_hold, q, qd, self._kp, self._kd, self._nominal, self._limit,
+        """The safe-hold effort at (q, qdot) around the latched pose (clamped), one call per
+        sample: its gains ramp over ``safety.hold_ramp`` (:func:`hold.hold_gains_into`)."""
+        gains = self._hold_gains
+        hold_gains_into(self.hold_samples, self._hold_ramp, self._kp, self._kd, self._hold_kp,
+                        self._hold_kd, gains)
+        self.hold_samples += 1
+        safe_hold_into(self.q_hold, q, qd, gains[0], gains[1], self._nominal, self._limit,
                        self._ws, self.control_input, self.effort)
         return self.effort

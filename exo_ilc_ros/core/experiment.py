@@ -10,6 +10,7 @@ import numpy as np
 from .assist import with_assist
 from .config import Config
 from .errors import SafetyError
+from .hold import ramp_samples
 from .laws import (
     ErrorSum,
     InitialFeedforward,
@@ -132,6 +133,11 @@ class Experiment:
         self.kd = np.asarray(config["control.kd"], dtype=float)
         self.effort_limit = np.asarray(config["control.effort_limit"], dtype=float)
         self.error_envelope = np.asarray(config["safety.error_envelope"], dtype=float)
+        self.hold_kp = np.asarray(config["safety.hold_kp"], dtype=float)
+        self.hold_kd = np.asarray(config["safety.hold_kd"], dtype=float)
+        self.hold_ramp = ramp_samples(config["safety.hold_ramp"], config["control.period"])
+        """The safe hold's gains and ramp (samples) (:mod:`.hold`): every place that commands
+        the hold takes them from here."""
         self.period = float(config["control.period"])
         self.substeps = int(round(self.period / config["integration_step"]))
         self.dynamics = PlantDynamics.FULL if config["dynamics"] == "full" \
@@ -159,8 +165,9 @@ class Experiment:
         q, qd, u, effort, abort, q_true, qd_true = simulate_trial_guarded(
             u_ff, ref.position, ref.velocity, self.kp, self.kd, self.effort_limit, self.period,
             self.substeps, self.plant.kernel_args, self.nominal.kernel_args, int(self.dynamics),
-            self.error_envelope, patient.joint, patient.scalars, draws.noise, draws.initial,
-            draws.trial_scalars, learned if learned is not None
+            self.error_envelope, self.hold_kp, self.hold_kd, self.hold_ramp, patient.joint,
+            patient.scalars, draws.noise, draws.initial, draws.trial_scalars,
+            learned if learned is not None
             else np.zeros(ref.position.shape) if patient.learns else _NO_TORQUE)
         measured = patient.measures
         return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels,

@@ -249,6 +249,17 @@ PARAMETERS: tuple[Parameter, ...] = (
               "|e_j| above it aborts the trial at once: safe hold, trial marked aborted, "
               "nothing learned from it (rad, per joint)", per_joint=True,
               strictly_positive=True, live=True),
+    Parameter("safety.hold_kp", SHARED, Kind.DOUBLE_ARRAY,
+              "K_P of the safe hold (s^-2, through a_N(q) as control.kp): its stiffness about "
+              "the pose latched at an abort, a watchdog trip or a failed homing (core/hold.py)",
+              per_joint=True, minimum=0.0),
+    Parameter("safety.hold_kd", SHARED, Kind.DOUBLE_ARRAY,
+              "K_D of the safe hold (s^-1, as control.kd): its damping; with hold_kp it must be "
+              "stable at control.period with the command one period late (core/hold.py)",
+              per_joint=True, minimum=0.0),
+    Parameter("safety.hold_ramp", SHARED, Kind.DOUBLE,
+              "s over which the safe hold's gains go linearly from control.kp/kd to "
+              "safety.hold_kp/kd (rounded to control periods; 0: at once)", minimum=0.0),
     Parameter("safety.watchdog_periods", SHARED, Kind.INTEGER,
               "control periods without /joint_states (controller) or a command (plant) before "
               "the safe hold / zero effort", strictly_positive=True),
@@ -520,6 +531,11 @@ def check_consistency(values: Mapping[str, Any]) -> None:
                 raise ConfigError(f"patient.spasticity.{key}",
                                   "give either a mas_grade (its preset) or the custom values, "
                                   "not both (set mas_grade: custom)")
+    from .hold import hold_gain_problem
+
+    hold = hold_gain_problem(values)
+    if hold is not None:
+        raise ConfigError(*hold)
     if len(set(values["joint_names"])) != len(values["joint_names"]):
         raise ConfigError("joint_names", "joint names must be unique")
     if any(not name for name in values["joint_names"]):

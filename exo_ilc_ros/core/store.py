@@ -48,6 +48,7 @@ STORE_VERSION = 1
 NOT_KEYED = frozenset({"max_trials", "mode", "real_time_rate", "wait_for_recorder",
                        "max_late_commands", "thread_priority",
                        "safety.watchdog_periods", "watchdog_min_timeout",
+                       "safety.hold_kp", "safety.hold_kd", "safety.hold_ramp",
                        "store.directory",
                        "store.resume"})
 """Non-live parameters that change how a run is driven, not what it learns."""

@@ -17,6 +17,7 @@ from numba import njit
 
 from .controller import control_into, outside_envelope, safe_hold_into
 from .dynamics import workspace
+from .hold import hold_gains_into
 from .laws import TrialRecord
 from .patient import measure_into, patient_period, start_state_into
 from .plant import clamp, rk4_period
@@ -30,7 +31,8 @@ if TYPE_CHECKING:
 def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray,
                            kp: np.ndarray, kd: np.ndarray, effort_limit: np.ndarray,
                            period: float, substeps: int, plant: tuple, nominal: tuple, mode: int,
-                           envelope: np.ndarray, patient_joint: np.ndarray,
+                           envelope: np.ndarray, hold_kp: np.ndarray, hold_kd: np.ndarray,
+                           hold_ramp: int, patient_joint: np.ndarray,
                            patient_scalars: np.ndarray, noise: np.ndarray, initial: np.ndarray,
                            trial_scalars: np.ndarray, learned: np.ndarray
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int,
@@ -43,7 +45,8 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
     over [t_i, t_i+1) (eq (8), :func:`plant.rk4_period`). The command at t_N is recorded but
     never applied. At the first sample outside the envelope the trial is aborted: that sample
     and every later one command the safe hold around the pose measured there (the loop keeps
-    integrating so the record shows the hold).
+    integrating so the record shows the hold), with the hold's own gains ``hold_kp``,
+    ``hold_kd`` reached over ``hold_ramp`` samples (:func:`hold.hold_gains_into`).
 
     The virtual patient (:mod:`.patient`; off when ``patient_scalars`` is empty, then none of
     it runs): the trial starts at x_d(0) plus ``initial``, the controller (and the envelope)
@@ -78,6 +81,7 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
         memory = np.empty((3, n))
         held = applied
     q_hold = q.copy()
+    gains = np.empty((2, n))
     abort = -1
     for i in range(n_samples):
         if patient:
@@ -96,8 +100,9 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
             control_into(u_ff[i], q_ref[i], qd_ref[i], q_seen, qd_seen, kp, kd, nominal,
                          effort_limit, ws, u_log[i], effort_log[i])
         else:
-            safe_hold_into(q_hold, q_seen, qd_seen, kp, kd, nominal, effort_limit, ws,
-                           u_log[i], effort_log[i])
+            hold_gains_into(i - abort, hold_ramp, kp, kd, hold_kp, hold_kd, gains)
+            safe_hold_into(q_hold, q_seen, qd_seen, gains[0], gains[1], nominal, effort_limit,
+                           ws, u_log[i], effort_log[i])
         if i + 1 < n_samples:
             for j in range(n):
                 applied[j] = clamp(effort_log[i, j], effort_limit[j])
@@ -143,21 +148,25 @@ def simulate_trial(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, kp: 
 @njit(cache=True, error_model="numpy")
 def control_inputs(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
                    qd: np.ndarray, kp: np.ndarray, kd: np.ndarray, nominal: tuple,
-                   effort_limit: np.ndarray, aborted_at: int) -> tuple[np.ndarray, np.ndarray]:
+                   effort_limit: np.ndarray, aborted_at: int, hold_kp: np.ndarray,
+                   hold_kd: np.ndarray, hold_ramp: int) -> tuple[np.ndarray, np.ndarray]:
     """u and effort at every sample of a trial from the sampled states, as the controller
     formed them (one :func:`controller.control_into` per sample, in order); from sample
-    ``aborted_at`` on (-1: never) the safe hold around q[aborted_at]."""
+    ``aborted_at`` on (-1: never) the safe hold around q[aborted_at] with its gains (ramped
+    as :func:`simulate_trial_guarded` does)."""
     n_samples, n = q.shape
     u = np.empty((n_samples, n))
     effort = np.empty((n_samples, n))
     ws = workspace(n)
+    gains = np.empty((2, n))
     for i in range(n_samples):
         if aborted_at < 0 or i < aborted_at:
             control_into(u_ff[i], q_ref[i], qd_ref[i], q[i], qd[i], kp, kd, nominal,
                          effort_limit, ws, u[i], effort[i])
         else:
-            safe_hold_into(q[aborted_at], q[i], qd[i], kp, kd, nominal, effort_limit, ws,
-                           u[i], effort[i])
+            hold_gains_into(i - aborted_at, hold_ramp, kp, kd, hold_kp, hold_kd, gains)
+            safe_hold_into(q[aborted_at], q[i], qd[i], gains[0], gains[1], nominal,
+                           effort_limit, ws, u[i], effort[i])
     return u, effort
 
 
@@ -180,7 +189,8 @@ def record_from_samples(experiment: Experiment, trial: int, feedforward: np.ndar
     u, effort = control_inputs(u_ff, ref.position, ref.velocity, q, qd, experiment.kp,
                                experiment.kd, experiment.nominal.kernel_args,
                                experiment.effort_limit, -1 if aborted_at is None
-                               else int(aborted_at))
+                               else int(aborted_at), experiment.hold_kp, experiment.hold_kd,
+                               experiment.hold_ramp)
     return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels, aborted_at,
                        None if true_position is None
                        else np.array(true_position, dtype=float, order="C"),

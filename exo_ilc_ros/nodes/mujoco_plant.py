@@ -28,7 +28,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from ..core import schema
-from ..core.controller import safe_hold_effort
+from ..core.controller import GuardedControlStep
 from ..core.experiment import Experiment
 from ..core.plant import PlantStepper
 from ..core.trial import period_ns
@@ -87,6 +87,11 @@ class FreeRunningPlant(Node):
         """Real time: wall time without a command before the safe hold."""
         self.last_command_ns = 0
         self.hold_pose: np.ndarray | None = None
+        self.safe_hold = GuardedControlStep(self.experiment)
+        """The controller's safe hold (its gains and ramp, core/hold.py), latched at the trip."""
+        here = np.zeros(config.joints)  # load its kernels now, not at a trip
+        self.safe_hold.hold_at(here)
+        self.safe_hold.hold(here, here)
         self.state = JointStateWriter(config["joint_names"])
         self.clock = Clock()
         self.state_pub = self.create_publisher(JointState, topics.JOINT_STATES, SAMPLES_QOS)
@@ -166,15 +171,14 @@ class FreeRunningPlant(Node):
         if self.hold_pose is None and \
                 time.monotonic_ns() - self.last_command_ns > self.timeout_ns:
             self.hold_pose = np.array(self.stepper.position)
+            self.safe_hold.hold_at(self.hold_pose)
             self.get_logger().error(
                 f"no effort command for {self.timeout_ns / 1e6:g} ms: safe hold around the "
                 "current pose until commands come again")
             self.on_health_timer()
         if self.hold_pose is not None:
-            e = self.experiment
-            effort = safe_hold_effort(self.hold_pose, np.array(self.stepper.position),
-                                      np.array(self.stepper.velocity), e.kp, e.kd,
-                                      e.nominal.kernel_args, self.limit)
+            effort = self.safe_hold.hold(np.array(self.stepper.position),
+                                         np.array(self.stepper.velocity))
             self.stalls += 1
             self._advance(effort)
         else:

@@ -31,7 +31,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from ..core import schema
-from ..core.controller import safe_hold_effort
+from ..core.controller import GuardedControlStep
 from ..core.experiment import Experiment
 from ..core.plant import PlantStepper, clamp_counted
 from ..core.safety import LateCommands, watchdog_for
@@ -98,6 +98,11 @@ class PlantSimulator(Node):
         self.late = LateCommands()  # real time: periods run on a late (held) command
         self.hold_pose: np.ndarray | None = None
         """Real-time mode: the pose the plant's safe hold keeps after a watchdog trip."""
+        self.safe_hold = GuardedControlStep(self.experiment)
+        """The controller's safe hold (its gains and ramp, core/hold.py), latched at the trip."""
+        here = np.zeros(config.joints)  # load its kernels now, not at a trip
+        self.safe_hold.hold_at(here)
+        self.safe_hold.hold(here, here)
 
         self.state = JointStateWriter(config["joint_names"])
         self.clock = Clock()
@@ -244,15 +249,13 @@ class PlantSimulator(Node):
         if self.watchdog.check(time.monotonic_ns()) or \
                 (self.watchdog.tripped and self.hold_pose is None):
             self.hold_pose = self.stepper.position.copy()
+            self.safe_hold.hold_at(self.hold_pose)
             self.get_logger().error(
                 f"no effort command for {self.watchdog.timeout_ns / 1e6:g} ms: stopped holding "
                 "the last command; safe hold around the current pose until the next trial")
             self.on_health_timer()
         if self.hold_pose is not None:
-            e = self.experiment
-            self.held[:] = safe_hold_effort(self.hold_pose, self.stepper.position,
-                                            self.stepper.velocity, e.kp, e.kd,
-                                            e.nominal.kernel_args, self.limit)
+            self.held[:] = self.safe_hold.hold(self.stepper.position, self.stepper.velocity)
         self.late.tick()
         self._advance(self.held)
         if not self.running:  # that was the last sample: the trial's lateness, for the supervisor

@@ -58,6 +58,41 @@ def mcap_bag(tmp_path_factory: pytest.TempPathFactory, config: Config,
                      split_every=2)
 
 
+def test_a_bag_from_before_a_parameter_was_added_keeps_its_config(
+        mcap_bag: Path, tmp_path: Path, result: RunResult) -> None:
+    """A bag whose recorded config lacks parameters added since (the safe hold's gains) or
+    names one since removed: its config is kept, the added ones at today's defaults and the
+    removed one left out, each said in a note; the table and a replay are as before."""
+    import shutil
+
+    from exo_ilc_ros.bag.provenance import CONFIG_JSON
+    from exo_ilc_ros.bag.replay import replay_plan
+
+    old = tmp_path / "old"
+    shutil.copytree(mcap_bag, old)
+    meta = old / "metadata.yaml"
+    document = yaml.safe_load(meta.read_text())
+    custom = document["rosbag2_bagfile_information"]["custom_data"]
+    values = json.loads(custom[CONFIG_JSON])
+    for key in ("safety.hold_kp", "safety.hold_kd"):
+        del values[key]
+    values["safety.retired_key"] = 1.0
+    custom[CONFIG_JSON] = json.dumps(values)
+    meta.write_text(yaml.safe_dump(document))
+
+    recorded = read_bag(mcap_bag).provenance.config
+    run = read_bag(old)
+    assert run.provenance.config is not None and recorded is not None
+    assert run.provenance.config.values == recorded.values  # the defaults are today's
+    assert any("without safety.hold_kp, safety.hold_kd" in n and "today's defaults" in n
+               for n in run.notes), run.notes
+    assert any("safety.retired_key" in n and "left out" in n for n in run.notes), run.notes
+    assert_same_table(run.summary(), RunSummary.from_result(result))
+    plan = replay_plan(run)
+    assert plan.config.values == recorded.replace({"max_trials": plan.trials}).values
+    assert any("today's defaults" in n for n in plan.notes)
+
+
 def assert_same_table(summary: RunSummary, reference: RunSummary, tol: float = 1e-12) -> None:
     assert summary.max_abs_error.shape == reference.max_abs_error.shape
     np.testing.assert_allclose(summary.max_abs_error, reference.max_abs_error, rtol=0, atol=tol)

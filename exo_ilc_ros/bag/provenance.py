@@ -14,7 +14,7 @@ from typing import Any
 
 from .. import __version__
 from ..core import schema
-from ..core.config import Config
+from ..core.config import Config, load_config
 from ..core.errors import ConfigError
 
 PREFIX = "exo_ilc_ros."
@@ -121,14 +121,32 @@ class Provenance:
     @property
     def config(self) -> Config | None:
         """The effective config, validated against this version's schema (None if absent or
-        no longer valid: see ``problems``)."""
+        no longer valid: see ``problems``). A bag recorded before parameters were added gets
+        today's defaults for them, one that names parameters since removed loses those; both
+        are said in ``problems``."""
         if self.config_values is None:
             return None
+        values = dict(self.config_values)
+        missing = [p.name for p in schema.PARAMETERS if p.name not in values]
+        removed = sorted(k for k in values if k not in schema.BY_NAME)
+        if missing:
+            defaults = load_config()  # the shipped defaults
+            values.update({name: defaults[name] for name in missing})
+            self._note(f"config recorded without {', '.join(missing)} (added since "
+                       f"{self.version or 'its version'}): today's defaults used for them")
+        for key in removed:
+            del values[key]
+        if removed:
+            self._note(f"config names {', '.join(removed)}, unknown to this version: left out")
         try:
-            return Config(self.config_values, "bag custom_data")
+            return Config(values, "bag custom_data")
         except ConfigError as exc:
-            self.problems.append(f"config does not validate: {exc}")
+            self._note(f"config does not validate: {exc}")
             return None
+
+    def _note(self, problem: str) -> None:
+        if problem not in self.problems:
+            self.problems.append(problem)
 
 
 def read_provenance(custom: Mapping[str, str] | None) -> Provenance:

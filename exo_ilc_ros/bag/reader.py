@@ -491,6 +491,7 @@ def read_bag(path: Path | str, *, skip_damaged: bool = False) -> BagRun:
     path = Path(path)
     info = read_metadata(path)
     provenance = read_provenance(info.get("custom_data"))
+    config = provenance.config  # (its problems, e.g. parameters added since, are notes too)
     notes = list(provenance.problems)
     streams, decode, read_notes = _read_topics(
         path, info, skip_damaged, [topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
@@ -566,7 +567,6 @@ def read_bag(path: Path | str, *, skip_damaged: bool = False) -> BagRun:
     js = streams[topics.JOINT_STATES]
     if not js.msgs:
         raise BagReadError(path, f"no {topics.JOINT_STATES} messages")
-    config = provenance.config
     decoded = joint_states(js.msgs, decode, config["joint_names"] if config else ())
     names = decoded.names
     if not names:

@@ -49,7 +49,7 @@ def replay_plan(run: BagRun) -> ReplayPlan:
     trials = max(run.completed, default=0)
     if trials == 0:
         raise BagReadError(run.path, "no completed trial to replay")
-    notes: list[str] = []
+    notes = list(run.provenance.problems)  # e.g. parameters added since: today's defaults
     changes: dict[int, dict[str, Any]] = {}
     if any(protocol.PARAMETERS_CHANGED in values for values in run.summaries.values()):
         for k, values in sorted(run.summaries.items()):

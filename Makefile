@@ -41,8 +41,8 @@ lint: $(STAMP)
 
 test: lint
 	@$(NUMBA_NOTE)
-	@echo "make: running the whole test suite (7-10 min on 2 cores, about 5 min of it real"
-	@echo "make: ROS 2 graphs over DDS and 1 min a colcon build); pytest prints a dot per test"
+	@echo "make: running the whole test suite (10-13 min on 2 cores, most of it real"
+	@echo "make: ROS 2 graphs over DDS and a colcon build); pytest prints a dot per test"
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)

@@ -6,8 +6,6 @@ measurements are in ``bench/arm_bench.py``."""
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
 import time
@@ -16,6 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from processes import sigkill_child
 
 from exo_ilc_ros.core.config import load_config
 from exo_ilc_ros.core.session import run_trials
@@ -26,11 +25,6 @@ pytestmark = pytest.mark.graph
 
 SHORT = {"trajectory.duration": 2.0, "protocol": "homing", "law": "linear",
          "mass_uncertainty": 0.1}
-
-
-def _children(pid: int) -> list[int]:
-    path = Path(f"/proc/{pid}/task/{pid}/children")
-    return [int(x) for x in path.read_text().split()] if path.exists() else []
 
 
 def test_mujoco_with_homing_matches_simulate_and_survives_a_kill(tmp_path: Path) -> None:
@@ -55,11 +49,7 @@ def test_mujoco_with_homing_matches_simulate_and_survives_a_kill(tmp_path: Path)
             stored = bool(found) and len(json.loads(found[0].read_text())["trials"]) >= 2
             time.sleep(0.02)
         assert stored, process.communicate(timeout=30)[1][-3000:]
-        pids = [pid for pid in _children(process.pid)
-                if "mujoco_plant" in Path(f"/proc/{pid}/cmdline").read_text()]
-        assert len(pids) == 1, pids
-        os.kill(pids[0], signal.SIGKILL)
-        err = process.communicate(timeout=60)[1]
+        err = sigkill_child(process, "mujoco_plant")
     finally:
         if process.poll() is None:
             process.kill()

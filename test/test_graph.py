@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from processes import alive, children
 
 from exo_ilc_ros.core.config import Config, load_config
 from exo_ilc_ros.core.experiment import Experiment, build_law
@@ -183,37 +184,24 @@ def test_ctrl_c_stops_every_process(tmp_path: Path) -> None:
         stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env, text=True, cwd=tmp_path)
     try:
         deadline = time.monotonic() + 90.0
-        children: list[int] = []
-        while time.monotonic() < deadline and len(children) < 3:
-            children = _children(process.pid)
+        nodes: list[int] = []
+        while time.monotonic() < deadline and len(nodes) < 3:
+            nodes = children(process.pid)
             time.sleep(0.2)
-        assert len(children) >= 3, "the three nodes started"
+        assert len(nodes) >= 3, "the three nodes started"
         time.sleep(8.0)  # let trials run (the nodes are up and discovering)
         process.send_signal(signal.SIGINT)
         _, err = process.communicate(timeout=30)
         assert process.returncode == 130, err[-2000:]
         gone_by = time.monotonic() + 15.0
-        while time.monotonic() < gone_by and any(_alive(pid) for pid in children):
+        while time.monotonic() < gone_by and any(alive(pid) for pid in nodes):
             time.sleep(0.1)
-        assert not any(_alive(pid) for pid in children)
+        assert not any(alive(pid) for pid in nodes)
     finally:
         if process.poll() is None:
             process.kill()
             process.wait()
         claim.release()
-
-
-def _children(pid: int) -> list[int]:
-    path = Path(f"/proc/{pid}/task/{pid}/children")
-    return [int(x) for x in path.read_text().split()] if path.exists() else []
-
-
-def _alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().split()[2]
-    except (FileNotFoundError, IndexError):
-        return False
-    return state != "Z"
 
 
 def _fifo_allowed() -> bool:

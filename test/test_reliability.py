@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -19,6 +18,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from processes import sigkill_child
 
 from exo_ilc_ros.core.config import Config, load_config
 from exo_ilc_ros.core.experiment import Experiment
@@ -511,7 +511,7 @@ def test_kill_9_the_supervisor_then_exo_ilc_run_resume(tmp_path: Path) -> None:
                 break
             time.sleep(0.02)
         assert index is not None, "two trials stored"
-        err = _sigkill_node(process, "ilc_supervisor")
+        err = sigkill_child(process, "ilc_supervisor")
     finally:
         if process.poll() is None:
             process.kill()
@@ -577,7 +577,7 @@ def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(
             time.sleep(0.01)
         assert first_bag is not None, "two trials stored and filed"
         time.sleep(0.05)  # into trial 3 (the supervisor starts it once trial 2 is filed)
-        err = _sigkill_node(process, "bag_recorder")
+        err = sigkill_child(process, "bag_recorder")
     finally:
         if process.poll() is None:
             process.kill()
@@ -620,20 +620,6 @@ def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(
                                           reference.max_abs_errors[k - 1])
     assert (first_bag / ".splits").is_dir()  # the killed recorder's unfinished file, unlisted
     assert not (second_bag / ".splits").exists()  # closed normally
-
-
-def _children(pid: int) -> list[int]:
-    path = Path(f"/proc/{pid}/task/{pid}/children")
-    return [int(x) for x in path.read_text().split()] if path.exists() else []
-
-
-def _sigkill_node(process: subprocess.Popen[str], node: str) -> str:
-    """SIGKILL the one child of the ``exo-ilc run`` process that runs ``node``; its stderr."""
-    pids = [pid for pid in _children(process.pid)
-            if node in Path(f"/proc/{pid}/cmdline").read_text()]
-    assert len(pids) == 1, pids
-    os.kill(pids[0], signal.SIGKILL)
-    return process.communicate(timeout=60)[1]
 
 
 def _assert_stopped_for_resume(process: subprocess.Popen[str], err: str, node: str,

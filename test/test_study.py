@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import alive, children
 
 from exo_ilc_ros.analysis.study import format_study_table, run_cells
 from exo_ilc_ros.analysis.study_figure import study_figure
@@ -269,10 +270,6 @@ def _study_in_its_pool(tmp_path: Path) -> tuple[subprocess.Popen[str], list[str]
     return process, lines
 
 
-def _children(pid: int) -> list[int]:
-    return [int(p) for p in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
-
-
 def test_ctrl_c_stops_the_pool_without_worker_tracebacks(tmp_path: Path) -> None:
     """SIGINT to the whole process group (what Ctrl-C in a terminal does) while the pool runs:
     exit 130, one line, no traceback from the workers or the command."""
@@ -290,25 +287,17 @@ def test_workers_die_with_a_killed_study(tmp_path: Path) -> None:
     """kill -9 of the study (not its group: what an OOM kill or a killed parent does) leaves no
     worker computing on: each gets SIGTERM from the kernel as its parent dies."""
     process, _ = _study_in_its_pool(tmp_path)
-    workers = [pid for pid in _children(process.pid)
+    workers = [pid for pid in children(process.pid)
                if "multiprocessing" in Path(f"/proc/{pid}/cmdline").read_text()]
     assert len(workers) >= 2, workers  # the pool's workers (and its resource tracker)
     process.kill()
     process.communicate(timeout=30)
     deadline = time.monotonic() + 20.0
-    alive = workers
-    while alive and time.monotonic() < deadline:
+    left = workers
+    while left and time.monotonic() < deadline:
         time.sleep(0.1)
-        alive = [pid for pid in workers if _running(pid)]
-    assert not alive, f"workers {alive} outlived their study"
-
-
-def _running(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except FileNotFoundError:
-        return False
-    return state != "Z"
+        left = [pid for pid in workers if alive(pid)]
+    assert not left, f"workers {left} outlived their study"
 
 
 def test_robust_config_survives_the_realistic_patient() -> None:

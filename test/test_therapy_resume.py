@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import sigkill_child
 
 from exo_ilc_ros.cli.main import main
 from exo_ilc_ros.core import load_config
@@ -307,8 +308,6 @@ def test_a_graph_session_killed_mid_session_resumes_exactly(tmp_path: Path) -> N
     The resumed run ends with the table, the v2 file's bytes and the provenance of the same
     session run uninterrupted (in-process, from a copy of the profiles), but for the times,
     the session id and the record of the resume."""
-    import os
-    import signal
     import subprocess
     import sys
     import time
@@ -340,11 +339,7 @@ def test_a_graph_session_killed_mid_session_resumes_exactly(tmp_path: Path) -> N
             stored = len(json.loads(found[0].read_text())["trials"]) if found else 0
             time.sleep(0.01)
         assert stored >= 2, "two trials stored"
-        children = Path(f"/proc/{process.pid}/task/{process.pid}/children").read_text().split()
-        (victim,) = [int(pid) for pid in children
-                     if "ilc_supervisor" in Path(f"/proc/{pid}/cmdline").read_text()]
-        os.kill(victim, signal.SIGKILL)
-        err = process.communicate(timeout=60)[1]
+        err = sigkill_child(process, "ilc_supervisor")
     finally:
         if process.poll() is None:
             process.kill()

@@ -51,7 +51,15 @@ from ..core.config import load_config
 from ..wire import topics
 from ..wire.protocol import int_value, key_values
 from ..wire.qos import RECORDER_DEPTH, TRANSIENT_LOCAL_TOPICS, offered_qos
-from .common import EVENTS_QOS, Inbox, diagnostic_array, run_nodes, status, wall_clock
+from .common import (
+    EVENTS_QOS,
+    Inbox,
+    diagnostic_array,
+    receive_time,
+    run_nodes,
+    status,
+    wall_clock,
+)
 
 NAME = "bag_recorder"
 READY_TOPICS = (topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
@@ -164,7 +172,7 @@ class BagRecorder(Node):
         now = time.monotonic()
         if taken or everything or now >= self.data_due:
             self.data_due = now + DATA_PERIOD
-            taken = sorted([*taken, *self.inbox.take()], key=_receive_time)
+            taken = sorted([*taken, *self.inbox.take()], key=receive_time)
         samples: list[tuple[int, str, bytes]] = []  # written as one batch up to an event
         for item in taken:
             if item[1] in PROTOCOL_TOPICS:
@@ -273,10 +281,6 @@ class BagRecorder(Node):
         print(f"[{NAME}] bag {self.writer.path} closed: {self.messages} messages, "
               f"{self.completed} trials", file=sys.stderr, flush=True)  # rclpy may be shut down
         super().destroy_node()
-
-
-def _receive_time(item: tuple[int, str, bytes]) -> int:
-    return item[0]
 
 
 def main(args: list[str] | None = None) -> int:

@@ -336,7 +336,7 @@ class Inbox:
             reader.drain()
         out, self._pending = self._pending, []
         if len(self._readers) > 1:
-            out.sort(key=_receive_time)
+            out.sort(key=receive_time)
         return out
 
     def destroy(self) -> None:
@@ -394,7 +394,8 @@ def _never_called(raw: bytes) -> None:  # pragma: no cover - inbox subscriptions
     raise RuntimeError("an inbox subscription was spun by an executor")
 
 
-def _receive_time(item: tuple[int, str, bytes]) -> int:
+def receive_time(item: tuple[int, str, bytes]) -> int:
+    """An inbox message's DDS receive time (ns): its sort key."""
     return item[0]
 
 

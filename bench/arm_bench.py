@@ -27,11 +27,11 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from exo_ilc_ros.core.config import Config, load_config
-from exo_ilc_ros.core.experiment import Experiment
-from exo_ilc_ros.core.growth import fit_growth
-from exo_ilc_ros.core.plant import PlantStepper
-from exo_ilc_ros.core.session import run_trials
+from exo_ilc_ros.core.convergence.growth import fit_growth
+from exo_ilc_ros.core.loop.stepper import PlantStepper
+from exo_ilc_ros.core.params.config import Config, load_config
+from exo_ilc_ros.core.session.learning_session import run_trials
+from exo_ilc_ros.core.sim.experiment import Experiment
 from exo_ilc_ros.orchestration.graph import GraphRun, GraphSession, run_graph
 from exo_ilc_ros.orchestration.launcher import graph_nodes
 
@@ -40,7 +40,7 @@ ROBUST = Path(__file__).resolve().parent.parent / "config" / "robust.yaml"
 
 def engine_rates(periods: int = 2000) -> dict[str, float]:
     """(a): microseconds per control period, MuJoCo and our RK4 (the same arm, delta 10 %)."""
-    from exo_ilc_ros.core.mujoco_arm import MujocoArm
+    from exo_ilc_ros.core.sim.mujoco_arm import MujocoArm
 
     config = load_config(overrides={"mass_uncertainty": 0.1})
     out = {}

@@ -45,8 +45,8 @@ import numpy as np
 
 from bench.graph_bench import graph_rate, middleware_floor
 from exo_ilc_ros.bag import read_bag, write_run
-from exo_ilc_ros.core.config import Config, load_config
-from exo_ilc_ros.core.session import run_trials
+from exo_ilc_ros.core.params.config import Config, load_config
+from exo_ilc_ros.core.session.learning_session import run_trials
 
 MODES = {"without": "no recorder", "supervisor": "recorder in the supervisor's process",
          "isolated": "recorder in a process of its own"}

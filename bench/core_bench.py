@@ -14,10 +14,10 @@ from typing import Any
 import numpy as np
 
 from exo_ilc_ros.core import Experiment, load_config, run_trials
-from exo_ilc_ros.core.config import Config
-from exo_ilc_ros.core.dynamics import workspace
-from exo_ilc_ros.core.experiment import build_law
-from exo_ilc_ros.core.plant import rk4_period
+from exo_ilc_ros.core.arm.dynamics import workspace
+from exo_ilc_ros.core.learning.factory import build_law
+from exo_ilc_ros.core.loop.plant import rk4_period
+from exo_ilc_ros.core.params.config import Config
 
 
 def plant_step_times(experiment: Experiment, repeats: int = 2000) -> list[float]:
@@ -43,7 +43,7 @@ def plant_step_times(experiment: Experiment, repeats: int = 2000) -> list[float]
 def between_trials(config: Config) -> None:
     """The supervisor's between-trial computation: each law's update (median of 21) from one
     5 s trial's record, and the norm-optimal law's learning matrix (once per configuration)."""
-    from exo_ilc_ros.core import norm_optimal
+    from exo_ilc_ros.core.learning import norm_optimal
 
     experiment = Experiment(config, 0.10)
     record = experiment.run_trial(np.zeros_like(experiment.reference.position), 1)

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from exo_ilc_ros.core.config import Config, load_config
+from exo_ilc_ros.core.params.config import Config, load_config
 from exo_ilc_ros.orchestration.graph import GraphSession, run_graph
 from exo_ilc_ros.orchestration.launcher import (
     GRAPH_NODES,

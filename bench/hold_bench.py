@@ -17,12 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from exo_ilc_ros.core.config import Config, load_config, scenario_path
-from exo_ilc_ros.core.experiment import Experiment
-from exo_ilc_ros.core.hold import hold_radius, rest_after_abort
-from exo_ilc_ros.core.laws import TrialRecord
-from exo_ilc_ros.core.session import run_trials
-from exo_ilc_ros.core.study import resolve_law, resolve_scenario, study_cells
+from exo_ilc_ros.core.loop.hold import rest_after_abort
+from exo_ilc_ros.core.loop.record import TrialRecord
+from exo_ilc_ros.core.params.config import Config, load_config, scenario_path
+from exo_ilc_ros.core.params.hold_rule import hold_radius
+from exo_ilc_ros.core.programs.study import resolve_law, resolve_scenario, study_cells
+from exo_ilc_ros.core.session.learning_session import run_trials
+from exo_ilc_ros.core.sim.experiment import Experiment
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")  # no node here; house rule
 

@@ -14,9 +14,9 @@ import time
 
 import numpy as np
 
-from exo_ilc_ros.core.config import load_config, scenario_path
-from exo_ilc_ros.core.experiment import Experiment
-from exo_ilc_ros.core.plant import PlantStepper
+from exo_ilc_ros.core.loop.stepper import PlantStepper
+from exo_ilc_ros.core.params.config import load_config, scenario_path
+from exo_ilc_ros.core.sim.experiment import Experiment
 
 SCENARIOS = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic")
 

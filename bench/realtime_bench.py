@@ -17,7 +17,7 @@ import argparse
 import os
 import time
 
-from exo_ilc_ros.core.config import load_config
+from exo_ilc_ros.core.params.config import load_config
 from exo_ilc_ros.orchestration.graph import GraphSession
 
 START_PERIODS = 10

@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 from exo_ilc_ros.analysis.study import format_study_table, run_cells
-from exo_ilc_ros.core.study import (
+from exo_ilc_ros.core.programs.study import (
     SCENARIO_ORDER,
     resolve_law,
     resolve_scenario,

@@ -24,9 +24,9 @@ import numpy as np
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
-from exo_ilc_ros.core.config import load_config, scenario_names, scenario_path
-from exo_ilc_ros.core.profiles import ProfileBook
-from exo_ilc_ros.core.therapy import ExerciseResult, prepare, run_exercise
+from exo_ilc_ros.core.params.config import load_config, scenario_names, scenario_path
+from exo_ilc_ros.core.persistence.profiles import ProfileBook
+from exo_ilc_ros.core.programs.therapy import ExerciseResult, prepare, run_exercise
 
 ROOT = Path(__file__).resolve().parents[1]
 AAN = {"assist_as_needed.enabled": True}
@@ -123,7 +123,7 @@ def main() -> None:
         t0 = time.perf_counter()
         plain = session(base, Path(tmp) / "a", "plain", args.trials, True)
         if args.variability_from_plain:  # sigma measured on the plain session's last trials
-            from exo_ilc_ros.core.assist import estimate_variability
+            from exo_ilc_ros.core.learning.assist import estimate_variability
 
             sigma = estimate_variability(plain.result.records[-20:])
             overrides["assist_as_needed.variability"] = [float(x) for x in sigma]

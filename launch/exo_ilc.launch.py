@@ -59,7 +59,7 @@ def _nodes(context: LaunchContext) -> list[Node]:
 
 
 def _recorder(user: str, delta: str, bag_path: str, plant: str = "simulator") -> Node:
-    from exo_ilc_ros.core.config import load_config
+    from exo_ilc_ros.core.params.config import load_config
 
     overrides: dict[str, object] = {"mass_uncertainty": float(delta)} if delta else {}
     if plant == "mujoco":

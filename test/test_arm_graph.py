@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from processes import sigkill_child
 
-from exo_ilc_ros.core.config import load_config
-from exo_ilc_ros.core.session import run_trials
+from exo_ilc_ros.core.params.config import load_config
+from exo_ilc_ros.core.session.learning_session import run_trials
 from exo_ilc_ros.orchestration.launcher import graph_nodes
 from exo_ilc_ros.wire import topics
 
@@ -207,8 +207,8 @@ def test_mujoco_node_in_lock_step_moves_only_per_command(tmp_path: Path) -> None
     command is refused (counted, not applied); without commands nothing moves (simulated time
     stands still: a late command is never replaced by a step of the plant's own)."""
 
-    from exo_ilc_ros.core.experiment import Experiment
-    from exo_ilc_ros.core.mujoco_arm import MujocoArm
+    from exo_ilc_ros.core.sim.experiment import Experiment
+    from exo_ilc_ros.core.sim.mujoco_arm import MujocoArm
     from exo_ilc_ros.nodes.mujoco_plant import FIRST_SAMPLE_AGAIN
     from exo_ilc_ros.wire.cdr import float64_array
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.core import LinearLaw, Memory, SampledReference, TrialRecord, load_config
-from exo_ilc_ros.core.assist import AssistAsNeededLaw, deadband_gate
-from exo_ilc_ros.core.convergence import JointLoop, analyze_loop
-from exo_ilc_ros.core.experiment import build_law
-from exo_ilc_ros.core.qfilter import QFilteredLaw
+from exo_ilc_ros.core.convergence.factors import JointLoop, analyze_loop
+from exo_ilc_ros.core.learning.assist import AssistAsNeededLaw, deadband_gate
+from exo_ilc_ros.core.learning.factory import build_law
+from exo_ilc_ros.core.learning.qfilter import QFilteredLaw
 
 
 def logistic(x: float) -> float:
@@ -59,7 +59,7 @@ def test_total_input_memory_is_forgotten() -> None:
 
 def test_neutral_settings_give_the_inner_law_back() -> None:
     config = load_config(None, {"law": "sign"})
-    from exo_ilc_ros.core.experiment import Experiment
+    from exo_ilc_ros.core.sim.experiment import Experiment
 
     experiment = Experiment(config)
     inner = build_law(config)
@@ -104,7 +104,7 @@ def test_analyze_loop_accounts_for_forgetting() -> None:
 
 
 def test_lifted_map_ends_of_the_gate() -> None:
-    from exo_ilc_ros.core.convergence import lifted_map
+    from exo_ilc_ros.core.convergence.factors import lifted_map
 
     loop = JointLoop(1.0 / 1.05, 16.0, 8.0, 0.01)
     gains = (0.0, 0.0, 1.0)
@@ -119,7 +119,7 @@ def test_lifted_map_ends_of_the_gate() -> None:
 def test_variability_by_hand() -> None:
     """Errors 0.1, 0.3 in one trial and 0.3, 0.1 in the other: variance 0.02 at each sample
     (ddof 1), sigma = sqrt(0.02); an aborted trial is left out; one trial is not enough."""
-    from exo_ilc_ros.core.assist import estimate_variability
+    from exo_ilc_ros.core.learning.assist import estimate_variability
 
     a, b = record_of([0.1, 0.3], 0.0, 0.0), record_of([0.3, 0.1], 0.0, 0.0)
     aborted = TrialRecord(3, a.reference, np.full((2, 1), 5.0), np.zeros((2, 1)),

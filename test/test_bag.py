@@ -31,9 +31,9 @@ from exo_ilc_ros.bag import (
 )
 from exo_ilc_ros.bag.provenance import read_provenance
 from exo_ilc_ros.cli.main import main as exo_ilc
-from exo_ilc_ros.core.config import Config, load_config
-from exo_ilc_ros.core.session import RunResult, run_trials
-from exo_ilc_ros.core.summary import RunSummary
+from exo_ilc_ros.core.params.config import Config, load_config
+from exo_ilc_ros.core.session.learning_session import RunResult, run_trials
+from exo_ilc_ros.core.session.summary import RunSummary
 from exo_ilc_ros.wire import topics
 
 TRIALS = 5

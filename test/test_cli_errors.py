@@ -250,8 +250,8 @@ def test_flag_values_that_pass_still_run(tmp_path: Path,
 
 def test_a_file_is_validated_whole_whatever_the_flags(tmp_path: Path) -> None:
     """A wrong-typed key of --config is an error even when a flag overrides it."""
-    from exo_ilc_ros.core.config import load_config
     from exo_ilc_ros.core.errors import ConfigError
+    from exo_ilc_ros.core.params.config import load_config
 
     bad = tmp_path / "bad.yaml"
     bad.write_text('ilc_supervisor:\n  ros__parameters:\n    max_trials: "3"\n')
@@ -417,7 +417,7 @@ def test_param_against_a_running_node(capsys: pytest.CaptureFixture[str]) -> Non
 def test_rerun_note_says_what_happened_in_plain_words() -> None:
     """The note `analyze`/`paper`/`run` print for a trial that was run again."""
     from exo_ilc_ros.bag.reader import PROTOCOL_STEPS, rerun_note
-    from exo_ilc_ros.core.protocol import STEP_TIMEOUT, Phase
+    from exo_ilc_ros.core.protocol.graph import STEP_TIMEOUT, Phase
 
     assert STEP_TIMEOUT == 30.0
     assert {p.value for p in Phase} - {"finished"} <= set(PROTOCOL_STEPS)
@@ -454,7 +454,7 @@ def test_node_refuses_bad_ros_arguments(ros_args: list[str], expected: list[str]
 
 def test_exponent_floats_read_as_rcl_reads_them(tmp_path: Path) -> None:
     """`1e-3` is a float for rcl (YAML 1.2); --config and the nodes read it the same way."""
-    from exo_ilc_ros.core.config import load_config, load_ros_yaml
+    from exo_ilc_ros.core.params.config import load_config, load_ros_yaml
     from exo_ilc_ros.nodes.common import command_line_parameters
 
     assert load_ros_yaml("[1e-3, 2E1, -1.5e+2, 1_0]") == [0.001, 20.0, -150.0, 10]

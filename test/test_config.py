@@ -9,8 +9,9 @@ from typing import Any
 import pytest
 import yaml
 
-from exo_ilc_ros.core import ConfigError, config_dir, default_config_path, load_config, schema
-from exo_ilc_ros.core.config import read_yaml
+from exo_ilc_ros.core import ConfigError, config_dir, default_config_path, load_config
+from exo_ilc_ros.core.params import schema
+from exo_ilc_ros.core.params.config import read_yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -119,7 +120,7 @@ def test_missing_file_is_a_config_error(tmp_path: Path) -> None:
 
 
 def test_scenario_overlays_are_laid_over_the_config_in_order(tmp_path):
-    from exo_ilc_ros.core.config import scenario_names, scenario_path
+    from exo_ilc_ros.core.params.config import scenario_names, scenario_path
 
     assert "ideal" in scenario_names()
     ideal = load_config(overlays=[scenario_path("ideal")])

@@ -10,17 +10,17 @@ import pytest
 from exo_ilc_ros.analysis.loop import format_growth
 from exo_ilc_ros.cli.main import main
 from exo_ilc_ros.core import load_config
-from exo_ilc_ros.core.convergence import (
+from exo_ilc_ros.core.convergence.factors import (
     JointLoop,
     analyze_loop,
     bands_above_one,
     lifted_map,
     packet_growth_rate,
 )
-from exo_ilc_ros.core.experiment import Experiment
-from exo_ilc_ros.core.growth import fit_growth
-from exo_ilc_ros.core.laws import Memory
-from exo_ilc_ros.core.qfilter import QFilter
+from exo_ilc_ros.core.convergence.growth import fit_growth
+from exo_ilc_ros.core.learning.laws import Memory
+from exo_ilc_ros.core.learning.qfilter import QFilter
+from exo_ilc_ros.core.sim.experiment import Experiment
 
 PERIOD = 0.01
 NONE = (0.0, 0.0, 0.0)

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.core import ConfigError, QuinticTrajectory, SampledReference, load_config
-from exo_ilc_ros.core.exercise import (
+from exo_ilc_ros.core.reference.build import build_reference
+from exo_ilc_ros.core.reference.exercise import (
     PAPER_EXERCISE,
     Exercise,
     exercise_reference,
     exercises_path,
     load_book,
 )
-from exo_ilc_ros.core.experiment import build_reference
 
 
 def test_default_exercise_is_the_papers_quintic_bit_for_bit() -> None:

@@ -21,9 +21,10 @@ import numpy as np
 import pytest
 from processes import alive, children
 
-from exo_ilc_ros.core.config import Config, load_config
-from exo_ilc_ros.core.experiment import Experiment, build_law
-from exo_ilc_ros.core.session import run_trials
+from exo_ilc_ros.core.learning.factory import build_law
+from exo_ilc_ros.core.params.config import Config, load_config
+from exo_ilc_ros.core.session.learning_session import run_trials
+from exo_ilc_ros.core.sim.experiment import Experiment
 from exo_ilc_ros.nodes.realtime import thread_policies
 from exo_ilc_ros.orchestration.launcher import claim_domain_id
 

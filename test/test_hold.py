@@ -9,17 +9,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from exo_ilc_ros.core.config import load_config, scenario_path
-from exo_ilc_ros.core.controller import GuardedControlStep, safe_hold_effort
 from exo_ilc_ros.core.errors import ConfigError
-from exo_ilc_ros.core.experiment import Experiment
-from exo_ilc_ros.core.hold import (
-    REST_SPEED,
-    hold_gains_into,
-    hold_radius,
-    rest_after_abort,
-)
-from exo_ilc_ros.core.trial import record_from_samples
+from exo_ilc_ros.core.loop.controller import GuardedControlStep, safe_hold_effort
+from exo_ilc_ros.core.loop.hold import REST_SPEED, hold_gains_into, rest_after_abort
+from exo_ilc_ros.core.loop.trial import record_from_samples
+from exo_ilc_ros.core.params.config import load_config, scenario_path
+from exo_ilc_ros.core.params.hold_rule import hold_radius
+from exo_ilc_ros.core.sim.experiment import Experiment
 
 CONTROLLER_GAINS = {"safety.hold_kp": [16.0, 10.0, 10.0], "safety.hold_kd": [8.0, 5.0, 7.0],
                     "safety.hold_ramp": 0.0}

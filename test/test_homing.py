@@ -12,9 +12,11 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.core import Experiment, load_config, run_trials
-from exo_ilc_ros.core.controller import GuardedControlStep
 from exo_ilc_ros.core.errors import ConfigError
-from exo_ilc_ros.core.homing import (
+from exo_ilc_ros.core.loop.controller import GuardedControlStep
+from exo_ilc_ros.core.loop.stepper import PlantStepper
+from exo_ilc_ros.core.protocol.graph import Phase
+from exo_ilc_ros.core.protocol.homing import (
     ControllerMode,
     Homing,
     HomingController,
@@ -25,10 +27,8 @@ from exo_ilc_ros.core.homing import (
     grid_index,
     homing_duration,
 )
-from exo_ilc_ros.core.homing_protocol import HomingProtocol
-from exo_ilc_ros.core.plant import PlantStepper
-from exo_ilc_ros.core.protocol import Phase
-from exo_ilc_ros.core.session import TrialConclusion
+from exo_ilc_ros.core.protocol.homing_protocol import HomingProtocol
+from exo_ilc_ros.core.session.learning_session import TrialConclusion
 
 SHORT = {"trajectory.duration": 1.0, "protocol": "homing"}
 DELTA = 0.1
@@ -288,7 +288,7 @@ def test_an_arm_moved_during_the_dwell_fails_homing() -> None:
 def test_the_mujoco_arm_homes_and_runs_a_trial_as_our_plant() -> None:
     """The same in-process loop on MuJoCo: homing from q_d(T), then trial 1 within 1e-9 rad of
     the loop on our plant (the two arms agree to rounding)."""
-    from exo_ilc_ros.core.mujoco_arm import MujocoArm
+    from exo_ilc_ros.core.sim.mujoco_arm import MujocoArm
 
     overrides = {"max_trials": 1}
     config = load_config(overrides={**SHORT, **overrides, "mass_uncertainty": DELTA})

@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from exo_ilc_ros.core.config import load_config
-from exo_ilc_ros.core.session import run_trials
-from exo_ilc_ros.core.validation import Cause
+from exo_ilc_ros.core.params.config import load_config
+from exo_ilc_ros.core.params.validation import Cause
+from exo_ilc_ros.core.session.learning_session import run_trials
 from exo_ilc_ros.wire import topics
 from exo_ilc_ros.wire.publishers import (
     PUBLISHER_OF,
@@ -171,7 +171,7 @@ def test_status_owner_and_sizes() -> None:
     assert status_owner("computed_torque_controller/trial") == "/computed_torque_controller"
     assert status_owner("bag_recorder/status", "/arm") == "/arm/bag_recorder"
     assert status_owner("plain") is None
-    from exo_ilc_ros.core import schema
+    from exo_ilc_ros.core.params import schema
 
     assert PUBLISHER_OF[topics.EFFORT_COMMANDS] == schema.CONTROLLER
     assert PUBLISHER_OF[topics.JOINT_STATES] == schema.PLANT
@@ -184,7 +184,7 @@ def test_status_owner_and_sizes() -> None:
 def test_late_commands_count_the_periods_run_on_a_held_command() -> None:
     """Hand-counted: commands before ticks 1, 2 and 4 of five; ticks 3 and 5 hold the previous
     one (late); a new trial starts the count again."""
-    from exo_ilc_ros.core.safety import LateCommands
+    from exo_ilc_ros.core.loop.safety import LateCommands
 
     late = LateCommands()
     late.start()

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.core import load_config, run_trials
-from exo_ilc_ros.core.convergence import analyze_loop, packet_growth_rate
-from exo_ilc_ros.core.growth import fit_growth
+from exo_ilc_ros.core.convergence.factors import analyze_loop, packet_growth_rate
+from exo_ilc_ros.core.convergence.growth import fit_growth
 
 ROBUST = Path(__file__).resolve().parents[1] / "config" / "robust.yaml"
 

@@ -7,12 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from exo_ilc_ros.core import ArmModel, build_arm, dynamics, load_config
-from exo_ilc_ros.core.controller import computed_torque_kernel
-from exo_ilc_ros.core.geometry import truncated_cone
-from exo_ilc_ros.core.plant import PlantDynamics, integrate_period
-from exo_ilc_ros.core.trajectory import QuinticTrajectory
-from exo_ilc_ros.core.urdf import arm_urdf
+from exo_ilc_ros.core import ArmModel, build_arm, load_config
+from exo_ilc_ros.core.arm import dynamics
+from exo_ilc_ros.core.arm.geometry import truncated_cone
+from exo_ilc_ros.core.arm.urdf import arm_urdf
+from exo_ilc_ros.core.loop.controller import computed_torque_kernel
+from exo_ilc_ros.core.loop.plant import PlantDynamics, integrate_period
+from exo_ilc_ros.core.reference.trajectory import QuinticTrajectory
 
 pin = pytest.importorskip("pinocchio")
 

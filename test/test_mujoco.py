@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.core import Experiment, load_config
+from exo_ilc_ros.core.arm.build import build_arm
+from exo_ilc_ros.core.arm.model import ArmModel
 from exo_ilc_ros.core.errors import ModelError
-from exo_ilc_ros.core.experiment import build_arm
-from exo_ilc_ros.core.model import ArmModel
-from exo_ilc_ros.core.mujoco_arm import JointEffects, MujocoArm, arm_mjcf
-from exo_ilc_ros.core.plant import PlantStepper
+from exo_ilc_ros.core.loop.stepper import PlantStepper
+from exo_ilc_ros.core.sim.mujoco_arm import JointEffects, MujocoArm, arm_mjcf
 
 
 @pytest.mark.parametrize("delta", [0.0, 0.15])
@@ -91,8 +91,8 @@ def test_patient_keys_map_to_native_joint_effects() -> None:
     rest position as a joint spring: MuJoCo's passive force is then -B qdot - K (q - q_0), by
     hand; a MAS preset gives its stiffness and damping; the shipped config has no effect; what
     MuJoCo cannot express is named."""
-    from exo_ilc_ros.core.mujoco_arm import effects_from_config, effects_not_simulated
-    from exo_ilc_ros.core.patient import MAS_PRESETS
+    from exo_ilc_ros.core.loop.patient import MAS_PRESETS
+    from exo_ilc_ros.core.sim.mujoco_arm import effects_from_config, effects_not_simulated
 
     config = load_config()
     arm = build_arm(config)

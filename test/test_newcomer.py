@@ -18,8 +18,8 @@ from exo_ilc_ros.analysis.report import format_iterations
 from exo_ilc_ros.bag import read_bag, write_run
 from exo_ilc_ros.cli.clean import parse_age
 from exo_ilc_ros.cli.main import main as exo_ilc
-from exo_ilc_ros.core.config import Config, load_config
-from exo_ilc_ros.core.session import run_trials
+from exo_ilc_ros.core.params.config import Config, load_config
+from exo_ilc_ros.core.session.learning_session import run_trials
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = {"trajectory.duration": 1.0}

@@ -13,13 +13,14 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.cli.main import main as cli_main
-from exo_ilc_ros.core import norm_optimal
-from exo_ilc_ros.core.config import Config, load_config
-from exo_ilc_ros.core.convergence import JointLoop, lifted_map
+from exo_ilc_ros.core.convergence.factors import JointLoop, lifted_map
 from exo_ilc_ros.core.errors import ConfigError
-from exo_ilc_ros.core.experiment import Experiment, build_law
-from exo_ilc_ros.core.laws import Memory
-from exo_ilc_ros.core.session import LearningSession, run_trials
+from exo_ilc_ros.core.learning import norm_optimal
+from exo_ilc_ros.core.learning.factory import build_law
+from exo_ilc_ros.core.learning.laws import Memory
+from exo_ilc_ros.core.params.config import Config, load_config
+from exo_ilc_ros.core.session.learning_session import LearningSession, run_trials
+from exo_ilc_ros.core.sim.experiment import Experiment
 
 SHORT = {"trajectory.duration": 1.0, "law": "norm_optimal"}
 

@@ -162,7 +162,7 @@ def test_one_node_registry() -> None:
     the registry, and every registry entry points at a real node class and main."""
     import importlib
 
-    from exo_ilc_ros.core import schema
+    from exo_ilc_ros.core.params import schema
     from exo_ilc_ros.nodes import container, registry
     from exo_ilc_ros.orchestration.launcher import GRAPH_NODES
     from exo_ilc_ros.orchestration.recording import RECORDER_MODULE
@@ -230,7 +230,7 @@ def _launched(monkeypatch: pytest.MonkeyPatch, **arguments: str) -> list[dict[st
 
 def test_launch_file_starts_the_graph_and_the_recorder(monkeypatch: pytest.MonkeyPatch,
                                                        tmp_path: Path) -> None:
-    from exo_ilc_ros.core.config import load_config
+    from exo_ilc_ros.core.params.config import load_config
     from exo_ilc_ros.nodes import registry
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))

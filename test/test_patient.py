@@ -12,13 +12,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from exo_ilc_ros.core import schema
-from exo_ilc_ros.core.config import load_config, scenario_names, scenario_path
-from exo_ilc_ros.core.controller import GuardedControlStep
+from exo_ilc_ros.core.arm.joint_forces import passive_effort_into
 from exo_ilc_ros.core.errors import ConfigError
-from exo_ilc_ros.core.experiment import Experiment
-from exo_ilc_ros.core.joint_forces import passive_effort_into
-from exo_ilc_ros.core.patient import (
+from exo_ilc_ros.core.loop.controller import GuardedControlStep
+from exo_ilc_ros.core.loop.patient import (
     MAS_PRESETS,
     PatientLearning,
     PatientModel,
@@ -26,16 +23,20 @@ from exo_ilc_ros.core.patient import (
     patient_period,
     true_error,
 )
-from exo_ilc_ros.core.plant import PlantStepper, rk4_period, rk4_period_with_joint_forces
-from exo_ilc_ros.core.session import run_trials
-from exo_ilc_ros.core.store import learning_key
-from exo_ilc_ros.core.study import (
+from exo_ilc_ros.core.loop.plant import rk4_period, rk4_period_with_joint_forces
+from exo_ilc_ros.core.loop.stepper import PlantStepper
+from exo_ilc_ros.core.params import schema
+from exo_ilc_ros.core.params.config import load_config, scenario_names, scenario_path
+from exo_ilc_ros.core.persistence.store import learning_key
+from exo_ilc_ros.core.programs.study import (
     StudyCell,
     resolve_law,
     resolve_scenario,
     run_cell,
     study_cells,
 )
+from exo_ilc_ros.core.session.learning_session import run_trials
+from exo_ilc_ros.core.sim.experiment import Experiment
 
 SHORT = {"trajectory.duration": 1.0}
 SHIPPED = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic", "learning")
@@ -126,7 +127,7 @@ def test_passive_rk4_matches_an_independent_integrator() -> None:
 
     exact = solve_ivp(rhs, (0.0, ex.period), np.concatenate([q0, qd0]), rtol=1e-12,
                       atol=1e-14).y[:, -1]
-    from exo_ilc_ros.core.dynamics import workspace
+    from exo_ilc_ros.core.arm.dynamics import workspace
 
     q, qd = q0.copy(), qd0.copy()
     rk4_period_with_joint_forces(q, qd, effort, ex.period, ex.substeps, ex.plant.kernel_args,
@@ -178,7 +179,7 @@ def test_held_torque_delay_reflex_and_voluntary_by_hand() -> None:
 
 
 def _scratch() -> tuple[Any, ...]:
-    from exo_ilc_ros.core.dynamics import workspace
+    from exo_ilc_ros.core.arm.dynamics import workspace
 
     return workspace(3), np.empty((10, 3)), np.empty(9)
 
@@ -444,7 +445,7 @@ class _Plant:
 
 
 def test_protocol_waits_for_the_true_samples_and_reruns_a_trial_that_lost_one() -> None:
-    from exo_ilc_ros.core.protocol import Phase, TrialProtocol
+    from exo_ilc_ros.core.protocol.graph import Phase, TrialProtocol
 
     config = _config("sensor", max_trials=3)
     plant = _Plant(config)

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.core import Experiment, load_config, run_trials
-from exo_ilc_ros.core.protocol import STEP_TIMEOUT, Phase, TrialProtocol
-from exo_ilc_ros.core.session import TrialConclusion
-from exo_ilc_ros.core.store import RunStore
+from exo_ilc_ros.core.persistence.store import RunStore
+from exo_ilc_ros.core.protocol.graph import STEP_TIMEOUT, Phase, TrialProtocol
+from exo_ilc_ros.core.session.learning_session import TrialConclusion
 
 SHORT = {"trajectory.duration": 1.0}
 PLANT = {"mass_uncertainty": 0.1}
@@ -267,7 +267,7 @@ def test_a_lost_acknowledgement_is_asked_for_again_within_a_second() -> None:
     """The controller's acknowledgement (or the profile itself) is lost: the protocol pushes
     the same feed-forward again after ACK_RETRY (well under a second), not after the 30 s step
     timeout, and the trial runs as if nothing happened."""
-    from exo_ilc_ros.core.protocol import ACK_RETRY
+    from exo_ilc_ros.core.protocol.graph import ACK_RETRY
 
     assert ACK_RETRY < 0.5
     config = load_config(overrides={**SHORT, "max_trials": 2})
@@ -305,7 +305,7 @@ def test_real_time_warms_up_then_reruns_a_trial_with_too_many_late_commands() ->
     more than max_late_commands of its periods on a late command is run again with the same
     feed-forward, not learned from; within the share it is concluded; LATE_RERUNS in a row stop
     the run. The table equals run_trials."""
-    from exo_ilc_ros.core.protocol import LATE_RERUNS
+    from exo_ilc_ros.core.protocol.graph import LATE_RERUNS
 
     config = load_config(overrides={**SHORT, "max_trials": 3, "max_late_commands": 0.02})
     graph = FakeGraph(config)
@@ -359,9 +359,9 @@ def test_opening_rehearses_the_conclusion_without_changing_the_session(
     """The protocol warms the conclusion's kernels up when it opens the session (the graph's
     first conclusion paid 0.2-0.3 s of numba cache load); the session is untouched, and a law
     that fails on the throwaway record only costs the warm-up."""
-    from exo_ilc_ros.core.config import load_config
-    from exo_ilc_ros.core.experiment import Experiment
-    from exo_ilc_ros.core.session import LearningSession
+    from exo_ilc_ros.core.params.config import load_config
+    from exo_ilc_ros.core.session.learning_session import LearningSession
+    from exo_ilc_ros.core.sim.experiment import Experiment
 
     config = load_config(overrides={"trajectory.duration": 1.0, "max_trials": 3})
     session = LearningSession(config)

@@ -6,11 +6,13 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.core import load_config
-from exo_ilc_ros.core.convergence import JointLoop, lifted_map
+from exo_ilc_ros.core.convergence.factors import JointLoop, lifted_map
 from exo_ilc_ros.core.errors import ConfigError
-from exo_ilc_ros.core.experiment import build_law, build_reference
-from exo_ilc_ros.core.laws import FeedforwardUpdate, Memory, SignLaw, TrialRecord
-from exo_ilc_ros.core.qfilter import QFilter, QFilteredLaw
+from exo_ilc_ros.core.learning.factory import build_law
+from exo_ilc_ros.core.learning.laws import FeedforwardUpdate, Memory, SignLaw
+from exo_ilc_ros.core.learning.qfilter import QFilter, QFilteredLaw
+from exo_ilc_ros.core.loop.record import TrialRecord
+from exo_ilc_ros.core.reference.build import build_reference
 
 PERIOD = 0.01
 SAMPLES = 501

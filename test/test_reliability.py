@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 from processes import sigkill_child
 
-from exo_ilc_ros.core.config import Config, load_config
-from exo_ilc_ros.core.experiment import Experiment
-from exo_ilc_ros.core.session import LearningSession, run_trials
-from exo_ilc_ros.core.trial import record_from_samples
+from exo_ilc_ros.core.loop.trial import record_from_samples
+from exo_ilc_ros.core.params.config import Config, load_config
+from exo_ilc_ros.core.session.learning_session import LearningSession, run_trials
+from exo_ilc_ros.core.sim.experiment import Experiment
 from exo_ilc_ros.orchestration.launcher import GraphError
 from exo_ilc_ros.wire import topics
 
@@ -232,7 +232,7 @@ def test_plant_watchdog_in_real_time_mode_stops_holding_the_last_command(tmp_pat
     from std_msgs.msg import Float64MultiArray
     from std_srvs.srv import Trigger
 
-    from exo_ilc_ros.core.controller import safe_hold_effort
+    from exo_ilc_ros.core.loop.controller import safe_hold_effort
     from exo_ilc_ros.nodes.common import DIAGNOSTICS_QOS, SAMPLES_QOS
     from exo_ilc_ros.nodes.plant_simulator import PlantSimulator
     from exo_ilc_ros.wire.cdr import float64_array
@@ -552,7 +552,7 @@ def test_kill_9_the_recorder_then_resume_keeps_every_trial_in_the_bags(
     supervisor stores a trial only once the recorder filed it, so trial 3 is never stored and
     is run again."""
     from exo_ilc_ros.bag import read_bag, trials_filed
-    from exo_ilc_ros.core.summary import RunSummary
+    from exo_ilc_ros.core.session.summary import RunSummary
 
     config_file = tmp_path / "short.yaml"
     config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 3.0\n')

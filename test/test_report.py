@@ -15,7 +15,7 @@ import pytest
 
 from exo_ilc_ros.analysis.session_report import ExerciseRun, render_session
 from exo_ilc_ros.cli.main import main
-from exo_ilc_ros.core.metrics import TrialMetrics
+from exo_ilc_ros.core.programs.metrics import TrialMetrics
 
 ROOT = Path(__file__).resolve().parents[1]
 UNIT = re.compile(r"^-?[0-9.]+(e[-+]?[0-9]+)? (rad|N m|rad/s\^2|%|N m s/rad)$"

@@ -27,7 +27,7 @@ def test_schema_parameters_validate_on_set_and_apply_after() -> None:
     from rclpy.node import Node
     from rclpy.parameter import Parameter
 
-    from exo_ilc_ros.core import schema
+    from exo_ilc_ros.core.params import schema
     from exo_ilc_ros.nodes.common import SchemaParameters
 
     context = Context()

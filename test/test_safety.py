@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.core import load_config, run_trials
-from exo_ilc_ros.core.controller import outside_envelope, safe_hold_effort
 from exo_ilc_ros.core.errors import SafetyError
-from exo_ilc_ros.core.experiment import Experiment
-from exo_ilc_ros.core.plant import clamp_counted, saturation_counts
-from exo_ilc_ros.core.safety import Watchdog, WatchdogState
-from exo_ilc_ros.core.trial import simulate_trial
+from exo_ilc_ros.core.loop.controller import outside_envelope, safe_hold_effort
+from exo_ilc_ros.core.loop.plant import clamp_counted, saturation_counts
+from exo_ilc_ros.core.loop.safety import Watchdog, WatchdogState
+from exo_ilc_ros.core.loop.trial import simulate_trial
+from exo_ilc_ros.core.sim.experiment import Experiment
 
 CONFIG = load_config()
 TIGHT = CONFIG.replace({"safety.error_envelope": [0.1, 0.1, 0.1]})

@@ -19,7 +19,8 @@ from exo_ilc_ros.core import (
     run_trials,
 )
 from exo_ilc_ros.core.errors import SafetyError, StoreError
-from exo_ilc_ros.core.laws import FeedforwardUpdate, TrialRecord
+from exo_ilc_ros.core.learning.laws import FeedforwardUpdate
+from exo_ilc_ros.core.loop.record import TrialRecord
 
 SHORT = {"trajectory.duration": 1.0}
 CHANGE = {"schedule.position.threshold_low": [0.0, 0.0, 0.0]}

@@ -15,10 +15,10 @@ import pytest
 
 from exo_ilc_ros.core import load_config, run_trials
 from exo_ilc_ros.core.errors import StoreError
-from exo_ilc_ros.core.experiment import build_reference
-from exo_ilc_ros.core.laws import TrialRecord
-from exo_ilc_ros.core.session import RunResult
-from exo_ilc_ros.core.store import RunStore, learning_key
+from exo_ilc_ros.core.loop.record import TrialRecord
+from exo_ilc_ros.core.persistence.store import RunStore, learning_key
+from exo_ilc_ros.core.reference.build import build_reference
+from exo_ilc_ros.core.session.learning_session import RunResult
 
 CONFIG = load_config()
 TRIALS = 12

@@ -21,10 +21,9 @@ from processes import alive, children
 from exo_ilc_ros.analysis.study import format_study_table, run_cells
 from exo_ilc_ros.analysis.study_figure import study_figure
 from exo_ilc_ros.cli.main import main
-from exo_ilc_ros.core.config import config_dir, load_config, scenario_path
 from exo_ilc_ros.core.errors import ConfigError
-from exo_ilc_ros.core.session import run_trials
-from exo_ilc_ros.core.study import (
+from exo_ilc_ros.core.params.config import config_dir, load_config, scenario_path
+from exo_ilc_ros.core.programs.study import (
     CellResult,
     LawSpec,
     ScenarioSpec,
@@ -34,6 +33,7 @@ from exo_ilc_ros.core.study import (
     study_cells,
     study_rows,
 )
+from exo_ilc_ros.core.session.learning_session import run_trials
 
 ROOT = Path(__file__).resolve().parents[1]
 IDEAL = ScenarioSpec("ideal", scenario_path("ideal"))

@@ -12,7 +12,8 @@ import pytest
 from exo_ilc_ros.cli.main import main
 from exo_ilc_ros.core import ConfigError, Experiment, TrialRecord, load_config
 from exo_ilc_ros.core.errors import ProfileError
-from exo_ilc_ros.core.metrics import (
+from exo_ilc_ros.core.persistence.profiles import ProfileBook
+from exo_ilc_ros.core.programs.metrics import (
     PassiveArm,
     TrialMetrics,
     gravity_compensation,
@@ -21,8 +22,7 @@ from exo_ilc_ros.core.metrics import (
     trial_metrics,
     velocity_slope,
 )
-from exo_ilc_ros.core.profiles import ProfileBook
-from exo_ilc_ros.core.therapy import prepare, run_exercise
+from exo_ilc_ros.core.programs.therapy import prepare, run_exercise
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBUST = load_config(ROOT / "config" / "robust.yaml", {"max_trials": 6})
@@ -73,7 +73,7 @@ def test_a_killed_session_keeps_every_trial_it_learned(tmp_path: Path) -> None:
     profile = book.load("p1", "paper_quintic")
     assert profile.provenance["trials"] == 3 and profile.provenance["status"] == "in_progress"
     # What trial 4 would have used: the law's update from trial 3.
-    from exo_ilc_ros.core.experiment import build_law
+    from exo_ilc_ros.core.learning.factory import build_law
 
     law = build_law(prepared.config)
     np.testing.assert_array_equal(profile.feedforward, law.update(seen[2]).feedforward)
@@ -308,7 +308,7 @@ def test_learning_patient_second_session_and_assist_as_needed(tmp_path: Path) ->
     falls after its peak while the true error stays far inside the envelope, and a second
     session (robot profile and the virtual patient's memory) starts within 1.5x of the first
     session's final max |e| (bench/therapy_bench.py measures 100 trials)."""
-    from exo_ilc_ros.core.config import scenario_path
+    from exo_ilc_ros.core.params.config import scenario_path
 
     config = load_config(ROOT / "config" / "robust.yaml", {"assist_as_needed.enabled": True},
                          overlays=[scenario_path("learning")])

@@ -18,14 +18,14 @@ from processes import sigkill_child
 
 from exo_ilc_ros.cli.main import main
 from exo_ilc_ros.core import load_config
-from exo_ilc_ros.core.config import scenario_path
 from exo_ilc_ros.core.errors import ProfileError
-from exo_ilc_ros.core.experiment import build_reference
-from exo_ilc_ros.core.laws import FeedforwardUpdate
-from exo_ilc_ros.core.patient import PatientLearning, PatientModel, true_error
-from exo_ilc_ros.core.patient_states import PatientState, read_state
-from exo_ilc_ros.core.profiles import ProfileBook
-from exo_ilc_ros.core.therapy import ExerciseResult, prepare, run_exercise
+from exo_ilc_ros.core.learning.laws import FeedforwardUpdate
+from exo_ilc_ros.core.loop.patient import PatientLearning, PatientModel, true_error
+from exo_ilc_ros.core.params.config import scenario_path
+from exo_ilc_ros.core.persistence.patient_states import PatientState, read_state
+from exo_ilc_ros.core.persistence.profiles import ProfileBook
+from exo_ilc_ros.core.programs.therapy import ExerciseResult, prepare, run_exercise
+from exo_ilc_ros.core.reference.build import build_reference
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT_ROBUST = (ROOT / "config" / "robust.yaml").read_text() + \
@@ -250,8 +250,8 @@ def test_a_resumed_plan_skips_what_its_session_completed(tmp_path: Path) -> None
     import argparse
 
     from exo_ilc_ros.cli.therapy_resume import resumed_steps, stored_summary
-    from exo_ilc_ros.core.session import run_trials
-    from exo_ilc_ros.core.summary import RunSummary
+    from exo_ilc_ros.core.session.learning_session import run_trials
+    from exo_ilc_ros.core.session.summary import RunSummary
 
     exercises = tmp_path / "exercises.yaml"
     exercises.write_text(
@@ -400,7 +400,7 @@ def test_a_save_interrupted_before_its_index_loses_nothing(
     make the version refused as corrupt (every trial of the session lost). Now the listed files
     were kept as `.previous`: the version loads as the last completed save (trial 2 of 3, the
     same arrays as a 2-trial session), with its patient state, and the next session starts."""
-    from exo_ilc_ros.core import profiles
+    from exo_ilc_ros.core.persistence import profiles
 
     book = ProfileBook(tmp_path / "a")
     calls = {"index": 0}

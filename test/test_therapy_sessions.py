@@ -14,14 +14,14 @@ import pytest
 
 from exo_ilc_ros.cli.main import main
 from exo_ilc_ros.core import load_config
-from exo_ilc_ros.core.config import scenario_path
 from exo_ilc_ros.core.errors import ConfigError, ProfileError
-from exo_ilc_ros.core.experiment import build_reference
-from exo_ilc_ros.core.laws import FeedforwardUpdate
-from exo_ilc_ros.core.patient import PatientModel
-from exo_ilc_ros.core.profiles import ProfileBook
-from exo_ilc_ros.core.session import run_trials
-from exo_ilc_ros.core.therapy import ExerciseResult, prepare, run_exercise
+from exo_ilc_ros.core.learning.laws import FeedforwardUpdate
+from exo_ilc_ros.core.loop.patient import PatientModel
+from exo_ilc_ros.core.params.config import scenario_path
+from exo_ilc_ros.core.persistence.profiles import ProfileBook
+from exo_ilc_ros.core.programs.therapy import ExerciseResult, prepare, run_exercise
+from exo_ilc_ros.core.reference.build import build_reference
+from exo_ilc_ros.core.session.learning_session import run_trials
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = {"trajectory.duration": 1.0, "max_trials": 3}

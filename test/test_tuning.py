@@ -23,8 +23,8 @@ from exo_ilc_ros.analysis.tuning import (
     suggest_schedules,
 )
 from exo_ilc_ros.cli.main import main
-from exo_ilc_ros.core import schema
-from exo_ilc_ros.core.config import Config, load_config
+from exo_ilc_ros.core.params import schema
+from exo_ilc_ros.core.params.config import Config, load_config
 
 SHORT = {"trajectory.duration": 2.0}
 """A short problem: 2 s horizon (201 samples), still the paper's gains and schedules."""

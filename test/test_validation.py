@@ -15,10 +15,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from exo_ilc_ros.core import schema
-from exo_ilc_ros.core.config import Config, load_config
 from exo_ilc_ros.core.errors import ConfigError
-from exo_ilc_ros.core.validation import (
+from exo_ilc_ros.core.params import schema
+from exo_ilc_ros.core.params.config import Config, load_config
+from exo_ilc_ros.core.params.validation import (
     Cause,
     FeedforwardProfile,
     JointSample,

@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from ..core.config import Config
-from ..core.session import run_trials
-from ..core.summary import RunSummary
+from ..core.params.config import Config
+from ..core.session.learning_session import run_trials
+from ..core.session.summary import RunSummary
 
 
 @dataclass(frozen=True)

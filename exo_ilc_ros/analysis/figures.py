@@ -13,7 +13,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..bag.reader import TrialData
-from ..core.summary import RunSummary
+from ..core.session.summary import RunSummary
 from .report import PAPER_FIRST_JOINT1, PAPER_OTHER_JOINTS_WITHIN
 
 

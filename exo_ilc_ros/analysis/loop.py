@@ -9,9 +9,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..core.convergence import LoopAnalysis, bands_above_one
-from ..core.growth import MIN_TRIALS, GrowthFit
-from ..core.norm_optimal import ROBUST_TOLERANCE, Robustness
+from ..core.convergence.factors import LoopAnalysis, bands_above_one
+from ..core.convergence.growth import MIN_TRIALS, GrowthFit
+from ..core.convergence.norm_optimal_robustness import ROBUST_TOLERANCE, Robustness
 
 
 def format_analysis(analysis: LoopAnalysis) -> str:

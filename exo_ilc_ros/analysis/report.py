@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from ..core.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth
-from ..core.summary import RunSummary
+from ..core.convergence.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth
+from ..core.session.summary import RunSummary
 from .loop import format_growth
 
 PAPER_FIRST_JOINT1 = {0.05: 35, 0.10: 96, 0.15: 101}

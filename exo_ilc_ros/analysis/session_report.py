@@ -24,12 +24,12 @@ from matplotlib.figure import Figure
 
 from ..bag.provenance import PREFIX
 from ..bag.reader import BagRun, read_metadata
-from ..core.config import Config
-from ..core.exercise import PAPER_EXERCISE
-from ..core.experiment import build_reference
-from ..core.laws import TrialRecord
-from ..core.metrics import METRIC_UNITS, TrialMetrics, config_metrics
-from ..core.profiles import ProfileBook
+from ..core.loop.record import TrialRecord
+from ..core.params.config import Config
+from ..core.persistence.profiles import ProfileBook
+from ..core.programs.metrics import METRIC_UNITS, TrialMetrics, config_metrics
+from ..core.reference.build import build_reference
+from ..core.reference.exercise import PAPER_EXERCISE
 
 PATIENT = PREFIX + "patient"
 EXERCISE = PREFIX + "exercise"

@@ -23,9 +23,9 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
+from ..core.convergence.growth import MIN_TRIALS
 from ..core.errors import ExoIlcError
-from ..core.growth import MIN_TRIALS
-from ..core.study import (
+from ..core.programs.study import (
     FLOOR_WINDOW,
     CellResult,
     StudyCell,

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core.metrics import METRIC_UNITS, TrialMetrics
+from ..core.programs.metrics import METRIC_UNITS, TrialMetrics
 
 ROWS = (("max_error", "peak true |e|"), ("rms_error", "RMS true e"),
         ("assistance_rms", "assistance (RMS beyond gravity comp.)"),

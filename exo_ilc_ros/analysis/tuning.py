@@ -42,10 +42,10 @@ from typing import Any
 import numpy as np
 import optuna
 
-from ..core.config import Config
 from ..core.errors import ExoIlcError
-from ..core.laws import TrialRecord
-from ..core.session import run_trials
+from ..core.loop.record import TrialRecord
+from ..core.params.config import Config
+from ..core.session.learning_session import run_trials
 
 TERMS = ("position", "velocity", "acceleration")
 """The three step schedules: M (by |s e|), M' (by |s e_dot|), M'' (by |s e_ddot|)."""

@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from .. import __version__
-from ..core import schema
-from ..core.config import Config, load_config
 from ..core.errors import ConfigError
+from ..core.params import schema
+from ..core.params.config import Config, load_config
 
 PREFIX = "exo_ilc_ros."
 VERSION = PREFIX + "version"

@@ -31,9 +31,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ..core.experiment import build_reference
-from ..core.protocol import STEP_TIMEOUT
-from ..core.summary import RunSummary
+from ..core.protocol.graph import STEP_TIMEOUT
+from ..core.reference.build import build_reference
+from ..core.session.summary import RunSummary
 from ..wire import protocol, topics
 from ..wire.cdr import joint_states
 from . import messages

@@ -17,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from ..core.config import Config
-from ..core.laws import TrialRecord
-from ..core.schema import SUPERVISOR
-from ..core.session import LIVE, RunResult, run_trials
+from ..core.loop.record import TrialRecord
+from ..core.params.config import Config
+from ..core.params.schema import SUPERVISOR
+from ..core.session.learning_session import LIVE, RunResult, run_trials
 from ..wire import protocol
 from .errors import BagReadError
 from .reader import BagRun
@@ -98,8 +98,8 @@ def _patient_start(run: BagRun, plan: ReplayPlan) -> tuple[np.ndarray, np.ndarra
     directory (empty: the session started from no version, so from zero)."""
     from pathlib import Path
 
-    from ..core.patient import PatientModel
-    from ..core.patient_states import session_start
+    from ..core.loop.patient import PatientModel
+    from ..core.persistence.patient_states import session_start
     from .provenance import PREFIX
     from .reader import read_metadata
 

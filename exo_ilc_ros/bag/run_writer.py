@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.config import Config
-from ..core.metrics import TrialMetrics, metric_summary_values
-from ..core.session import RunResult
+from ..core.params.config import Config
+from ..core.programs.metrics import TrialMetrics, metric_summary_values
+from ..core.session.learning_session import RunResult
 from ..wire import protocol, topics
 from . import messages
 from .provenance import TRIALS_COMPLETED, provenance_data

@@ -12,7 +12,7 @@ from typing import Any
 
 from ..analysis.report import format_iterations, format_trial_table, write_json
 from ..bag import BagReadError, BagRun, read_bag
-from ..core.summary import RunSummary
+from ..core.session.summary import RunSummary
 from .arguments import figure_path, integer, json_file
 
 

@@ -17,9 +17,9 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ..core import schema
-from ..core.config import Config, load_config
 from ..core.errors import ConfigError, ExoIlcError
+from ..core.params import schema
+from ..core.params.config import Config, load_config
 
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".jpg", ".jpeg", ".tif", ".tiff", ".webp",
                    ".eps", ".ps", ".pgf", ".raw", ".rgba")
@@ -190,7 +190,7 @@ def directory(text: str) -> str:
 def scenario(text: str) -> str:
     """argparse type: a virtual-patient scenario, a shipped name (config/scenarios/) or a YAML
     file; returns the file's path (its keys are checked when the config is loaded)."""
-    from ..core.config import scenario_names, scenario_path
+    from ..core.params.config import scenario_names, scenario_path
 
     try:
         return str(scenario_path(text))

@@ -11,9 +11,9 @@ from tqdm import tqdm
 
 from ..analysis.comparison import Variant, format_comparison, plot_comparison, run_comparison
 from ..analysis.report import write_json
-from ..core.config import config_dir, read_yaml
 from ..core.errors import ConfigError
-from ..core.summary import RunSummary
+from ..core.params.config import config_dir, read_yaml
+from ..core.session.summary import RunSummary
 from .arguments import (
     add_scenario_argument,
     config_with_flags,

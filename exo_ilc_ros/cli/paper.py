@@ -69,7 +69,7 @@ def paper(args: argparse.Namespace) -> int:
 
             if args.in_process:
                 from ..bag import run_name, unique_path, write_run
-                from ..core.session import run_trials
+                from ..core.session.learning_session import run_trials
 
                 result = run_trials(run_config, delta, trials, on_trial=progress)
                 path = unique_path(args.bag_dir, run_name("sim", result.law, delta))

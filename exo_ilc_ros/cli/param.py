@@ -11,8 +11,8 @@ from typing import Any
 
 import yaml
 
-from ..core.config import load_ros_yaml, yaml_problem
 from ..core.errors import ExoIlcError
+from ..core.params.config import load_ros_yaml, yaml_problem
 from .arguments import domain_id, number
 
 

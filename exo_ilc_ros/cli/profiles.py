@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from ..core.profiles import ProfileBook, export_profile
-from ..core.therapy import profiles_root
+from ..core.persistence.profiles import ProfileBook, export_profile
+from ..core.programs.therapy import profiles_root
 from .arguments import directory, integer, output_file
 
 

@@ -32,8 +32,9 @@ def run(args: argparse.Namespace) -> int:
     """Read, group by session, render and write."""
     from ..analysis.session_report import exercise_run, group_by_session, render_session
     from ..bag import BagError, read_bag
-    from ..core.profiles import ProfileBook, write_bytes_atomic
-    from ..core.therapy import profiles_root
+    from ..core.persistence.files import write_bytes_atomic
+    from ..core.persistence.profiles import ProfileBook
+    from ..core.programs.therapy import profiles_root
     from .analyze import bag_paths
 
     runs = []

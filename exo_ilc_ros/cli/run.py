@@ -13,9 +13,9 @@ from typing import Any
 
 from tqdm import tqdm
 
-from ..core.config import Config
 from ..core.errors import ConfigError
-from ..core.summary import RunSummary
+from ..core.params.config import Config
+from ..core.session.summary import RunSummary
 from ..wire import topics
 from .arguments import directory, domain_id
 from .simulate import add_config_arguments, config_from_args, print_report
@@ -81,8 +81,8 @@ def _store_root(args: argparse.Namespace) -> Path | None:
 def _check_store(config: Config, resume: bool) -> int:
     """Before any node starts: trials already stored for this run (an error without
     ``resume``)."""
-    from ..core.experiment import build_reference
-    from ..core.store import RunStore
+    from ..core.persistence.store import RunStore
+    from ..core.reference.build import build_reference
 
     store = RunStore(config["store.directory"], config, build_reference(config))
     if store.completed and not resume:
@@ -195,7 +195,7 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
                                    on_start=announce_graph(bar, recording.path))
             bar.write(f"bag: {recording.path}", file=sys.stderr)
             result.summary.extra["bag"] = str(recording.path)
-    from ..core.metrics import TrialMetrics
+    from ..core.programs.metrics import TrialMetrics
 
     names = config["joint_names"]
     filed = [TrialMetrics.from_summary(s.trial, s.values, names) for s in result.summaries]

@@ -8,15 +8,10 @@ from typing import Any
 
 from tqdm import tqdm
 
-from ..analysis.report import (
-    format_iterations,
-    format_long_run,
-    format_trial_table,
-    write_json,
-)
-from ..core.config import Config
-from ..core.session import run_trials
-from ..core.summary import RunSummary
+from ..analysis.report import format_iterations, format_long_run, format_trial_table, write_json
+from ..core.params.config import Config
+from ..core.session.learning_session import run_trials
+from ..core.session.summary import RunSummary
 from .arguments import (
     add_scenario_argument,
     config_with_flags,
@@ -149,7 +144,7 @@ def simulate(args: argparse.Namespace) -> int:
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
         if args.json:  # the therapy metrics of every trial (core/metrics.py)
-            from ..core.metrics import config_metrics
+            from ..core.programs.metrics import config_metrics
 
             measured = config.replace({"mass_uncertainty": delta})
             runs[-1].extra["metrics"] = [config_metrics(r, measured).to_json()

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from ..analysis.study import format_study_table, run_cells, write_study_json
 from ..core.errors import ConfigError
-from ..core.study import (
+from ..core.programs.study import (
     SHIPPED_LAWS,
     StudyCell,
     resolve_law,

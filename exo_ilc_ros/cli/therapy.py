@@ -13,10 +13,10 @@ from tqdm import tqdm
 
 from ..analysis.therapy import format_session_metrics
 from ..core.errors import ConfigError
-from ..core.exercise import exercises_path, load_book
-from ..core.profiles import ProfileBook
-from ..core.summary import RunSummary
-from ..core.therapy import ExerciseResult, prepare, profiles_root, run_exercise, session_id
+from ..core.persistence.profiles import ProfileBook
+from ..core.programs.therapy import ExerciseResult, prepare, profiles_root, run_exercise, session_id
+from ..core.reference.exercise import exercises_path, load_book
+from ..core.session.summary import RunSummary
 from .arguments import directory, nonempty
 
 
@@ -131,9 +131,9 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
     was stopped, so a killed session keeps what it learned; it then prints the command that
     resumes exactly this session. ``--resume [SESSION]`` continues it (its unfinished
     versions, the same session numbers, so the same store keys: cli/therapy_resume.py)."""
-    from ..core.experiment import build_reference
-    from ..core.patient import PatientModel
-    from ..core.store import RunStore
+    from ..core.loop.patient import PatientModel
+    from ..core.persistence.store import RunStore
+    from ..core.reference.build import build_reference
     from ..orchestration.launcher import GraphError
     from .therapy_resume import Step, resume_command, resumed_steps, stored_summary
 
@@ -228,7 +228,7 @@ def _profile_from_store(writer: Any, config: Any, stored: list[Any],
                         count: int) -> list[Any] | None:
     """Metrics of the stored trials and the profile version from the last one (None: no trial
     completed, nothing written)."""
-    from ..core.metrics import config_metrics
+    from ..core.programs.metrics import config_metrics
 
     if not stored:
         return None
@@ -247,7 +247,7 @@ node does not know them)."""
 
 def _write_sidecar(bag: Path, patient: str, exercise: str, session: str,
                    started_from: int | None, version: int) -> None:
-    from ..core.store import write_json_atomic
+    from ..core.persistence.files import write_json_atomic
 
     if bag.is_dir():
         write_json_atomic(bag / SIDECAR, {"patient": patient, "exercise": exercise,

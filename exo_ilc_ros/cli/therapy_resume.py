@@ -18,12 +18,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..core.config import Config
 from ..core.errors import ProfileError
-from ..core.experiment import build_reference
-from ..core.profiles import ProfileBook
-from ..core.summary import RunSummary
-from ..core.therapy import PreparedExercise, prepare
+from ..core.params.config import Config
+from ..core.persistence.profiles import ProfileBook
+from ..core.programs.therapy import PreparedExercise, prepare
+from ..core.reference.build import build_reference
+from ..core.session.summary import RunSummary
 
 RUN_STORE = "run_store"
 """The index entry's key of the run store a graph session saves its trials in (None: an
@@ -166,9 +166,9 @@ def stored_summary(step: Step, store: Path) -> RunSummary | None:
     """The report of an exercise its session completed before it was stopped (``step.done``),
     from the trials its run store holds, as the uninterrupted run reported it (None: the
     store no longer holds them)."""
-    from ..core.metrics import config_metrics
-    from ..core.session import RunResult
-    from ..core.store import RunStore
+    from ..core.persistence.store import RunStore
+    from ..core.programs.metrics import config_metrics
+    from ..core.session.learning_session import RunResult
 
     entry = step.done or {}
     cfg = step.prepared.config.replace({

@@ -14,8 +14,8 @@ import optuna
 from tqdm import tqdm
 
 from ..analysis.tuning import RunScore, TuningProblem, TuningResult, best_result, optimize
-from ..core.config import load_config
 from ..core.errors import ConfigError
+from ..core.params.config import load_config
 from .arguments import (
     add_scenario_argument,
     at_least_two_trials,

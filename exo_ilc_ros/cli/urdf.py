@@ -6,9 +6,9 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ..core.config import load_config
-from ..core.experiment import build_arm
-from ..core.urdf import arm_urdf
+from ..core.arm.build import build_arm
+from ..core.arm.urdf import arm_urdf
+from ..core.params.config import load_config
 from .arguments import input_file, json_file
 
 

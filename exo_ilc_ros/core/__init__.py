@@ -2,56 +2,83 @@
 in-process runner, and the logic the supervisor node runs) and its store. Nothing here imports
 rclpy.
 
-What a user or a node needs is importable from here. The compiled kernels live in their own
-modules, by role: :mod:`.plant` (RK4 with ZOH effort, eq (8); the effort clamp and saturation),
-:mod:`.controller` (PD eq (11), computed torque eqs (9)/(16), error envelope, safe hold) and
-:mod:`.trial` (one trial in-process, a graph trial rebuilt from its samples).
+The code lives in rooms by concern, each importing only the rooms below it (the order of
+:data:`ROOMS`; ``test/test_layers.py`` keeps it so). This face names what a user or a node
+needs and loads it on first use (PEP 562), so ``import exo_ilc_ros.core`` costs nothing and a
+reader of bags never loads numba.
 """
 
 from __future__ import annotations
 
-from . import _numba_cache  # noqa: F401  (must run before the kernels are compiled)
-from .config import Config, config_dir, default_config_path, load_config
-from .convergence import LoopAnalysis, analyze_loop
-from .errors import ConfigError, ExoIlcError, ModelError, SafetyError, StoreError
-from .experiment import (
-    Experiment,
-    IterationsToBound,
-    build_arm,
-    build_law,
-    build_reference,
-    iterations_to_bound,
-)
-from .growth import GrowthFit, fit_growth
-from .laws import (
-    ErrorSum,
-    FeedforwardUpdate,
-    InitialFeedforward,
-    LearningLaw,
-    LinearLaw,
-    Memory,
-    ScheduleIndex,
-    SignLaw,
-    StepSchedule,
-    TrialRecord,
-    error_sums,
-    sgn,
-)
-from .model import ArmModel
-from .norm_optimal import NormOptimalLaw, learning_matrices
-from .plant import PlantDynamics
-from .qfilter import QFilter, QFilteredLaw
-from .session import LearningSession, RunResult, StopReason, TrialConclusion, run_trials
-from .store import RunStore
-from .trajectory import QuinticTrajectory, SampledReference
+import importlib
+from typing import Any
 
-__all__ = [
-    "ArmModel", "Config", "ConfigError", "ErrorSum", "ExoIlcError", "Experiment",
-    "FeedforwardUpdate", "GrowthFit", "InitialFeedforward", "IterationsToBound", "LearningLaw",
-    "LearningSession", "LinearLaw", "LoopAnalysis", "Memory", "ModelError", "NormOptimalLaw",
-    "PlantDynamics", "QFilter", "QFilteredLaw", "QuinticTrajectory", "RunResult", "RunStore",
-    "SafetyError", "SampledReference", "ScheduleIndex", "SignLaw", "StepSchedule", "StopReason",
-    "StoreError", "TrialConclusion", "TrialRecord", "analyze_loop", "build_arm", "build_law",
-    "build_reference", "config_dir", "default_config_path", "error_sums", "fit_growth",
-    "iterations_to_bound", "learning_matrices", "load_config", "run_trials", "sgn",
-]
+ROOMS = ("params", "arm", "reference", "loop", "learning", "convergence", "sim", "persistence",
+         "session", "protocol", "programs")
+"""core's subpackages, bottom first: each may import only those before it (and the shared
+modules ``errors`` and ``_numba_cache``)."""
+
+_WHERE = {
+    "build_arm": ".arm.build",
+    "ArmModel": ".arm.model",
+    "IterationsToBound": ".convergence.bound",
+    "iterations_to_bound": ".convergence.bound",
+    "LoopAnalysis": ".convergence.factors",
+    "analyze_loop": ".convergence.factors",
+    "GrowthFit": ".convergence.growth",
+    "fit_growth": ".convergence.growth",
+    "ConfigError": ".errors",
+    "ExoIlcError": ".errors",
+    "ModelError": ".errors",
+    "SafetyError": ".errors",
+    "StoreError": ".errors",
+    "build_law": ".learning.factory",
+    "ErrorSum": ".learning.laws",
+    "FeedforwardUpdate": ".learning.laws",
+    "InitialFeedforward": ".learning.laws",
+    "LearningLaw": ".learning.laws",
+    "LinearLaw": ".learning.laws",
+    "Memory": ".learning.laws",
+    "ScheduleIndex": ".learning.laws",
+    "SignLaw": ".learning.laws",
+    "StepSchedule": ".learning.laws",
+    "error_sums": ".learning.laws",
+    "sgn": ".learning.laws",
+    "NormOptimalLaw": ".learning.norm_optimal",
+    "learning_matrices": ".learning.norm_optimal",
+    "QFilter": ".learning.qfilter",
+    "QFilteredLaw": ".learning.qfilter",
+    "PlantDynamics": ".loop.plant",
+    "TrialRecord": ".loop.record",
+    "Config": ".params.config",
+    "config_dir": ".params.config",
+    "default_config_path": ".params.config",
+    "load_config": ".params.config",
+    "RunStore": ".persistence.store",
+    "build_reference": ".reference.build",
+    "QuinticTrajectory": ".reference.trajectory",
+    "SampledReference": ".reference.trajectory",
+    "LearningSession": ".session.learning_session",
+    "RunResult": ".session.learning_session",
+    "StopReason": ".session.learning_session",
+    "TrialConclusion": ".session.learning_session",
+    "run_trials": ".session.learning_session",
+    "Experiment": ".sim.experiment",
+}
+"""Public name -> the module that defines it."""
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str) -> Any:
+    """Load a public name's module on first use (PEP 562)."""
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

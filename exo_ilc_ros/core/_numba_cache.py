@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numba
 
-KERNEL_MODULES = ("dynamics.py", "plant.py", "controller.py", "trial.py", "patient.py",
-                  "joint_forces.py", "hold.py")
+KERNEL_MODULES = ("arm/dynamics.py", "arm/joint_forces.py", "loop/plant.py", "loop/controller.py",
+                  "loop/trial.py", "loop/patient.py", "loop/hold.py")
 
 if not os.environ.get("NUMBA_CACHE_DIR"):
     here = Path(__file__).resolve().parent

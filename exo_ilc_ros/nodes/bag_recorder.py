@@ -47,19 +47,11 @@ from ..bag.provenance import (
     provenance_data,
 )
 from ..bag.writer import BagWriter
-from ..core.config import load_config
+from ..core.params.config import load_config
 from ..wire import topics
 from ..wire.protocol import int_value, key_values
 from ..wire.qos import RECORDER_DEPTH, TRANSIENT_LOCAL_TOPICS, offered_qos
-from .common import (
-    EVENTS_QOS,
-    Inbox,
-    diagnostic_array,
-    receive_time,
-    run_nodes,
-    status,
-    wall_clock,
-)
+from .common import EVENTS_QOS, Inbox, diagnostic_array, receive_time, run_nodes, status, wall_clock
 
 NAME = "bag_recorder"
 READY_TOPICS = (topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,

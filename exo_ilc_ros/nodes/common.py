@@ -27,10 +27,10 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-from ..core import schema
-from ..core.config import Config, flatten_tree, load_config, load_ros_yaml
 from ..core.errors import ConfigError, ExoIlcError
-from ..core.validation import validate_update
+from ..core.params import schema
+from ..core.params.config import Config, flatten_tree, load_config, load_ros_yaml
+from ..core.params.validation import validate_update
 from ..wire import topics
 from . import realtime
 

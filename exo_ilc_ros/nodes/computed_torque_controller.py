@@ -26,12 +26,12 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
 
-from ..core import schema
-from ..core.controller import GuardedControlStep
-from ..core.experiment import Experiment
-from ..core.safety import watchdog_for
-from ..core.trial import period_ns, sample_index
-from ..core.validation import Cause, Rejection, validate_feedforward
+from ..core.loop.controller import GuardedControlStep
+from ..core.loop.safety import watchdog_for
+from ..core.loop.trial import period_ns, sample_index
+from ..core.params import schema
+from ..core.params.validation import Cause, Rejection, validate_feedforward
+from ..core.sim.experiment import Experiment
 from ..wire import topics
 from ..wire.cdr import float64_array
 from ..wire.protocol import trial_of_frame

@@ -19,7 +19,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.node import Node
 
-from ..core.validation import Cause, LogOnce, Rejection, validate_joint_state
+from ..core.params.validation import Cause, LogOnce, Rejection, validate_joint_state
 from ..wire.cdr import (
     HEADER,
     STAMP,

@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from ..core.homing import ControllerEvent, ControllerMode, HomingController, HomingSettings
-from ..core.validation import FeedforwardProfile
+from ..core.params.validation import FeedforwardProfile
+from ..core.protocol.homing import ControllerEvent, ControllerMode, HomingController, HomingSettings
 from ..wire import topics
 from ..wire.cdr import float64_array
 from .common import diagnostic_array, status

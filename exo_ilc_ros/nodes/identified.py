@@ -34,15 +34,8 @@ from rclpy.type_support import check_is_valid_msg_type
 from rclpy.utilities import get_rmw_implementation_identifier
 from rclpy.waitable import NumberOfEntities, Waitable
 
-from ..core.validation import Cause
-from ..wire.publishers import (
-    PUBLISHER_OF,
-    TRUSTED,
-    UNKNOWN,
-    Endpoint,
-    PublisherCheck,
-    qualified,
-)
+from ..core.params.validation import Cause
+from ..wire.publishers import PUBLISHER_OF, TRUSTED, UNKNOWN, Endpoint, PublisherCheck, qualified
 from .guard import Rejections
 
 TRUSTED_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL,
@@ -444,7 +437,7 @@ class TrustedInput(Admission):
 
 def effort_classifier(rejections: Rejections, joints: int) -> Callable[[bytes], bool]:
     """``classify`` for effort commands: decodable, one finite value per joint."""
-    from ..core.validation import Rejection, validate_effort_command
+    from ..core.params.validation import Rejection, validate_effort_command
     from ..wire.cdr import CdrError, read_float64_array
 
     unbounded = [float("inf")] * joints

@@ -25,10 +25,10 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from ..core import schema
-from ..core.homing_protocol import HomingProtocol
-from ..core.protocol import TrialProtocol
-from ..core.session import TrialConclusion
+from ..core.params import schema
+from ..core.protocol.graph import TrialProtocol
+from ..core.protocol.homing_protocol import HomingProtocol
+from ..core.session.learning_session import TrialConclusion
 from ..wire import topics
 from ..wire.protocol import int_value
 from ..wire.publishers import max_bytes

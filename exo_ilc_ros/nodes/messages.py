@@ -10,10 +10,10 @@ from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticStatus
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from ..core.metrics import metric_summary_values
-from ..core.schema import SUPERVISOR
-from ..core.session import TrialConclusion
-from ..core.trajectory import SampledReference
+from ..core.params.schema import SUPERVISOR
+from ..core.programs.metrics import metric_summary_values
+from ..core.reference.trajectory import SampledReference
+from ..core.session.learning_session import TrialConclusion
 from ..wire import topics
 from ..wire.protocol import feedforward_frame, summary_values
 from .common import doubles, status

@@ -27,12 +27,12 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from ..core import schema
-from ..core.controller import GuardedControlStep
-from ..core.experiment import Experiment
-from ..core.plant import PlantStepper
-from ..core.trial import period_ns
-from ..core.validation import Cause, Rejection, validate_effort_command
+from ..core.loop.controller import GuardedControlStep
+from ..core.loop.stepper import PlantStepper
+from ..core.loop.trial import period_ns
+from ..core.params import schema
+from ..core.params.validation import Cause, Rejection, validate_effort_command
+from ..core.sim.experiment import Experiment
 from ..wire import topics
 from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
 from ..wire.publishers import max_bytes
@@ -229,7 +229,7 @@ class MujocoPlant(FreeRunningPlant):
 
     def make_stepper(self) -> Any:
         """MuJoCo's arm of this configuration."""
-        from ..core.mujoco_arm import MujocoArm, effects_not_simulated
+        from ..core.sim.mujoco_arm import MujocoArm, effects_not_simulated
 
         config = self.params.config
         if config["dynamics"] != "full":

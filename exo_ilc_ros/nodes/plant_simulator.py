@@ -30,13 +30,14 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from ..core import schema
-from ..core.controller import GuardedControlStep
-from ..core.experiment import Experiment
-from ..core.plant import PlantStepper, clamp_counted
-from ..core.safety import LateCommands, watchdog_for
-from ..core.trial import period_ns
-from ..core.validation import Cause, Rejection, validate_effort_command
+from ..core.loop.controller import GuardedControlStep
+from ..core.loop.plant import clamp_counted
+from ..core.loop.safety import LateCommands, watchdog_for
+from ..core.loop.stepper import PlantStepper
+from ..core.loop.trial import period_ns
+from ..core.params import schema
+from ..core.params.validation import Cause, Rejection, validate_effort_command
+from ..core.sim.experiment import Experiment
 from ..wire import topics
 from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
 from ..wire.protocol import trial_of_frame

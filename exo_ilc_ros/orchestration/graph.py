@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from ..core.config import Config
-from ..core.summary import RunSummary
+from ..core.params.config import Config
+from ..core.session.summary import RunSummary
 from ..wire import topics
 from ..wire.protocol import int_value, per_joint, summary_values
 from .launcher import (
@@ -74,8 +74,8 @@ def stored_summaries(config: Config) -> list[TrialSummary]:
     as trial summaries: what a resumed run restored rather than ran (empty without a store)."""
     if not config["store.directory"]:
         return []
-    from ..core.experiment import build_reference
-    from ..core.store import RunStore
+    from ..core.persistence.store import RunStore
+    from ..core.reference.build import build_reference
 
     store = RunStore(config["store.directory"], config, build_reference(config))
     joints = config["joint_names"]

@@ -16,8 +16,8 @@ from types import TracebackType
 import yaml
 
 from ..bag.run_writer import run_name, unique_path
-from ..core import schema
-from ..core.config import Config
+from ..core.params import schema
+from ..core.params.config import Config
 from ..nodes.registry import RECORDER
 from .launcher import GRAPH_NODES, NodeSpec, composed
 

@@ -1,0 +1,172 @@
+"""The controller: PD feedback over the feed-forward (eq (11)), computed torque with the nominal
+model (eqs (9)/(16)), the error envelope and the safe hold. One sample at a time, compiled.
+
+Error envelope (``safety.error_envelope``): at every sample the controller compares
+|e_j| = |q_d,j - q_j| with the envelope of joint j (:func:`outside_envelope`, the one check). At
+the first sample where any joint is outside (or the state is not finite) the trial is aborted
+*at that sample*: from it on the effort is the **safe hold** and the trial record carries
+``aborted_at`` = that index; the learning law does not learn from an aborted trial (the next
+trial reuses the same feed-forward).
+
+Safe hold: the same computed-torque controller with the reference frozen at the pose measured at
+the abort, zero reference velocity and no feed-forward, with the hold's own gains:
+
+    Q = a_N(q) (K_P,h (q_hold - q) - K_D,h qdot) + c_N(q, qdot), clamped to +-effort_limit,
+
+i.e. nominal gravity (and Coriolis) compensation at the current pose, plus ``safety.hold_kp``,
+``safety.hold_kd`` as stiffness and damping around the abort pose, reached from the controller's
+gains over ``safety.hold_ramp`` (:mod:`.hold`: why those gains, and what "at rest" means). It
+brings the arm to rest near where the fault was seen instead of following the reference on or
+letting the limb drop; with mass uncertainty delta it rests with a small gravity sag (delta
+times the gravity torque over K_P,h).
+
+Every command is clamped to +-effort_limit by the plant's rule (:func:`plant.clamp`), so the
+plant's own limit never changes it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .. import _numba_cache  # noqa: F401  (sets numba's cache directory before any kernel)
+from ..arm.dynamics import inertia_and_bias_into, workspace
+from .hold import hold_gains_into
+from .plant import clamp
+from .setup import LoopSetup
+
+
+@njit(cache=True, error_model="numpy")
+def feedback_into(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
+                  qd: np.ndarray, kp: np.ndarray, kd: np.ndarray, out: np.ndarray) -> None:
+    """u = u_ff + K_P e + K_D e_dot, eq (11), with e = q_d - q, into ``out``."""
+    for j in range(q.shape[0]):
+        out[j] = u_ff[j] + kp[j] * (q_ref[j] - q[j]) + kd[j] * (qd_ref[j] - qd[j])
+
+
+@njit(cache=True, error_model="numpy")
+def computed_torque_into(q: np.ndarray, qd: np.ndarray, u: np.ndarray, nominal: tuple,
+                         effort_limit: np.ndarray, ws: tuple, out: np.ndarray) -> None:
+    """Q^u = a_N(q) u + c_N(q, qdot), eqs (9)/(16), clamped to +-effort_limit, into ``out``."""
+    n = u.shape[0]
+    an = inertia_and_bias_into(q, qd, *nominal, ws, out)
+    for j in range(n):
+        for k in range(n):
+            out[j] += an[j, k] * u[k]
+    for j in range(n):
+        out[j] = clamp(out[j], effort_limit[j])
+
+
+@njit(cache=True, error_model="numpy")
+def control_into(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
+                 qd: np.ndarray, kp: np.ndarray, kd: np.ndarray, nominal: tuple,
+                 effort_limit: np.ndarray, ws: tuple, u_out: np.ndarray,
+                 effort_out: np.ndarray) -> None:
+    """One sample of the controller: u by eq (11) into ``u_out``, then the effort by eq (16)
+    (clamped) into ``effort_out``."""
+    feedback_into(u_ff, q_ref, qd_ref, q, qd, kp, kd, u_out)
+    computed_torque_into(q, qd, u_out, nominal, effort_limit, ws, effort_out)
+
+
+@njit(cache=True, error_model="numpy")
+def safe_hold_into(q_hold: np.ndarray, q: np.ndarray, qd: np.ndarray, kp: np.ndarray,
+                   kd: np.ndarray, nominal: tuple, effort_limit: np.ndarray, ws: tuple,
+                   u_out: np.ndarray, effort_out: np.ndarray) -> None:
+    """The safe hold around ``q_hold`` (module docstring): :func:`control_into` with the
+    reference frozen at ``q_hold``, zero reference velocity and no feed-forward."""
+    zero = np.zeros(q.shape[0])
+    control_into(zero, q_hold, zero, q, qd, kp, kd, nominal, effort_limit, ws, u_out,
+                 effort_out)
+
+
+@njit(cache=True, error_model="numpy")
+def outside_envelope(q_ref: np.ndarray, q: np.ndarray, envelope: np.ndarray) -> bool:
+    """True if any |q_ref_j - q_j| exceeds ``envelope_j`` or is not finite (NaN counts as
+    outside): the one error-envelope check."""
+    for j in range(q.shape[0]):  # noqa: SIM110  (a loop numba compiles)
+        if not abs(q_ref[j] - q[j]) <= envelope[j]:
+            return True
+    return False
+
+
+@njit(cache=True, error_model="numpy")
+def computed_torque_kernel(q: np.ndarray, qd: np.ndarray, u: np.ndarray, nominal: tuple,
+                           effort_limit: np.ndarray) -> np.ndarray:
+    """Q^u = a_N(q) u + c_N(q, qdot), eqs (9)/(16), clamped, as a new array: the allocating
+    form of :func:`computed_torque_into`, for tests and interactive use."""
+    out = np.empty(u.shape[0])
+    computed_torque_into(q, qd, u, nominal, effort_limit, workspace(u.shape[0]), out)
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def safe_hold_effort(q_hold: np.ndarray, q: np.ndarray, qd: np.ndarray, kp: np.ndarray,
+                     kd: np.ndarray, nominal: tuple, effort_limit: np.ndarray) -> np.ndarray:
+    """The safe-hold effort at (q, qdot) around the pose ``q_hold`` (module docstring), as a
+    new array (the plant's watchdog hold)."""
+    n = q.shape[0]
+    u = np.empty(n)
+    out = np.empty(n)
+    safe_hold_into(q_hold, q, qd, kp, kd, nominal, effort_limit, workspace(n), u, out)
+    return out
+
+
+class ControlStep:
+    """The computed-torque controller at one sample, into preallocated buffers."""
+
+    def __init__(self, experiment: LoopSetup) -> None:
+        n = experiment.reference.position.shape[1]
+        self._nominal = experiment.nominal.kernel_args
+        self._kp = experiment.kp
+        self._kd = experiment.kd
+        self._limit = experiment.effort_limit
+        self._ws = workspace(n)
+        self.control_input = np.empty(n)
+        """u of eq (11) at the last sample."""
+        self.effort = np.empty(n)
+        """The commanded effort at the last sample (eq (16), clamped)."""
+
+    def __call__(self, u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
+                 qd: np.ndarray) -> np.ndarray:
+        """Effort for the measured (q, qdot) at a sample with these reference values."""
+        control_into(u_ff, q_ref, qd_ref, q, qd, self._kp, self._kd, self._nominal, self._limit,
+                     self._ws, self.control_input, self.effort)
+        return self.effort
+
+
+class GuardedControlStep(ControlStep):
+    """:class:`ControlStep` with the error envelope and the safe hold, one sample at a time,
+    the arithmetic of :func:`trial.simulate_trial_guarded`: at the first sample outside the
+    envelope (:meth:`outside`) the caller latches the hold pose (:meth:`hold_at`) and commands
+    :meth:`hold` from then on."""
+
+    def __init__(self, experiment: LoopSetup) -> None:
+        super().__init__(experiment)
+        self.envelope = np.asarray(experiment.error_envelope, dtype=float).copy()
+        self.q_hold = np.empty(experiment.reference.position.shape[1])
+        self._hold_kp = experiment.hold_kp
+        self._hold_kd = experiment.hold_kd
+        self._hold_ramp = experiment.hold_ramp
+        self._hold_gains = np.empty((2, self.q_hold.shape[0]))
+        self.hold_samples = 0
+        """Hold commands since :meth:`hold_at` (the ramp's sample count, :mod:`.hold`)."""
+
+    def outside(self, q_ref: np.ndarray, q: np.ndarray) -> bool:
+        """True if any |q_ref_j - q_j| exceeds the envelope (or is not finite)."""
+        return bool(outside_envelope(q_ref, q, self.envelope))
+
+    def hold_at(self, q: np.ndarray) -> None:
+        """Latch the pose the safe hold keeps (its gains ramp from the controller's again)."""
+        self.q_hold[:] = q
+        self.hold_samples = 0
+
+    def hold(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """The safe-hold effort at (q, qdot) around the latched pose (clamped), one call per
+        sample: its gains ramp over ``safety.hold_ramp`` (:func:`hold.hold_gains_into`)."""
+        gains = self._hold_gains
+        hold_gains_into(self.hold_samples, self._hold_ramp, self._kp, self._kd, self._hold_kp,
+                        self._hold_kd, gains)
+        self.hold_samples += 1
+        safe_hold_into(self.q_hold, q, qd, gains[0], gains[1], self._nominal, self._limit,
+                       self._ws, self.control_input, self.effort)
+        return self.effort

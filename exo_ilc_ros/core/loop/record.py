@@ -1,0 +1,78 @@
+"""What one trial produced (:class:`TrialRecord`): the record every law learns from, every
+store keeps and every report reads."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from ..reference.trajectory import SampledReference
+
+
+@dataclass(frozen=True, eq=False)
+class TrialRecord:
+    """What one trial produced, sampled at t_i = i * period, i = 0..N.
+
+    ``control_input`` is the whole u of eq (11) the controller formed (feed-forward plus
+    feedback), ``effort`` the torque it commanded, ``levels`` the M, M', M'' (rows) per joint
+    that formed this trial's feed-forward (None for trial 1, which has no predecessor).
+    """
+
+    trial: int
+    reference: SampledReference
+    position: np.ndarray
+    velocity: np.ndarray
+    feedforward: np.ndarray
+    control_input: np.ndarray
+    effort: np.ndarray
+    levels: np.ndarray | None = None
+    aborted_at: int | None = None
+    """Index of the first sample outside the error envelope (the trial was aborted there and
+    the safe hold commanded from it on); None for a completed trial. No law learns from it."""
+    true_position: np.ndarray | None = None
+    """The plant's true q at every sample when the sensors (:mod:`.patient`) made the measured
+    ``position`` differ from it; None: the measured state is the true one."""
+    true_velocity: np.ndarray | None = None
+    """The plant's true qdot, as ``true_position``."""
+
+    @property
+    def aborted(self) -> bool:
+        """True if the trial was aborted by the error envelope."""
+        return self.aborted_at is not None
+
+    @cached_property
+    def error(self) -> np.ndarray:
+        """e = q_d - q."""
+        return np.asarray(self.reference.position - self.position)
+
+    @cached_property
+    def error_velocity(self) -> np.ndarray:
+        """e_dot = qdot_d - qdot, from the measured velocity."""
+        return np.asarray(self.reference.velocity - self.velocity)
+
+    @cached_property
+    def error_acceleration(self) -> np.ndarray:
+        """e_ddot = qddot_d - qddot, qddot by finite differences of the measured velocity
+        (central inside, one-sided at the ends: ``numpy.gradient``); no acceleration is measured."""
+        estimate = np.gradient(self.velocity, self.reference.period, axis=0)
+        return np.asarray(self.reference.acceleration - estimate)
+
+    @cached_property
+    def max_abs_error(self) -> np.ndarray:
+        """max_t |e_j(t)| per joint (of an aborted trial: up to and including the abort
+        sample, the tracking part; the hold after it does not track the reference)."""
+        end = None if self.aborted_at is None else self.aborted_at + 1
+        return np.asarray(np.max(np.abs(self.error[:end]), axis=0))
+
+    @cached_property
+    def true_max_abs_error(self) -> np.ndarray:
+        """max_t |q_d,j(t) - q_j(t)| per joint of the plant's true state (as
+        :attr:`max_abs_error`, which holds what the controller measured); equal to it when
+        the record has no true state apart."""
+        if self.true_position is None:
+            return self.max_abs_error
+        end = None if self.aborted_at is None else self.aborted_at + 1
+        error = self.reference.position - self.true_position
+        return np.asarray(np.max(np.abs(error[:end]), axis=0))

@@ -1,0 +1,210 @@
+"""One trial of the closed loop in-process (controller + plant, compiled), and a trial run
+elsewhere (the graph) rebuilt from its samples with the same arithmetic.
+
+The trial is the controller of :mod:`.controller` and the plant of :mod:`.plant` called in the
+order the graph calls them (same kernels, same order, same doubles), so the in-process runner
+and the ROS graph agree bit for bit. Sample i of a trial that starts at simulated time ``t0_ns``
+is stamped ``t0_ns + i * period_ns`` (integer nanoseconds), so indices are recovered exactly
+from stamps (:func:`period_ns`, :func:`sample_index`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .. import _numba_cache  # noqa: F401  (sets numba's cache directory before any kernel)
+from ..arm.dynamics import workspace
+from ..reference.trajectory import SampledReference
+from .controller import control_into, outside_envelope, safe_hold_into
+from .hold import hold_gains_into
+from .patient import measure_into, patient_period, start_state_into
+from .plant import clamp, rk4_period
+from .record import TrialRecord
+from .setup import LoopSetup
+
+
+@njit(cache=True, error_model="numpy")
+def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray,
+                           kp: np.ndarray, kd: np.ndarray, effort_limit: np.ndarray,
+                           period: float, substeps: int, plant: tuple, nominal: tuple, mode: int,
+                           envelope: np.ndarray, hold_kp: np.ndarray, hold_kd: np.ndarray,
+                           hold_ramp: int, patient_joint: np.ndarray,
+                           patient_scalars: np.ndarray, noise: np.ndarray, initial: np.ndarray,
+                           trial_scalars: np.ndarray, learned: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int,
+                                      np.ndarray, np.ndarray]:
+    """One trial at the samples t_i = i * period, i = 0..N, guarded by the error envelope.
+
+    Starts at x_d(0) (assumption (ii), eq (21)). At each sample the controller reads
+    (q, qdot), forms u_i by eq (11) and the effort by eq (16) (:func:`controller.control_into`);
+    the plant applies its own limit (a no-op after the controller's clamp) and holds the effort
+    over [t_i, t_i+1) (eq (8), :func:`plant.rk4_period`). The command at t_N is recorded but
+    never applied. At the first sample outside the envelope the trial is aborted: that sample
+    and every later one command the safe hold around the pose measured there (the loop keeps
+    integrating so the record shows the hold), with the hold's own gains ``hold_kp``,
+    ``hold_kd`` reached over ``hold_ramp`` samples (:func:`hold.hold_gains_into`).
+
+    The virtual patient (:mod:`.patient`; off when ``patient_scalars`` is empty, then none of
+    it runs): the trial starts at x_d(0) plus ``initial``, the controller (and the envelope)
+    reads the measured state (:func:`patient.measure_into`) and the plant steps with
+    :func:`patient.patient_period` (``learned``: a learning patient's torque per sample).
+    Returns the measured q, qdot, u, effort, the abort index (-1: not aborted) and the true
+    q, qdot (the same arrays as the measured ones when the patient is off).
+    """
+    n_samples, n = u_ff.shape
+    q_log = np.empty((n_samples, n))
+    qd_log = np.empty((n_samples, n))
+    u_log = np.empty((n_samples, n))
+    effort_log = np.empty((n_samples, n))
+    ws = workspace(n)
+    stage = np.empty((10, n))
+    extra = np.empty(3 * n)
+    applied = np.empty(n)
+    q = q_ref[0].copy()
+    qd = qd_ref[0].copy()
+    patient = patient_scalars.shape[0] > 0
+    if patient:
+        start_state_into(q_ref[0], qd_ref[0], initial, q, qd)
+        q_true = np.empty((n_samples, n))
+        qd_true = np.empty((n_samples, n))
+        history = np.empty((2, n_samples, n))
+        memory = np.zeros((3, n))
+        held = np.empty(n)
+    else:
+        q_true = q_log
+        qd_true = qd_log
+        history = np.empty((2, 0, n))
+        memory = np.empty((3, n))
+        held = applied
+    q_hold = q.copy()
+    gains = np.empty((2, n))
+    abort = -1
+    for i in range(n_samples):
+        if patient:
+            q_true[i] = q
+            qd_true[i] = qd
+            measure_into(i, q, qd, patient_scalars, noise, memory, q_log[i], qd_log[i])
+        else:
+            q_log[i] = q
+            qd_log[i] = qd
+        q_seen = q_log[i]
+        qd_seen = qd_log[i]
+        if abort < 0 and outside_envelope(q_ref[i], q_seen, envelope):
+            abort = i
+            q_hold[:] = q_seen
+        if abort < 0:
+            control_into(u_ff[i], q_ref[i], qd_ref[i], q_seen, qd_seen, kp, kd, nominal,
+                         effort_limit, ws, u_log[i], effort_log[i])
+        else:
+            hold_gains_into(i - abort, hold_ramp, kp, kd, hold_kp, hold_kd, gains)
+            safe_hold_into(q_hold, q_seen, qd_seen, gains[0], gains[1], nominal, effort_limit,
+                           ws, u_log[i], effort_log[i])
+        if i + 1 < n_samples:
+            for j in range(n):
+                applied[j] = clamp(effort_log[i, j], effort_limit[j])
+            if patient:
+                patient_period(i, q, qd, applied, q_ref, qd_ref, period, substeps, plant,
+                               nominal, mode, ws, stage, extra, patient_joint, patient_scalars,
+                               trial_scalars, learned, history, memory, held)
+            else:
+                rk4_period(q, qd, applied, period, substeps, plant, nominal, mode, ws, stage,
+                           extra[:2 * n])
+    return q_log, qd_log, u_log, effort_log, abort, q_true, qd_true
+
+
+@njit(cache=True, error_model="numpy")
+def simulate_trial(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, kp: np.ndarray,
+                   kd: np.ndarray, effort_limit: np.ndarray, period: float, substeps: int,
+                   plant: tuple, nominal: tuple, mode: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Test oracle only (no runner uses it): the trial of :func:`simulate_trial_guarded` without
+    the error envelope and without the plant's second clamp, which must give the same doubles
+    while every |e_j| stays within the envelope. Returns sampled q, qdot, u and effort."""
+    n_samples, n = u_ff.shape
+    q_log = np.empty((n_samples, n))
+    qd_log = np.empty((n_samples, n))
+    u_log = np.empty((n_samples, n))
+    effort_log = np.empty((n_samples, n))
+    ws = workspace(n)
+    stage = np.empty((10, n))
+    extra = np.empty(2 * n)
+    q = q_ref[0].copy()
+    qd = qd_ref[0].copy()
+    for i in range(n_samples):
+        q_log[i] = q
+        qd_log[i] = qd
+        control_into(u_ff[i], q_ref[i], qd_ref[i], q, qd, kp, kd, nominal, effort_limit, ws,
+                     u_log[i], effort_log[i])
+        if i + 1 < n_samples:
+            rk4_period(q, qd, effort_log[i], period, substeps, plant, nominal, mode, ws, stage,
+                       extra)
+    return q_log, qd_log, u_log, effort_log
+
+
+@njit(cache=True, error_model="numpy")
+def control_inputs(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
+                   qd: np.ndarray, kp: np.ndarray, kd: np.ndarray, nominal: tuple,
+                   effort_limit: np.ndarray, aborted_at: int, hold_kp: np.ndarray,
+                   hold_kd: np.ndarray, hold_ramp: int) -> tuple[np.ndarray, np.ndarray]:
+    """u and effort at every sample of a trial from the sampled states, as the controller
+    formed them (one :func:`controller.control_into` per sample, in order); from sample
+    ``aborted_at`` on (-1: never) the safe hold around q[aborted_at] with its gains (ramped
+    as :func:`simulate_trial_guarded` does)."""
+    n_samples, n = q.shape
+    u = np.empty((n_samples, n))
+    effort = np.empty((n_samples, n))
+    ws = workspace(n)
+    gains = np.empty((2, n))
+    for i in range(n_samples):
+        if aborted_at < 0 or i < aborted_at:
+            control_into(u_ff[i], q_ref[i], qd_ref[i], q[i], qd[i], kp, kd, nominal,
+                         effort_limit, ws, u[i], effort[i])
+        else:
+            hold_gains_into(i - aborted_at, hold_ramp, kp, kd, hold_kp, hold_kd, gains)
+            safe_hold_into(q[aborted_at], q[i], qd[i], gains[0], gains[1], nominal,
+                           effort_limit, ws, u[i], effort[i])
+    return u, effort
+
+
+def record_from_samples(experiment: LoopSetup, trial: int, feedforward: np.ndarray,
+                        position: np.ndarray, velocity: np.ndarray,
+                        levels: np.ndarray | None = None,
+                        reference: SampledReference | None = None,
+                        aborted_at: int | None = None,
+                        true_position: np.ndarray | None = None,
+                        true_velocity: np.ndarray | None = None) -> TrialRecord:
+    """The :class:`TrialRecord` of a trial run elsewhere (the graph), from its sampled
+    (measured) states: u and effort are formed again exactly as the controller did (the safe
+    hold from ``aborted_at`` on, for a trial the error envelope aborted); ``true_position``,
+    ``true_velocity``: the plant's true state when the sensors differ from it. The record owns
+    copies of the arrays (a caller's sample buffers may be reused for the next trial)."""
+    ref = reference or experiment.reference
+    u_ff = np.array(feedforward, dtype=float, order="C")
+    q = np.array(position, dtype=float, order="C")
+    qd = np.array(velocity, dtype=float, order="C")
+    u, effort = control_inputs(u_ff, ref.position, ref.velocity, q, qd, experiment.kp,
+                               experiment.kd, experiment.nominal.kernel_args,
+                               experiment.effort_limit, -1 if aborted_at is None
+                               else int(aborted_at), experiment.hold_kp, experiment.hold_kd,
+                               experiment.hold_ramp)
+    return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels, aborted_at,
+                       None if true_position is None
+                       else np.array(true_position, dtype=float, order="C"),
+                       None if true_velocity is None
+                       else np.array(true_velocity, dtype=float, order="C"))
+
+
+def period_ns(period: float) -> int:
+    """The control period in integer nanoseconds (the stamp step of the samples)."""
+    return int(round(period * 1e9))
+
+
+def sample_index(stamp_ns: int, t0_ns: int, step_ns: int, samples: int) -> int | None:
+    """Index i of the sample stamped ``stamp_ns`` in a trial starting at ``t0_ns``, or None if
+    the stamp is not one of the trial's ``samples`` sample times."""
+    offset = stamp_ns - t0_ns
+    if offset < 0 or offset % step_ns:
+        return None
+    i = offset // step_ns
+    return i if i < samples else None

@@ -1,0 +1,304 @@
+"""Loading, validating and writing the ROS-parameter YAML that configures everything.
+
+The shipped ``config/exo_ilc.yaml`` holds every parameter's value; a user file (same layout,
+any subset of keys) and command-line overrides are laid over it, then the whole is checked
+against :mod:`schema`. Nodes read the same files as ROS parameters.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import sys
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ..errors import ConfigError
+from . import schema
+
+PACKAGE = "exo_ilc_ros"
+DEFAULT_CONFIG_NAME = "exo_ilc.yaml"
+
+
+def config_dir() -> Path:
+    """Where the shipped configs are: the ament share directory of an installed package, the
+    ``config/`` of a source checkout or editable install, or ``<prefix>/share`` of a pip install.
+    ``EXO_ILC_CONFIG_DIR`` overrides all three."""
+    override = os.environ.get("EXO_ILC_CONFIG_DIR")
+    candidates = [Path(override)] if override else []
+    candidates.append(Path(__file__).resolve().parents[3] / "config")  # source / editable
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        candidates.append(Path(get_package_share_directory(PACKAGE)) / "config")
+    except Exception:  # not installed through ament, or AMENT_PREFIX_PATH unset
+        pass
+    candidates.append(Path(sys.prefix) / "share" / PACKAGE / "config")
+    for candidate in candidates:
+        if (candidate / DEFAULT_CONFIG_NAME).is_file():
+            return candidate
+    raise ConfigError("config", "cannot find the shipped config/exo_ilc.yaml; looked in "
+                      + ", ".join(str(c) for c in candidates))
+
+
+def default_config_path() -> Path:
+    """The shipped ``exo_ilc.yaml`` (the paper's experiment under the canonical reading)."""
+    return config_dir() / DEFAULT_CONFIG_NAME
+
+
+class RosYamlLoader(yaml.SafeLoader):
+    """PyYAML's safe loader that also reads ``1e-5`` as a float, as rcl's parameter parser
+    (YAML 1.2) does; PyYAML alone (YAML 1.1) would make it the string '1e-5'."""
+
+
+RosYamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"))
+
+
+def load_ros_yaml(text: str) -> Any:
+    """A ROS parameter YAML document (or ``-p`` value) read as rcl types it."""
+    return yaml.load(text, Loader=RosYamlLoader)
+
+
+def flatten_ros_yaml(document: Any, source: str) -> dict[str, Any]:
+    """Flat ``{dotted name: value}`` from a ROS parameter YAML (``node: ros__parameters: ...``).
+
+    Unknown sections and unknown keys are errors naming the file and key; a key in the wrong
+    section is an error too (it would silently not reach its node under ROS).
+    """
+    if document is None:
+        return {}
+    if not isinstance(document, dict):
+        raise ConfigError("<file>", "must be a mapping of node names to ros__parameters",
+                          source)
+    flat: dict[str, Any] = {}
+    for section, body in document.items():
+        name = str(section).lstrip("/") if section != schema.SHARED else section
+        if name not in schema.SECTIONS:
+            raise ConfigError(str(section), "unknown node section; expected one of "
+                              + ", ".join(schema.SECTIONS), source)
+        if not isinstance(body, dict) or set(body) != {"ros__parameters"}:
+            raise ConfigError(str(section), "must contain exactly one key, ros__parameters",
+                              source)
+        params = body["ros__parameters"] or {}
+        if not isinstance(params, dict):
+            raise ConfigError(f"{section}.ros__parameters", "must be a mapping", source)
+        for key, value in flatten_tree(params, ""):
+            if key in schema.ROS_BUILTIN:
+                continue
+            param = schema.BY_NAME.get(key)
+            if param is None:
+                raise ConfigError(key, "unknown parameter", source)
+            if param.section != name:
+                raise ConfigError(key, f"belongs in section {param.section!r}, not {section!r}",
+                                  source)
+            if key in flat:
+                raise ConfigError(key, "given twice", source)
+            flat[key] = value
+    return flat
+
+
+def flatten_tree(tree: Mapping[str, Any], prefix: str = "") -> Iterable[tuple[str, Any]]:
+    """(dotted name, value) of every leaf of a nested ``ros__parameters`` mapping."""
+    for key, value in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            yield from flatten_tree(value, name + ".")
+        else:
+            yield name, value
+
+
+def validate(values: Mapping[str, Any], source: str | None = None) -> dict[str, Any]:
+    """Every parameter present, typed and within its rule; returns the coerced values."""
+    missing = [p.name for p in schema.PARAMETERS if p.name not in values]
+    if missing:
+        raise ConfigError(missing[0], "missing (every parameter needs a value)", source)
+    unknown = [k for k in values if k not in schema.BY_NAME]
+    if unknown:
+        raise ConfigError(unknown[0], "unknown parameter", source)
+    out: dict[str, Any] = {}
+    try:
+        for param in schema.PARAMETERS:
+            out[param.name] = schema.coerce(param, values[param.name])
+        joints = len(out["joint_names"])
+        if joints < 1:
+            raise ConfigError("joint_names", "at least one joint is needed")
+        for param in schema.PARAMETERS:
+            schema.check_value(param, out[param.name], joints)
+        schema.check_consistency(out)
+    except ConfigError as exc:
+        if source and not exc.source:
+            raise ConfigError(exc.key, exc.rule, source) from None
+        raise
+    return out
+
+
+def read_yaml(path: Path | str) -> dict[str, Any]:
+    """The flat parameters of one ROS parameter YAML file (not yet validated)."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ConfigError("<file>", f"cannot read: {exc.strerror}", str(path)) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError("<file>", f"not a text (UTF-8) file: byte {exc.start} is "
+                          f"{exc.object[exc.start:exc.start + 1]!r}", str(path)) from None
+    try:
+        document = load_ros_yaml(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError("<file>", f"invalid YAML: {yaml_problem(exc)}", str(path)) from None
+    return flatten_ros_yaml(document, str(path))
+
+
+def yaml_problem(exc: yaml.YAMLError) -> str:
+    """A PyYAML error in one line: what is wrong and where (line and column, from 1)."""
+    problem = getattr(exc, "problem", None)
+    mark = getattr(exc, "problem_mark", None)
+    if not problem:
+        return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    context = getattr(exc, "context", None)
+    where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+    return f"{problem}{where}" + (f" ({context})" if context else "")
+
+
+class Config:
+    """A complete, validated set of parameter values (immutable)."""
+
+    def __init__(self, values: Mapping[str, Any], source: str | None = None) -> None:
+        self._values = validate(values, source)
+        self.source = source
+
+    def __getitem__(self, name: str) -> Any:
+        value = self._values[name]
+        return list(value) if isinstance(value, list) else value
+
+    @property
+    def values(self) -> dict[str, Any]:
+        """A copy of every value, by dotted name."""
+        return json.loads(json.dumps(self._values))
+
+    @property
+    def joints(self) -> int:
+        """Number of joints."""
+        return len(self._values["joint_names"])
+
+    def replace(self, overrides: Mapping[str, Any]) -> Config:
+        """A new Config with ``overrides`` (dotted names) applied and validated."""
+        unknown = [k for k in overrides if k not in schema.BY_NAME]
+        if unknown:
+            raise ConfigError(unknown[0], "unknown parameter")
+        merged = dict(self._values)
+        merged.update(overrides)
+        return Config(merged, self.source)
+
+    def digest(self) -> str:
+        """A stable hash of every value (keys stores of learned data)."""
+        blob = json.dumps(self._values, sort_keys=True).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+    def section(self, node: str) -> dict[str, Any]:
+        """The values one node declares: the shared parameters and its own."""
+        return {p.name: self[p.name] for p in schema.parameters_of(node)}
+
+    def to_ros_yaml(self, header: str = "") -> str:
+        """This config as a ROS parameter YAML that ``--params-file`` and :func:`load_config`
+        both accept (sections nested, one key per parameter, the schema's text as comments)."""
+        lines = [f"# {line}" for line in header.splitlines()]
+        for section in schema.SECTIONS:
+            params = [p for p in schema.PARAMETERS if p.section == section]
+            if not params:
+                continue
+            key = f'"{section}"' if section == schema.SHARED else section
+            lines += [f"{key}:", "  ros__parameters:"]
+            if section == schema.SHARED:
+                lines.append("    use_sim_time: true")
+            opened: list[str] = []
+            for p in params:
+                parts = p.name.split(".")
+                common = 0
+                while (common < len(opened) and common < len(parts) - 1
+                       and opened[common] == parts[common]):
+                    common += 1
+                opened = opened[:common]
+                for depth in range(common, len(parts) - 1):
+                    lines.append("    " + "  " * depth + f"{parts[depth]}:")
+                    opened.append(parts[depth])
+                indent = "    " + "  " * (len(parts) - 1)
+                value = _yaml_value(self._values[p.name])
+                lines.append(f"{indent}{parts[-1]}: {value}  # {p.description}")
+        return "\n".join(lines) + "\n"
+
+
+def _yaml_float(x: float) -> str:
+    """A float that YAML 1.1 (PyYAML) and rcl both read as a float: ``1e-05`` -> ``1.0e-05``."""
+    text = json.dumps(x)
+    mantissa, e, exponent = text.partition("e")
+    if e and "." not in mantissa:
+        return f"{mantissa}.0e{exponent}"
+    return text
+
+
+def _yaml_value(value: Any) -> str:
+    """A parameter value as a flow-style YAML scalar or list (JSON, floats made YAML-safe)."""
+    if isinstance(value, float):
+        return _yaml_float(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_yaml_value(v) for v in value) + "]"
+    return json.dumps(value)
+
+
+SCENARIO_DIR_NAME = "scenarios"
+
+
+def scenario_dir() -> Path:
+    """Where the shipped scenario overlays are: ``config/scenarios/``."""
+    return config_dir() / SCENARIO_DIR_NAME
+
+
+def scenario_names() -> list[str]:
+    """The shipped scenarios, by name (file stem), sorted."""
+    return sorted(p.stem for p in scenario_dir().glob("*.yaml"))
+
+
+def scenario_path(name_or_path: str | Path) -> Path:
+    """A scenario overlay: a shipped name (``realistic`` is ``config/scenarios/realistic.yaml``)
+    or a path to a YAML file of the same layout."""
+    text = str(name_or_path)
+    candidate = Path(text)
+    if candidate.suffix in (".yaml", ".yml") or candidate.is_file():
+        if not candidate.is_file():
+            raise ConfigError("<file>", "no such scenario file", text)
+        return candidate
+    shipped = scenario_dir() / f"{text}.yaml"
+    if not shipped.is_file():
+        raise ConfigError("scenario", f"unknown scenario {text!r}; shipped: "
+                          + ", ".join(scenario_names()))
+    return shipped
+
+
+def load_config(path: Path | str | None = None,
+                overrides: Mapping[str, Any] | None = None,
+                overlays: Iterable[Path | str] = ()) -> Config:
+    """The shipped defaults, then ``path`` (any subset of keys), then each of ``overlays`` in
+    order (e.g. a scenario), then ``overrides``. Each file is validated with what lies under it
+    before ``overrides`` replace any of their values; an error names the file that broke it."""
+    default = default_config_path()
+    values = read_yaml(default)
+    source = str(default)
+    files = [] if path is None else [Path(path)]
+    files += [Path(p) for p in overlays]
+    config = Config(values, source)
+    for file in files:
+        if file.resolve() == default.resolve():
+            continue
+        values.update(read_yaml(file))
+        source = str(file)
+        config = Config(values, source)  # the files are checked whole, whatever overrides them
+    return config.replace(overrides) if overrides else config

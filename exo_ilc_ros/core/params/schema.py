@@ -1,0 +1,546 @@
+"""The parameter schema: every parameter's name, ROS section, type and rule, in one list.
+
+Names are the dotted ROS parameter names (nested YAML keys joined by '.'). ``section`` says where
+the parameter lives in the ROS parameter YAML: ``/**`` (read by every node) or one node's name.
+Values come from the YAML in ``config/``; this module holds no defaults, only the rules.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Any
+
+from ..errors import ConfigError
+from .hold_rule import hold_gain_problem
+
+AXIS_VECTORS: dict[str, tuple[float, float, float]] = {
+    "x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0),
+    "-x": (-1.0, 0.0, 0.0), "-y": (0.0, -1.0, 0.0), "-z": (0.0, 0.0, -1.0),
+}
+"""Joint axis names accepted in the config, as unit vectors of the link frame."""
+
+SHARED = "/**"
+PLANT = "plant_simulator"
+CONTROLLER = "computed_torque_controller"
+SUPERVISOR = "ilc_supervisor"
+SECTIONS = (SHARED, PLANT, CONTROLLER, SUPERVISOR)
+ROS_BUILTIN = frozenset({"use_sim_time", "start_type_description_service"})
+"""Parameters every rclpy node owns; accepted in any section, not part of the schema."""
+
+
+class Kind(Enum):
+    """ROS parameter types used by the schema."""
+
+    DOUBLE = "double"
+    INTEGER = "integer"
+    BOOL = "bool"
+    STRING = "string"
+    DOUBLE_ARRAY = "double_array"
+    STRING_ARRAY = "string_array"
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One parameter: name, section, type, meaning and the rule its value must follow."""
+
+    name: str
+    section: str
+    kind: Kind
+    description: str
+    per_joint: bool = False
+    """An array with one entry per joint."""
+    minimum: float | None = None
+    strictly_positive: bool = False
+    choices: tuple[str, ...] = ()
+    live: bool = False
+    """May change while the graph runs (takes effect at the next trial boundary)."""
+    extra_rule: Callable[[Any], str | None] | None = field(default=None, compare=False)
+
+
+def _axes_rule(value: Any) -> str | None:
+    bad = [v for v in value if v not in AXIS_VECTORS]
+    return f"unknown joint axis {bad[0]!r}; use one of {sorted(AXIS_VECTORS)}" if bad else None
+
+
+def _range_rule(value: Any) -> str | None:
+    if len(value) != 2 or value[0] > value[1]:
+        return f"must be [low, high] with low <= high, got {value!r}"
+    return None
+
+
+def _margin_rule(value: Any) -> str | None:
+    return None if value < 1.0 else f"must be < 1 (a share of the limit), got {value!r}"
+
+
+def _priority_rule(value: Any) -> str | None:
+    return None if value <= 99 else f"must be 0..99 (SCHED_FIFO priorities), got {value!r}"
+
+
+def _forgetting_rule(value: Any) -> str | None:
+    return None if 0.0 < value <= 1.0 else f"must be in (0, 1] (1: no forgetting), got {value!r}"
+
+
+def _node_name_rule(value: Any) -> str | None:
+    ok = bool(value) and not value[0].isdigit() and all(c.isalnum() or c == "_" for c in value)
+    return None if ok else f"must be a ROS node name (letters, digits and _), got {value!r}"
+
+
+def _name_rule(value: Any) -> str | None:
+    ok = bool(value) and all(c.isalnum() or c in "_-" for c in value)
+    return None if ok else f"must be a name of letters, digits, _ and -, got {value!r}"
+
+
+MAS_GRADES = ("custom", "0", "1", "1+", "2", "3")
+"""``patient.spasticity.mas_grade``: ``custom`` (the spasticity values given) or a Modified
+Ashworth grade (its preset, core/patient.py ``MAS_PRESETS``)."""
+
+
+def _fraction_rule(value: Any) -> str | None:
+    return None if value <= 1.0 else f"must be <= 1 (a share of the gain), got {value!r}"
+
+
+def _retention_rule(value: Any) -> str | None:
+    return None if value <= 1.0 else f"must be <= 1 (a share kept per trial), got {value!r}"
+
+
+def _patient_parameters() -> list[Parameter]:
+    """The virtual patient's effects (core/patient.py), plant_simulator section, all off by
+    default."""
+    def p(name: str, kind: Kind, text: str, **rules: Any) -> Parameter:
+        return Parameter(f"patient.{name}", PLANT, kind, text, **rules)
+
+    joint = {"per_joint": True, "minimum": 0.0}
+    return [
+        p("seed", Kind.INTEGER, "seed of the patient's random numbers (trial k draws from "
+          "SeedSequence([seed, k]))", minimum=0.0),
+        p("session", Kind.INTEGER, "the patient's therapy session the run is (1: the first, "
+          "or no session): session s >= 2 draws trial k from SeedSequence([seed, s, k]); "
+          "--patient sets it to the profile version the session writes", minimum=1.0),
+        p("sensor.quantisation", Kind.DOUBLE, "encoder resolution (rad); 0: none",
+          minimum=0.0),
+        p("sensor.position_noise", Kind.DOUBLE, "Gaussian noise on the measured q, sd (rad)",
+          minimum=0.0),
+        p("sensor.velocity_noise", Kind.DOUBLE, "Gaussian noise on the measured qdot, sd "
+          "(rad/s)", minimum=0.0),
+        p("sensor.differentiate_velocity", Kind.BOOL, "measured qdot = difference of the "
+          "measured (quantised) q over the period, as most exoskeletons do"),
+        p("sensor.velocity_filter", Kind.DOUBLE, "first-order low-pass on the measured qdot, "
+          "time constant (s); 0: none", minimum=0.0),
+        p("friction.viscous", Kind.DOUBLE_ARRAY, "viscous joint friction B (N m s/rad)",
+          **joint),
+        p("friction.coulomb", Kind.DOUBLE_ARRAY, "Coulomb friction F_c of F_c tanh(qdot / v_s) "
+          "(N m)", **joint),
+        p("friction.stribeck_velocity", Kind.DOUBLE, "v_s of the tanh Coulomb model (rad/s)",
+          strictly_positive=True),
+        p("passive.stiffness", Kind.DOUBLE_ARRAY, "passive joint stiffness K of "
+          "K (q - q_0) (N m/rad)", **joint),
+        p("passive.rest_position", Kind.DOUBLE_ARRAY, "q_0: where the passive (and spastic) "
+          "stiffness exerts no torque (rad)", per_joint=True),
+        p("spasticity.mas_grade", Kind.STRING, "custom (the values below) or a Modified "
+          "Ashworth grade 0, 1, 1+, 2, 3 (its preset replaces them)", choices=MAS_GRADES),
+        p("spasticity.stiffness", Kind.DOUBLE_ARRAY, "spastic stiffness added to "
+          "passive.stiffness (N m/rad)", **joint),
+        p("spasticity.damping", Kind.DOUBLE_ARRAY, "velocity-dependent resistance added to "
+          "the viscous friction (N m s/rad)", **joint),
+        p("spasticity.reflex_gain", Kind.DOUBLE_ARRAY, "stretch reflex torque per rad/s of "
+          "the delayed velocity above the threshold (N m s/rad)", **joint),
+        p("spasticity.reflex_threshold", Kind.DOUBLE_ARRAY, "velocity threshold of the "
+          "stretch reflex (rad/s)", **joint),
+        p("spasticity.reflex_max", Kind.DOUBLE_ARRAY, "ceiling of the stretch reflex torque "
+          "(N m; the reflex is clipped to +-reflex_max); 0: no ceiling", **joint),
+        p("spasticity.reflex_delay", Kind.DOUBLE, "stretch reflex delay (s; rounded to "
+          "control periods)", minimum=0.0),
+        p("voluntary.stiffness", Kind.DOUBLE_ARRAY, "K_v: the patient's own torque toward the "
+          "reference per rad of error (N m/rad); 0: a passive patient", **joint),
+        p("voluntary.damping", Kind.DOUBLE_ARRAY, "D_v: the patient's torque per rad/s of "
+          "velocity error (N m s/rad)", **joint),
+        p("voluntary.time_constant", Kind.DOUBLE, "lag of the voluntary torque (s): sluggish "
+          "tracking; 0: none", minimum=0.0),
+        p("voluntary.amplitude_sd", Kind.DOUBLE, "trial-to-trial sd of the voluntary gain "
+          "(share of it)", minimum=0.0),
+        p("voluntary.timing_sd", Kind.DOUBLE, "trial-to-trial sd of the patient's timing "
+          "(s; rounded to control periods)", minimum=0.0),
+        p("voluntary.fatigue_rate", Kind.DOUBLE, "r of the fatigue f_k = f_min + (1 - f_min) "
+          "exp(-r (k - 1)) on the voluntary gain (per trial)", minimum=0.0),
+        p("voluntary.fatigue_floor", Kind.DOUBLE, "f_min: the share of the voluntary gain "
+          "fatigue leaves", minimum=0.0, extra_rule=_fraction_rule),
+        p("initial.position_sd", Kind.DOUBLE, "trial-to-trial sd of q(0) about q_d(0) (rad)",
+          minimum=0.0),
+        p("initial.velocity_sd", Kind.DOUBLE, "trial-to-trial sd of qdot(0) (rad/s)",
+          minimum=0.0),
+        p("learning.gain", Kind.DOUBLE_ARRAY, "K_e: torque the patient learns per rad of the "
+          "true error of a trial (N m/rad; two-state model, core/patient.py); 0: no learning",
+          **joint),
+        p("learning.fast_retention", Kind.DOUBLE, "A_f of the fast state x_f <- A_f x_f + "
+          "B_f K_e e", minimum=0.0, extra_rule=_retention_rule),
+        p("learning.fast_rate", Kind.DOUBLE, "B_f of the fast state", minimum=0.0),
+        p("learning.slow_retention", Kind.DOUBLE, "A_s of the slow state x_s <- A_s x_s + "
+          "B_s K_e e", minimum=0.0, extra_rule=_retention_rule),
+        p("learning.slow_rate", Kind.DOUBLE, "B_s of the slow state", minimum=0.0),
+        p("effort_delay", Kind.INTEGER, "control periods between a command and its torque at "
+          "the joint", minimum=0.0),
+    ]
+def _share_rule(value: Any) -> str | None:
+    return None if value <= 1.0 else f"must be <= 1 (a share of the periods), got {value!r}"
+
+
+def _schedule_parameters() -> list[Parameter]:
+    out = []
+    meaning = {"position": ("M", "|s e|"), "velocity": ("M'", "|s e_dot|"),
+               "acceleration": ("M''", "|s e_ddot|")}
+    for term, (symbol, total) in meaning.items():
+        base = f"schedule.{term}"
+        out += [
+            Parameter(f"{base}.threshold_low", SUPERVISOR, Kind.DOUBLE_ARRAY,
+                      f"s1 of {symbol}: {total} at or below it gives level_low, eqs (22)-(24)",
+                      per_joint=True, minimum=0.0, live=True),
+            Parameter(f"{base}.threshold_high", SUPERVISOR, Kind.DOUBLE_ARRAY,
+                      f"s2 of {symbol}: {total} above it gives level_high", per_joint=True,
+                      minimum=0.0, live=True),
+            Parameter(f"{base}.level_low", SUPERVISOR, Kind.DOUBLE_ARRAY,
+                      f"{symbol} step when {total} <= threshold_low", per_joint=True,
+                      minimum=0.0, live=True),
+            Parameter(f"{base}.level_mid", SUPERVISOR, Kind.DOUBLE_ARRAY,
+                      f"{symbol} step when threshold_low < {total} <= threshold_high",
+                      per_joint=True, minimum=0.0, live=True),
+            Parameter(f"{base}.level_high", SUPERVISOR, Kind.DOUBLE_ARRAY,
+                      f"{symbol} step when {total} > threshold_high", per_joint=True,
+                      minimum=0.0, live=True),
+        ]
+    return out
+
+
+PARAMETERS: tuple[Parameter, ...] = (
+    Parameter("joint_names", SHARED, Kind.STRING_ARRAY, "joint names, in chain order"),
+    Parameter("model.link_masses", SHARED, Kind.DOUBLE_ARRAY, "nominal link masses (kg)",
+              per_joint=True, minimum=0.0),
+    Parameter("model.link_lengths", SHARED, Kind.DOUBLE_ARRAY, "link lengths (m)",
+              per_joint=True, minimum=0.0),
+    Parameter("model.radius_proximal", SHARED, Kind.DOUBLE_ARRAY,
+              "truncated-cone radius at the proximal joint (m)", per_joint=True, minimum=0.0),
+    Parameter("model.radius_distal", SHARED, Kind.DOUBLE_ARRAY,
+              "truncated-cone radius at the distal end (m)", per_joint=True, minimum=0.0),
+    Parameter("model.joint_axes", SHARED, Kind.STRING_ARRAY,
+              "joint axis in the parent link's frame: x, y, z, -x, -y or -z", per_joint=True,
+              extra_rule=_axes_rule),
+    Parameter("model.gravity", SHARED, Kind.DOUBLE, "gravity acceleration along -z (m/s^2)",
+              minimum=0.0),
+    Parameter("trajectory.start", SHARED, Kind.DOUBLE_ARRAY, "q_d(0) of eq (14) (rad)",
+              per_joint=True),
+    Parameter("trajectory.goal", SHARED, Kind.DOUBLE_ARRAY, "q_d(T) of eq (14) (rad)",
+              per_joint=True),
+    Parameter("trajectory.duration", SHARED, Kind.DOUBLE, "T of eq (14) (s)",
+              strictly_positive=True),
+    Parameter("exercise.name", SHARED, Kind.STRING,
+              "the movement (reference) of every trial: paper_quintic (eq (14) from "
+              "trajectory.*) or an exercise of exercise.file (core/exercise.py)",
+              extra_rule=_name_rule),
+    Parameter("exercise.file", SHARED, Kind.STRING,
+              "the exercises file (rest points and durations per exercise, sessions); "
+              "empty: the shipped config/exercises/default.yaml"),
+    Parameter("control.period", SHARED, Kind.DOUBLE,
+              "control period (s): effort held over it; the error sums (13) are over its samples",
+              strictly_positive=True),
+    Parameter("control.kp", SHARED, Kind.DOUBLE_ARRAY, "K_P of eq (11)", per_joint=True,
+              minimum=0.0),
+    Parameter("control.kd", SHARED, Kind.DOUBLE_ARRAY, "K_D of eq (11)", per_joint=True,
+              minimum=0.0),
+    Parameter("control.effort_limit", SHARED, Kind.DOUBLE_ARRAY,
+              "|effort| limit per joint (N m)", per_joint=True, strictly_positive=True),
+    Parameter("safety.error_envelope", SHARED, Kind.DOUBLE_ARRAY,
+              "|e_j| above it aborts the trial at once: safe hold, trial marked aborted, "
+              "nothing learned from it (rad, per joint)", per_joint=True,
+              strictly_positive=True, live=True),
+    Parameter("safety.hold_kp", SHARED, Kind.DOUBLE_ARRAY,
+              "K_P of the safe hold (s^-2, through a_N(q) as control.kp): its stiffness about "
+              "the pose latched at an abort, a watchdog trip or a failed homing (core/hold.py)",
+              per_joint=True, minimum=0.0),
+    Parameter("safety.hold_kd", SHARED, Kind.DOUBLE_ARRAY,
+              "K_D of the safe hold (s^-1, as control.kd): its damping; with hold_kp it must be "
+              "stable at control.period with the command one period late (core/hold.py)",
+              per_joint=True, minimum=0.0),
+    Parameter("safety.hold_ramp", SHARED, Kind.DOUBLE,
+              "s over which the safe hold's gains go linearly from control.kp/kd to "
+              "safety.hold_kp/kd (rounded to control periods; 0: at once)", minimum=0.0),
+    Parameter("safety.watchdog_periods", SHARED, Kind.INTEGER,
+              "control periods without /joint_states (controller) or a command (plant) before "
+              "the safe hold / zero effort", strictly_positive=True),
+    Parameter("watchdog_min_timeout", SHARED, Kind.DOUBLE,
+              "wall-clock floor of every watchdog (s; the controller's and the real-time "
+              "plant's, core.safety.watchdog_for): a loaded machine may deliver late without "
+              "any fault; 0 on hardware", minimum=0.0),
+    Parameter("thread_priority", SHARED, Kind.INTEGER,
+              "SCHED_FIFO priority of the control loop's threads (the computed-torque "
+              "controller's; a plant's in real_time mode), as ros2_control's controller_manager "
+              "(nodes/realtime.py); 0: the normal scheduler. Refused without CAP_SYS_NICE or an "
+              "rtprio limit: the node says so and runs normally", minimum=0.0,
+              extra_rule=_priority_rule),
+    Parameter("joint_states_publisher", SHARED, Kind.STRING,
+              "the node whose /joint_states the controller and the supervisor act on (others "
+              "are refused and reported; wire/publishers.py): plant_simulator (our plants) or "
+              "your arm's, e.g. joint_state_broadcaster", extra_rule=_node_name_rule),
+    Parameter("protocol", SHARED, Kind.STRING,
+              "how a trial starts: services (the plant's reset/start services put it at x_d(0); "
+              "our simulator) or homing (the controller brings any arm to q_d(0) and starts "
+              "once it settled; core/homing.py)", choices=("services", "homing")),
+    Parameter("homing.speed_limit", CONTROLLER, Kind.DOUBLE,
+              "protocol homing: peak joint speed of the homing quintic (rad/s); its duration "
+              "is 15/8 max |q_d(0) - q| / speed_limit", strictly_positive=True),
+    Parameter("homing.position_tolerance", CONTROLLER, Kind.DOUBLE_ARRAY,
+              "protocol homing: |q - q_d(0)| allowed when a trial starts (rad, per joint)",
+              per_joint=True, strictly_positive=True),
+    Parameter("homing.velocity_tolerance", CONTROLLER, Kind.DOUBLE_ARRAY,
+              "protocol homing: |qdot| allowed when a trial starts (rad/s, per joint)",
+              per_joint=True, strictly_positive=True),
+    Parameter("homing.dwell", CONTROLLER, Kind.DOUBLE,
+              "protocol homing: how long the arm must stay within both tolerances before the "
+              "trial starts (s); leaving them meanwhile is a fault", minimum=0.0),
+    Parameter("homing.timeout", CONTROLLER, Kind.DOUBLE,
+              "protocol homing: how long after the path's end the arm may take to settle "
+              "before homing fails (s)", strictly_positive=True),
+    Parameter("max_missing_samples", SUPERVISOR, Kind.INTEGER,
+              "protocol homing: samples of a trial that may be missing (filled by linear "
+              "interpolation); a trial missing more is run again, not learned from",
+              minimum=0.0),
+    Parameter("mass_uncertainty", PLANT, Kind.DOUBLE,
+              "delta: the plant's masses are m_i (1 + delta); the controller keeps m_i",
+              minimum=-0.9),
+    Parameter("integration_step", PLANT, Kind.DOUBLE,
+              "RK4 sub-step (s); must divide control.period", strictly_positive=True),
+    Parameter("dynamics", PLANT, Kind.STRING,
+              "full (true masses, eq (15)) or paper_approximation (eqs (17)-(18), a^-1 a_N ~ I)",
+              choices=("full", "paper_approximation")),
+    Parameter("mode", PLANT, Kind.STRING,
+              "lock_step (advance one period per command: deterministic, as fast as DDS allows) "
+              "or real_time (wall-clock timer, the last command held)",
+              choices=("lock_step", "real_time")),
+    Parameter("real_time_rate", PLANT, Kind.DOUBLE,
+              "real_time mode: simulated seconds per wall-clock second (1.0: real time)",
+              strictly_positive=True),
+    Parameter("clock_every", PLANT, Kind.INTEGER,
+              "publish /clock every this many control periods (and at each trial's first "
+              "sample); 1: every period", strictly_positive=True),
+    *_patient_parameters(),
+    Parameter("law", SUPERVISOR, Kind.STRING,
+              "learning law: sign (sgnPDD^2, eq (11)), linear (Arimoto PDD^2-type) or "
+              "norm_optimal (model-based, core/norm_optimal.py)",
+              choices=("sign", "linear", "norm_optimal"), live=True),
+    Parameter("max_trials", SUPERVISOR, Kind.INTEGER, "number of trials to run",
+              strictly_positive=True),
+    Parameter("error_bound", SUPERVISOR, Kind.DOUBLE, "max |e_j| bound (rad)",
+              strictly_positive=True, live=True),
+    Parameter("max_late_commands", SUPERVISOR, Kind.DOUBLE,
+              "real_time mode: share (0-1) of a trial's control periods the plant may run with "
+              "the previous command held (this period's came late) before the trial is run "
+              "again instead of learned from", minimum=0.0, extra_rule=_share_rule),
+    Parameter("wait_for_recorder", SUPERVISOR, Kind.BOOL,
+              "before trial 1, wait until bag_recorder reports it is subscribed to every topic "
+              "(exo-ilc run sets it when it records a bag)"),
+    Parameter("store.directory", SUPERVISOR, Kind.STRING,
+              "root of the store of learned data (every accepted trial and the feed-forward it "
+              "led to, core/store.py); empty: no store (exo-ilc run sets it)"),
+    Parameter("store.resume", SUPERVISOR, Kind.BOOL,
+              "continue after the last trial in store.directory (false: a store that already "
+              "holds trials of this run is an error)"),
+    Parameter("profile.initial", SUPERVISOR, Kind.STRING,
+              "a patient's profile version file (.npz, core/profiles.py) whose feed-forward "
+              "trial 1 uses (exo-ilc simulate/run --patient set it); empty: initial_feedforward"),
+    Parameter("stop_when_settled", SUPERVISOR, Kind.INTEGER,
+              "stop once every joint has stayed within the bound this many trials (0: never)",
+              minimum=0.0, live=True),
+    Parameter("memory", SUPERVISOR, Kind.STRING,
+              "u_{k-1} of eq (11): total_input (feed-forward + feedback) or feedforward",
+              choices=("total_input", "feedforward"), live=True),
+    Parameter("initial_feedforward", SUPERVISOR, Kind.STRING,
+              "feed-forward of trial 1: zero or reference_acceleration (q_ddot_d)",
+              choices=("zero", "reference_acceleration")),
+    Parameter("schedule_index", SUPERVISOR, Kind.STRING,
+              "M', M'' chosen from their own sums (own_sum) or from |s e| as printed "
+              "(position_sum)", choices=("own_sum", "position_sum"), live=True),
+    Parameter("error_sum", SUPERVISOR, Kind.STRING,
+              "eq (13) sums: abs_of_sum (|sum e|, as printed) or sum_of_abs (sum |e|)",
+              choices=("abs_of_sum", "sum_of_abs"), live=True),
+    *_schedule_parameters(),
+    Parameter("linear.gain_position", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "linear law: learning gain on e", per_joint=True, minimum=0.0, live=True),
+    Parameter("linear.gain_velocity", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "linear law: learning gain on e_dot", per_joint=True, minimum=0.0, live=True),
+    Parameter("linear.gain_acceleration", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "linear law: learning gain on e_ddot", per_joint=True, minimum=0.0, live=True),
+    Parameter("norm_optimal.weight_error", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "norm-optimal law: weight We on the next trial's squared position error, (NO1)",
+              per_joint=True, strictly_positive=True, live=True),
+    Parameter("norm_optimal.weight_input_change", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "norm-optimal law: weight Wd on the squared change of u_ff between trials "
+              "(larger: slower, more robust learning)", per_joint=True, strictly_positive=True,
+              live=True),
+    Parameter("norm_optimal.weight_input_size", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "norm-optimal law: weight Wu on the squared learned input (0: none; > 0 leaks "
+              "u_ff towards 0, raising the floor)", per_joint=True, minimum=0.0, live=True),
+    Parameter("norm_optimal.model_kind", SUPERVISOR, Kind.STRING,
+              "norm-optimal law's lifted model: per_joint (ZOH double integrator under PD, "
+              "as analyze-loop) or linearised (coupled, along the reference, gravity terms of "
+              "the mass error included)", choices=("per_joint", "linearised"), live=True),
+    Parameter("norm_optimal.model_mass_uncertainty", SUPERVISOR, Kind.DOUBLE,
+              "delta_m the norm-optimal model assumes (plant masses m_i (1 + delta_m)); "
+              "0: the controller's nominal model", minimum=-0.9, live=True),
+    Parameter("norm_optimal.constrained", SUPERVISOR, Kind.BOOL,
+              "norm-optimal law: solve each update as a QP that keeps the predicted effort "
+              "within control.effort_limit and u_ff within feedforward_limit (Clarabel)",
+              live=True),
+    Parameter("norm_optimal.effort_margin", SUPERVISOR, Kind.DOUBLE,
+              "constrained norm-optimal law: share of control.effort_limit kept free for the "
+              "error of the next trial's predicted effort (0.01: the QP aims at 99 %)",
+              minimum=0.0, live=True, extra_rule=_margin_rule),
+    Parameter("norm_optimal.uncertainty_range", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "[low, high] mass uncertainty the norm-optimal weights must tolerate: "
+              "analyze-loop warns when they do not", minimum=-0.9, extra_rule=_range_rule),
+    Parameter("q_filter.enabled", SUPERVISOR, Kind.BOOL,
+              "zero-phase low-pass Q applied to the learned feed-forward after every update",
+              live=True),
+    Parameter("q_filter.cutoff_hz", SUPERVISOR, Kind.DOUBLE,
+              "Q-filter cut-off (Hz, Butterworth design; |Q| = 1/2 there after filtfilt); "
+              "below the Nyquist frequency 1 / (2 control.period)", strictly_positive=True,
+              live=True),
+    Parameter("q_filter.order", SUPERVISOR, Kind.INTEGER,
+              "Q-filter Butterworth order (run forwards and backwards: twice the roll-off)",
+              strictly_positive=True, live=True),
+    Parameter("feedforward_limit", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "bound on |learned feed-forward| per joint (rad/s^2, the units of u); 0: no bound",
+              per_joint=True, minimum=0.0, live=True),
+    Parameter("assist_as_needed.enabled", SUPERVISOR, Kind.BOOL,
+              "assist-as-needed (core/assist.py, Emken et al. 2007): forgetting factor and "
+              "error deadband around the law", live=True),
+    Parameter("assist_as_needed.forgetting", SUPERVISOR, Kind.DOUBLE,
+              "f of u_k+1 = f u_k + G(e) (learned step): the learned input decays by f per "
+              "trial unless the error calls for it (1: no forgetting)", live=True,
+              extra_rule=_forgetting_rule),
+    Parameter("assist_as_needed.variability", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "sigma: the patient's own trial-to-trial variability of the position error (rad) "
+              "per joint; 0: no deadband", per_joint=True, minimum=0.0, live=True),
+    Parameter("assist_as_needed.deadband_sigmas", SUPERVISOR, Kind.DOUBLE,
+              "deadband half-width in sigmas: |e| below it is not learned (Emken: 3)",
+              minimum=0.0, live=True),
+    Parameter("assist_as_needed.transition_sigmas", SUPERVISOR, Kind.DOUBLE,
+              "width of the tanh transition at the deadband's edge, in sigmas (Emken: 0.5)",
+              strictly_positive=True, live=True),
+)
+
+BY_NAME: Mapping[str, Parameter] = {p.name: p for p in PARAMETERS}
+
+
+def parameters_of(node: str) -> tuple[Parameter, ...]:
+    """The parameters a node declares: the shared ones and its own section's."""
+    return tuple(p for p in PARAMETERS if p.section in (SHARED, node))
+
+
+def coerce(param: Parameter, value: Any) -> Any:
+    """``value`` converted to the parameter's type, or ConfigError naming the rule."""
+    kind = param.kind
+    if kind is Kind.DOUBLE:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(param.name, f"must be a number, got {value!r}")
+        return float(value)
+    if kind is Kind.INTEGER:
+        if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, float) and value.is_integer():
+                return int(value)
+            raise ConfigError(param.name, f"must be an integer, got {value!r}")
+        return int(value)
+    if kind is Kind.BOOL:
+        if not isinstance(value, bool):
+            raise ConfigError(param.name, f"must be true or false, got {value!r}")
+        return value
+    if kind is Kind.STRING:
+        if param.choices and isinstance(value, int) and not isinstance(value, bool) \
+                and str(value) in param.choices:
+            return str(value)  # a choice YAML reads as a number: mas_grade: 2
+        if not isinstance(value, str):
+            raise ConfigError(param.name, f"must be a string, got {value!r}")
+        return value
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
+        raise ConfigError(param.name, f"must be a list, got {value!r}")
+    items = list(value)
+    if kind is Kind.DOUBLE_ARRAY:
+        if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in items):
+            raise ConfigError(param.name, f"must be a list of numbers, got {items!r}")
+        return [float(v) for v in items]
+    if any(not isinstance(v, str) for v in items):
+        raise ConfigError(param.name, f"must be a list of strings, got {items!r}")
+    return items
+
+
+def check_value(param: Parameter, value: Any, joints: int) -> None:
+    """Raise ConfigError if an already coerced ``value`` breaks ``param``'s own rule."""
+    numbers: list[float] = []
+    if param.kind in (Kind.DOUBLE, Kind.INTEGER):
+        numbers = [float(value)]
+    elif param.kind is Kind.DOUBLE_ARRAY:
+        numbers = list(value)
+    if any(not math.isfinite(x) for x in numbers):
+        raise ConfigError(param.name, "must be finite (no NaN or inf)")
+    if param.per_joint and len(value) != joints:
+        raise ConfigError(param.name, f"must have one entry per joint ({joints}), got {len(value)}")
+    if param.minimum is not None and any(x < param.minimum for x in numbers):
+        raise ConfigError(param.name, f"must be >= {param.minimum:g}, got {value!r}")
+    if param.strictly_positive and any(x <= 0.0 for x in numbers):
+        raise ConfigError(param.name, f"must be > 0, got {value!r}")
+    if param.choices and value not in param.choices:
+        raise ConfigError(param.name, f"must be one of {', '.join(param.choices)}; got {value!r}")
+    if param.extra_rule is not None:
+        problem = param.extra_rule(value)
+        if problem:
+            raise ConfigError(param.name, problem)
+
+
+def check_consistency(values: Mapping[str, Any]) -> None:
+    """Rules between parameters: monotonic thresholds, a whole number of sub-steps, ..."""
+    for term in ("position", "velocity", "acceleration"):
+        low = values[f"schedule.{term}.threshold_low"]
+        high = values[f"schedule.{term}.threshold_high"]
+        for j, (lo, hi) in enumerate(zip(low, high, strict=True)):
+            if not lo < hi:
+                raise ConfigError(f"schedule.{term}.threshold_low",
+                                  f"thresholds must increase: joint {j + 1} has threshold_low "
+                                  f"{lo:g} >= threshold_high {hi:g}")
+    period = values["control.period"]
+    step = values["integration_step"]
+    ratio = period / step
+    if step > period or abs(ratio - round(ratio)) > 1e-9 * ratio:
+        raise ConfigError("integration_step",
+                          f"must divide control.period ({period:g} s) a whole number of times")
+    steps = values["trajectory.duration"] / period
+    if abs(steps - round(steps)) > 1e-9 * max(steps, 1.0):
+        raise ConfigError("trajectory.duration",
+                          f"must be a whole number of control periods ({period:g} s)")
+    masses = values["model.link_masses"]
+    lengths = values["model.link_lengths"]
+    radii = zip(values["model.radius_proximal"], values["model.radius_distal"], strict=True)
+    for j, (m, length, (r1, r2)) in enumerate(zip(masses, lengths, radii, strict=True)):
+        if m > 0.0 and length > 0.0 and r1 == 0.0 and r2 == 0.0:
+            raise ConfigError("model.radius_proximal",
+                              f"link {j + 1} has mass and length, so it needs a positive radius")
+    if all(m == 0.0 for m in masses):
+        raise ConfigError("model.link_masses", "at least one link must have mass")
+    nyquist = 0.5 / period
+    if values["q_filter.cutoff_hz"] >= nyquist:
+        raise ConfigError("q_filter.cutoff_hz",
+                          f"must be below the Nyquist frequency {nyquist:g} Hz of "
+                          f"control.period {period:g} s")
+    if values["patient.spasticity.mas_grade"] != "custom":
+        for key in ("stiffness", "damping", "reflex_gain", "reflex_threshold", "reflex_max"):
+            if any(values[f"patient.spasticity.{key}"]):
+                raise ConfigError(f"patient.spasticity.{key}",
+                                  "give either a mas_grade (its preset) or the custom values, "
+                                  "not both (set mas_grade: custom)")
+
+    hold = hold_gain_problem(values)
+    if hold is not None:
+        raise ConfigError(*hold)
+    if len(set(values["joint_names"])) != len(values["joint_names"]):
+        raise ConfigError("joint_names", "joint names must be unique")
+    if any(not name for name in values["joint_names"]):
+        raise ConfigError("joint_names", "joint names must not be empty")

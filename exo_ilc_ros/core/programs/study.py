@@ -1,0 +1,466 @@
+"""The robustness study: which learning law survives which patient (issue 14).
+
+A *cell* is one law x scenario x mass uncertainty x seed: a whole configuration, run for K trials
+in-process by :func:`run_cell` and reduced where it ran to per-trial tables (:class:`CellResult`,
+a few kB, whatever K's records weighed). :func:`study_rows` reduces the cells of one
+law x scenario x uncertainty over their seeds to one :class:`StudyRow`. A cell carries its whole
+configuration as plain values, so any process or machine with exo_ilc_ros installed runs it
+without the files it came from; and every result is a function of the cell alone, so the table
+is the same however the cells are scheduled (a process pool, a Dask cluster, one by one).
+
+A *law* is any config file laid over the shipped ``config/exo_ilc.yaml``; the shipped short names
+(:data:`SHIPPED_LAWS`) name the project's own. A *scenario* is an overlay of
+``config/scenarios/`` (or any file of that layout) laid over the law's config.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ... import __version__
+from ..convergence.bound import iterations_to_bound
+from ..convergence.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth
+from ..errors import ConfigError, ExoIlcError
+from ..loop.record import TrialRecord
+from ..params.config import Config, config_dir, load_config, scenario_names, scenario_path
+from ..session.learning_session import run_trials
+
+FLOOR_WINDOW = 100
+"""Trials whose median is the settled floor (the last ones; all of them if the run is shorter)."""
+LATE_ABORT_AFTER = 10
+"""An envelope abort after this trial counts against "bounded" (the first trials may still be
+learning a large error)."""
+SEED_PARAMETER = "patient.seed"
+"""The parameter every per-trial random stream of the patient derives from (with the trial)."""
+
+
+@dataclass(frozen=True)
+class LawSpec:
+    """A learning law of the study: its label, the config file laid over the shipped one (None:
+    the shipped config itself) and the values set on top."""
+
+    label: str
+    path: Path | None = None
+    values: Mapping[str, Any] = field(default_factory=dict)
+
+    def describe(self) -> str:
+        """``robust (config/robust.yaml)``, ``linear (shipped config, law: linear)``."""
+        where = str(self.path) if self.path is not None else "shipped config"
+        extra = ", ".join(f"{k}: {v}" for k, v in self.values.items())
+        return f"{self.label} ({where}{', ' + extra if extra else ''})"
+
+
+SHIPPED_LAWS: dict[str, tuple[str | None, dict[str, Any]]] = {
+    "sign": (None, {}),
+    "tuned": ("tuned.yaml", {}),
+    "linear": (None, {"law": "linear"}),
+    "robust": ("robust.yaml", {}),
+    "norm_optimal": (None, {"law": "norm_optimal"}),
+}
+"""Short name -> (file of the shipped config directory, values): ``sign`` is the shipped default
+(the paper's law), ``tuned`` its tuned schedules, ``linear`` and ``norm_optimal`` the shipped
+config with that law (and its shipped gains or weights), ``robust`` the Q-filtered linear law."""
+
+
+def resolve_law(text: str) -> LawSpec:
+    """A law from the command line: a shipped short name (:data:`SHIPPED_LAWS`), a config file
+    (labelled by its stem), or ``LABEL=FILE``."""
+    label, sep, rest = text.partition("=")
+    if sep and label and rest:
+        spec = resolve_law(rest)
+        return LawSpec(label, spec.path, spec.values)
+    if text in SHIPPED_LAWS:
+        name, values = SHIPPED_LAWS[text]
+        path = None if name is None else config_dir() / name
+        if path is not None and not path.is_file():
+            raise ConfigError("--laws", f"the shipped law {text!r} needs {path}, which is "
+                              "missing")
+        return LawSpec(text, path, dict(values))
+    path = Path(text)
+    if path.suffix in (".yaml", ".yml") or path.exists():
+        if not path.is_file():
+            raise ConfigError("--laws", f"no such config file {text!r}")
+        return LawSpec(path.stem, path)
+    raise ConfigError("--laws", f"unknown law {text!r}; use a shipped name ("
+                      + ", ".join(SHIPPED_LAWS) + "), a config file or LABEL=FILE")
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    """A patient scenario: its label and overlay file."""
+
+    label: str
+    path: Path
+
+
+def resolve_scenario(text: str) -> ScenarioSpec:
+    """A scenario from the command line: a shipped name or an overlay file (``LABEL=FILE``
+    names it)."""
+    label, sep, rest = text.partition("=")
+    if sep and label and rest:
+        return ScenarioSpec(label, scenario_path(rest))
+    path = scenario_path(text)
+    return ScenarioSpec(path.stem, path)
+
+
+SCENARIO_ORDER = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic")
+"""The shipped scenarios from the paper's plant to every effect at once (the table's order)."""
+
+
+def shipped_scenarios() -> list[str]:
+    """Every shipped scenario: those of :data:`SCENARIO_ORDER` in that order, then the rest."""
+    names = scenario_names()
+    return [n for n in SCENARIO_ORDER if n in names] + \
+        [n for n in names if n not in SCENARIO_ORDER]
+
+
+@dataclass(frozen=True, eq=False)
+class StudyCell:
+    """One law x scenario x mass uncertainty x seed, with its whole configuration."""
+
+    law: str
+    scenario: str
+    mass_uncertainty: float
+    seed: int
+    values: dict[str, Any]
+    """Every parameter's value (:attr:`Config.values`): the cell runs without any file."""
+
+    @property
+    def label(self) -> str:
+        """``robust / sensor / 10 % / seed 0``."""
+        return (f"{self.law} / {self.scenario} / {100 * self.mass_uncertainty:g} % / "
+                f"seed {self.seed}")
+
+
+def cell_config(law: LawSpec, scenario: ScenarioSpec, mass_uncertainty: float, seed: int,
+                trials: int) -> Config:
+    """The configuration of one cell: the shipped config, the law's file, the scenario overlay,
+    then the law's values, the uncertainty, the trial count (every trial runs:
+    ``stop_when_settled`` 0) and the seed. A broken file is named in the error."""
+    overrides: dict[str, Any] = {**law.values, "max_trials": int(trials),
+                                 "mass_uncertainty": float(mass_uncertainty),
+                                 "stop_when_settled": 0, SEED_PARAMETER: int(seed)}
+    try:
+        return load_config(law.path, overrides, overlays=[scenario.path])
+    except ConfigError as exc:
+        if exc.source:
+            raise
+        raise ConfigError(exc.key, f"{exc.rule} (law {law.label}, scenario {scenario.label}, "
+                          f"delta {mass_uncertainty:g}, seed {seed})") from None
+
+
+def study_cells(laws: Sequence[LawSpec], scenarios: Sequence[ScenarioSpec],
+                mass_uncertainties: Sequence[float], seeds: Sequence[int],
+                trials: int) -> list[StudyCell]:
+    """Every law x scenario x uncertainty x seed, in that nesting order (the table's)."""
+    for kind, labels in (("law", [law.label for law in laws]),
+                         ("scenario", [s.label for s in scenarios])):
+        twice = sorted({x for x in labels if labels.count(x) > 1})
+        if twice:
+            raise ConfigError(f"--{kind}s", f"the {kind} label {twice[0]!r} is given twice "
+                              f"(name one LABEL=FILE)")
+    cells = []
+    for law in laws:
+        for scenario in scenarios:
+            for delta in mass_uncertainties:
+                for seed in seeds:
+                    config = cell_config(law, scenario, delta, seed, trials)
+                    cells.append(StudyCell(law.label, scenario.label, float(delta), int(seed),
+                                           config.values))
+    return cells
+
+
+@dataclass(eq=False)
+class CellResult:
+    """What one cell ran, per trial (rows) and joint (columns); the trials' records stay where
+    the cell ran."""
+
+    law: str
+    scenario: str
+    mass_uncertainty: float
+    seed: int
+    error_bound: float
+    samples: int
+    """Samples per trial (N + 1)."""
+    true_max_abs_error: np.ndarray
+    """max_t |e_j| of the plant's true state (the measured one where the plant has no sensor
+    model)."""
+    max_abs_error: np.ndarray
+    """max_t |e_j| as the controller measured it."""
+    max_abs_feedforward: np.ndarray
+    max_abs_effort: np.ndarray
+    samples_at_limit: np.ndarray
+    """Per trial: samples at which some joint's effort is at its limit."""
+    aborted: list[int]
+    """Trials the error envelope aborted."""
+    failure: str | None = None
+    """Why the run stopped before its last trial (a law that learned a non-finite input ...)."""
+    nonfinite: str | None = None
+    """Where the first non-finite state or effort appeared (the run itself went on)."""
+    version: str = __version__
+    """The exo_ilc_ros that ran the cell (a cluster must run the client's)."""
+    seconds: float = 0.0
+    """Wall time of the run where it ran (not part of the outcome: :meth:`same_as` ignores it)."""
+
+    @property
+    def trials(self) -> int:
+        """Trials run."""
+        return int(self.true_max_abs_error.shape[0])
+
+    def same_as(self, other: CellResult) -> bool:
+        """Bit for bit the same outcome (NaN equal to NaN)."""
+        arrays = ("true_max_abs_error", "max_abs_error", "max_abs_feedforward",
+                  "max_abs_effort", "samples_at_limit")
+        return (self.law, self.scenario, self.mass_uncertainty, self.seed, self.aborted,
+                self.failure, self.nonfinite, self.samples) == \
+            (other.law, other.scenario, other.mass_uncertainty, other.seed, other.aborted,
+             other.failure, other.nonfinite, other.samples) and \
+            all(np.array_equal(getattr(self, a), getattr(other, a), equal_nan=True)
+                for a in arrays)
+
+
+def true_max_abs_error(record: TrialRecord) -> np.ndarray:
+    """The record's max |e| of the true state where the plant reports one, else the measured."""
+    true = getattr(record, "true_max_abs_error", None)
+    return np.asarray(record.max_abs_error if true is None else true)
+
+
+def run_cell(cell: StudyCell) -> CellResult:
+    """Run one cell in-process and reduce it to its per-trial tables. A run the session stops
+    (:class:`ExoIlcError`: a learned input that is not finite ...) keeps the trials before and
+    says why in ``failure``."""
+    config = Config(cell.values, f"study cell {cell.label}")
+    limit = np.asarray(config["control.effort_limit"], dtype=float)
+    rows: dict[str, list[np.ndarray]] = {k: [] for k in ("true", "measured", "ff", "effort")}
+    at_limit: list[int] = []
+    aborted: list[int] = []
+
+    nonfinite: list[str] = []
+
+    def reduce(record: TrialRecord) -> None:
+        if not nonfinite:
+            bad = ~(np.all(np.isfinite(record.effort), axis=1)
+                    & np.all(np.isfinite(record.position), axis=1))
+            if np.any(bad):
+                after = "" if record.aborted_at is None else \
+                    f", in the safe hold after the envelope abort at sample {record.aborted_at}"
+                nonfinite.append(f"non-finite state or effort from trial {record.trial}, "
+                                 f"sample {int(np.flatnonzero(bad)[0])}{after}")
+        rows["true"].append(true_max_abs_error(record))
+        rows["measured"].append(np.asarray(record.max_abs_error))
+        rows["ff"].append(np.max(np.abs(record.feedforward), axis=0))
+        rows["effort"].append(np.max(np.abs(record.effort), axis=0))
+        at_limit.append(int(np.count_nonzero(np.any(np.abs(record.effort) >= limit, axis=1))))
+        if record.aborted:
+            aborted.append(record.trial)
+
+    failure = None
+    start = time.perf_counter()
+    try:
+        run_trials(config, on_trial=reduce)
+    except ExoIlcError as exc:
+        failure = f"after trial {len(at_limit)}: {exc}"
+    seconds = time.perf_counter() - start
+    joints = config.joints
+    samples = int(round(config["trajectory.duration"] / config["control.period"])) + 1
+
+    def table(key: str) -> np.ndarray:
+        return np.array(rows[key], dtype=float).reshape(-1, joints)
+
+    return CellResult(cell.law, cell.scenario, cell.mass_uncertainty, cell.seed,
+                      float(config["error_bound"]), samples, table("true"), table("measured"),
+                      table("ff"), table("effort"), np.array(at_limit, dtype=np.int64),
+                      aborted, failure, nonfinite[0] if nonfinite else None, seconds=seconds)
+
+
+@dataclass(frozen=True)
+class SeedOutcome:
+    """One cell reduced to numbers: what the row takes over seeds."""
+
+    first: int | None
+    """First trial with every joint's true max |e| within the bound (None: never)."""
+    settled: int | None
+    """The trial from which every joint stays within it to the last (None: not at the end)."""
+    floor_per_joint: np.ndarray
+    """Median of the true max |e| over the last :data:`FLOOR_WINDOW` trials, per joint (NaN
+    for a run that did not reach its last trial with finite numbers)."""
+    growing: np.ndarray
+    """Per joint: the growth check flags its learned input (False where it gives no verdict)."""
+    growth_rate: np.ndarray
+    """Per joint: fitted growth of log max |u_ff| per trial (NaN: no verdict)."""
+    finite: bool
+    """Every error, learned input and effort is finite and the run reached its last trial."""
+    late_aborts: int
+    """Envelope aborts after trial :data:`LATE_ABORT_AFTER`."""
+
+    @property
+    def floor(self) -> float:
+        """The worst joint's floor (rad)."""
+        return float(np.max(self.floor_per_joint)) if self.floor_per_joint.size else np.nan
+
+
+def growth_window(trials: int) -> int:
+    """Trials the growth check fits, as ``exo-ilc simulate`` does: the last 100, at most the
+    second half of the run (the first trials' learning is not growth), at least 10."""
+    return min(DEFAULT_WINDOW, max(trials // 2, MIN_TRIALS))
+
+
+def seed_outcome(cell: CellResult, trials: int) -> SeedOutcome:
+    """The numbers of one cell: first/settled on the worst joint's true error, the floor over the
+    last min(100, K) trials, the growth check (``core.growth``) on max |u_ff|."""
+    errors = cell.true_max_abs_error
+    finite = cell.failure is None and cell.nonfinite is None and cell.trials == trials and all(
+        bool(np.all(np.isfinite(t))) for t in
+        (errors, cell.max_abs_feedforward, cell.max_abs_effort))
+    joints = errors.shape[1]
+    if cell.trials == 0:
+        return SeedOutcome(None, None, np.full(joints, np.nan), np.zeros(joints, bool),
+                           np.full(joints, np.nan), False, 0)
+    worst = np.max(errors, axis=1, keepdims=True)
+    its = iterations_to_bound(worst, cell.error_bound)
+    window = errors[-min(FLOOR_WINDOW, cell.trials):]
+    floor = np.median(window, axis=0) if finite else np.full(joints, np.nan)  # none: not settled
+    with np.errstate(invalid="ignore", divide="ignore"):
+        fit = fit_growth(cell.max_abs_feedforward, growth_window(cell.trials))
+    growing = np.zeros(joints, bool) if fit is None else np.asarray(fit.growing, bool)
+    rate = np.full(joints, np.nan) if fit is None else np.asarray(fit.rate, float)
+    late = sum(1 for k in cell.aborted if k > LATE_ABORT_AFTER)
+    return SeedOutcome(its.first[0], its.settled[0], floor, growing, rate, finite, late)
+
+
+@dataclass(frozen=True)
+class StudyRow:
+    """One law x scenario x mass uncertainty over its seeds: the study table's row."""
+
+    law: str
+    scenario: str
+    mass_uncertainty: float
+    seeds: int
+    trials: int
+    error_bound: float
+    first: int | None
+    """The latest over seeds of the first trial with every joint within the bound (None: some
+    seed never got there)."""
+    settled: int | None
+    """The latest over seeds of the trial from which every joint stays within (None: some seed
+    is outside at its last trial)."""
+    floor: float
+    """Median over seeds of the settled floor (worst joint; rad)."""
+    floor_low: float
+    floor_high: float
+    """Smallest and largest settled floor over seeds (rad)."""
+    floor_per_joint: tuple[float, ...]
+    """Per joint: median over seeds of its floor (rad)."""
+    growing_joints: tuple[int, ...]
+    """Joints (1-based) whose learned input the growth check flags in some seed."""
+    growing_seeds: int
+    """Seeds with some joint flagged."""
+    max_growth_rate: float
+    """Largest fitted growth rate of log max |u_ff| per trial over joints and seeds (NaN: none)."""
+    finite: bool
+    """Every seed ran to its last trial with finite numbers."""
+    failures: tuple[str, ...]
+    """Why runs stopped early, per failing seed."""
+    peak_effort: float
+    """max |effort| over seeds, trials and joints (N m)."""
+    at_limit: float
+    """Share of samples (over seeds and trials) at which some joint is at its effort limit."""
+    aborts: int
+    """Envelope aborts, summed over seeds."""
+    late_aborts: int
+    """Of them, after trial :data:`LATE_ABORT_AFTER`."""
+    last_abort: int | None
+    """The latest aborted trial over seeds."""
+
+    @property
+    def bounded(self) -> bool:
+        """Finite, no growth flag, no envelope abort after trial 10: the run can go on."""
+        return self.finite and self.growing_seeds == 0 and self.late_aborts == 0
+
+    @property
+    def verdict(self) -> str:
+        """``bounded``, ``growing``, ``aborts`` or ``failed``."""
+        if not self.finite:
+            return "failed"
+        if self.growing_seeds:
+            return "growing"
+        if self.late_aborts:
+            return "aborts"
+        return "bounded"
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``rows[]`` entry of the study's JSON."""
+        def number(x: float) -> float | None:
+            return float(x) if np.isfinite(x) else None
+
+        return {"law": self.law, "scenario": self.scenario,
+                "mass_uncertainty": self.mass_uncertainty, "seeds": self.seeds,
+                "trials": self.trials, "error_bound": self.error_bound, "first": self.first,
+                "settled": self.settled, "floor": number(self.floor),
+                "floor_low": number(self.floor_low), "floor_high": number(self.floor_high),
+                "floor_per_joint": [number(x) for x in self.floor_per_joint],
+                "verdict": self.verdict, "bounded": self.bounded,
+                "growing_joints": list(self.growing_joints),
+                "growing_seeds": self.growing_seeds,
+                "max_growth_rate": number(self.max_growth_rate), "finite": self.finite,
+                "failures": list(self.failures), "peak_effort": number(self.peak_effort),
+                "at_limit": self.at_limit, "aborts": self.aborts,
+                "late_aborts": self.late_aborts, "last_abort": self.last_abort}
+
+
+def _latest(values: Iterable[int | None]) -> int | None:
+    items = list(values)
+    return None if any(v is None for v in items) or not items else max(
+        v for v in items if v is not None)
+
+
+def study_row(results: Sequence[CellResult], trials: int) -> StudyRow:
+    """The row of the cells of one law x scenario x uncertainty (one per seed)."""
+    if not results:
+        raise ValueError("a study row needs at least one cell")
+    head = results[0]
+    outcomes = [seed_outcome(r, trials) for r in results]
+    floors = np.array([o.floor for o in outcomes])
+    finite_floors = floors[np.isfinite(floors)]
+    per_joint = np.array([o.floor_per_joint for o in outcomes])
+    growing = np.array([o.growing for o in outcomes])
+    rates = np.array([o.growth_rate for o in outcomes])
+    efforts = [r.max_abs_effort for r in results if r.max_abs_effort.size]
+    peak = max((float(np.max(e)) for e in efforts), default=np.nan)
+    samples = sum(r.trials * r.samples for r in results)
+    at_limit = sum(int(np.sum(r.samples_at_limit)) for r in results) / samples if samples \
+        else 0.0
+    aborted = [k for r in results for k in r.aborted]
+
+    def median(x: np.ndarray) -> float:
+        return float(np.median(x)) if x.size else np.nan
+
+    return StudyRow(
+        head.law, head.scenario, head.mass_uncertainty, len(results), trials, head.error_bound,
+        _latest(o.first for o in outcomes), _latest(o.settled for o in outcomes),
+        median(finite_floors) if finite_floors.size == floors.size else np.nan,
+        float(np.min(floors)) if finite_floors.size == floors.size else np.nan,
+        float(np.max(floors)) if finite_floors.size == floors.size else np.nan,
+        tuple(median(per_joint[:, j]) for j in range(per_joint.shape[1])),
+        tuple(int(j) + 1 for j in np.flatnonzero(np.any(growing, axis=0))),
+        int(np.count_nonzero(np.any(growing, axis=1))),
+        float(np.nanmax(rates)) if np.any(np.isfinite(rates)) else np.nan,
+        all(o.finite for o in outcomes),
+        tuple(f"seed {r.seed}: {why}" for r in results for why in (r.failure, r.nonfinite)
+              if why),
+        peak, float(at_limit), len(aborted), sum(o.late_aborts for o in outcomes),
+        max(aborted, default=None))
+
+
+def study_rows(results: Sequence[CellResult], trials: int) -> list[StudyRow]:
+    """One row per law x scenario x uncertainty, in the order their cells first appear."""
+    groups: dict[tuple[str, str, float], list[CellResult]] = {}
+    for r in results:
+        groups.setdefault((r.law, r.scenario, r.mass_uncertainty), []).append(r)
+    return [study_row(sorted(group, key=lambda r: r.seed), trials) for group in groups.values()]

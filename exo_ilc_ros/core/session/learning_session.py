@@ -1,0 +1,378 @@
+"""One learning session: which trial runs next, with which feed-forward, and what a trial's
+record does to it. The in-process runner (:func:`run_trials`) and the ``ilc_supervisor`` node
+are both loops over a :class:`LearningSession`; neither holds a rule of its own.
+
+The rules, in the order :meth:`LearningSession.conclude` applies them at a trial boundary:
+
+1. Live parameter changes staged during the trial (:meth:`~LearningSession.stage`) take effect:
+   the law is rebuilt from the new values and learns the next feed-forward with them (the first
+   trial *run* with them is the next one, the ``effective_trial`` a bag records).
+2. A trial the error envelope aborted is kept and marked but not learned from: the next trial
+   reuses its feed-forward and levels. Any other trial is learned from with the law, eq (11); a
+   learned feed-forward that is not finite or of the wrong shape stops the session
+   (:class:`SafetyError`), nothing of it is used.
+3. The "within the bound" streak counts consecutive completed trials with every joint's
+   max |e_j| <= ``error_bound``; the session is finished after ``max_trials`` trials or once the
+   streak reaches ``stop_when_settled`` (> 0).
+
+A trial that must be run again (a watchdog trip, lost samples, a protocol step that made no
+progress) is :meth:`~LearningSession.discard`-ed: nothing is learned, the same trial number and
+feed-forward run again. A session resumes from the trials a :class:`RunStore` holds.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..convergence.bound import IterationsToBound, iterations_to_bound
+from ..errors import SafetyError, StoreError
+from ..learning.factory import build_law
+from ..learning.laws import FeedforwardUpdate, LearningLaw
+from ..loop.patient import PatientLearning, true_error
+from ..loop.record import TrialRecord
+from ..loop.trial import record_from_samples
+from ..params import schema
+from ..params.config import Config
+from ..params.validation import Rejection, check_feedforward_array
+from ..persistence.profiles import load_initial
+from ..persistence.store import RunStore, StoredTrial
+from ..reference.build import build_reference
+from ..sim.experiment import Experiment
+
+LIVE = frozenset(p.name for p in schema.PARAMETERS if p.live)
+"""Parameters that may change at a trial boundary."""
+EXPERIMENT_KEYS = frozenset({"safety.error_envelope"})
+"""Live parameters that change how a trial runs in-process (the rest change what is learned)."""
+
+
+class StopReason(Enum):
+    """Why a session is finished."""
+
+    MAX_TRIALS = "max_trials"
+    SETTLED = "settled"
+
+
+@dataclass(frozen=True)
+class TrialConclusion:
+    """What a trial's record did to the session."""
+
+    record: TrialRecord
+    update: FeedforwardUpdate
+    """The feed-forward (and levels) the next trial uses."""
+    learned: bool
+    """False for a trial the error envelope aborted (its feed-forward is reused)."""
+    within_bound: bool
+    applied: dict[str, Any]
+    """Live changes that took effect at this boundary (learned with; empty: none)."""
+    config: Config
+    """The configuration in effect after this boundary (what the store records)."""
+    stop: StopReason | None
+    """Set when this was the session's last trial."""
+
+
+@dataclass
+class LearningSession:
+    """The state of one learning run between trials (module docstring for the rules).
+
+    ``config`` is the run's whole configuration, the plant's parameters included (it keys the
+    store). ``law`` replaces the config's law (then live changes cannot rebuild it).
+    """
+
+    config: Config
+    law: LearningLaw | None = None
+    trial: int = 1
+    """The next trial to run."""
+    completed: int = 0
+    """Trials concluded (stored or restored)."""
+    within_streak: int = 0
+    aborted_trials: list[int] = field(default_factory=list)
+    retried: list[tuple[int, str]] = field(default_factory=list)
+    stop: StopReason | None = None
+    _custom_law: bool = field(default=False, init=False, repr=False)
+    _staged: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self._custom_law = self.law is not None
+        self.active_law: LearningLaw = self.law or build_law(self.config)
+        self.reference = build_reference(self.config)
+        if self.config["profile.initial"]:  # a patient's learned profile (core/profiles.py)
+
+            self.next_update = load_initial(self.config["profile.initial"], self.config,
+                                            self.reference)
+        else:
+            first = self.active_law.initial_feedforward(self.reference)
+            self.next_update = FeedforwardUpdate(first, None)
+        self.stop = self._stop_reason()
+
+    # --- what runs next ---------------------------------------------------------------------
+    @property
+    def feedforward(self) -> np.ndarray:
+        """The feed-forward of the next trial."""
+        return self.next_update.feedforward
+
+    @property
+    def levels(self) -> np.ndarray | None:
+        """The M, M', M'' (rows) per joint that formed the next trial's feed-forward."""
+        return self.next_update.levels
+
+    @property
+    def finished(self) -> bool:
+        """No trial is left to run (``stop`` says why)."""
+        return self.stop is not None
+
+    @property
+    def staged(self) -> dict[str, Any]:
+        """Live changes waiting for the next trial boundary."""
+        return dict(self._staged)
+
+    def _stop_reason(self) -> StopReason | None:
+        if self.completed >= self.config["max_trials"]:
+            return StopReason.MAX_TRIALS
+        settled = self.config["stop_when_settled"]
+        if settled > 0 and self.within_streak >= settled:
+            return StopReason.SETTLED
+        return None
+
+    # --- inputs ------------------------------------------------------------------------------
+    def stage(self, values: Mapping[str, Any]) -> None:
+        """Live parameter changes for the next trial boundary (validated now: ConfigError
+        names the key and the rule; nothing is staged then). Only ``live`` parameters."""
+        fixed = sorted(set(values) - LIVE)
+        if fixed:
+            raise ValueError(f"not live parameters (cannot change during a run): {fixed}")
+        if self._custom_law and values:
+            raise ValueError("a session with a custom learning law cannot take live changes")
+        self.config.replace({**self._staged, **values})  # validates the whole combination
+        self._staged.update(values)
+
+    def conclude(self, record: TrialRecord) -> TrialConclusion:
+        """The trial ``record`` ran to its end: apply staged changes, learn (or keep the
+        feed-forward after an envelope abort), update the streak; rules in the module
+        docstring."""
+        if self.finished:
+            raise SafetyError(f"trial {record.trial}: the session is already finished "
+                              f"({self.stop.value if self.stop else ''})")
+        if record.trial != self.trial:
+            raise SafetyError(f"trial {record.trial} concluded, but trial {self.trial} is the "
+                              "one running")
+        applied = self._apply_staged()
+        if record.aborted:
+            update = self.next_update
+            self.aborted_trials.append(record.trial)
+        else:
+            update = self.active_law.update(record)
+            checked = check_feedforward_array(update.feedforward, self.feedforward.shape,
+                                              "learned feed-forward")
+            if isinstance(checked, Rejection):
+                raise SafetyError(f"trial {record.trial}: the learning law produced a bad "
+                                  f"feed-forward ({checked}); it was not stored or used")
+        within = self._within(record)
+        self.within_streak = self.within_streak + 1 if within else 0
+        self.completed = record.trial
+        self.trial = record.trial + 1
+        self.next_update = update
+        self.stop = self._stop_reason()
+        return TrialConclusion(record, update, not record.aborted, within, applied,
+                               self.config, self.stop)
+
+    def rehearse(self, experiment: Experiment) -> None:
+        """Run a conclusion's kernels once on a throwaway record (the reference tracked
+        exactly, this session's feed-forward) and a copy of the law: the graph's first trial
+        then does not pay numba's cache load (0.2-0.3 s measured in the supervisor after
+        trial 1). Nothing of this session changes."""
+        ref = self.reference
+        record = record_from_samples(experiment, self.trial, self.feedforward, ref.position,
+                                     ref.velocity, self.levels, ref)
+        copy.deepcopy(self.active_law).update(record)
+
+    def discard(self, reason: str) -> None:
+        """The running trial must be run again (``reason``: watchdog, lost, timeout, ...):
+        nothing is learned, the same trial and feed-forward run next."""
+        self.retried.append((self.trial, reason))
+
+    def resume(self, stored: Sequence[StoredTrial]) -> None:
+        """Continue after the trials ``stored`` (1..n, as a :class:`RunStore` loads them):
+        their streak, aborts and the feed-forward the last one led to."""
+        if self.completed:
+            raise StoreError("resume: the session has already concluded trials")
+        for k, item in enumerate(stored, start=1):
+            if item.record.trial != k:
+                raise StoreError(f"resume: stored trial {item.record.trial} where trial {k} "
+                                 "was expected")
+            within = self._within(item.record)
+            self.within_streak = self.within_streak + 1 if within else 0
+            if item.record.aborted:
+                self.aborted_trials.append(item.record.trial)
+        if stored:
+            self.next_update = stored[-1].next_update
+            self.completed = stored[-1].record.trial
+            self.trial = self.completed + 1
+        self.stop = self._stop_reason()
+
+    def open_store(self, root: Path | str, resume: bool) -> tuple[RunStore, list[StoredTrial]]:
+        """The store of this run under ``root`` (its learning key); with ``resume`` the session
+        continues after the trials it holds (up to ``max_trials``), which are returned. A store
+        that holds trials without ``resume`` is an error: nothing is overwritten."""
+        store = RunStore(root, self.config, self.reference)
+        if store.completed and not resume:
+            raise StoreError(f"{store.directory}: already holds {store.completed} trials of "
+                             "this run; resume it (--resume, store.resume) or use another store")
+        restored = store.load()[:self.config["max_trials"]]
+        self.resume(restored)
+        return store, restored
+
+    # --- rules --------------------------------------------------------------------------------
+    def _within(self, record: TrialRecord) -> bool:
+        return not record.aborted and \
+            bool(np.all(record.max_abs_error <= self.config["error_bound"]))
+
+    def _apply_staged(self) -> dict[str, Any]:
+        changed = {k: v for k, v in self._staged.items() if self.config[k] != v}
+        self._staged.clear()
+        if not changed:
+            return {}
+        self.config = self.config.replace(changed)
+        if not self._custom_law:
+            self.active_law = build_law(self.config)
+        return changed
+
+
+@dataclass
+class RunResult:
+    """Every trial of one run and what was learned."""
+
+    mass_uncertainty: float
+    law: str
+    error_bound: float
+    records: list[TrialRecord] = field(default_factory=list)
+    final: FeedforwardUpdate | None = None
+    """The feed-forward learned from the last trial (what trial K+1 would use)."""
+    patient_memory: tuple[np.ndarray, np.ndarray] | None = None
+    """A learning virtual patient's fast and slow states after the run (None: none)."""
+    resumed: int = 0
+    """Trials restored from the store rather than run (0: none)."""
+    stop: StopReason | None = None
+    """Why the run ended (max_trials, or settled with ``stop_when_settled``)."""
+    applied: dict[int, dict[str, Any]] = field(default_factory=dict)
+    """Live changes per effective trial (the first trial run with them)."""
+    notes: dict[int, tuple[str, ...]] = field(default_factory=dict)
+    """What the law reported when it learned from a trial (e.g. active constraints), by trial."""
+
+    @property
+    def aborted(self) -> list[int]:
+        """Trial numbers aborted by the error envelope (nothing learned from them)."""
+        return [r.trial for r in self.records if r.aborted]
+
+    @property
+    def max_abs_errors(self) -> np.ndarray:
+        """(K, joints) table of max |e| per trial and joint."""
+        return np.array([r.max_abs_error for r in self.records])
+
+    def true_max_abs_errors(self) -> np.ndarray:
+        """(K, joints) table of the true max |e| per trial and joint (the plant's state; equal
+        to :attr:`max_abs_errors`, the measured one, without sensor effects)."""
+        return np.array([r.true_max_abs_error for r in self.records])
+
+    @property
+    def max_abs_feedforward(self) -> np.ndarray:
+        """(K, joints) table of max |u_ff| per trial and joint."""
+        return np.array([np.max(np.abs(r.feedforward), axis=0) for r in self.records])
+
+    @property
+    def max_abs_effort(self) -> np.ndarray:
+        """(K, joints) table of max |effort| per trial and joint."""
+        return np.array([np.max(np.abs(r.effort), axis=0) for r in self.records])
+
+    def iterations_to_bound(self) -> IterationsToBound:
+        """First and settled trial per joint with the true max |e| within ``error_bound``."""
+        return iterations_to_bound(self.true_max_abs_errors(), self.error_bound)
+
+
+def run_trials(config: Config, mass_uncertainty: float | None = None,
+               trials: int | None = None, law: str | None = None,
+               on_trial: Callable[[TrialRecord], None] | None = None,
+               learning_law: LearningLaw | None = None,
+               store: Path | str | None = None, resume: bool = False,
+               changes: Mapping[int, Mapping[str, Any]] | None = None,
+               on_conclusion: Callable[[TrialConclusion], None] | None = None,
+               patient_memory: tuple[np.ndarray, np.ndarray] | None = None,
+               patient: PatientLearning | None = None) -> RunResult:
+    """Run the experiment in-process, learning between trials: a loop over a
+    :class:`LearningSession` (its rules, including ``stop_when_settled``, are the graph's).
+
+    ``trials`` overrides ``max_trials``, ``law`` the config's law (``sign``/``linear``);
+    ``learning_law`` passes any other :class:`LearningLaw`. ``on_trial`` is called after each
+    trial run now (progress, logging). ``changes`` replays live parameter changes: effective
+    trial -> values, as a bag records them (the first trial run with the new values). With
+    ``store`` (a root directory, :class:`RunStore`) every trial and the feed-forward it led to
+    are saved before the next trial starts; with ``resume`` the trials already stored under
+    this run's learning key are restored (bit for bit) and the run continues after the last
+    one. A store that already holds trials without ``resume`` is an error (nothing is
+    overwritten). ``on_conclusion`` sees each trial's conclusion (what the next trial uses)
+    once the store holds it (a patient's profile is saved from it, core/profiles.py).
+    ``patient_memory`` (fast, slow) starts a learning patient with what an earlier session left
+    (core/therapy.py); ``result.patient_memory`` is what this run leaves. ``patient``: the
+    learning patient itself (its state read by ``on_conclusion``: the state after the trial
+    concluded), instead of a new one.
+    """
+    overrides: dict[str, Any] = {}
+    if trials is not None:
+        overrides["max_trials"] = int(trials)
+    if law is not None:
+        overrides["law"] = law
+    if mass_uncertainty is not None:
+        overrides["mass_uncertainty"] = float(mass_uncertainty)
+    pending = {int(k): dict(v) for k, v in (changes or {}).items()}
+    for k in sorted(k for k in pending if k <= 1):  # in effect from the start
+        overrides.update(pending.pop(k))
+    effective = config.replace(overrides) if overrides else config
+    session = LearningSession(effective, learning_law)
+    experiment = Experiment(effective)
+    result = RunResult(experiment.mass_uncertainty, effective["law"],
+                       float(effective["error_bound"]))
+    if patient is None and experiment.patient.learns:
+        patient = PatientLearning(experiment.patient, experiment.reference.samples)
+    if patient is not None and patient_memory is not None:  # the same patient, a new session
+        patient.fast, patient.slow = (np.array(x, dtype=float) for x in patient_memory)
+        patient.torque = patient.fast + patient.slow
+    run_store: RunStore | None = None
+    if store is not None:
+        run_store, restored = session.open_store(store, resume)
+        result.records.extend(item.record for item in restored)
+        result.resumed = len(restored)
+        for item in restored:
+            if patient is not None:
+                patient.learn(item.record.trial, true_error(item.record))
+    while not session.finished:
+        record = experiment.run_trial(session.feedforward, session.trial, session.levels,
+                                      None if patient is None else patient.torque)
+        if patient is not None:
+            patient.learn(record.trial, true_error(record))
+        if session.trial + 1 in pending:
+            session.stage(pending.pop(session.trial + 1))
+        conclusion = session.conclude(record)
+        if conclusion.applied:
+            result.applied[record.trial + 1] = conclusion.applied
+            if EXPERIMENT_KEYS & conclusion.applied.keys():
+                experiment = Experiment(session.config)
+        if run_store is not None:
+            run_store.save(record, conclusion.update, conclusion.config)
+        if on_conclusion is not None:
+            on_conclusion(conclusion)
+        result.records.append(record)
+        if conclusion.learned and conclusion.update.notes:
+            result.notes[record.trial] = conclusion.update.notes
+        if on_trial is not None:
+            on_trial(record)
+    result.final = session.next_update
+    result.stop = session.stop
+    if patient is not None:
+        result.patient_memory = (patient.fast.copy(), patient.slow.copy())
+    return result

@@ -1,0 +1,85 @@
+"""A run as its tables show it (max |e|, |u_ff|, |effort| per trial and joint), whichever way it
+ran: in-process, through the graph, or read back from a bag or a JSON export."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..convergence.bound import IterationsToBound, iterations_to_bound
+from .learning_session import RunResult
+
+
+@dataclass
+class RunSummary:
+    """One run as the tables show it: max |e| per trial and joint, plus what was learned."""
+
+    mass_uncertainty: float
+    law: str
+    error_bound: float
+    max_abs_error: np.ndarray
+    max_abs_feedforward: np.ndarray | None = None
+    max_abs_effort: np.ndarray | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+    true_max_abs_error: np.ndarray | None = None
+    """The true max |e| (the plant's state) where the sensors made the measured
+    ``max_abs_error`` differ from it (the virtual patient); None: they are the same."""
+
+    @classmethod
+    def from_result(cls, result: RunResult) -> RunSummary:
+        """From an in-process run."""
+        measured = any(r.true_position is not None for r in result.records)
+        return cls(result.mass_uncertainty, result.law, result.error_bound,
+                   result.max_abs_errors, result.max_abs_feedforward, result.max_abs_effort,
+                   true_max_abs_error=result.true_max_abs_errors() if measured else None)
+
+    @property
+    def true_errors(self) -> np.ndarray:
+        """The true max |e| table (the measured one when they are the same)."""
+        return self.max_abs_error if self.true_max_abs_error is None \
+            else self.true_max_abs_error
+
+    def iterations_to_bound(self) -> IterationsToBound:
+        """First and settled trial per joint, of the true max |e|."""
+        return iterations_to_bound(self.true_errors, self.error_bound)
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``runs[]`` entry of the JSON export."""
+        its = self.iterations_to_bound()
+        trials = []
+        for k, row in enumerate(self.max_abs_error):
+            entry: dict[str, Any] = {"trial": k + 1, "max_abs_error": [float(x) for x in row],
+                                     "true_max_abs_error": [float(x)
+                                                            for x in self.true_errors[k]]}
+            if self.max_abs_feedforward is not None:
+                entry["max_abs_feedforward"] = [float(x) for x in self.max_abs_feedforward[k]]
+            if self.max_abs_effort is not None:
+                entry["max_abs_effort"] = [float(x) for x in self.max_abs_effort[k]]
+            trials.append(entry)
+        out = {"mass_uncertainty": self.mass_uncertainty, "law": self.law,
+               "error_bound": self.error_bound, "trials": trials,
+               "iterations_to_bound": {"first": its.first, "settled": its.settled}}
+        out.update(self.extra)
+        return out
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> RunSummary:
+        """Inverse of :meth:`to_json`."""
+        trials = data["trials"]
+
+        def table(key: str) -> np.ndarray | None:
+            if not trials or key not in trials[0]:
+                return None
+            return np.array([t[key] for t in trials], dtype=float)
+
+        errors = table("max_abs_error")
+        true = table("true_max_abs_error")
+        if true is not None and errors is not None and np.array_equal(true, errors):
+            true = None
+        return cls(float(data["mass_uncertainty"]), str(data["law"]),
+                   float(data.get("error_bound", 0.005)),
+                   errors if errors is not None else np.zeros((0, 0)),
+                   table("max_abs_feedforward"), table("max_abs_effort"),
+                   true_max_abs_error=true)

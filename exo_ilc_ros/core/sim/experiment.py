@@ -1,0 +1,75 @@
+"""The paper's experiment in-process: config -> nominal model, plant, reference and law; one
+trial of the closed loop (:class:`Experiment`). The trial-to-trial loop is ``core.session``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..arm.build import build_arm
+from ..errors import SafetyError
+from ..loop.hold import ramp_samples
+from ..loop.patient import PatientModel
+from ..loop.plant import PlantDynamics
+from ..loop.record import TrialRecord
+from ..loop.trial import simulate_trial_guarded
+from ..params.config import Config
+from ..reference.build import build_reference
+
+_NO_TORQUE = np.zeros((0, 0))
+
+
+class Experiment:
+    """The closed loop of one configuration: nominal model in the controller, the plant with
+    masses scaled by (1 + mass_uncertainty), the sampled reference, gains and limits."""
+
+    def __init__(self, config: Config, mass_uncertainty: float | None = None) -> None:
+        self.config = config
+        self.mass_uncertainty = float(config["mass_uncertainty"] if mass_uncertainty is None
+                                      else mass_uncertainty)
+        self.nominal = build_arm(config)
+        self.plant = self.nominal.with_mass_scale(self.mass_uncertainty)
+        self.reference = build_reference(config)
+        self.kp = np.asarray(config["control.kp"], dtype=float)
+        self.kd = np.asarray(config["control.kd"], dtype=float)
+        self.effort_limit = np.asarray(config["control.effort_limit"], dtype=float)
+        self.error_envelope = np.asarray(config["safety.error_envelope"], dtype=float)
+        self.hold_kp = np.asarray(config["safety.hold_kp"], dtype=float)
+        self.hold_kd = np.asarray(config["safety.hold_kd"], dtype=float)
+        self.hold_ramp = ramp_samples(config["safety.hold_ramp"], config["control.period"])
+        """The safe hold's gains and ramp (samples) (:mod:`.hold`): every place that commands
+        the hold takes them from here."""
+        self.period = float(config["control.period"])
+        self.substeps = int(round(self.period / config["integration_step"]))
+        self.dynamics = PlantDynamics.FULL if config["dynamics"] == "full" \
+            else PlantDynamics.PAPER_APPROXIMATION
+        self.patient = PatientModel(config)
+        """The virtual patient's effects (all off by default)."""
+
+    def run_trial(self, feedforward: np.ndarray, trial: int,
+                  levels: np.ndarray | None = None,
+                  learned: np.ndarray | None = None) -> TrialRecord:
+        """One trial with the given feed-forward, from x_d(0), guarded by the error envelope
+        (``record.aborted_at`` set if it left it: safe hold from that sample on), with the
+        virtual patient's effects and trial ``trial``'s draws (:mod:`.patient`); ``learned``:
+        the torque a learning patient adds (:class:`.patient.PatientLearning`; None: none)."""
+        ref = self.reference
+        u_ff = np.ascontiguousarray(feedforward, dtype=float)
+        if u_ff.shape != ref.position.shape:
+            raise ValueError(f"feed-forward must have shape {ref.position.shape}, "
+                             f"got {u_ff.shape}")
+        if not np.all(np.isfinite(u_ff)):
+            raise SafetyError(f"trial {trial}: the feed-forward holds non-finite values; "
+                              "refusing to run it")
+        patient = self.patient
+        draws = patient.draws(trial, ref.samples)
+        q, qd, u, effort, abort, q_true, qd_true = simulate_trial_guarded(
+            u_ff, ref.position, ref.velocity, self.kp, self.kd, self.effort_limit, self.period,
+            self.substeps, self.plant.kernel_args, self.nominal.kernel_args, int(self.dynamics),
+            self.error_envelope, self.hold_kp, self.hold_kd, self.hold_ramp, patient.joint,
+            patient.scalars, draws.noise, draws.initial, draws.trial_scalars,
+            learned if learned is not None
+            else np.zeros(ref.position.shape) if patient.learns else _NO_TORQUE)
+        measured = patient.measures
+        return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels,
+                           None if abort < 0 else int(abort), q_true if measured else None,
+                           qd_true if measured else None)

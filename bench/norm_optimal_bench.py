@@ -18,7 +18,7 @@ import numpy as np
 from exo_ilc_ros.core import load_config, run_trials
 from exo_ilc_ros.core.convergence.growth import fit_growth
 from exo_ilc_ros.core.loop.plant import saturation_counts
-from exo_ilc_ros.core.session.learning_session import RunResult
+from exo_ilc_ros.core.session.result import RunResult
 
 
 def _its(result: RunResult) -> str:

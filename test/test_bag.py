@@ -32,7 +32,8 @@ from exo_ilc_ros.bag import (
 from exo_ilc_ros.bag.provenance import read_provenance
 from exo_ilc_ros.cli.main import main as exo_ilc
 from exo_ilc_ros.core.params.config import Config, load_config
-from exo_ilc_ros.core.session.learning_session import RunResult, run_trials
+from exo_ilc_ros.core.session.learning_session import run_trials
+from exo_ilc_ros.core.session.result import RunResult
 from exo_ilc_ros.core.session.summary import RunSummary
 from exo_ilc_ros.wire import topics
 

@@ -23,7 +23,8 @@ from exo_ilc_ros.bag import BagReadError, BagWriter, read_bag, write_run
 from exo_ilc_ros.bag.integrity import check_mcap, check_mcap_bytes
 from exo_ilc_ros.cli.main import main as exo_ilc
 from exo_ilc_ros.core.params.config import Config, load_config
-from exo_ilc_ros.core.session.learning_session import RunResult, run_trials
+from exo_ilc_ros.core.session.learning_session import run_trials
+from exo_ilc_ros.core.session.result import RunResult
 from exo_ilc_ros.wire import topics
 from exo_ilc_ros.wire.qos import OFFERED
 

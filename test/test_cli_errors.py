@@ -319,7 +319,7 @@ def test_environment_domain_id_is_checked(monkeypatch: pytest.MonkeyPatch,
 
 # --- ROS arguments: later overrides win; `exo-ilc param` against a running node -------------
 def test_command_line_parameters_later_wins(tmp_path: Path) -> None:
-    from exo_ilc_ros.nodes.common import command_line_parameters
+    from exo_ilc_ros.nodes.parameters import command_line_parameters
 
     node_file = tmp_path / "node.yaml"
     node_file.write_text("ilc_supervisor:\n  ros__parameters:\n    max_trials: 7\n"
@@ -417,7 +417,8 @@ def test_param_against_a_running_node(capsys: pytest.CaptureFixture[str]) -> Non
 def test_rerun_note_says_what_happened_in_plain_words() -> None:
     """The note `analyze`/`paper`/`run` print for a trial that was run again."""
     from exo_ilc_ros.bag.reader import PROTOCOL_STEPS, rerun_note
-    from exo_ilc_ros.core.protocol.graph import STEP_TIMEOUT, Phase
+    from exo_ilc_ros.core.protocol.graph import Phase
+    from exo_ilc_ros.core.protocol.timing import STEP_TIMEOUT
 
     assert STEP_TIMEOUT == 30.0
     assert {p.value for p in Phase} - {"finished"} <= set(PROTOCOL_STEPS)
@@ -455,7 +456,7 @@ def test_node_refuses_bad_ros_arguments(ros_args: list[str], expected: list[str]
 def test_exponent_floats_read_as_rcl_reads_them(tmp_path: Path) -> None:
     """`1e-3` is a float for rcl (YAML 1.2); --config and the nodes read it the same way."""
     from exo_ilc_ros.core.params.config import load_config, load_ros_yaml
-    from exo_ilc_ros.nodes.common import command_line_parameters
+    from exo_ilc_ros.nodes.parameters import command_line_parameters
 
     assert load_ros_yaml("[1e-3, 2E1, -1.5e+2, 1_0]") == [0.001, 20.0, -150.0, 10]
     assert load_ros_yaml("v1e5") == "v1e5"

@@ -116,5 +116,6 @@ def test_every_kernel_module_keys_the_numba_cache() -> None:
     from exo_ilc_ros.core import _numba_cache
 
     core = Path(_numba_cache.__file__).parent
-    with_kernels = {p.name for p in core.glob("*.py") if "@njit" in p.read_text()}
+    with_kernels = {p.relative_to(core).as_posix() for p in core.rglob("*.py")
+                    if "@njit" in p.read_text()}
     assert with_kernels == set(_numba_cache.KERNEL_MODULES)

@@ -14,7 +14,8 @@ import pytest
 
 from exo_ilc_ros.core import Experiment, load_config, run_trials
 from exo_ilc_ros.core.persistence.store import RunStore
-from exo_ilc_ros.core.protocol.graph import STEP_TIMEOUT, Phase, TrialProtocol
+from exo_ilc_ros.core.protocol.graph import Phase, TrialProtocol
+from exo_ilc_ros.core.protocol.timing import STEP_TIMEOUT
 from exo_ilc_ros.core.session.learning_session import TrialConclusion
 
 SHORT = {"trajectory.duration": 1.0}
@@ -267,7 +268,7 @@ def test_a_lost_acknowledgement_is_asked_for_again_within_a_second() -> None:
     """The controller's acknowledgement (or the profile itself) is lost: the protocol pushes
     the same feed-forward again after ACK_RETRY (well under a second), not after the 30 s step
     timeout, and the trial runs as if nothing happened."""
-    from exo_ilc_ros.core.protocol.graph import ACK_RETRY
+    from exo_ilc_ros.core.protocol.timing import ACK_RETRY
 
     assert ACK_RETRY < 0.5
     config = load_config(overrides={**SHORT, "max_trials": 2})
@@ -305,7 +306,7 @@ def test_real_time_warms_up_then_reruns_a_trial_with_too_many_late_commands() ->
     more than max_late_commands of its periods on a late command is run again with the same
     feed-forward, not learned from; within the share it is concluded; LATE_RERUNS in a row stop
     the run. The table equals run_trials."""
-    from exo_ilc_ros.core.protocol.graph import LATE_RERUNS
+    from exo_ilc_ros.core.protocol.timing import LATE_RERUNS
 
     config = load_config(overrides={**SHORT, "max_trials": 3, "max_late_commands": 0.02})
     graph = FakeGraph(config)

@@ -28,7 +28,7 @@ def test_schema_parameters_validate_on_set_and_apply_after() -> None:
     from rclpy.parameter import Parameter
 
     from exo_ilc_ros.core.params import schema
-    from exo_ilc_ros.nodes.common import SchemaParameters
+    from exo_ilc_ros.nodes.parameters import SchemaParameters
 
     context = Context()
     rclpy.init(context=context)

@@ -18,7 +18,7 @@ from exo_ilc_ros.core.errors import StoreError
 from exo_ilc_ros.core.loop.record import TrialRecord
 from exo_ilc_ros.core.persistence.store import RunStore, learning_key
 from exo_ilc_ros.core.reference.build import build_reference
-from exo_ilc_ros.core.session.learning_session import RunResult
+from exo_ilc_ros.core.session.result import RunResult
 
 CONFIG = load_config()
 TRIALS = 12

@@ -9,29 +9,39 @@ Everything follows the wire contract of :mod:`exo_ilc_ros.wire.topics`; a bag's 
 
 from __future__ import annotations
 
-from .errors import BagError, BagReadError, BagWriteError
-from .integrity import McapCheck, check_mcap
-from .provenance import ParameterChange, Provenance, provenance_data, read_provenance
-from .reader import BagRun, TrialData, read_bag, trials_filed
-from .run_writer import run_name, unique_path, write_run
-from .writer import BagWriter
+from typing import Any
 
-__all__ = [
-    "BagError",
-    "BagReadError",
-    "BagRun",
-    "BagWriteError",
-    "BagWriter",
-    "McapCheck",
-    "ParameterChange",
-    "Provenance",
-    "TrialData",
-    "check_mcap",
-    "provenance_data",
-    "read_bag",
-    "read_provenance",
-    "run_name",
-    "trials_filed",
-    "unique_path",
-    "write_run",
-]
+from .. import load_public
+
+_WHERE = {
+    "BagError": ".errors",
+    "BagReadError": ".errors",
+    "BagWriteError": ".errors",
+    "McapCheck": ".integrity",
+    "check_mcap": ".integrity",
+    "ParameterChange": ".provenance",
+    "Provenance": ".provenance",
+    "provenance_data": ".provenance",
+    "read_provenance": ".provenance",
+    "BagRun": ".reader",
+    "TrialData": ".reader",
+    "read_bag": ".reader",
+    "trials_filed": ".reader",
+    "run_name": ".run_writer",
+    "unique_path": ".run_writer",
+    "write_run": ".run_writer",
+    "BagWriter": ".writer",
+}
+"""Public name -> the module that defines it (loaded on first use, PEP 562: importing the face
+loads neither numba nor rclpy)."""
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str) -> Any:
+    """Load a public name's module on first use (PEP 562)."""
+    return load_public(__name__, _WHERE, name, globals())
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ..core.protocol.graph import STEP_TIMEOUT
+from ..core.protocol.timing import STEP_TIMEOUT
 from ..core.reference.build import build_reference
 from ..core.session.summary import RunSummary
 from ..wire import protocol, topics

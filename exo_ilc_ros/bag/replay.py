@@ -17,13 +17,17 @@ from typing import Any
 
 import numpy as np
 
+from ..core.loop.patient import PatientModel
 from ..core.loop.record import TrialRecord
 from ..core.params.config import Config
 from ..core.params.schema import SUPERVISOR
-from ..core.session.learning_session import LIVE, RunResult, run_trials
+from ..core.persistence.patient_states import session_start
+from ..core.session.learning_session import LIVE, run_trials
+from ..core.session.result import RunResult
 from ..wire import protocol
 from .errors import BagReadError
-from .reader import BagRun
+from .provenance import PREFIX
+from .reader import BagRun, read_metadata
 
 COMPARED = ("max_abs_error", "max_abs_feedforward", "max_abs_effort")
 """The summary quantities a replay must reproduce."""
@@ -98,10 +102,6 @@ def _patient_start(run: BagRun, plan: ReplayPlan) -> tuple[np.ndarray, np.ndarra
     directory (empty: the session started from no version, so from zero)."""
     from pathlib import Path
 
-    from ..core.loop.patient import PatientModel
-    from ..core.persistence.patient_states import session_start
-    from .provenance import PREFIX
-    from .reader import read_metadata
 
     config = plan.config
     if not PatientModel(config).learns:

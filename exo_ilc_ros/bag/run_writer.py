@@ -19,8 +19,9 @@ import numpy as np
 
 from ..core.params.config import Config
 from ..core.programs.metrics import TrialMetrics, metric_summary_values
-from ..core.session.learning_session import RunResult
+from ..core.session.result import RunResult
 from ..wire import protocol, topics
+from ..wire.qos import offered_qos
 from . import messages
 from .provenance import TRIALS_COMPLETED, provenance_data
 from .writer import BagWriter
@@ -48,7 +49,6 @@ def unique_path(parent: Path | str, name: str) -> Path:
 
 def declare_topics(writer: BagWriter) -> None:
     """Every topic of :data:`topics.TYPES`, with the QoS the graph's publishers offer."""
-    from ..wire.qos import offered_qos
 
     for topic, msgtype in topics.TYPES.items():
         writer.add_topic(topic, msgtype, offered_qos(topic))

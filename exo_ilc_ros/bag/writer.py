@@ -25,6 +25,7 @@ from typing import Any
 
 import yaml
 
+from .. import __version__
 from .errors import BagWriteError
 from .messages import typestore
 
@@ -123,7 +124,6 @@ class _McapFile:
     def __init__(self, path: Path) -> None:
         from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
-        from .. import __version__
 
         self.path = path
         self._handle = open(path, "wb")  # noqa: SIM115  (closed by finish)

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ..analysis.figures import convergence_figure, save, tracking_figure
 from ..analysis.report import format_iterations, format_trial_table, write_json
 from ..bag import BagReadError, BagRun, read_bag
 from ..core.session.summary import RunSummary
@@ -164,8 +165,6 @@ def analyze(args: argparse.Namespace) -> int:
         Path(args.config_out).write_text(config_text or "")
         print(f"wrote {args.config_out}")
     if args.plot or args.trial is not None:
-        from ..analysis.figures import convergence_figure, save, tracking_figure
-
         if args.plot:
             plot_labels = [f"{label} ({r.law}, {100 * r.mass_uncertainty:g} %)"
                            for r, label in usable]

@@ -7,6 +7,7 @@ from typing import Any
 
 from ..analysis.loop import format_analysis, format_robustness, plot_analysis
 from ..core.convergence.factors import analyze_loop
+from ..core.convergence.norm_optimal_robustness import robustness
 from .arguments import config_with_flags, figure_file, input_file, integer, parameter
 
 
@@ -68,8 +69,6 @@ def run(args: argparse.Namespace) -> int:
         print("note: assist-as-needed is on, but the norm-optimal factor above does not include "
               "it (its forgetting multiplies the memory term: inside the deadband |F| = f)")
     if (args.law or config["law"]) == "norm_optimal":
-        from ..core.convergence.norm_optimal_robustness import robustness
-
         report = robustness(config)
         print()
         print(format_robustness(report))

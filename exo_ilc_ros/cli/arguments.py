@@ -17,9 +17,10 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from ..analysis.tuning import TuningError, check_database_driver
 from ..core.errors import ConfigError, ExoIlcError
 from ..core.params import schema
-from ..core.params.config import Config, load_config
+from ..core.params.config import Config, load_config, scenario_names, scenario_path
 
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".jpg", ".jpeg", ".tif", ".tiff", ".webp",
                    ".eps", ".ps", ".pgf", ".raw", ".rgba")
@@ -190,7 +191,6 @@ def directory(text: str) -> str:
 def scenario(text: str) -> str:
     """argparse type: a virtual-patient scenario, a shipped name (config/scenarios/) or a YAML
     file; returns the file's path (its keys are checked when the config is loaded)."""
-    from ..core.params.config import scenario_names, scenario_path
 
     try:
         return str(scenario_path(text))
@@ -238,7 +238,6 @@ def storage(text: str) -> str:
     from sqlalchemy.engine import make_url
     from sqlalchemy.exc import ArgumentError
 
-    from ..analysis.tuning import TuningError, check_database_driver
 
     try:
         check_database_driver(text)

@@ -9,6 +9,7 @@ import sys
 from collections.abc import Sequence
 
 from ..core.errors import ExoIlcError
+from .arguments import hide_password
 
 COMMANDS = ("simulate", "urdf", "tune", "compare", "run", "param", "analyze", "paper",
             "analyze_loop", "clean", "profiles", "report", "study")
@@ -52,7 +53,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         if type(exc).__module__.startswith("sqlalchemy") and \
                 getattr(args, "storage", None) is not None:  # the database of tune --storage
             reason = str(getattr(exc, "orig", None) or exc).splitlines()[0]
-            from .arguments import hide_password
 
             print(f"exo-ilc {args.command}: error: argument --storage: cannot use the database "
                   f"{hide_password(args.storage)!r}: {reason}", file=sys.stderr)

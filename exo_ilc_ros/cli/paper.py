@@ -10,7 +10,11 @@ from typing import Any
 
 from tqdm import tqdm
 
+from ..bag import run_name, unique_path, write_run
 from ..core.errors import ConfigError
+from ..core.session.learning_session import run_trials
+from ..orchestration.graph import run_graph
+from ..orchestration.recording import Recording
 from .analyze import analyze
 from .arguments import (
     config_with_flags,
@@ -68,16 +72,10 @@ def paper(args: argparse.Namespace) -> int:
                 bar.update(1)
 
             if args.in_process:
-                from ..bag import run_name, unique_path, write_run
-                from ..core.session.learning_session import run_trials
-
                 result = run_trials(run_config, delta, trials, on_trial=progress)
                 path = unique_path(args.bag_dir, run_name("sim", result.law, delta))
                 bags.append(write_run(path, run_config, result))
             else:
-                from ..orchestration.graph import run_graph
-                from ..orchestration.recording import Recording
-
                 run_config = run_config.replace({"wait_for_recorder": True})
                 with Recording(run_config, args.bag_dir) as recording:
                     run_graph(run_config, args.domain_id, on_summary=progress,

@@ -15,10 +15,16 @@ from tqdm import tqdm
 
 from ..core.errors import ConfigError
 from ..core.params.config import Config
+from ..core.programs.metrics import TrialMetrics
+from ..core.session.learning_session import stored_trials
 from ..core.session.summary import RunSummary
+from ..orchestration.graph import TrialSummary, run_graph
+from ..orchestration.launcher import GraphError, graph_nodes
+from ..orchestration.recording import Recording
 from ..wire import topics
 from .arguments import directory, domain_id
 from .simulate import add_config_arguments, config_from_args, print_report
+from .therapy import add_therapy_arguments, run_session_graph, uses_therapy
 
 
 def register(sub: Any) -> None:
@@ -54,7 +60,6 @@ def register(sub: Any) -> None:
                         "run; with --patient, SESSION (the id the stopped run printed, or vN) "
                         "says which unfinished session to continue")
     parser.add_argument("--no-store", action="store_true", help="do not save the trials")
-    from .therapy import add_therapy_arguments
 
     add_therapy_arguments(parser)
     parser.add_argument("--plant", choices=("simulator", "mujoco"), default="simulator",
@@ -78,24 +83,9 @@ def _store_root(args: argparse.Namespace) -> Path | None:
     return (Path(".exo-ilc") / "runs" / stamp / "store").resolve()
 
 
-def _check_store(config: Config, resume: bool) -> int:
-    """Before any node starts: trials already stored for this run (an error without
-    ``resume``)."""
-    from ..core.persistence.store import RunStore
-    from ..core.reference.build import build_reference
-
-    store = RunStore(config["store.directory"], config, build_reference(config))
-    if store.completed and not resume:
-        raise ConfigError("--store", f"{store.directory} already holds {store.completed} "
-                          "trials of this run; add --resume to continue it or use another "
-                          "store")
-    return store.completed
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the graph once per mass uncertainty and report."""
 
-    from ..orchestration.launcher import GraphError
 
     if args.no_bag and (args.bag_dir is not None or args.isolated_recorder):
         given = "--bag-dir" if args.bag_dir is not None else "--isolated-recorder"
@@ -109,7 +99,6 @@ def run(args: argparse.Namespace) -> int:
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     trials = config["max_trials"]
     root = _store_root(args)
-    from .therapy import run_session_graph, uses_therapy
 
     if isinstance(args.resume, str) and not uses_therapy(args):
         raise ConfigError("--resume", f"takes a session ({args.resume!r}) only with --patient")
@@ -134,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
         if root is not None:
             run_config = run_config.replace({"store.directory": str(root),
                                              "store.resume": bool(args.resume)})
-            done = _check_store(run_config, args.resume)
+            done = stored_trials(run_config, args.resume)
             print(f"store: {root}" + (f" (resuming after trial {done})" if done else ""),
                   file=sys.stderr, flush=True)
         try:
@@ -168,9 +157,6 @@ def announce_graph(bar: Any, bag: Path | None) -> Callable[[Any], None]:
 def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
              trials: int) -> RunSummary:
     """One graph run (one mass uncertainty)."""
-    from ..orchestration.graph import TrialSummary, run_graph
-    from ..orchestration.launcher import graph_nodes
-    from ..orchestration.recording import Recording
 
     config = run_config
     nodes = graph_nodes(args.plant, config["protocol"])
@@ -195,7 +181,6 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
                                    on_start=announce_graph(bar, recording.path))
             bar.write(f"bag: {recording.path}", file=sys.stderr)
             result.summary.extra["bag"] = str(recording.path)
-    from ..core.programs.metrics import TrialMetrics
 
     names = config["joint_names"]
     filed = [TrialMetrics.from_summary(s.trial, s.values, names) for s in result.summaries]

@@ -9,7 +9,10 @@ from typing import Any
 from tqdm import tqdm
 
 from ..analysis.report import format_iterations, format_long_run, format_trial_table, write_json
+from ..bag import BagError, read_bag, run_name, unique_path, write_run
+from ..bag.replay import replay
 from ..core.params.config import Config
+from ..core.programs.metrics import config_metrics
 from ..core.session.learning_session import run_trials
 from ..core.session.summary import RunSummary
 from .arguments import (
@@ -20,6 +23,7 @@ from .arguments import (
     json_file,
     parameter,
 )
+from .therapy import add_therapy_arguments, simulate_session, uses_therapy
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
@@ -70,7 +74,6 @@ def register(sub: Any) -> None:
                         "the bag's config, mass uncertainty, trial count and live parameter "
                         "changes (at the trials they took effect), then compare every trial "
                         "with the bag (exit 1 if any differs)")
-    from .therapy import add_therapy_arguments
 
     add_therapy_arguments(parser)
     parser.set_defaults(func=simulate)
@@ -82,8 +85,6 @@ REPLAY_EXCLUDES = ("config", "scenario", "mass_uncertainty", "trials", "law", "s
 
 def replay_bag(args: argparse.Namespace) -> int:
     """--replay BAG: the recorded run again, the report, and the comparison with the bag."""
-    from ..bag import BagError, read_bag
-    from ..bag.replay import replay
 
     given = [f"--{name.replace('_', '-')}" for name in REPLAY_EXCLUDES
              if getattr(args, name) not in (None, False)]
@@ -124,7 +125,6 @@ def simulate(args: argparse.Namespace) -> int:
         print("exo-ilc simulate: error: --resume needs --store DIR", file=sys.stderr)
         return 2
     config = config_from_args(args)
-    from .therapy import simulate_session, uses_therapy
 
     if uses_therapy(args):
         _, runs = simulate_session(args, config)
@@ -144,7 +144,6 @@ def simulate(args: argparse.Namespace) -> int:
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
         if args.json:  # the therapy metrics of every trial (core/metrics.py)
-            from ..core.programs.metrics import config_metrics
 
             measured = config.replace({"mass_uncertainty": delta})
             runs[-1].extra["metrics"] = [config_metrics(r, measured).to_json()
@@ -153,8 +152,6 @@ def simulate(args: argparse.Namespace) -> int:
             for note in notes:
                 print(f"delta {delta:g}, learning from trial {trial}: {note}", file=sys.stderr)
         if args.bag:
-            from ..bag import run_name, unique_path, write_run
-
             path = unique_path(args.bag, run_name("sim", result.law, delta))
             print(f"bag: {write_run(path, config, result)}", file=sys.stderr)
     print_report(args, config, runs)

@@ -10,7 +10,9 @@ from typing import Any
 
 from tqdm import tqdm
 
+from ..analysis.figures import save
 from ..analysis.study import format_study_table, run_cells, write_study_json
+from ..analysis.study_figure import study_figure
 from ..core.errors import ConfigError
 from ..core.programs.study import (
     SHIPPED_LAWS,
@@ -96,8 +98,5 @@ def study(args: argparse.Namespace) -> int:
         write_study_json(args.json, setup, rows, results)
         print(f"wrote {args.json}")
     if args.figure:
-        from ..analysis.figures import save
-        from ..analysis.study_figure import study_figure
-
         print(f"wrote {save(study_figure(rows), args.figure)}")
     return 0

@@ -11,13 +11,23 @@ from typing import Any
 
 from tqdm import tqdm
 
+from ..analysis import session_report as keys
 from ..analysis.therapy import format_session_metrics
+from ..bag import run_name, unique_path, write_run
 from ..core.errors import ConfigError
+from ..core.loop.patient import PatientModel
+from ..core.persistence.files import write_json_atomic
 from ..core.persistence.profiles import ProfileBook
+from ..core.persistence.store import RunStore
+from ..core.programs.metrics import config_metrics
 from ..core.programs.therapy import ExerciseResult, prepare, profiles_root, run_exercise, session_id
+from ..core.reference.build import build_reference
 from ..core.reference.exercise import exercises_path, load_book
+from ..core.session.learning_session import stored_trials
 from ..core.session.summary import RunSummary
+from ..orchestration.launcher import GraphError
 from .arguments import directory, nonempty
+from .therapy_resume import Step, resume_command, resumed_steps, stored_summary
 
 
 def add_therapy_arguments(parser: argparse.ArgumentParser) -> None:
@@ -101,8 +111,6 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
         print(f"profile: {book.directory(args.patient, name)} v{done.version} (the patient's "
               f"session {done.config['patient.session']} of {name})", file=sys.stderr)
         if args.bag:
-            from ..bag import run_name, unique_path, write_run
-
             path = unique_path(args.bag, run_name(f"sim_{args.patient}_{name}", done.result.law,
                                                   done.result.mass_uncertainty))
             write_run(path, done.config, done.result, metrics=done.metrics,
@@ -116,7 +124,6 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
 
 def therapy_custom_data(done: ExerciseResult, session: str) -> dict[str, str]:
     """The bag's custom data naming the patient, exercise, session and profile versions."""
-    from ..analysis import session_report as keys
 
     return {keys.PATIENT: done.patient, keys.EXERCISE: done.exercise, keys.SESSION: session,
             keys.PROFILE_STARTED_FROM: str(done.started_from or ""),
@@ -131,15 +138,9 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
     was stopped, so a killed session keeps what it learned; it then prints the command that
     resumes exactly this session. ``--resume [SESSION]`` continues it (its unfinished
     versions, the same session numbers, so the same store keys: cli/therapy_resume.py)."""
-    from ..core.loop.patient import PatientModel
-    from ..core.persistence.store import RunStore
-    from ..core.reference.build import build_reference
-    from ..orchestration.launcher import GraphError
-    from .therapy_resume import Step, resume_command, resumed_steps, stored_summary
 
     if args.mass_uncertainty and len(args.mass_uncertainty) > 1:
         raise ConfigError("--mass-uncertainty", "one value with --patient (one patient's arm)")
-    from .run import _check_store
 
     if args.mass_uncertainty:
         config = config.replace({"mass_uncertainty": args.mass_uncertainty[0]})
@@ -162,7 +163,7 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
             continue
         item = step.prepared
         version = step.reopen or book.next_version(args.patient, step.name, item.start)
-        _check_store(item.config.replace({
+        stored_trials(item.config.replace({
             "max_trials": step.trials or item.config["max_trials"],
             "store.directory": str(store_root), "patient.session": version}), args.resume)
     runs: list[RunSummary] = []
@@ -228,7 +229,6 @@ def _profile_from_store(writer: Any, config: Any, stored: list[Any],
                         count: int) -> list[Any] | None:
     """Metrics of the stored trials and the profile version from the last one (None: no trial
     completed, nothing written)."""
-    from ..core.programs.metrics import config_metrics
 
     if not stored:
         return None
@@ -247,8 +247,6 @@ node does not know them)."""
 
 def _write_sidecar(bag: Path, patient: str, exercise: str, session: str,
                    started_from: int | None, version: int) -> None:
-    from ..core.persistence.files import write_json_atomic
-
     if bag.is_dir():
         write_json_atomic(bag / SIDECAR, {"patient": patient, "exercise": exercise,
                                           "session": session, "profile_started_from":

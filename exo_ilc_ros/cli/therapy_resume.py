@@ -21,8 +21,11 @@ from typing import Any
 from ..core.errors import ProfileError
 from ..core.params.config import Config
 from ..core.persistence.profiles import ProfileBook
+from ..core.persistence.store import RunStore
+from ..core.programs.metrics import config_metrics
 from ..core.programs.therapy import PreparedExercise, prepare
 from ..core.reference.build import build_reference
+from ..core.session.result import RunResult
 from ..core.session.summary import RunSummary
 
 RUN_STORE = "run_store"
@@ -166,9 +169,6 @@ def stored_summary(step: Step, store: Path) -> RunSummary | None:
     """The report of an exercise its session completed before it was stopped (``step.done``),
     from the trials its run store holds, as the uninterrupted run reported it (None: the
     store no longer holds them)."""
-    from ..core.persistence.store import RunStore
-    from ..core.programs.metrics import config_metrics
-    from ..core.session.learning_session import RunResult
 
     entry = step.done or {}
     cfg = step.prepared.config.replace({

@@ -10,8 +10,9 @@ reader of bags never loads numba.
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
+
+from .. import load_public
 
 ROOMS = ("params", "arm", "reference", "loop", "learning", "convergence", "sim", "persistence",
          "session", "protocol", "programs")
@@ -59,8 +60,8 @@ _WHERE = {
     "QuinticTrajectory": ".reference.trajectory",
     "SampledReference": ".reference.trajectory",
     "LearningSession": ".session.learning_session",
-    "RunResult": ".session.learning_session",
-    "StopReason": ".session.learning_session",
+    "RunResult": ".session.result",
+    "StopReason": ".session.result",
     "TrialConclusion": ".session.learning_session",
     "run_trials": ".session.learning_session",
     "Experiment": ".sim.experiment",
@@ -72,12 +73,7 @@ __all__ = sorted(_WHERE)
 
 def __getattr__(name: str) -> Any:
     """Load a public name's module on first use (PEP 562)."""
-    module = _WHERE.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module, __name__), name)
-    globals()[name] = value
-    return value
+    return load_public(__name__, _WHERE, name, globals())
 
 
 def __dir__() -> list[str]:

@@ -37,6 +37,7 @@ from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
+from .. import __version__
 from ..bag.provenance import (
     RECORDED_BY,
     RUN_NAME,
@@ -51,7 +52,8 @@ from ..core.params.config import load_config
 from ..wire import topics
 from ..wire.protocol import int_value, key_values
 from ..wire.qos import RECORDER_DEPTH, TRANSIENT_LOCAL_TOPICS, offered_qos
-from .common import EVENTS_QOS, Inbox, diagnostic_array, receive_time, run_nodes, status, wall_clock
+from .common import EVENTS_QOS, Inbox, receive_time, run_nodes, wall_clock
+from .diagnostics import diagnostic_array, status
 
 NAME = "bag_recorder"
 READY_TOPICS = (topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
@@ -103,8 +105,6 @@ class BagRecorder(Node):
             config = load_config(config_file)
             custom = provenance_data(config, recorded_by=NAME, run_name=self.run_name)
         else:
-            from .. import __version__
-
             custom[VERSION] = __version__
             self.get_logger().warning("no config_file given: the bag will not hold the run's "
                                       "config")

@@ -36,16 +36,8 @@ from ..wire import topics
 from ..wire.cdr import float64_array
 from ..wire.protocol import trial_of_frame
 from ..wire.publishers import max_bytes
-from .common import (
-    DIAGNOSTICS_QOS,
-    SAMPLES_QOS,
-    SchemaParameters,
-    diagnostic_array,
-    spin,
-    stamp_ns,
-    status,
-    wall_clock,
-)
+from .common import DIAGNOSTICS_QOS, SAMPLES_QOS, spin, wall_clock
+from .diagnostics import diagnostic_array, stamp_ns, status
 from .guard import Health, JointStateGate, Rejections, rejections_check
 from .homing_control import HomingControl
 from .identified import (
@@ -56,6 +48,7 @@ from .identified import (
     decodes,
     gate_classifier,
 )
+from .parameters import SchemaParameters
 from .realtime import LoopPriority
 
 NAME = schema.CONTROLLER
@@ -167,6 +160,7 @@ class ComputedTorqueController(Node):
         self.trial = trial
         self.t0_ns = stamp_ns(msg.header.stamp)
         self.aborted_at = -1
+        self.step.begin_trial()
         self.trial_trips = 0
         self.holding = False
         self.watchdog.disarm()
@@ -215,22 +209,16 @@ class ComputedTorqueController(Node):
             self.watchdog.feed(time.monotonic_ns())
             if self.watchdog.tripped and not self.holding:
                 self._trip()
-        if self.aborted_at < 0 and not self.holding and \
-                self.step.outside(self.q_ref[i], self.q):
+        if self.step.sample(i, self.feedforward[i], self.q_ref[i], self.qd_ref[i], self.q,
+                            self.qd, self.holding):
             self.aborted_at = i
-            self.step.hold_at(self.q)
             self.aborted_trials.append(self.trial)
             self.get_logger().error(
                 f"trial {self.trial}: |e| left the error envelope at sample {i} "
                 f"(|e| = {np.abs(self.q_ref[i] - self.q).tolist()}, envelope "
                 f"{self.step.envelope.tolist()}); trial aborted, safe hold commanded")
             self._publish_health()
-        if self.aborted_at >= 0 or self.holding:
-            effort = self.step.hold(self.q, self.qd)
-        else:
-            effort = self.step(self.feedforward[i], self.q_ref[i], self.qd_ref[i], self.q,
-                               self.qd)
-        self.command_pub.publish(float64_array(effort))
+        self.command_pub.publish(float64_array(self.step.effort))
         self.latency_ns[self.latency_count % LATENCY_WINDOW] = time.perf_counter_ns() - received
         self.latency_count += 1
         self.steps += 1

@@ -29,7 +29,7 @@ from ..wire.cdr import (
     read_joint_state,
     read_joint_state_full,
 )
-from .common import status
+from .diagnostics import status
 
 LEVEL_NAMES = {DiagnosticStatus.OK: "OK", DiagnosticStatus.WARN: "WARN",
                DiagnosticStatus.ERROR: "ERROR"}

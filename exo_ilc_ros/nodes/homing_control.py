@@ -1,4 +1,5 @@
-"""The computed-torque controller's binding of :class:`core.homing.HomingController`
+"""The computed-torque controller's binding of
+:class:`exo_ilc_ros.core.protocol.homing.HomingController`
 (``protocol: homing``): every /joint_states sample gets an effort (homing, the trial, or the
 safe hold between trials, so a real arm is never left with a stale command), and the
 controller's reports go to /diagnostics on ``computed_torque_controller/trial``:
@@ -13,26 +14,58 @@ controller's reports go to /diagnostics on ``computed_torque_controller/trial``:
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 
+from ..core.loop.controller import GuardedControlStep
+from ..core.loop.safety import Watchdog
 from ..core.params.validation import FeedforwardProfile
 from ..core.protocol.homing import ControllerEvent, ControllerMode, HomingController, HomingSettings
 from ..wire import topics
 from ..wire.cdr import float64_array
-from .common import diagnostic_array, status
+from .diagnostics import diagnostic_array, status
+from .guard import Health, JointStateGate
+from .parameters import SchemaParameters
 
-if TYPE_CHECKING:
-    from .computed_torque_controller import ComputedTorqueController
+
+class ControllerNode(Protocol):
+    """What homing needs of the controller node
+    (:class:`exo_ilc_ros.nodes.computed_torque_controller.ComputedTorqueController`): its step,
+    gate, watchdog, health and publishers, and the trial's state it reports."""
+
+    params: SchemaParameters
+    step: GuardedControlStep
+    gate: JointStateGate
+    watchdog: Watchdog
+    health: Health
+    command_pub: Any
+    diagnostics_pub: Any
+    q: np.ndarray
+    qd: np.ndarray
+    holding: bool
+    steps: int
+    trial: int
+    t0_ns: int
+    aborted_at: int
+    trial_trips: int
+    aborted_trials: list[int]
+
+    def get_logger(self) -> Any: ...
+
+    def get_name(self) -> str: ...
+
+    def _trip(self) -> None: ...
+
+    def _publish_health(self) -> None: ...
 
 
 class HomingControl:
     """Homing, trial and hold for one controller node (``node``: its step, gate, watchdog
     and publishers)."""
 
-    def __init__(self, node: ComputedTorqueController, period: float, samples: int) -> None:
+    def __init__(self, node: ControllerNode, period: float, samples: int) -> None:
         self.node = node
         config = node.params.config
         self.driver = HomingController(node.step, HomingSettings.from_config(config), period,

@@ -34,8 +34,19 @@ from rclpy.type_support import check_is_valid_msg_type
 from rclpy.utilities import get_rmw_implementation_identifier
 from rclpy.waitable import NumberOfEntities, Waitable
 
-from ..core.params.validation import Cause
-from ..wire.publishers import PUBLISHER_OF, TRUSTED, UNKNOWN, Endpoint, PublisherCheck, qualified
+from ..core.params.validation import Cause, Rejection, validate_effort_command
+from ..wire import topics
+from ..wire.cdr import CdrError, read_float64_array
+from ..wire.publishers import (
+    PUBLISHER_OF,
+    TRUSTED,
+    UNKNOWN,
+    Endpoint,
+    PublisherCheck,
+    max_bytes,
+    qualified,
+    status_owner,
+)
 from .guard import Rejections
 
 TRUSTED_READER_QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL,
@@ -437,8 +448,6 @@ class TrustedInput(Admission):
 
 def effort_classifier(rejections: Rejections, joints: int) -> Callable[[bytes], bool]:
     """``classify`` for effort commands: decodable, one finite value per joint."""
-    from ..core.params.validation import Rejection, validate_effort_command
-    from ..wire.cdr import CdrError, read_float64_array
 
     unbounded = [float("inf")] * joints
 
@@ -509,9 +518,6 @@ class StatusAdmission:
     supervisor's container at shut-down.)"""
 
     def __init__(self, node: Node, rejections: Rejections) -> None:
-        from ..wire import topics
-        from ..wire.publishers import max_bytes
-
         self.node = node
         self.rejections = rejections
         self.limit = max_bytes(topics.DIAGNOSTICS, 0, 0)
@@ -522,7 +528,6 @@ class StatusAdmission:
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.serialization import deserialize_message
 
-        from ..wire.publishers import status_owner
 
         if len(raw) > self.limit:
             self.rejections.reject_cause(Cause.OVERSIZED, f"/diagnostics: {len(raw)} bytes, "

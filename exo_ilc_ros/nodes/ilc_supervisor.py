@@ -32,21 +32,12 @@ from ..core.session.learning_session import TrialConclusion
 from ..wire import topics
 from ..wire.protocol import int_value
 from ..wire.publishers import max_bytes
-from .common import (
-    DIAGNOSTICS_QOS,
-    EVENTS_QOS,
-    LATCHED_QOS,
-    Inbox,
-    SchemaParameters,
-    diagnostic_array,
-    spin,
-    status,
-    values_of,
-    wall_clock,
-)
+from .common import DIAGNOSTICS_QOS, EVENTS_QOS, LATCHED_QOS, Inbox, spin, wall_clock
+from .diagnostics import diagnostic_array, status, values_of
 from .guard import Health, JointStateGate, Rejections, rejections_check
 from .identified import STATUS_READER_QOS, Admission, StatusAdmission, gate_classifier
 from .messages import feedforward_message, trial_summary
+from .parameters import SchemaParameters
 
 NAME = schema.SUPERVISOR
 PLANT_PARAMETERS = [p.name for p in schema.PARAMETERS if p.section == schema.PLANT]

@@ -16,7 +16,7 @@ from ..core.reference.trajectory import SampledReference
 from ..core.session.learning_session import TrialConclusion
 from ..wire import topics
 from ..wire.protocol import feedforward_frame, summary_values
-from .common import doubles, status
+from .diagnostics import doubles, status
 
 
 def feedforward_message(reference: SampledReference, feedforward: np.ndarray, trial: int,

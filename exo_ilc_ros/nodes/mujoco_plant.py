@@ -33,20 +33,15 @@ from ..core.loop.trial import period_ns
 from ..core.params import schema
 from ..core.params.validation import Cause, Rejection, validate_effort_command
 from ..core.sim.experiment import Experiment
+from ..core.sim.mujoco_arm import MujocoArm, effects_not_simulated
 from ..wire import topics
 from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
 from ..wire.publishers import max_bytes
-from .common import (
-    CLOCK_QOS,
-    DIAGNOSTICS_QOS,
-    SAMPLES_QOS,
-    SchemaParameters,
-    diagnostic_array,
-    spin,
-    wall_clock,
-)
+from .common import CLOCK_QOS, DIAGNOSTICS_QOS, SAMPLES_QOS, spin, wall_clock
+from .diagnostics import diagnostic_array
 from .guard import Health, Rejections, effort_limit_reasons, rejections_check
 from .identified import TRUSTED_READER_QOS, TrustedInput, effort_classifier
+from .parameters import SchemaParameters
 from .realtime import plant_scheduling
 
 NAME = schema.PLANT
@@ -229,7 +224,6 @@ class MujocoPlant(FreeRunningPlant):
 
     def make_stepper(self) -> Any:
         """MuJoCo's arm of this configuration."""
-        from ..core.sim.mujoco_arm import MujocoArm, effects_not_simulated
 
         config = self.params.config
         if config["dynamics"] != "full":

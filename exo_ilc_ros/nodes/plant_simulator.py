@@ -42,17 +42,8 @@ from ..wire import topics
 from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
 from ..wire.protocol import trial_of_frame
 from ..wire.publishers import max_bytes
-from .common import (
-    CLOCK_QOS,
-    DIAGNOSTICS_QOS,
-    SAMPLES_QOS,
-    SchemaParameters,
-    diagnostic_array,
-    spin,
-    stamp_ns,
-    status,
-    wall_clock,
-)
+from .common import CLOCK_QOS, DIAGNOSTICS_QOS, SAMPLES_QOS, spin, wall_clock
+from .diagnostics import diagnostic_array, stamp_ns, status
 from .guard import Health, Rejections, effort_limit_reasons, rejections_check
 from .identified import (
     FEEDFORWARD_READER_QOS,
@@ -62,6 +53,7 @@ from .identified import (
     decodes,
     effort_classifier,
 )
+from .parameters import SchemaParameters
 from .realtime import plant_scheduling
 
 NAME = schema.PLANT

@@ -20,7 +20,10 @@ from typing import Any
 import numpy as np
 
 from ..core.params.config import Config
+from ..core.persistence.store import RunStore
+from ..core.reference.build import build_reference
 from ..core.session.summary import RunSummary
+from ..nodes.common import EVENTS_QOS
 from ..wire import topics
 from ..wire.protocol import int_value, per_joint, summary_values
 from .launcher import (
@@ -74,8 +77,6 @@ def stored_summaries(config: Config) -> list[TrialSummary]:
     as trial summaries: what a resumed run restored rather than ran (empty without a store)."""
     if not config["store.directory"]:
         return []
-    from ..core.persistence.store import RunStore
-    from ..core.reference.build import build_reference
 
     store = RunStore(config["store.directory"], config, build_reference(config))
     joints = config["joint_names"]
@@ -141,7 +142,6 @@ class GraphSession:
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.experimental import EventsExecutor
 
-        from ..nodes.common import EVENTS_QOS
 
         os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE",
                               self.env["ROS_AUTOMATIC_DISCOVERY_RANGE"])

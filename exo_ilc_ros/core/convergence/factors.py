@@ -229,8 +229,8 @@ def _analyze_norm_optimal(config: Config, delta: float, frequency: np.ndarray,
                           q_filter: QFilter | None, q: np.ndarray | None,
                           lifted_trials: int) -> LoopAnalysis:
     """The factor of (NO2) (:func:`.norm_optimal_robustness.frequency_factor`) per joint; its
-    memory is the feed-forward. ``lifted_trials`` > 0 adds the whole-arm lifted map's check (joints are
-    coupled in the ``linearised`` model: the same check on every joint)."""
+    memory is the feed-forward. ``lifted_trials`` > 0 adds the whole-arm lifted map's check
+    (joints are coupled in the ``linearised`` model: the same check on every joint)."""
 
     plain = None
     if lifted_trials > 0:

@@ -89,6 +89,63 @@ def outside_envelope(q_ref: np.ndarray, q: np.ndarray, envelope: np.ndarray) -> 
     return False
 
 
+ABORT = 0
+"""Entry of a guard state (int64 array, :func:`guard_state`): the sample the trial was aborted
+at (-1: not aborted)."""
+HOLD_COUNT = 1
+"""Entry of a guard state: hold commands since the hold pose was latched (the ramp's count,
+:func:`hold.hold_gains_into`)."""
+
+
+def guard_state() -> np.ndarray:
+    """A fresh guard state: not aborted, no hold command yet."""
+    return np.array([-1, 0], dtype=np.int64)
+
+
+@njit(cache=True, error_model="numpy")
+def hold_into(state: np.ndarray, q_hold: np.ndarray, q: np.ndarray, qd: np.ndarray,
+              kp: np.ndarray, kd: np.ndarray, hold_kp: np.ndarray, hold_kd: np.ndarray,
+              hold_ramp: int, nominal: tuple, effort_limit: np.ndarray, gains: np.ndarray,
+              ws: tuple, u_out: np.ndarray, effort_out: np.ndarray) -> None:
+    """One safe-hold command around ``q_hold``: its gains ramped from the controller's to the
+    hold's over ``hold_ramp`` samples (:func:`hold.hold_gains_into`, counted in
+    ``state[HOLD_COUNT]``), then :func:`safe_hold_into`."""
+    hold_gains_into(state[HOLD_COUNT], hold_ramp, kp, kd, hold_kp, hold_kd, gains)
+    state[HOLD_COUNT] += 1
+    safe_hold_into(q_hold, q, qd, gains[0], gains[1], nominal, effort_limit, ws, u_out,
+                   effort_out)
+
+
+@njit(cache=True, error_model="numpy")
+def guarded_control_into(i: int, state: np.ndarray, holding: bool, u_ff: np.ndarray,
+                         q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray, qd: np.ndarray,
+                         kp: np.ndarray, kd: np.ndarray, nominal: tuple,
+                         effort_limit: np.ndarray, envelope: np.ndarray, hold_kp: np.ndarray,
+                         hold_kd: np.ndarray, hold_ramp: int, q_hold: np.ndarray,
+                         gains: np.ndarray, ws: tuple, u_out: np.ndarray,
+                         effort_out: np.ndarray) -> bool:
+    """The controller's rule at sample ``i`` of a trial, the one place it is written (the
+    in-process trial kernel, the controller node and homing all call it): the first sample
+    outside the error envelope (:func:`outside_envelope`) aborts the trial (``state[ABORT] =
+    i``) and latches the hold pose there; from then on, and while ``holding`` (a watchdog trip,
+    whose pose the caller latched), the safe hold (:func:`hold_into`); otherwise eq (11) and
+    the computed torque of eq (16) (:func:`control_into`). Returns True at the abort sample."""
+    aborted_now = False
+    if state[ABORT] < 0 and not holding and outside_envelope(q_ref, q, envelope):
+        state[ABORT] = i
+        state[HOLD_COUNT] = 0
+        for j in range(q.shape[0]):
+            q_hold[j] = q[j]
+        aborted_now = True
+    if state[ABORT] >= 0 or holding:
+        hold_into(state, q_hold, q, qd, kp, kd, hold_kp, hold_kd, hold_ramp, nominal,
+                  effort_limit, gains, ws, u_out, effort_out)
+    else:
+        control_into(u_ff, q_ref, qd_ref, q, qd, kp, kd, nominal, effort_limit, ws, u_out,
+                     effort_out)
+    return aborted_now
+
+
 @njit(cache=True, error_model="numpy")
 def computed_torque_kernel(q: np.ndarray, qd: np.ndarray, u: np.ndarray, nominal: tuple,
                            effort_limit: np.ndarray) -> np.ndarray:
@@ -135,10 +192,10 @@ class ControlStep:
 
 
 class GuardedControlStep(ControlStep):
-    """:class:`ControlStep` with the error envelope and the safe hold, one sample at a time,
-    the arithmetic of :func:`trial.simulate_trial_guarded`: at the first sample outside the
-    envelope (:meth:`outside`) the caller latches the hold pose (:meth:`hold_at`) and commands
-    :meth:`hold` from then on."""
+    """:class:`ControlStep` with the error envelope and the safe hold, one sample at a time:
+    :meth:`sample` is the rule of :func:`guarded_control_into` (the in-process trial's), with
+    the state of the trial begun by :meth:`begin_trial`; :meth:`hold_at` and :meth:`hold` the
+    safe hold outside a trial's samples (between trials, a watchdog trip)."""
 
     def __init__(self, experiment: LoopSetup) -> None:
         super().__init__(experiment)
@@ -148,8 +205,32 @@ class GuardedControlStep(ControlStep):
         self._hold_kd = experiment.hold_kd
         self._hold_ramp = experiment.hold_ramp
         self._hold_gains = np.empty((2, self.q_hold.shape[0]))
-        self.hold_samples = 0
-        """Hold commands since :meth:`hold_at` (the ramp's sample count, :mod:`.hold`)."""
+        self.state = guard_state()
+        """The trial's guard state (:data:`ABORT`, :data:`HOLD_COUNT`)."""
+
+    @property
+    def aborted_at(self) -> int:
+        """The sample the trial begun last was aborted at (-1: not aborted)."""
+        return int(self.state[ABORT])
+
+    @property
+    def hold_samples(self) -> int:
+        """Hold commands since the hold pose was latched (the ramp's count, :mod:`.hold`)."""
+        return int(self.state[HOLD_COUNT])
+
+    def begin_trial(self) -> None:
+        """A trial starts: not aborted."""
+        self.state[ABORT] = -1
+
+    def sample(self, i: int, u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray,
+               q: np.ndarray, qd: np.ndarray, holding: bool = False) -> bool:
+        """The effort at trial sample ``i`` into :attr:`effort` by the rule of
+        :func:`guarded_control_into`; True if this sample aborted the trial."""
+        return bool(guarded_control_into(
+            i, self.state, holding, u_ff, q_ref, qd_ref, q, qd, self._kp, self._kd,
+            self._nominal, self._limit, self.envelope, self._hold_kp, self._hold_kd,
+            self._hold_ramp, self.q_hold, self._hold_gains, self._ws, self.control_input,
+            self.effort))
 
     def outside(self, q_ref: np.ndarray, q: np.ndarray) -> bool:
         """True if any |q_ref_j - q_j| exceeds the envelope (or is not finite)."""
@@ -158,15 +239,12 @@ class GuardedControlStep(ControlStep):
     def hold_at(self, q: np.ndarray) -> None:
         """Latch the pose the safe hold keeps (its gains ramp from the controller's again)."""
         self.q_hold[:] = q
-        self.hold_samples = 0
+        self.state[HOLD_COUNT] = 0
 
     def hold(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """The safe-hold effort at (q, qdot) around the latched pose (clamped), one call per
-        sample: its gains ramp over ``safety.hold_ramp`` (:func:`hold.hold_gains_into`)."""
-        gains = self._hold_gains
-        hold_gains_into(self.hold_samples, self._hold_ramp, self._kp, self._kd, self._hold_kp,
-                        self._hold_kd, gains)
-        self.hold_samples += 1
-        safe_hold_into(self.q_hold, q, qd, gains[0], gains[1], self._nominal, self._limit,
-                       self._ws, self.control_input, self.effort)
+        sample: its gains ramp over ``safety.hold_ramp`` (:func:`hold_into`)."""
+        hold_into(self.state, self.q_hold, q, qd, self._kp, self._kd, self._hold_kp,
+                  self._hold_kd, self._hold_ramp, self._nominal, self._limit, self._hold_gains,
+                  self._ws, self.control_input, self.effort)
         return self.effort

@@ -16,8 +16,7 @@ from numba import njit
 from .. import _numba_cache  # noqa: F401  (sets numba's cache directory before any kernel)
 from ..arm.dynamics import workspace
 from ..reference.trajectory import SampledReference
-from .controller import control_into, outside_envelope, safe_hold_into
-from .hold import hold_gains_into
+from .controller import control_into, guarded_control_into, hold_into
 from .patient import measure_into, patient_period, start_state_into
 from .plant import clamp, rk4_period
 from .record import TrialRecord
@@ -79,7 +78,7 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
         held = applied
     q_hold = q.copy()
     gains = np.empty((2, n))
-    abort = -1
+    state = np.array([-1, 0], dtype=np.int64)  # controller.guard_state()
     for i in range(n_samples):
         if patient:
             q_true[i] = q
@@ -90,16 +89,9 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
             qd_log[i] = qd
         q_seen = q_log[i]
         qd_seen = qd_log[i]
-        if abort < 0 and outside_envelope(q_ref[i], q_seen, envelope):
-            abort = i
-            q_hold[:] = q_seen
-        if abort < 0:
-            control_into(u_ff[i], q_ref[i], qd_ref[i], q_seen, qd_seen, kp, kd, nominal,
-                         effort_limit, ws, u_log[i], effort_log[i])
-        else:
-            hold_gains_into(i - abort, hold_ramp, kp, kd, hold_kp, hold_kd, gains)
-            safe_hold_into(q_hold, q_seen, qd_seen, gains[0], gains[1], nominal, effort_limit,
-                           ws, u_log[i], effort_log[i])
+        guarded_control_into(i, state, False, u_ff[i], q_ref[i], qd_ref[i], q_seen, qd_seen,
+                             kp, kd, nominal, effort_limit, envelope, hold_kp, hold_kd,
+                             hold_ramp, q_hold, gains, ws, u_log[i], effort_log[i])
         if i + 1 < n_samples:
             for j in range(n):
                 applied[j] = clamp(effort_log[i, j], effort_limit[j])
@@ -110,7 +102,7 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
             else:
                 rk4_period(q, qd, applied, period, substeps, plant, nominal, mode, ws, stage,
                            extra[:2 * n])
-    return q_log, qd_log, u_log, effort_log, abort, q_true, qd_true
+    return q_log, qd_log, u_log, effort_log, state[0], q_true, qd_true
 
 
 @njit(cache=True, error_model="numpy")
@@ -156,14 +148,14 @@ def control_inputs(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: n
     effort = np.empty((n_samples, n))
     ws = workspace(n)
     gains = np.empty((2, n))
+    state = np.array([-1, 0], dtype=np.int64)  # controller.guard_state()
     for i in range(n_samples):
         if aborted_at < 0 or i < aborted_at:
             control_into(u_ff[i], q_ref[i], qd_ref[i], q[i], qd[i], kp, kd, nominal,
                          effort_limit, ws, u[i], effort[i])
         else:
-            hold_gains_into(i - aborted_at, hold_ramp, kp, kd, hold_kp, hold_kd, gains)
-            safe_hold_into(q[aborted_at], q[i], qd[i], gains[0], gains[1], nominal,
-                           effort_limit, ws, u[i], effort[i])
+            hold_into(state, q[aborted_at], q[i], qd[i], kp, kd, hold_kp, hold_kd, hold_ramp,
+                      nominal, effort_limit, gains, ws, u[i], effort[i])
     return u, effort
 
 

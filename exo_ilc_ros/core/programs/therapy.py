@@ -23,7 +23,8 @@ from ..params.config import Config
 from ..persistence.patient_states import PatientState, read_legacy
 from ..persistence.profiles import Profile, ProfileBook, ProfileWriter, check_name, default_root
 from ..reference.build import build_reference
-from ..session.learning_session import RunResult, TrialConclusion, run_trials
+from ..session.learning_session import TrialConclusion, run_trials
+from ..session.result import RunResult
 from .metrics import SessionMetrics, TrialMetrics, config_metrics, session_metrics
 
 

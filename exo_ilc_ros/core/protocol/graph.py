@@ -29,17 +29,7 @@ from ..reference.build import build_reference
 from ..session.learning_session import LIVE, LearningSession, TrialConclusion
 from ..sim.experiment import Experiment
 from .samples import TrialSamples
-
-STEP_TIMEOUT = 30.0
-"""Wall seconds a protocol step may take before the trial is discarded and run again."""
-ACK_RETRY = 0.25
-"""Wall seconds without the controller's acknowledgement of a pushed feed-forward before it is
-pushed again (a lost profile or acknowledgement costs a quarter second, not STEP_TIMEOUT)."""
-LATE_RERUNS = 3
-"""A real-time trial run again this many times in a row for late commands stops the run: the
-machine cannot keep this control rate (nothing stored is lost; resume at a lower rate)."""
-RECORDER_TIMEOUT = 5.0
-"""Wall seconds to wait for the recorder to file a trial before going on without it."""
+from .timing import ACK_RETRY, LATE_RERUNS, RECORDER_TIMEOUT, STEP_TIMEOUT
 
 
 class Phase(Enum):

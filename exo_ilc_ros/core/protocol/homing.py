@@ -289,6 +289,7 @@ class HomingController:
                 self.mode = ControllerMode.TRIAL
                 self.t0_ns = int(stamp_ns)
                 self.aborted_at, self.tripped, self.index = -1, False, -1
+                self.step.begin_trial()
                 events.append(ControllerEvent("homed", self.trial, stamp_ns))
             else:
                 return self._homing_effort(stamp_ns, q, qd, events), events
@@ -321,14 +322,11 @@ class HomingController:
         last = self.samples - 1
         i = min(max(i, 0), last)
         self.index = i
-        if self.aborted_at < 0 and not self.tripped and self.step.outside(self.q_ref[i], q):
+        if self.step.sample(i, self.feedforward[i], self.q_ref[i], self.qd_ref[i], q, qd,
+                            self.tripped):
             self.aborted_at = i
-            self.step.hold_at(q)
             events.append(ControllerEvent("aborted", self.trial, stamp_ns, i))
-        if self.aborted_at >= 0 or self.tripped:
-            effort = self.step.hold(q, qd)
-        else:
-            effort = self.step(self.feedforward[i], self.q_ref[i], self.qd_ref[i], q, qd)
+        effort = self.step.effort
         if i >= last:
             events.append(ControllerEvent("done", self.trial, stamp_ns, i))
             self.mode = ControllerMode.HOLD

@@ -25,13 +25,11 @@ from __future__ import annotations
 import copy
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from enum import Enum
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..convergence.bound import IterationsToBound, iterations_to_bound
 from ..errors import SafetyError, StoreError
 from ..learning.factory import build_law
 from ..learning.laws import FeedforwardUpdate, LearningLaw
@@ -45,6 +43,7 @@ from ..persistence.profiles import load_initial
 from ..persistence.store import RunStore, StoredTrial
 from ..reference.build import build_reference
 from ..sim.experiment import Experiment
+from .result import RunResult, StopReason
 
 LIVE = frozenset(p.name for p in schema.PARAMETERS if p.live)
 """Parameters that may change at a trial boundary."""
@@ -52,11 +51,20 @@ EXPERIMENT_KEYS = frozenset({"safety.error_envelope"})
 """Live parameters that change how a trial runs in-process (the rest change what is learned)."""
 
 
-class StopReason(Enum):
-    """Why a session is finished."""
+def refuse_stored(store: RunStore, resume: bool) -> int:
+    """The trials ``store`` already holds; without ``resume``, holding any is an error (nothing
+    is overwritten). The one rule for the in-process runner, the supervisor and ``exo-ilc run``
+    (which checks before any node starts, :func:`stored_trials`)."""
+    if store.completed and not resume:
+        raise StoreError(f"{store.directory}: already holds {store.completed} trials of this "
+                         "run; add --resume (store.resume) to continue it or use another store")
+    return store.completed
 
-    MAX_TRIALS = "max_trials"
-    SETTLED = "settled"
+
+def stored_trials(config: Config, resume: bool) -> int:
+    """:func:`refuse_stored` for the store a config names (``store.directory``)."""
+    return refuse_stored(RunStore(config["store.directory"], config, build_reference(config)),
+                         resume)
 
 
 @dataclass(frozen=True)
@@ -221,9 +229,7 @@ class LearningSession:
         continues after the trials it holds (up to ``max_trials``), which are returned. A store
         that holds trials without ``resume`` is an error: nothing is overwritten."""
         store = RunStore(root, self.config, self.reference)
-        if store.completed and not resume:
-            raise StoreError(f"{store.directory}: already holds {store.completed} trials of "
-                             "this run; resume it (--resume, store.resume) or use another store")
+        refuse_stored(store, resume)
         restored = store.load()[:self.config["max_trials"]]
         self.resume(restored)
         return store, restored
@@ -242,57 +248,6 @@ class LearningSession:
         if not self._custom_law:
             self.active_law = build_law(self.config)
         return changed
-
-
-@dataclass
-class RunResult:
-    """Every trial of one run and what was learned."""
-
-    mass_uncertainty: float
-    law: str
-    error_bound: float
-    records: list[TrialRecord] = field(default_factory=list)
-    final: FeedforwardUpdate | None = None
-    """The feed-forward learned from the last trial (what trial K+1 would use)."""
-    patient_memory: tuple[np.ndarray, np.ndarray] | None = None
-    """A learning virtual patient's fast and slow states after the run (None: none)."""
-    resumed: int = 0
-    """Trials restored from the store rather than run (0: none)."""
-    stop: StopReason | None = None
-    """Why the run ended (max_trials, or settled with ``stop_when_settled``)."""
-    applied: dict[int, dict[str, Any]] = field(default_factory=dict)
-    """Live changes per effective trial (the first trial run with them)."""
-    notes: dict[int, tuple[str, ...]] = field(default_factory=dict)
-    """What the law reported when it learned from a trial (e.g. active constraints), by trial."""
-
-    @property
-    def aborted(self) -> list[int]:
-        """Trial numbers aborted by the error envelope (nothing learned from them)."""
-        return [r.trial for r in self.records if r.aborted]
-
-    @property
-    def max_abs_errors(self) -> np.ndarray:
-        """(K, joints) table of max |e| per trial and joint."""
-        return np.array([r.max_abs_error for r in self.records])
-
-    def true_max_abs_errors(self) -> np.ndarray:
-        """(K, joints) table of the true max |e| per trial and joint (the plant's state; equal
-        to :attr:`max_abs_errors`, the measured one, without sensor effects)."""
-        return np.array([r.true_max_abs_error for r in self.records])
-
-    @property
-    def max_abs_feedforward(self) -> np.ndarray:
-        """(K, joints) table of max |u_ff| per trial and joint."""
-        return np.array([np.max(np.abs(r.feedforward), axis=0) for r in self.records])
-
-    @property
-    def max_abs_effort(self) -> np.ndarray:
-        """(K, joints) table of max |effort| per trial and joint."""
-        return np.array([np.max(np.abs(r.effort), axis=0) for r in self.records])
-
-    def iterations_to_bound(self) -> IterationsToBound:
-        """First and settled trial per joint with the true max |e| within ``error_bound``."""
-        return iterations_to_bound(self.true_max_abs_errors(), self.error_bound)
 
 
 def run_trials(config: Config, mass_uncertainty: float | None = None,

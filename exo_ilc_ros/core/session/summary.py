@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from ..convergence.bound import IterationsToBound, iterations_to_bound
-from .learning_session import RunResult
+from .result import RunResult
 
 
 @dataclass

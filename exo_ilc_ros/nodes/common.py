@@ -23,7 +23,8 @@ from rclpy.signals import SignalHandlerOptions
 from ..core.errors import ExoIlcError
 from ..wire import topics
 from . import parameters, realtime
-from .identified import IdentifiedSubscription, RawTaker
+from .identified import IdentifiedSubscription
+from .raw_take import RawTaker
 
 RCLError = rclpy_implementation.RCLError
 

@@ -18,6 +18,9 @@ No fast-math (not even fused multiply-add): whichever caller a kernel is compile
 same doubles come out, so the graph and the in-process runner agree bit for bit. The reference path
 (:func:`metric_terms`, :func:`christoffel_bias`: eq (5) through the Christoffel symbols) keeps
 its plain loops and is the independent check of the fast one.
+
+One module of ~500 lines on purpose: the fast path and its reference check are read side by side
+(each equation in both), and the kernels share the workspace's layout.
 """
 
 from __future__ import annotations

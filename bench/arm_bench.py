@@ -4,7 +4,7 @@
     .venv/bin/python -m bench.arm_bench [--trials 10] [--measure] [--robust-trials 300]
 
 (a) the engines in-process: wall time of one control period (10 RK4 sub-steps) of MuJoCo's arm
-    and of our plant (core/plant.py);
+    and of our plant (core/loop/plant.py);
 (b) the graph's lock-step rate within trials (control steps per second, median trial, from the
     supervisor's start and end events) in one run of this script: plant_simulator with its
     services, our simulator without them (free_running_plant, homing) and MuJoCo (homing);

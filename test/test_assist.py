@@ -1,4 +1,4 @@
-"""Assist-as-needed (core/assist.py) against hand-computed cases, with the Q-filter, and in
+"""Assist-as-needed (core/learning/assist.py) against hand-computed cases, with the Q-filter, and in
 analyze-loop's factor."""
 
 from __future__ import annotations

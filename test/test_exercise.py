@@ -1,4 +1,4 @@
-"""Exercises (core/exercise.py): piecewise quintics through rest points, the default exercise is
+"""Exercises (core/reference/exercise.py): piecewise quintics through rest points, the default exercise is
 the paper's quintic bit for bit, the shipped file loads, bad files are refused naming the key."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The safe hold's own gains (core/hold.py): its effort by hand, the ramp, the stability rule,
+"""The safe hold's own gains (core/loop/hold.py): its effort by hand, the ramp, the stability rule,
 and that it brings a spastic arm to rest after an abort where the controller's gains did not."""
 
 from __future__ import annotations

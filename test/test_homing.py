@@ -1,5 +1,5 @@
-"""Homing instead of a reset (core/homing.py) and the trial protocol without services
-(core/homing_protocol.py), without ROS: an arm that keeps its own clock (our RK4 plant or
+"""Homing instead of a reset (core/protocol/homing.py) and the trial protocol without services
+(core/protocol/homing_protocol.py), without ROS: an arm that keeps its own clock (our RK4 plant or
 MuJoCo) driven sample by sample by the controller's homing decisions, its samples and reports
 handed to the protocol as the nodes would."""
 

@@ -1,4 +1,4 @@
-"""The arm in MuJoCo (core/mujoco_arm.py) against the Rodriguez dynamics of core/dynamics.py:
+"""The arm in MuJoCo (core/sim/mujoco_arm.py) against the Rodriguez dynamics of core/arm/dynamics.py:
 an independent engine on the MJCF generated from the same config."""
 
 from __future__ import annotations

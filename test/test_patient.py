@@ -1,4 +1,4 @@
-"""The virtual patient (core/patient.py): each effect against a hand computation or an
+"""The virtual patient (core/loop/patient.py): each effect against a hand computation or an
 independent integrator, the node's plant stepper against the compiled trial, per-trial draws,
 measured vs true error, resume, validation, and graph == in-process under ``realistic``."""
 

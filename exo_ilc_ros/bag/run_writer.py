@@ -96,7 +96,7 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                 result.notes.get(k, ()))
             if metrics is not None:
                 values += metrics[k - 1].summary_values(names)
-            else:  # as the supervisor files them (core/metrics.py)
+            else:  # as the supervisor files them (core/programs/metrics.py)
                 values += metric_summary_values(record, measured, names)
             within = bool(np.all(record.max_abs_error <= result.error_bound))
             writer.write(topics.TRIAL_SUMMARY, end, messages.trial_summary(end, values, within))

@@ -143,7 +143,7 @@ def simulate(args: argparse.Namespace) -> int:
             result = run_trials(config, delta, trials, on_trial=progress, store=args.store,
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
-        if args.json:  # the therapy metrics of every trial (core/metrics.py)
+        if args.json:  # the therapy metrics of every trial (core/programs/metrics.py)
 
             measured = config.replace({"mass_uncertainty": delta})
             runs[-1].extra["metrics"] = [config_metrics(r, measured).to_json()

@@ -1,5 +1,5 @@
 """``exo-ilc simulate --patient ID --exercise NAME ...``: a therapy session in-process, each
-exercise starting from the patient's latest profile (core/therapy.py)."""
+exercise starting from the patient's latest profile (core/programs/therapy.py)."""
 
 from __future__ import annotations
 

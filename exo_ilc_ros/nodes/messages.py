@@ -49,6 +49,6 @@ def trial_summary(conclusion: TrialConclusion, joint_names: Sequence[str]) -> Di
                             None if record.true_position is None
                             else record.true_max_abs_error,
                             conclusion.update.notes if conclusion.learned else ())
-    values += metric_summary_values(record, config, joint_names)  # core/metrics.py
+    values += metric_summary_values(record, config, joint_names)  # core/programs/metrics.py
     level = DiagnosticStatus.OK if conclusion.within_bound else DiagnosticStatus.WARN
     return status(topics.SUMMARY_STATUS, f"trial {record.trial}", values, level, SUPERVISOR)

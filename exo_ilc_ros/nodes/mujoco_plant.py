@@ -1,4 +1,4 @@
-"""mujoco_plant: the arm simulated by MuJoCo (``core/mujoco_arm.py``), as the graph's plant,
+"""mujoco_plant: the arm simulated by MuJoCo (``core/sim/mujoco_arm.py``), as the graph's plant,
 without reset or start services: it behaves as an arm does, so the trials need ``protocol:
 homing``.
 
@@ -11,7 +11,7 @@ command held, and after ``safety.watchdog_periods`` periods of wall time without
 applies the safe hold around the pose of that moment instead, until commands come again.
 
 :class:`FreeRunningPlant` is the node with any stepper; ``free_running_plant`` runs it with our
-own simulator's RK4 (``core/plant.py``): our simulator as any arm, for ``protocol: homing``.
+own simulator's RK4 (``core/loop/plant.py``): our simulator as any arm, for ``protocol: homing``.
 Commands are checked and clamped as in ``plant_simulator``.
 """
 
@@ -83,7 +83,7 @@ class FreeRunningPlant(Node):
         self.last_command_ns = 0
         self.hold_pose: np.ndarray | None = None
         self.safe_hold = GuardedControlStep(self.experiment)
-        """The controller's safe hold (its gains and ramp, core/hold.py), latched at the trip."""
+        """The controller's safe hold (its gains and ramp, core/loop/hold.py), latched at the trip."""
         here = np.zeros(config.joints)  # load its kernels now, not at a trip
         self.safe_hold.hold_at(here)
         self.safe_hold.hold(here, here)
@@ -217,7 +217,7 @@ class FreeRunningPlant(Node):
 
 
 class MujocoPlant(FreeRunningPlant):
-    """The arm in MuJoCo (core/mujoco_arm.py): masses scaled by (1 + mass_uncertainty), RK4 at
+    """The arm in MuJoCo (core/sim/mujoco_arm.py): masses scaled by (1 + mass_uncertainty), RK4 at
     ``integration_step``."""
 
     engine = "mujoco"

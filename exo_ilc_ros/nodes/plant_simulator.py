@@ -92,7 +92,7 @@ class PlantSimulator(Node):
         self.hold_pose: np.ndarray | None = None
         """Real-time mode: the pose the plant's safe hold keeps after a watchdog trip."""
         self.safe_hold = GuardedControlStep(self.experiment)
-        """The controller's safe hold (its gains and ramp, core/hold.py), latched at the trip."""
+        """The controller's safe hold (its gains and ramp, core/loop/hold.py), latched at the trip."""
         here = np.zeros(config.joints)  # load its kernels now, not at a trip
         self.safe_hold.hold_at(here)
         self.safe_hold.hold(here, here)

@@ -97,7 +97,7 @@ def _name_rule(value: Any) -> str | None:
 
 MAS_GRADES = ("custom", "0", "1", "1+", "2", "3")
 """``patient.spasticity.mas_grade``: ``custom`` (the spasticity values given) or a Modified
-Ashworth grade (its preset, core/patient.py ``MAS_PRESETS``)."""
+Ashworth grade (its preset, core/loop/patient.py ``MAS_PRESETS``)."""
 
 
 def _fraction_rule(value: Any) -> str | None:
@@ -109,7 +109,7 @@ def _retention_rule(value: Any) -> str | None:
 
 
 def _patient_parameters() -> list[Parameter]:
-    """The virtual patient's effects (core/patient.py), plant_simulator section, all off by
+    """The virtual patient's effects (core/loop/patient.py), plant_simulator section, all off by
     default."""
     def p(name: str, kind: Kind, text: str, **rules: Any) -> Parameter:
         return Parameter(f"patient.{name}", PLANT, kind, text, **rules)
@@ -174,7 +174,7 @@ def _patient_parameters() -> list[Parameter]:
         p("initial.velocity_sd", Kind.DOUBLE, "trial-to-trial sd of qdot(0) (rad/s)",
           minimum=0.0),
         p("learning.gain", Kind.DOUBLE_ARRAY, "K_e: torque the patient learns per rad of the "
-          "true error of a trial (N m/rad; two-state model, core/patient.py); 0: no learning",
+          "true error of a trial (N m/rad; two-state model, core/loop/patient.py); 0: no learning",
           **joint),
         p("learning.fast_retention", Kind.DOUBLE, "A_f of the fast state x_f <- A_f x_f + "
           "B_f K_e e", minimum=0.0, extra_rule=_retention_rule),
@@ -238,7 +238,7 @@ PARAMETERS: tuple[Parameter, ...] = (
               strictly_positive=True),
     Parameter("exercise.name", SHARED, Kind.STRING,
               "the movement (reference) of every trial: paper_quintic (eq (14) from "
-              "trajectory.*) or an exercise of exercise.file (core/exercise.py)",
+              "trajectory.*) or an exercise of exercise.file (core/reference/exercise.py)",
               extra_rule=_name_rule),
     Parameter("exercise.file", SHARED, Kind.STRING,
               "the exercises file (rest points and durations per exercise, sessions); "
@@ -258,11 +258,11 @@ PARAMETERS: tuple[Parameter, ...] = (
               strictly_positive=True, live=True),
     Parameter("safety.hold_kp", SHARED, Kind.DOUBLE_ARRAY,
               "K_P of the safe hold (s^-2, through a_N(q) as control.kp): its stiffness about "
-              "the pose latched at an abort, a watchdog trip or a failed homing (core/hold.py)",
+              "the pose latched at an abort, a watchdog trip or a failed homing (core/loop/hold.py)",
               per_joint=True, minimum=0.0),
     Parameter("safety.hold_kd", SHARED, Kind.DOUBLE_ARRAY,
               "K_D of the safe hold (s^-1, as control.kd): its damping; with hold_kp it must be "
-              "stable at control.period with the command one period late (core/hold.py)",
+              "stable at control.period with the command one period late (core/loop/hold.py)",
               per_joint=True, minimum=0.0),
     Parameter("safety.hold_ramp", SHARED, Kind.DOUBLE,
               "s over which the safe hold's gains go linearly from control.kp/kd to "
@@ -287,7 +287,7 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("protocol", SHARED, Kind.STRING,
               "how a trial starts: services (the plant's reset/start services put it at x_d(0); "
               "our simulator) or homing (the controller brings any arm to q_d(0) and starts "
-              "once it settled; core/homing.py)", choices=("services", "homing")),
+              "once it settled; core/protocol/homing.py)", choices=("services", "homing")),
     Parameter("homing.speed_limit", CONTROLLER, Kind.DOUBLE,
               "protocol homing: peak joint speed of the homing quintic (rad/s); its duration "
               "is 15/8 max |q_d(0) - q| / speed_limit", strictly_positive=True),
@@ -328,7 +328,7 @@ PARAMETERS: tuple[Parameter, ...] = (
     *_patient_parameters(),
     Parameter("law", SUPERVISOR, Kind.STRING,
               "learning law: sign (sgnPDD^2, eq (11)), linear (Arimoto PDD^2-type) or "
-              "norm_optimal (model-based, core/norm_optimal.py)",
+              "norm_optimal (model-based, core/learning/norm_optimal.py)",
               choices=("sign", "linear", "norm_optimal"), live=True),
     Parameter("max_trials", SUPERVISOR, Kind.INTEGER, "number of trials to run",
               strictly_positive=True),
@@ -343,12 +343,12 @@ PARAMETERS: tuple[Parameter, ...] = (
               "(exo-ilc run sets it when it records a bag)"),
     Parameter("store.directory", SUPERVISOR, Kind.STRING,
               "root of the store of learned data (every accepted trial and the feed-forward it "
-              "led to, core/store.py); empty: no store (exo-ilc run sets it)"),
+              "led to, core/persistence/store.py); empty: no store (exo-ilc run sets it)"),
     Parameter("store.resume", SUPERVISOR, Kind.BOOL,
               "continue after the last trial in store.directory (false: a store that already "
               "holds trials of this run is an error)"),
     Parameter("profile.initial", SUPERVISOR, Kind.STRING,
-              "a patient's profile version file (.npz, core/profiles.py) whose feed-forward "
+              "a patient's profile version file (.npz, core/persistence/profiles.py) whose feed-forward "
               "trial 1 uses (exo-ilc simulate/run --patient set it); empty: initial_feedforward"),
     Parameter("stop_when_settled", SUPERVISOR, Kind.INTEGER,
               "stop once every joint has stayed within the bound this many trials (0: never)",
@@ -414,7 +414,7 @@ PARAMETERS: tuple[Parameter, ...] = (
               "bound on |learned feed-forward| per joint (rad/s^2, the units of u); 0: no bound",
               per_joint=True, minimum=0.0, live=True),
     Parameter("assist_as_needed.enabled", SUPERVISOR, Kind.BOOL,
-              "assist-as-needed (core/assist.py, Emken et al. 2007): forgetting factor and "
+              "assist-as-needed (core/learning/assist.py, Emken et al. 2007): forgetting factor and "
               "error deadband around the law", live=True),
     Parameter("assist_as_needed.forgetting", SUPERVISOR, Kind.DOUBLE,
               "f of u_k+1 = f u_k + G(e) (learned step): the learned input decays by f per "

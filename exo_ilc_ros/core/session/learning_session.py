@@ -110,7 +110,7 @@ class LearningSession:
         self._custom_law = self.law is not None
         self.active_law: LearningLaw = self.law or build_law(self.config)
         self.reference = build_reference(self.config)
-        if self.config["profile.initial"]:  # a patient's learned profile (core/profiles.py)
+        if self.config["profile.initial"]:  # a patient's learned profile (core/persistence/profiles.py)
 
             self.next_update = load_initial(self.config["profile.initial"], self.config,
                                             self.reference)
@@ -271,9 +271,9 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
     this run's learning key are restored (bit for bit) and the run continues after the last
     one. A store that already holds trials without ``resume`` is an error (nothing is
     overwritten). ``on_conclusion`` sees each trial's conclusion (what the next trial uses)
-    once the store holds it (a patient's profile is saved from it, core/profiles.py).
+    once the store holds it (a patient's profile is saved from it, core/persistence/profiles.py).
     ``patient_memory`` (fast, slow) starts a learning patient with what an earlier session left
-    (core/therapy.py); ``result.patient_memory`` is what this run leaves. ``patient``: the
+    (core/programs/therapy.py); ``result.patient_memory`` is what this run leaves. ``patient``: the
     learning patient itself (its state read by ``on_conclusion``: the state after the trial
     concluded), instead of a new one.
     """

@@ -117,7 +117,7 @@ def effects_from_config(config: Config) -> JointEffects:
     """The virtual patient's effects MuJoCo expresses natively, from the ``patient.*`` keys:
     ``friction.viscous`` + spastic damping -> ``damping``; ``friction.coulomb`` ->
     ``frictionloss`` (MuJoCo's dry friction is a hard Coulomb law, not the tanh of
-    core/patient.py: close above ``stribeck_velocity``); ``passive.stiffness`` + spastic
+    core/loop/patient.py: close above ``stribeck_velocity``); ``passive.stiffness`` + spastic
     stiffness -> ``stiffness`` towards ``passive.rest_position``. The spastic stiffness and
     damping are the Modified Ashworth preset's or the ``custom`` values
     (:func:`.patient.spasticity_values`). What MuJoCo cannot express is listed by

@@ -158,8 +158,8 @@ def flow(ax: Axes) -> None:
 
 
 def main() -> int:
-    fig, (left, right) = plt.subplots(1, 2, figsize=(15, 8.2),
-                                      gridspec_kw={"width_ratios": [1, 1.08]})
+    fig, (left, right) = plt.subplots(2, 1, figsize=(9, 14.5),
+                                      gridspec_kw={"height_ratios": [1, 0.95]})
     for ax in (left, right):
         ax.set_xlim(0, 1)
         ax.set_ylim(0, 1)

@@ -7,7 +7,9 @@ module or subpackage appears by itself), the CLI reference from ``exo-ilc``'s ar
 
 from __future__ import annotations
 
+import importlib
 import os
+import pkgutil
 import shutil
 import sys
 from pathlib import Path
@@ -43,6 +45,19 @@ myst_enable_extensions = ["colon_fence"]
 autosummary_generate = True
 autosummary_ignore_module_all = False  # a package's page documents its __all__ (its face)
 autosummary_imported_members = False
+
+
+def package_faces(root: str = "exo_ilc_ros") -> list[str]:
+    """The packages with ``__all__`` (``exo_ilc_ros.core``, ``exo_ilc_ros.bag``): faces. A face's
+    page documents those names and lists its modules and subpackages without a page each (their
+    paths may move; the face stays). A package without one gets a page per module."""
+    package = importlib.import_module(root)
+    names = [root] + [info.name for info in pkgutil.walk_packages(package.__path__, root + ".")
+                      if info.ispkg]
+    return sorted(name for name in names if hasattr(importlib.import_module(name), "__all__"))
+
+
+autosummary_context = {"faces": package_faces()}
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"
 

@@ -65,4 +65,5 @@ html_theme = "furo"
 html_title = "exo_ilc_ros"
 html_static_path: list[str] = []
 html_show_sourcelink = False
+smartquotes = False  # "--config" stays two hyphens, quotes stay as typed
 

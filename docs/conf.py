@@ -66,4 +66,5 @@ html_title = "exo_ilc_ros"
 html_static_path: list[str] = []
 html_show_sourcelink = False
 smartquotes = False  # "--config" stays two hyphens, quotes stay as typed
+highlight_language = "text"  # a fence without a language is shown as typed
 

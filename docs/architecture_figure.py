@@ -158,7 +158,7 @@ def flow(ax: Axes) -> None:
 
 
 def main() -> int:
-    fig, (left, right) = plt.subplots(2, 1, figsize=(9, 14.5),
+    fig, (left, right) = plt.subplots(2, 1, figsize=(7.8, 12.6),
                                       gridspec_kw={"height_ratios": [1, 0.95]})
     for ax in (left, right):
         ax.set_xlim(0, 1)

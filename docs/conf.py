@@ -54,7 +54,12 @@ def package_faces(root: str = "exo_ilc_ros") -> list[str]:
     package = importlib.import_module(root)
     names = [root] + [info.name for info in pkgutil.walk_packages(package.__path__, root + ".")
                       if info.ispkg]
-    return sorted(name for name in names if hasattr(importlib.import_module(name), "__all__"))
+    faces = [name for name in names if hasattr(importlib.import_module(name), "__all__")]
+    for name in faces:  # a face that loads its names lazily (PEP 562) has them all loaded now
+        module = importlib.import_module(name)
+        for member in module.__all__:
+            getattr(module, member)
+    return sorted(faces)
 
 
 autosummary_context = {"faces": package_faces()}

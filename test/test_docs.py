@@ -108,6 +108,11 @@ def headings(path: Path) -> list[str]:
 def test_readme_is_short() -> None:
     lines = README.read_text().count("\n")
     assert lines <= README_LIMIT, f"README.md has {lines} lines (at most {README_LIMIT})"
+    text = README.read_text()
+    for command in ("make demo   #", "make test   #", "exo-ilc simulate", "exo-ilc run",
+                    "exo-ilc param set", "exo-ilc analyze"):  # the commands and the tour
+        assert command in text, command
+    assert "](docs/paper_figures.png)" in text  # its one figure
 
 
 @pytest.mark.parametrize("section", sorted(MOVED_SECTIONS))

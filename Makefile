@@ -1,4 +1,5 @@
-# exo_ilc_ros: `make demo` runs the paper's experiment, `make test` runs every check.
+# exo_ilc_ros: `make demo` runs the paper's experiment, `make test` runs every check (the docs
+# build included), `make docs` builds the documentation site into docs/_build/html.
 # Both create (or update) a local virtualenv in .venv with everything from PyPI.
 
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
@@ -10,7 +11,7 @@ STAMP := $(VENV)/.installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export ROS_LOG_DIR ?= $(CURDIR)/.ros_log
 
-.PHONY: venv demo test lint bench clean
+.PHONY: venv demo test lint docs bench clean
 
 # The first run in a fresh environment (or after the kernels changed) compiles the numba kernels
 # (~20 s, silent) and caches them (exo_ilc_ros/core/_numba_cache.py).
@@ -39,7 +40,13 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 
-test: lint
+# The documentation site (Sphinx + MyST; API from the docstrings, CLI from the parser), warnings
+# as errors: a broken link or cross-reference, or a docstring that does not render, fails it.
+docs: $(STAMP)
+	@echo "make: building the documentation into docs/_build/html (about 30 s)"
+	$(BIN)/sphinx-build -W --keep-going -q -b html docs docs/_build/html
+
+test: lint docs
 	@$(NUMBA_NOTE)
 	@echo "make: running the whole test suite (10-13 min on 2 cores, most of it real"
 	@echo "make: ROS 2 graphs over DDS and a colcon build); pytest prints a dot per test"
@@ -49,4 +56,4 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.core_bench
 
 clean:
-	rm -rf $(VENV) build install log .ros_log
+	rm -rf $(VENV) build install log .ros_log docs/_build docs/api

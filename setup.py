@@ -11,6 +11,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 REGISTRY = runpy.run_path(os.path.join(HERE, package_name, "nodes", "registry.py"))
 """The node registry (plain data: read without importing the package)."""
 
+DOCS_DEPENDENCIES = ["sphinx>=8", "myst-parser>=4", "furo>=2024.8", "sphinx-argparse>=0.5"]
+"""`make docs` (and so `make test`): the documentation site. Tooling, not a runtime dependency."""
+
 ROS_DEPENDENCIES = [
     "ros-jazzy-rclpy[fastrtps]",
     "ros-jazzy-sensor-msgs",
@@ -59,7 +62,9 @@ setup(
     ],
     extras_require={
         "test": ["pytest>=8", "hypothesis>=6.100", "pin>=3", "ruff>=0.6", "mypy>=1.10",
-                 "types-PyYAML", "colcon-core", "colcon-ros", "psycopg[binary]>=3.1"],
+                 "types-PyYAML", "colcon-core", "colcon-ros", "psycopg[binary]>=3.1",
+                 *DOCS_DEPENDENCIES],
+        "docs": DOCS_DEPENDENCIES,
         # `exo-ilc tune --storage postgresql://...`: SQLAlchemy 2.x opens it with psycopg 3.
         "postgres": ["psycopg[binary]>=3.1"],
     },

@@ -334,7 +334,7 @@ def main() -> None:
     parser.add_argument("--quiet", type=float, default=0.15, help="(a) also reports the rounds "
                         "in which the machine's other tenants used fewer cores than this")
     parser.add_argument("--rate", type=float, default=3500.0, help="(d)'s in-trial rate, "
-                        "steps/s, when (a) does not run (default: README's 3,501)")
+                        "steps/s, when (a) does not run (default: docs/bags.md's 3,501)")
     args = parser.parse_args()
     bag_dir = Path(tempfile.mkdtemp(prefix="exo_ilc_bag_bench_"))
     try:

@@ -6,7 +6,7 @@ the study's cell up to its first envelope abort and replays that trial with the 
 controller's gains (``old``: the hold before ``safety.hold_*``) and with the shipped hold
 (``new``); then the same for aborts provoked under ``spastic`` by a constant feed-forward on
 one joint, and the hold's discrete-time decay rate at 0.001-0.01 s. Prints the numbers of
-README "The safe hold"; asserts nothing.
+docs/safety.md "The safe hold"; asserts nothing.
 """
 
 from __future__ import annotations

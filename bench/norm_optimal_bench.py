@@ -1,4 +1,4 @@
-"""The norm-optimal law against the linear law: the numbers of the README's "Norm-optimal ILC".
+"""The norm-optimal law against the linear law: the numbers of docs/norm-optimal.md.
 
 Run with ``.venv/bin/python -m bench.norm_optimal_bench [--trials 1000]`` (~5 min). Prints, per mass
 uncertainty, the first / settled trial per joint of both laws, the floor (max |e| of the last

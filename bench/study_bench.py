@@ -1,4 +1,4 @@
-"""The robustness study at full size: the number of the README's "Which law survives which
+"""The robustness study at full size: the number of docs/study.md, "Which law survives which
 patient" (issue 14's target: <= 10 min on 2 cores).
 
 Run with ``.venv/bin/python -m bench.study_bench`` (defaults: the laws sign, tuned, linear and

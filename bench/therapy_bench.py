@@ -1,4 +1,5 @@
-"""Therapy sessions, measured (issue #16's "done when"): prints numbers, writes the README figure.
+"""Therapy sessions, measured (issue #16's "done when"): prints numbers, writes the figure of
+docs/therapy.md.
 
 1. Assist-as-needed against the plain law over a session with a virtual patient (scenario,
    default the learning patient if shipped, else ``voluntary``): the robot's assistance (RMS

@@ -591,7 +591,7 @@ def test_run_records_a_bag_that_analyses_to_its_table(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr[-3000:]
     (bag,) = (tmp_path / "bags").iterdir()
     assert f"bag: {bag}" in proc.stderr
-    # At start, for `exo-ilc param` from another terminal (README), with a bag too.
+    # At start, for `exo-ilc param` from another terminal (docs/ros-graph.md), with a bag too.
     assert "graph on ROS_DOMAIN_ID=" in proc.stderr and f"recording to bag: {bag}" in proc.stderr
     assert exo_ilc(["analyze", str(bag), "--quiet", "--json", str(bag_json)]) == 0
     (graph,) = json.loads(run_json.read_text())["runs"]

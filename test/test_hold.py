@@ -21,7 +21,7 @@ CONTROLLER_GAINS = {"safety.hold_kp": [16.0, 10.0, 10.0], "safety.hold_kd": [8.0
                     "safety.hold_ramp": 0.0}
 """The safe hold as it was before ``safety.hold_*``: the controller's own gains, no ramp."""
 REST_WITHIN = 2.0
-"""s after the abort by which the arm must be at rest (RELIABILITY.md's definition)."""
+"""s after the abort by which the arm must be at rest (docs/reliability.md's definition)."""
 BRAKING = 0.5
 """rad: how far from the latched pose the arm may get while the hold stops it."""
 

@@ -140,7 +140,7 @@ def test_links_stay_inside_the_repository() -> None:
                 path = (document.parent / target).resolve()
                 assert path.is_relative_to(root), \
                     f"{document.relative_to(ROOT)}: {target} points outside the repository"
-    assert checked >= 2  # README -> docs/paper-reading.md and its figure at least
+    assert checked >= 2  # README -> the docs pages and its figure at least
 
 
 def test_the_package_ships_its_type_hints() -> None:

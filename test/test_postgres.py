@@ -1,5 +1,5 @@
-"""`exo-ilc tune` on a PostgreSQL storage, the README's recipe: two tuner processes share one
-study on a real server that the test starts itself (Debian's ``postgresql`` package: initdb and
+"""`exo-ilc tune` on a PostgreSQL storage, the recipe of docs/tuning.md: two tuner processes share
+one study on a real server that the test starts itself (Debian's ``postgresql`` package: initdb and
 pg_ctl into a temporary directory, a free localhost port, trust authentication).
 
 Skipped, with the reason, when the server binaries or the psycopg driver are missing; `.ci/run`
@@ -90,7 +90,7 @@ def postgres_url() -> Iterator[str]:
 
 def test_two_tuner_processes_share_one_study_on_postgres(tmp_path: Path,
                                                          postgres_url: str) -> None:
-    """The README's recipe: the same command on two "machines" (processes) with one
+    """The recipe of docs/tuning.md: the same command on two "machines" (processes) with one
     --study-name and --storage postgresql://...; then --budget 0 writes the best of both."""
     short = tmp_path / "short.yaml"
     short.write_text(SHORT_YAML)

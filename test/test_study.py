@@ -305,7 +305,7 @@ def test_robust_config_survives_the_realistic_patient() -> None:
     finite, no growth flag, no envelope abort after trial 10, and learning that works (the
     floor well under 0.02 rad; with its old 20 rad/s^2 bound on |u_ff| the learning was
     clipped at 0.36 rad, and the Q-filter at 5 Hz diverged under the first voluntary patient).
-    The full 1000-trial, every-scenario check is the README's study."""
+    The full 1000-trial, every-scenario check is the study of docs/study.md."""
     [c] = study_cells([resolve_law("robust")], [resolve_scenario("realistic")], [0.15], [0],
                       300)
     result = run_cell(c)

@@ -1,6 +1,6 @@
 """The session report a therapist reads: one self-contained HTML page per session (figures as
 base64 PNG, no script, no external file), built from the session's bags and the patient's
-profiles (``exo-ilc report BAG... --html report.html``).
+profiles (``exo-ilc report BAG [BAG ...] --html report.html``).
 
 Per exercise: the tracking error and the robot's assistance over the trials, the patient's share
 of the work, the trials the safety envelope stopped or the watchdog made run again and what that

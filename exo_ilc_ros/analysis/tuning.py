@@ -437,7 +437,7 @@ def open_study(problem: TuningProblem, storage: str, study_name: str | None = No
     study = _create_study(storage, name, seed)
     stored = study.user_attrs.get("problem_fixed")
     if stored is None:
-        # "problem_fixed" last: a process starting on the same study meanwhile (the README's
+        # "problem_fixed" last: a process starting on the same study meanwhile (docs/tuning.md's
         # "same command on every machine") reads either none of these or all of them.
         study.set_user_attr("problem_digest", problem.digest())
         study.set_user_attr("problem", problem.settings())

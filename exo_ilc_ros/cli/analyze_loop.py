@@ -18,7 +18,7 @@ def register(sub: Any) -> None:
         description="Linearise the closed loop (computed torque + PD + zero-order hold at the "
         "control period) around the reference and print, per joint, the worst trial-to-trial "
         "factor |F| of the learning law and the band where |F| > 1 (the learned input grows "
-        "there), without and with the Q-filter. See README, 'Convergence and the Q-filter'.")
+        "there), without and with the Q-filter. See docs/convergence.md.")
     parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
                         "shipped config/exo_ilc.yaml (any subset of keys)")
     parser.add_argument("--law", choices=("sign", "linear", "norm_optimal"),

@@ -17,8 +17,8 @@ def register(sub: Any) -> None:
     parser = sub.add_parser(
         "profiles", help="list, show, export or roll back patients' learned profiles",
         description="A profile is the feed-forward a patient's sessions learned for one "
-        "exercise, versioned (one version per session) with its provenance. README, 'Therapy "
-        "sessions'.")
+        "exercise, versioned (one version per session) with its provenance. See "
+        "docs/therapy.md.")
     parser.add_argument("--profiles", metavar="DIR", type=directory,
                         help="profiles root (default: $EXO_ILC_PROFILES or .exo-ilc/profiles)")
     actions = parser.add_subparsers(dest="action", required=True, metavar="ACTION")

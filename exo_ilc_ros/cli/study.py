@@ -61,7 +61,7 @@ def register(sub: Any) -> None:
                         help="local worker processes (default: the CPUs available)")
     parser.add_argument("--dask", metavar="ADDRESS", type=nonempty,
                         help="run the cells on a Dask distributed cluster, e.g. "
-                        "tcp://host:8786 (README: how to start a scheduler and workers)")
+                        "tcp://host:8786 (docs/study.md: how to start a scheduler and workers)")
     parser.set_defaults(func=study)
 
 

@@ -32,7 +32,7 @@ from .therapy_resume import Step, resume_command, resumed_steps, stored_summary
 
 def add_therapy_arguments(parser: argparse.ArgumentParser) -> None:
     """--patient, --exercise, --session, --profiles, --new-patient (simulate and run)."""
-    group = parser.add_argument_group("therapy session (README, 'Therapy sessions')")
+    group = parser.add_argument_group("therapy session (docs/therapy.md)")
     group.add_argument("--patient", metavar="ID", type=nonempty,
                        help="the patient: each exercise starts from their latest learned "
                        "profile and the session's is saved after every trial")

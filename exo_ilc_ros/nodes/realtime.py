@@ -19,7 +19,7 @@ program (a test, a notebook) leaves that program's scheduling alone.
 
 Without ``CAP_SYS_NICE`` or an ``rtprio`` limit (``/etc/security/limits.conf``) the kernel
 refuses it: the node then says so and runs at the normal priority. Measured with
-``bench/realtime_bench.py`` (README "Real time").
+``bench/realtime_bench.py`` (docs/hostile-input.md "Real time").
 """
 
 from __future__ import annotations

@@ -55,12 +55,15 @@ Trial protocol (the supervisor drives it; lock-step and real-time alike):
     Puts the arm at x_d(0) and stops stepping; ``message`` is ``t0_ns=<int>``, the simulated
     time (ns) of the next trial's first sample. Sample i of the trial is stamped
     ``t0_ns + i * period_ns`` exactly (integer ns), so every node recovers i from the stamp.
+
 ``/ilc/feedforward`` for that trial then carries header.stamp = t0 (the trial's first sample).
+
 ``/plant_simulator/start`` (``std_srvs/srv/Trigger``)
     Publishes sample 0 and steps until sample N (the command at t_N is never applied). Fails
     (success false, with the reason) until the plant is linked to a controller, and, with a
     virtual patient, until it has the trial's /ilc/feedforward (stamp t0): its frame
     ``trial:<k>`` says which trial's random draws the patient uses.
+
 ``/ilc/trial_events`` message ``finished`` (values ``trials``) when the supervisor stops
 (``max_trials`` reached or ``stop_when_settled``).
 """

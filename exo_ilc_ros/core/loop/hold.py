@@ -18,7 +18,7 @@ damping; I s^2 + (D + G e^{-s tau}) s + K has no root crossing the imaginary axi
 tau when D > |G|). Computed torque gives damping a_N(q) K_D,h, and the light mode of the coupled
 shoulder-elbow flexion has an inertia down to ~0.01 kg m^2 (the smallest eigenvalue of a_N, at
 the straight arm): K_D,h = 60 s^-1 on the elbow brings every MAS 2 abort we provoked or the
-study met to rest; 40 left an abort near the straight arm swinging (README "The safe hold").
+study met to rest; 40 left an abort near the straight arm swinging (docs/safety.md "The safe hold").
 
 Why not stiffer. A discrete PD of period T with the command d periods late is stable only for
 K_D,h T below ~2 (d = 0), 0.85 (d = 1), 0.52 (d = 2) (critically damped, K_P,h = K_D,h^2 / 4;

@@ -109,7 +109,7 @@ def main() -> None:
                         help="assist-as-needed overrides, e.g. assist_as_needed.forgetting=0.97")
     parser.add_argument("--variability-from-plain", action="store_true",
                         help="assist_as_needed.variability = sigma of the plain session's last "
-                        "20 trials (core.assist.estimate_variability)")
+                        "20 trials (core.learning.assist.estimate_variability)")
     args = parser.parse_args()
     scenario = args.scenario or default_scenario()
     overrides: dict[str, Any] = dict(AAN)

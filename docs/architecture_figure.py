@@ -26,15 +26,15 @@ TOP_LEVEL = [  # top to bottom: each imports only those below it
     ("bag/", "rosbag2 (MCAP) writing, CRC check, reading, replay"),
     ("wire/", "topics, QoS, CDR fast paths, who may publish"),
 ]
-CORE_ROOMS = [  # top to bottom, the planned rooms of core/
+CORE_ROOMS = [  # top to bottom, the rooms of core/ (exo_ilc_ros.core.ROOMS, reversed)
     ("programs/", "therapy, metrics, study cells"),
     ("protocol/", "graph and homing protocol, samples"),
     ("session/", "LearningSession, run_trials, summary"),
     ("persistence/", "store, profiles, patient states"),
     ("sim/", "Experiment, MuJoCo arm"),
-    ("convergence/", "loop factors, growth"),
+    ("convergence/", "iterations to bound, loop factors, growth"),
     ("learning/", "laws, Q-filter, norm-optimal, assist"),
-    ("loop/", "compiled plant, controller, hold, trial"),
+    ("loop/", "compiled plant, controller rule, hold, trial"),
     ("reference/", "quintic, exercises"),
     ("arm/", "model, dynamics, geometry, URDF"),
     ("params/", "schema, config, validation"),

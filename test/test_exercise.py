@@ -1,5 +1,6 @@
-"""Exercises (core/reference/exercise.py): piecewise quintics through rest points, the default exercise is
-the paper's quintic bit for bit, the shipped file loads, bad files are refused naming the key."""
+"""Exercises (core/reference/exercise.py): piecewise quintics through rest points, the default
+exercise is the paper's quintic bit for bit, the shipped file loads, bad files are refused naming
+the key."""
 
 from __future__ import annotations
 

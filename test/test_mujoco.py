@@ -1,5 +1,5 @@
-"""The arm in MuJoCo (core/sim/mujoco_arm.py) against the Rodriguez dynamics of core/arm/dynamics.py:
-an independent engine on the MJCF generated from the same config."""
+"""The arm in MuJoCo (core/sim/mujoco_arm.py) against the Rodriguez dynamics of
+core/arm/dynamics.py: an independent engine on the MJCF generated from the same config."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""The norm-optimal law (core/learning/norm_optimal.py): its model, the update (NO2) and the QP (NO3),
-the cache, the robustness check, and one representative run against the linear law.
+"""The norm-optimal law (core/learning/norm_optimal.py): its model, the update (NO2) and the QP
+(NO3), the cache, the robustness check, and one representative run against the linear law.
 
 The long checks (1000 trials at 5/10/15 %, the constrained run) are in
 ``bench/norm_optimal_bench.py``.

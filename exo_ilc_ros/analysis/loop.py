@@ -1,7 +1,7 @@
 """The loop analysis as a user reads it: the trial-to-trial factor per joint and frequency
 (``exo-ilc analyze-loop``, its figure), the growth check of a long run and the norm-optimal
-law's robustness check, from the numbers ``core.convergence``, ``core.growth`` and
-``core.norm_optimal`` compute."""
+law's robustness check, from the numbers ``core.convergence``, ``core.convergence.growth`` and
+``core.learning.norm_optimal`` compute."""
 
 from __future__ import annotations
 

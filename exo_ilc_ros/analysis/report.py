@@ -84,7 +84,7 @@ def format_trial_table(runs: Sequence[RunSummary], joint_names: Sequence[str],
 def format_long_run(runs: Sequence[RunSummary], joint_names: Sequence[str],
                     window: int = DEFAULT_WINDOW) -> str:
     """Per run: max |u_ff| and max |effort| at the last trial, and whether the learned input
-    keeps growing (:func:`~exo_ilc_ros.core.growth.fit_growth` over the last ``window``
+    keeps growing (:func:`~exo_ilc_ros.core.convergence.growth.fit_growth` over the last ``window``
     trials, at most the second half of the run so that the first trials' learning is not
     mistaken for growth)."""
     lines = ["Learned input at the last trial and its growth (max |u_ff| per joint, rad/s^2; "

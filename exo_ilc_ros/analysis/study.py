@@ -1,6 +1,6 @@
 """Running the robustness study's cells (a local process pool, or a Dask distributed cluster)
 and reporting it: one table, the JSON export. The cells and their reduction are
-:mod:`exo_ilc_ros.core.study`; the figure is :mod:`.study_figure`.
+:mod:`exo_ilc_ros.core.programs.study`; the figure is :mod:`.study_figure`.
 
 Results are placed by the cell's index, never by the order they finish in, so every way of
 running gives the same table.

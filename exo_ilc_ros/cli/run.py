@@ -69,7 +69,7 @@ def register(sub: Any) -> None:
 
 
 def _store_root(args: argparse.Namespace) -> Path | None:
-    """The store root of this invocation (module docstring of core.store)."""
+    """The store root of this invocation (module docstring of core.persistence.store)."""
     if args.no_store:
         if args.resume or args.store:
             raise ConfigError("--no-store", "cannot be combined with --store or --resume")

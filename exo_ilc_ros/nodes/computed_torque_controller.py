@@ -5,12 +5,12 @@ reference of /ilc/feedforward, then eq (16) with the nominal model, clamps to th
 and publishes on /effort_controller/commands (the ros2_control JointGroupEffortController
 convention). Acknowledges every feed-forward it loaded on /diagnostics.
 
-Safety (core.controller, the arithmetic of ``trial.simulate_trial_guarded``): at the first
+Safety (core.loop.controller, the arithmetic of ``trial.simulate_trial_guarded``): at the first
 sample whose |e_j| leaves ``safety.error_envelope`` the trial is aborted at once and the safe hold
 (gravity compensation and PD around the pose measured there) is commanded for the rest of it; the
 watchdog (``safety.watchdog_periods`` control periods of wall time without /joint_states during
 a trial) commands the safe hold around the last pose received. Bad /joint_states or
-feed-forward messages are rejected (core.validation), logged once per cause and counted; no
+feed-forward messages are rejected (core.params.validation), logged once per cause and counted; no
 effort is ever computed from them. After each trial's last sample the controller reports
 ``done`` (abort index, watchdog trips) on /diagnostics; its health once a second.
 """
@@ -68,7 +68,7 @@ class ComputedTorqueController(Node):
         self.step_ns = period_ns(experiment.period)
         self.rejections = Rejections(self)
         self.gate = JointStateGate(self.joint_names, self.rejections)
-        self.watchdog = watchdog_for(config)  # the plant's rule too (core.safety)
+        self.watchdog = watchdog_for(config)  # the plant's rule too (core.loop.safety)
         self.aborted_at = -1
         """First sample of the current trial outside the error envelope (-1: none)."""
         self.trial_trips = 0

@@ -1,5 +1,5 @@
-"""free_running_plant: our own simulator (core/loop/plant.py's RK4) as any arm, without the reset and
-start services (``protocol: homing``); the node is :class:`.mujoco_plant.FreeRunningPlant`."""
+"""free_running_plant: our own simulator (core/loop/plant.py's RK4) as any arm, without the reset
+and start services (``protocol: homing``); the node is :class:`.mujoco_plant.FreeRunningPlant`."""
 
 from __future__ import annotations
 

@@ -1,11 +1,11 @@
-"""Input gates and health reporting shared by the nodes (thin wrappers of core.validation).
+"""Input gates and health reporting shared by the nodes (thin wrappers of core.params.validation).
 
 :class:`JointStateGate` checks every /joint_states message before a node uses it: names (a
 message naming the configured joints in another order is reordered), lengths, finite values,
 stamps strictly increasing. The common case (the plant's own layout) costs a bytes compare and
-one ``isfinite``; anything else goes through :func:`core.validation.validate_joint_state`.
-Rejections are counted per cause (:class:`core.validation.LogOnce`), logged once per cause, and
-reported on /diagnostics by :class:`Health`.
+one ``isfinite``; anything else goes through :func:`core.params.validation.validate_joint_state`.
+Rejections are counted per cause (:class:`core.params.validation.LogOnce`), logged once per
+cause, and reported on /diagnostics by :class:`Health`.
 """
 
 from __future__ import annotations

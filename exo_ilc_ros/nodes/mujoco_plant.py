@@ -83,7 +83,8 @@ class FreeRunningPlant(Node):
         self.last_command_ns = 0
         self.hold_pose: np.ndarray | None = None
         self.safe_hold = GuardedControlStep(self.experiment)
-        """The controller's safe hold (its gains and ramp, core/loop/hold.py), latched at the trip."""
+        """The controller's safe hold (its gains and ramp, core/loop/hold.py), latched at the
+        trip."""
         here = np.zeros(config.joints)  # load its kernels now, not at a trip
         self.safe_hold.hold_at(here)
         self.safe_hold.hold(here, here)

@@ -32,9 +32,9 @@ class SchemaParameters:
     through the schema's ``coerce`` (a user writing ``0`` for a double is fine).
     Changes at runtime, the way rclpy's demos do it: the on-set callback validates (``live``
     parameters only, the schema and the rules between parameters:
-    :func:`~exo_ilc_ros.core.validation.validate_update`, the one validation path) and changes
-    nothing; a refused change returns the key and the rule. The post-set callback, called once
-    rclpy has stored the values, applies them to :attr:`pending` and tells the
+    :func:`~exo_ilc_ros.core.params.validation.validate_update`, the one validation path) and
+    changes nothing; a refused change returns the key and the rule. The post-set callback, called
+    once rclpy has stored the values, applies them to :attr:`pending` and tells the
     :attr:`listeners`. The node decides when :attr:`pending` takes effect.
     """
 

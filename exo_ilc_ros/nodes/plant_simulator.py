@@ -2,7 +2,7 @@
 
 Publishes /joint_states and /clock, takes efforts on /effort_controller/commands, and offers
 the reset/start services of the trial protocol (see :mod:`exo_ilc_ros.wire.topics`). With a
-virtual patient (``patient.*``, :mod:`exo_ilc_ros.core.patient`) /joint_states carries what
+virtual patient (``patient.*``, :mod:`exo_ilc_ros.core.loop.patient`) /joint_states carries what
 the sensors measure and /ground_truth/joint_states the true state; the trial number (for the
 patient's per-trial draws) comes from the frame of the trial's /ilc/feedforward. Lock-step mode
 advances one period per command; real-time mode steps on a wall-clock timer with the last
@@ -87,12 +87,13 @@ class PlantSimulator(Node):
         self.saturated = np.zeros(config.joints, dtype=np.int64)
         self.over_limit = 0
         self.commands = 0
-        self.watchdog = watchdog_for(config)  # the controller's rule too (core.safety)
+        self.watchdog = watchdog_for(config)  # the controller's rule too (core.loop.safety)
         self.late = LateCommands()  # real time: periods run on a late (held) command
         self.hold_pose: np.ndarray | None = None
         """Real-time mode: the pose the plant's safe hold keeps after a watchdog trip."""
         self.safe_hold = GuardedControlStep(self.experiment)
-        """The controller's safe hold (its gains and ramp, core/loop/hold.py), latched at the trip."""
+        """The controller's safe hold (its gains and ramp, core/loop/hold.py), latched at the
+        trip."""
         here = np.zeros(config.joints)  # load its kernels now, not at a trip
         self.safe_hold.hold_at(here)
         self.safe_hold.hold(here, here)

@@ -258,7 +258,8 @@ PARAMETERS: tuple[Parameter, ...] = (
               strictly_positive=True, live=True),
     Parameter("safety.hold_kp", SHARED, Kind.DOUBLE_ARRAY,
               "K_P of the safe hold (s^-2, through a_N(q) as control.kp): its stiffness about "
-              "the pose latched at an abort, a watchdog trip or a failed homing (core/loop/hold.py)",
+              "the pose latched at an abort, a watchdog trip or a failed homing "
+              "(core/loop/hold.py)",
               per_joint=True, minimum=0.0),
     Parameter("safety.hold_kd", SHARED, Kind.DOUBLE_ARRAY,
               "K_D of the safe hold (s^-1, as control.kd): its damping; with hold_kp it must be "
@@ -272,7 +273,7 @@ PARAMETERS: tuple[Parameter, ...] = (
               "the safe hold / zero effort", strictly_positive=True),
     Parameter("watchdog_min_timeout", SHARED, Kind.DOUBLE,
               "wall-clock floor of every watchdog (s; the controller's and the real-time "
-              "plant's, core.safety.watchdog_for): a loaded machine may deliver late without "
+              "plant's, core.loop.safety.watchdog_for): a loaded machine may deliver late without "
               "any fault; 0 on hardware", minimum=0.0),
     Parameter("thread_priority", SHARED, Kind.INTEGER,
               "SCHED_FIFO priority of the control loop's threads (the computed-torque "
@@ -348,8 +349,9 @@ PARAMETERS: tuple[Parameter, ...] = (
               "continue after the last trial in store.directory (false: a store that already "
               "holds trials of this run is an error)"),
     Parameter("profile.initial", SUPERVISOR, Kind.STRING,
-              "a patient's profile version file (.npz, core/persistence/profiles.py) whose feed-forward "
-              "trial 1 uses (exo-ilc simulate/run --patient set it); empty: initial_feedforward"),
+              "a patient's profile version file (.npz, core/persistence/profiles.py) whose "
+              "feed-forward trial 1 uses (exo-ilc simulate/run --patient set it); empty: "
+              "initial_feedforward"),
     Parameter("stop_when_settled", SUPERVISOR, Kind.INTEGER,
               "stop once every joint has stayed within the bound this many trials (0: never)",
               minimum=0.0, live=True),
@@ -414,8 +416,8 @@ PARAMETERS: tuple[Parameter, ...] = (
               "bound on |learned feed-forward| per joint (rad/s^2, the units of u); 0: no bound",
               per_joint=True, minimum=0.0, live=True),
     Parameter("assist_as_needed.enabled", SUPERVISOR, Kind.BOOL,
-              "assist-as-needed (core/learning/assist.py, Emken et al. 2007): forgetting factor and "
-              "error deadband around the law", live=True),
+              "assist-as-needed (core/learning/assist.py, Emken et al. 2007): forgetting factor "
+              "and error deadband around the law", live=True),
     Parameter("assist_as_needed.forgetting", SUPERVISOR, Kind.DOUBLE,
               "f of u_k+1 = f u_k + G(e) (learned step): the learned input decays by f per "
               "trial unless the error calls for it (1: no forgetting)", live=True,

@@ -313,7 +313,7 @@ def growth_window(trials: int) -> int:
 
 def seed_outcome(cell: CellResult, trials: int) -> SeedOutcome:
     """The numbers of one cell: first/settled on the worst joint's true error, the floor over the
-    last min(100, K) trials, the growth check (``core.growth``) on max |u_ff|."""
+    last min(100, K) trials, the growth check (``core.convergence.growth``) on max |u_ff|."""
     errors = cell.true_max_abs_error
     finite = cell.failure is None and cell.nonfinite is None and cell.trials == trials and all(
         bool(np.all(np.isfinite(t))) for t in

@@ -40,7 +40,8 @@ class Phase(Enum):
     WAIT_ACK = "wait_ack"
     STARTING = "starting"
     HOMING = "homing"
-    """Protocol homing: the controller brings the arm to q_d(0) (core/protocol/homing_protocol.py)."""
+    """Protocol homing: the controller brings the arm to q_d(0)
+    (core/protocol/homing_protocol.py)."""
     RUNNING = "running"
     WAIT_RECORDER = "wait_recorder"
     FINISHED = "finished"

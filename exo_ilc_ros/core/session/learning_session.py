@@ -110,7 +110,7 @@ class LearningSession:
         self._custom_law = self.law is not None
         self.active_law: LearningLaw = self.law or build_law(self.config)
         self.reference = build_reference(self.config)
-        if self.config["profile.initial"]:  # a patient's learned profile (core/persistence/profiles.py)
+        if self.config["profile.initial"]:  # a patient's learned profile (persistence/profiles.py)
 
             self.next_update = load_initial(self.config["profile.initial"], self.config,
                                             self.reference)

@@ -39,7 +39,10 @@ the effort held over each period T, u = u_ff + K_P e + K_D e_dot.
 
 G, L and Phi depend only on the configuration (model, gains, period, reference, weights): they
 are computed once and cached (:func:`learning_matrices`), so an update is one matrix-vector
-product (milliseconds).
+product (milliseconds). The law itself (:class:`NormOptimalLaw`) uses the same minimiser without
+them: the Riccati gains of :mod:`exo_ilc_ros.core.learning.norm_optimal_recursive`, cached the
+same way (:func:`recursive_matrices`), memory linear in the samples; G, L and Phi remain for the
+robustness check (``analyze-loop``) and as the tests' oracle.
 """
 
 from __future__ import annotations
@@ -49,10 +52,17 @@ import math
 import time
 from dataclasses import dataclass, field
 from enum import Enum
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
+
+from exo_ilc_ros.core.learning.norm_optimal_recursive import (
+    RiccatiGains,
+    riccati_gains,
+    solve_constrained_banded,
+)
 
 from .config import Config
 from .errors import SafetyError
@@ -92,8 +102,21 @@ class LiftedModel:
     """(N+1, 2n, n): B_i."""
     k: np.ndarray
     """(n, 2n): [K_P, K_D]."""
-    g: np.ndarray
-    """(n (N+1), n (N+1)): the lifted map from the feed-forward change to the position change."""
+
+    @cached_property
+    def g(self) -> np.ndarray:
+        """(n (N+1), n (N+1)): the lifted map from the feed-forward change to the position
+        change (built on first use: the law itself needs only A, B and K)."""
+        count, n = self.samples, self.joints
+        closed = self.a - self.b @ self.k
+        g = np.zeros((count * n, count * n))
+        states = np.zeros((2 * n, count * n))  # response of x_i to every input sample
+        for i in range(count):
+            g[i * n:(i + 1) * n] = states[:n]
+            if i + 1 < count:
+                states[:, :(i + 1) * n] = closed[i] @ states[:, :(i + 1) * n]
+                states[:, i * n:(i + 1) * n] += self.b[i]
+        return g
 
     @property
     def joints(self) -> int:
@@ -162,19 +185,12 @@ def build_lifted_model(config: Config) -> LiftedModel:
     disc = _expm_batch(cont * period)
     a, b = disc[:, :2 * n, :2 * n], disc[:, :2 * n, 2 * n:]
     k = np.hstack([np.diag(config["control.kp"]), np.diag(config["control.kd"])])
-    closed = a - b @ k
-    g = np.zeros((count * n, count * n))
-    states = np.zeros((2 * n, count * n))  # response of x_i to every input sample
-    for i in range(count):
-        g[i * n:(i + 1) * n] = states[:n]
-        if i + 1 < count:
-            states[:, :(i + 1) * n] = closed[i] @ states[:, :(i + 1) * n]
-            states[:, i * n:(i + 1) * n] += b[i]
-    return LiftedModel(np.ascontiguousarray(a), np.ascontiguousarray(b), k, g)
+    return LiftedModel(np.ascontiguousarray(a), np.ascontiguousarray(b), k)
 
 
 _MODELS: dict[str, LiftedModel] = {}
 _MATRICES: dict[tuple[str, str], LearningMatrices] = {}
+_RECURSIVE: dict[tuple[str, str], RecursiveMatrices] = {}
 CACHE_SIZE = 4
 """Configurations kept (a live change back and forth between two settings costs nothing)."""
 
@@ -267,10 +283,43 @@ def learning_matrices(config: Config) -> LearningMatrices:
     return matrices
 
 
+@dataclass(frozen=True, eq=False)
+class RecursiveMatrices:
+    """(NO2) without lifted matrices: the Riccati gains of
+    :mod:`exo_ilc_ros.core.learning.norm_optimal_recursive` (memory linear in the samples),
+    the law's drop-in for :class:`LearningMatrices` (same minimiser to rounding, tested)."""
+
+    model: LiftedModel
+    weights: Weights
+    gains: RiccatiGains
+    seconds: float = field(default=0.0, compare=False)
+    """Seconds it took to build the gains (and the model, if it was not cached yet)."""
+
+    def next_feedforward(self, feedforward: np.ndarray, error: np.ndarray) -> np.ndarray:
+        """u_ff,k+1 of (NO2), stacked (sample-major), as
+        :meth:`LearningMatrices.next_feedforward`."""
+        return self.gains.next_feedforward(feedforward, error)
+
+
+def recursive_matrices(config: Config) -> RecursiveMatrices:
+    """:class:`RecursiveMatrices` for the config, cached as :func:`learning_matrices`."""
+    key = (_key(config, MODEL_KEYS), _key(config, WEIGHT_KEYS))
+    matrices = _RECURSIVE.get(key)
+    if matrices is None:
+        start = time.perf_counter()
+        model, weights = lifted_model(config), Weights.of(config)
+        gains = riccati_gains(model.a, model.b, model.k, weights.error, weights.input_change,
+                              weights.input_size)
+        matrices = RecursiveMatrices(model, weights, gains, time.perf_counter() - start)
+        _remember(_RECURSIVE, key, matrices)
+    return matrices
+
+
 def clear_cache() -> None:
     """Forget every cached model and learning matrix (benchmarks)."""
     _MODELS.clear()
     _MATRICES.clear()
+    _RECURSIVE.clear()
 
 
 @dataclass(frozen=True, eq=False)
@@ -333,7 +382,7 @@ QP_TOLERANCE = 1e-12
 constraint is active (tested)."""
 
 
-def solve_constrained(matrices: LearningMatrices, constraints: Constraints,
+def solve_constrained(matrices: LearningMatrices | RecursiveMatrices, constraints: Constraints,
                       record: TrialRecord) -> ConstrainedStep:
     """(NO3) as a sparse QP over z = (du_ff, x_0..x_N) with the model's dynamics as equalities,
     solved by Clarabel (interior point). Active: within 1e-6 (relative) of a bound."""
@@ -432,7 +481,7 @@ class NormOptimalLaw:
     Learns from the previous feed-forward (not the whole input: the model already holds the PD
     part), whatever ``memory`` says."""
 
-    matrices: LearningMatrices
+    matrices: RecursiveMatrices
     constraints: Constraints | None = None
     initial: InitialFeedforward = InitialFeedforward.ZERO
 
@@ -449,7 +498,7 @@ class NormOptimalLaw:
                                       np.where(ff > 0.0, ff, np.inf),
                                       build_arm(config).kernel_args,
                                       float(config["norm_optimal.effort_margin"]))
-        return cls(learning_matrices(config), constraints,
+        return cls(recursive_matrices(config), constraints,
                    InitialFeedforward(config["initial_feedforward"]))
 
     def initial_feedforward(self, reference: SampledReference) -> np.ndarray:
@@ -460,15 +509,34 @@ class NormOptimalLaw:
         """(NO2): u_ff,k+1 = Phi u_ff,k + L e_k; with constraints the QP (NO3), and a note
         naming the constraints that were active."""
         shape = record.feedforward.shape
-        if shape[0] * shape[1] != self.matrices.model.g.shape[0]:
+        model = self.matrices.model
+        if shape[0] != model.samples or shape[1] != model.joints:
             raise SafetyError(f"trial {record.trial}: {shape[0]} samples, but the learning "
                               f"matrix was built for {self.matrices.model.samples}")
         if self.constraints is not None:
-            step = solve_constrained(self.matrices, self.constraints, record)
+            step = solve_constrained_recursive(self.matrices, self.constraints, record)
             notes = constraint_notes(step)
             return FeedforwardUpdate(record.feedforward + step.change, None, notes)
         new = self.matrices.next_feedforward(record.feedforward.ravel(), record.error.ravel())
         return FeedforwardUpdate(new.reshape(shape), None)
+
+
+def solve_constrained_recursive(matrices: RecursiveMatrices, constraints: Constraints,
+                                record: TrialRecord) -> ConstrainedStep:
+    """(NO3) as :func:`solve_constrained`, the QP assembled banded
+    (:func:`exo_ilc_ros.core.learning.norm_optimal_recursive.solve_constrained_banded`)."""
+    model, w = matrices.model, matrices.weights
+    tau, inertia, jacobian = _effort_along(record, constraints.nominal)
+    banded = solve_constrained_banded(
+        model.a, model.b, model.k, w.error, w.input_change, w.input_size, record.feedforward,
+        record.error, tau, inertia, jacobian,
+        constraints.effort_limit * (1.0 - constraints.effort_margin),
+        constraints.feedforward_limit)
+    if not banded.solved:
+        raise SafetyError(f"trial {record.trial}: the constrained norm-optimal update was not "
+                          f"solved ({banded.status}); the limits may be infeasible together")
+    return ConstrainedStep(banded.change, banded.predicted_effort, banded.effort_active,
+                           banded.feedforward_active, banded.status)
 
 
 def constraint_notes(step: ConstrainedStep) -> tuple[str, ...]:

@@ -1,0 +1,1 @@
+"""Learning laws that need no lifted (trial-length squared) matrices."""

@@ -1,0 +1,1 @@
+"""Arms from their URDF: kernel arrays of the chain, a person's arm segments, MuJoCo."""

@@ -116,6 +116,9 @@ class UrdfChain:
     merged_links: tuple[tuple[str, ...], ...] = ()
     """Per moving joint: every link of its body (its child link first)."""
     dropped_links: tuple[str, ...] = ()
+    link_poses: Mapping[str, tuple[int, np.ndarray, np.ndarray]] = field(default_factory=dict)
+    """Every kept link: (moving joint whose body holds it, -1 for the base's; its rotation and
+    origin in that body's frame as the kernels orient it, parallel to the base at q = 0)."""
     source: str = field(default="", compare=False)
     """The file read, or ``<text>``."""
 
@@ -424,15 +427,21 @@ def read_urdf_chain(source: str | Path, base_link: str, tip_link: str,
     coms = np.zeros((n, 3))
     inertias = np.zeros((n, 3, 3))
     orientation = np.eye(3)  # R0 of the previous body (the base's: identity)
+    orientations = []
     for i, joint in enumerate(moving):
         _, rotation, origin = body_of_joint_frame[i]  # in the previous moving body's frame
         offsets[i] = orientation @ origin
         orientation = orientation @ rotation
+        orientations.append(orientation)
         axes[i] = orientation @ joint.axis
         mass, com, inertia = bodies[i + 1].combined()
         masses[i] = mass
         coms[i] = orientation @ com
         inertias[i] = orientation @ inertia @ orientation.T
+    poses = {}
+    for name, (body, rotation, origin) in frame_of.items():
+        r0 = orientations[body - 1] if body > 0 else np.eye(3)
+        poses[name] = (body - 1, r0 @ rotation, r0 @ origin)
     base_down = _base_orientation(base_link, parent_joint, locked)
     g = base_down.T @ np.array([0.0, 0.0, -float(gravity)])
     chain = UrdfChain(
@@ -445,7 +454,7 @@ def read_urdf_chain(source: str | Path, base_link: str, tip_link: str,
         tuple(j.type == "continuous" for j in moving),
         hashlib.sha256(text.encode("utf-8")).hexdigest(),
         tuple(sorted(locked.items())), tuple(tuple(b.links) for b in bodies[1:]),
-        tuple(dropped), where)
+        tuple(dropped), poses, where)
     _check_mass_matrix(chain, where)
     return chain
 

@@ -208,7 +208,7 @@ def _origin(element: ET.Element | None, where: str) -> tuple[np.ndarray, np.ndar
     return rpy_rotation(rpy), xyz
 
 
-def _read_text(source: str | Path) -> tuple[str, str]:
+def read_urdf_text(source: str | Path) -> tuple[str, str]:
     """(text, where) of a path, a ``package://`` URI or URDF text."""
     if isinstance(source, str) and source.lstrip().startswith("<"):
         return source, "<text>"
@@ -336,7 +336,7 @@ def read_urdf_chain(source: str | Path, base_link: str, tip_link: str,
     """The chain from ``base_link`` to ``tip_link`` of the URDF at ``source`` (a path, a
     ``package://`` URI, or the URDF's text), ``locked`` joints held at the given values
     (module docstring)."""
-    text, where = _read_text(source)
+    text, where = read_urdf_text(source)
     robot, links, joints = _parse(text, where)
     locked = dict(locked or {})
     for name, value in locked.items():

@@ -19,6 +19,8 @@ from exo_ilc_ros.core.plant import PlantDynamics, integrate_period
 ARMS = [("ur5", "base_link", "tool0", {}),
         ("panda", "panda_link0", "panda_hand",
          {"panda_finger_joint1": 0.02, "panda_finger_joint2": 0.035}),
+        ("kinova", "base", "j2s6s200_end_effector", {}),  # .dae collision meshes
+        ("xarm7", "world", "link_eef", {}),
         ("two", "base", "tool", TWO_LOCKED)]
 
 
@@ -44,7 +46,8 @@ def test_mass_matrix_and_bias_equal_ours(name: str, base: str, tip: str,
     assert worst < 1e-9
 
 
-@pytest.mark.parametrize(("name", "base", "tip", "locked"), ARMS[1:], ids=["panda", "two"])
+@pytest.mark.parametrize(("name", "base", "tip", "locked"), [ARMS[1], ARMS[-1]],
+                         ids=["panda", "two"])
 def test_rk4_period_equals_our_plant(name: str, base: str, tip: str,
                                      locked: dict[str, float]) -> None:
     """One 10 ms control period, effort held, RK4 at 1 ms in both."""
@@ -83,6 +86,10 @@ def test_model_options_and_joint_effects() -> None:
     damped.set_state([0.3, -0.2], [1.5, -2.0])
     np.testing.assert_allclose(damped.passive_force(), [-0.5 * 1.5, 0.0], atol=1e-15)
     assert not np.any(damped.model.dof_frictionloss)
+    xarm = _arm("xarm7", "world", "link_eef", {}, damping=True)  # damping 10/10/5/5/5/2/2
+    velocity = np.linspace(-1.0, 1.0, 7)
+    xarm.set_state(np.zeros(7), velocity)
+    np.testing.assert_allclose(xarm.passive_force(), -xarm.chain.damping * velocity, atol=1e-14)
 
 
 def test_urdf_is_cut_to_the_chain() -> None:

@@ -138,7 +138,9 @@ def _worst_relative(chain_args: tuple[np.ndarray, ...], model: pin.Model, data: 
 
 ROBOTS = [("ur5", "base_link", "tool0", {}, 6),
           ("panda", "panda_link0", "panda_hand",
-           {"panda_finger_joint1": 0.02, "panda_finger_joint2": 0.035}, 7)]
+           {"panda_finger_joint1": 0.02, "panda_finger_joint2": 0.035}, 7),
+          ("kinova", "base", "j2s6s200_end_effector", {}, 6),  # 3 continuous joints
+          ("xarm7", "world", "link_eef", {}, 7)]  # <dynamics damping friction>
 
 
 @pytest.mark.parametrize(("robot", "base", "tip", "locked", "dof"), ROBOTS,
@@ -154,8 +156,16 @@ def test_public_arms_equal_pinocchio(robot: str, base: str, tip: str,
     assert chain.joint_names == tuple(model.names[1:])
     np.testing.assert_allclose(chain.effort_limit, model.effortLimit)
     np.testing.assert_allclose(chain.velocity_limit, model.velocityLimit)
-    np.testing.assert_allclose(chain.position_lower, model.lowerPositionLimit)
-    np.testing.assert_allclose(chain.position_upper, model.upperPositionLimit)
+    if model.nq == model.nv:  # no continuous joint (Pinocchio's are (cos, sin))
+        np.testing.assert_allclose(chain.position_lower, model.lowerPositionLimit)
+        np.testing.assert_allclose(chain.position_upper, model.upperPositionLimit)
+    else:
+        assert sum(chain.continuous) == model.nq - model.nv
+        assert np.all(np.isinf(chain.position_lower[list(chain.continuous)]))
+    text = Path(path).read_text()
+    if 'damping="10"' in text:  # xArm7: damping 10/10/5/5/5/2/2, friction 1 N m
+        np.testing.assert_array_equal(chain.damping, [10, 10, 5, 5, 5, 2, 2])
+        np.testing.assert_array_equal(chain.friction, [1.0] * 7)
 
 
 def test_panda_fingers_are_merged_into_the_last_body() -> None:

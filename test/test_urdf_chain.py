@@ -215,8 +215,9 @@ def test_digest_is_of_the_contents_not_the_path(tmp_path: Path) -> None:
 
 
 def test_paper_arm_through_its_urdf(tmp_path: Path) -> None:
-    """`exo-ilc urdf` output read back gives the ArmModel's kernels' arrays and dynamics to
-    1e-12 (the file is well-formed XML: its comment holds no double hyphen)."""
+    """`exo-ilc urdf` output read back gives the ArmModel's kernels' arrays bit for bit (so the
+    same trials) and its dynamics to 1e-12 (the file is well-formed XML: its comment holds no
+    double hyphen)."""
     out = tmp_path / "exo_arm.urdf"
     assert cli_main(["urdf", "--out", str(out)]) == 0
     config = load_config()
@@ -225,7 +226,7 @@ def test_paper_arm_through_its_urdf(tmp_path: Path) -> None:
     assert chain.joint_names == tuple(config["joint_names"])
     np.testing.assert_array_equal(chain.effort_limit, config["control.effort_limit"])
     for ours, theirs in zip(chain.kernel_args, arm.kernel_args, strict=True):
-        np.testing.assert_allclose(ours, theirs, rtol=0.0, atol=1e-15)
+        np.testing.assert_array_equal(ours, theirs)  # bit for bit: the same trials
     rng = np.random.default_rng(11)
     for _ in range(50):
         q, v = rng.uniform(-np.pi, np.pi, 3), rng.uniform(-4.0, 4.0, 3)

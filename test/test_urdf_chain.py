@@ -13,7 +13,13 @@ import pinocchio as pin
 import pytest
 
 from exo_ilc_ros.cli.main import main as cli_main
-from exo_ilc_ros.core.arm.urdf_chain import UrdfError, read_urdf_chain, resolve_package_uri
+from exo_ilc_ros.core.arm.urdf_chain import (
+    LimitError,
+    UrdfError,
+    check_reference_limits,
+    read_urdf_chain,
+    resolve_package_uri,
+)
 from exo_ilc_ros.core.config import load_config
 from exo_ilc_ros.core.dynamics import inertia_and_bias, solve_spd
 from exo_ilc_ros.core.experiment import build_arm
@@ -341,3 +347,27 @@ def test_package_uri(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
         resolve_package_uri("package://no_such_package_here/urdf/arm.urdf")
     monkeypatch.delenv("AMENT_PREFIX_PATH")
     assert "AMENT_PREFIX_PATH is not set" in _error(uri)
+
+
+def test_reference_beyond_a_joint_limit() -> None:
+    """The earliest sample out of a URDF limit, named by joint, time and value (the elbow's
+    position limits -2 / 2.5 rad and 4 rad/s; the continuous shoulder has none but 3 rad/s)."""
+    chain = read_urdf_chain(TWO_JOINTS, "base", "tool", TWO_LOCKED)
+    time = np.linspace(0.0, 2.0, 201)
+    position = np.column_stack([10.0 * time, 1.2 * time])  # elbow above 2.5 from t = 2.09: never
+    velocity = np.column_stack([np.full_like(time, 2.9), np.full_like(time, 1.2)])
+    check_reference_limits(chain, time, position, velocity)  # within every limit
+    position[150:, 1] = 2.6
+    with pytest.raises(LimitError, match=r"joint 'elbow' at t = 1\.5 s: q = 2\.6 rad is above "
+                                         r"its upper limit 2\.5 rad \(<text> <limit upper>\)"):
+        check_reference_limits(chain, time, position, velocity)
+    velocity[120:, 0] = -3.5  # earlier than the elbow's position
+    with pytest.raises(LimitError, match=r"joint 'shoulder' at t = 1\.2 s: qdot = -3\.5 rad/s "
+                                         r"is beyond its limit 3 rad/s"):
+        check_reference_limits(chain, time, position, velocity, "exercise reach")
+    position[10, 1] = -2.1
+    with pytest.raises(LimitError, match=r"^the reference: joint 'elbow' at t = 0\.1 s: "
+                                         r"q = -2\.1 rad is below its lower limit -2 rad"):
+        check_reference_limits(chain, time, position, velocity)
+    with pytest.raises(LimitError, match="3 joints, the URDF's chain has 2"):
+        check_reference_limits(chain, time, np.zeros((201, 3)), np.zeros((201, 3)))

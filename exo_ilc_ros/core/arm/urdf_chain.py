@@ -133,6 +133,41 @@ class UrdfChain:
         return (self.masses, self.axes, self.offsets, self.coms, self.inertias, self.gravity)
 
 
+class LimitError(ModelError):
+    """A reference leaves a joint's URDF limits; the message names the joint, time and value."""
+
+
+def check_reference_limits(chain: UrdfChain, time: np.ndarray, position: np.ndarray,
+                           velocity: np.ndarray, what: str = "the reference") -> None:
+    """:class:`LimitError` at the earliest sample where ``position`` (rad) leaves a joint's
+    ``<limit lower upper>`` or ``|velocity|`` (rad/s) exceeds its ``<limit velocity>``
+    (``position``, ``velocity``: one row per sample of ``time``, one column per joint)."""
+    q, qd = np.asarray(position, dtype=float), np.asarray(velocity, dtype=float)
+    shape = (np.shape(time)[0], chain.dof)
+    if q.shape != shape or qd.shape != shape:
+        raise LimitError(f"{what}: {q.shape[1] if q.ndim == 2 else '?'} joints, the URDF's "
+                         f"chain has {chain.dof} ({', '.join(chain.joint_names)})")
+    checks = [(q < chain.position_lower, q, chain.position_lower, "q", "rad", "below its lower",
+               "lower"),
+              (q > chain.position_upper, q, chain.position_upper, "q", "rad", "above its upper",
+               "upper"),
+              (np.abs(qd) > chain.velocity_limit, qd, chain.velocity_limit, "qdot", "rad/s",
+               "beyond its", "velocity")]
+    first: tuple[int, int, int] | None = None
+    for c, (outside, _, _, _, _, _, _) in enumerate(checks):
+        for j in range(chain.dof):
+            hits = np.flatnonzero(outside[:, j])
+            if hits.size and (first is None or hits[0] < first[0]):
+                first = (int(hits[0]), j, c)
+    if first is None:
+        return
+    i, j, c = first
+    _, values, limits, symbol, unit, relation, attribute = checks[c]
+    raise LimitError(f"{what}: joint {chain.joint_names[j]!r} at t = {float(time[i]):.4g} s: "
+                     f"{symbol} = {values[i, j]:.6g} {unit} is {relation} limit "
+                     f"{limits[j]:.6g} {unit} ({chain.source} <limit {attribute}>)")
+
+
 def resolve_package_uri(uri: str) -> Path:
     """``package://name/rest`` to a path the ROS way (the package's share directory from
     ``ament_index_python``); :class:`UrdfError` when it cannot be."""

@@ -301,7 +301,7 @@ def solve_constrained_banded(a: np.ndarray, b: np.ndarray, k: np.ndarray,
                              feedforward_limit: np.ndarray) -> BandedStep:
     """(NO3) as the sparse QP over z = (du_0..du_N, x_0..x_N) with the model (R1) as equalities
     and the predicted effort tau_k + a_N(q_k)(du - K x) + J_k x within +-``effort_limit`` (the
-    margin already applied), |u_ff + du| <= ``feedforward_limit`` (inf: none); ``effort``,
+    margin already applied), abs(u_ff + du) <= ``feedforward_limit`` (inf: none); ``effort``,
     ``inertia``, ``effort_jacobian`` are tau_k, a_N(q_k) and d tau / d x along trial k, as
     ``norm_optimal._effort_along`` gives them. The matrix is the lifted form's, entry for entry,
     assembled from vectorised block indices."""

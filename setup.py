@@ -63,6 +63,9 @@ setup(
     extras_require={
         "test": ["pytest>=8", "hypothesis>=6.100", "pin>=3", "ruff>=0.6", "mypy>=1.10",
                  "types-PyYAML", "colcon-core", "colcon-ros", "psycopg[binary]>=3.1",
+                 # public URDFs (UR5, Panda) for the URDF reader's tests; the loaders pin
+                 # example-robot-data 5.0.0 (tested)
+                 "example-robot-data-loaders>=5", "example-robot-data>=5",
                  *DOCS_DEPENDENCIES],
         "docs": DOCS_DEPENDENCIES,
         # `exo-ilc tune --storage postgresql://...`: SQLAlchemy 2.x opens it with psycopg 3.

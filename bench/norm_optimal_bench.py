@@ -1,24 +1,34 @@
-"""The norm-optimal law against the linear law: the numbers of docs/norm-optimal.md.
+"""The norm-optimal law against the linear law: the numbers of the README's "Norm-optimal ILC".
 
 Run with ``.venv/bin/python -m bench.norm_optimal_bench [--trials 1000]`` (~5 min). Prints, per mass
 uncertainty, the first / settled trial per joint of both laws, the floor (max |e| of the last
 trial) and the boundedness of the learned input over the run (max |u_ff| at trials 100, 500 and
 the last, and the growth check of ``exo-ilc simulate``); then the constrained law against the
 clipped linear law with the effort limit just above what the movement needs. Asserts nothing.
+
+``--scale`` prints instead what the law costs as the arm and the rate grow (3 and 7 joints, 100 Hz
+and 1 kHz, 5 s trials): the lifted matrices' size (one (n (N+1))^2 matrix of doubles) against the
+Riccati form's memory (traced peak while building, bytes held) and its times (model, gains, one
+between-trial update; the constrained QP's update with ``--constrained``).
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+import tracemalloc
 from typing import Any
 
 import numpy as np
 
 from exo_ilc_ros.core import load_config, run_trials
 from exo_ilc_ros.core.convergence.growth import fit_growth
+from exo_ilc_ros.core.learning import norm_optimal
 from exo_ilc_ros.core.loop.plant import saturation_counts
+from exo_ilc_ros.core.params import schema
+from exo_ilc_ros.core.params.config import Config
 from exo_ilc_ros.core.session.result import RunResult
+from exo_ilc_ros.core.sim.experiment import Experiment
 
 
 def _its(result: RunResult) -> str:
@@ -80,12 +90,81 @@ def constrained(trials: int, margin: float = 1.001) -> None:
               + f" ...); constraints active at {len(result.notes)} updates ({seconds:.1f} s)")
 
 
+def widened(joints: int, period: float) -> Config:
+    """The shipped config on a ``joints``-joint cone arm (every per-joint list widened; links
+    of 0.4-1.4 kg), control at ``period``, 5 s trials."""
+    base = load_config()
+    wide: dict[str, Any] = {p.name: [base[p.name][i % 3] for i in range(joints)]
+                            for p in schema.PARAMETERS if p.per_joint}
+    if joints != 3:
+        wide.update({
+            "joint_names": [f"joint_{i + 1}" for i in range(joints)],
+            "model.link_masses": [[1.2, 1.4, 1.1, 0.9, 0.8, 0.6, 0.4][i % 7]
+                                  for i in range(joints)],
+            "model.link_lengths": [[0.1, 0.3, 0.25, 0.1, 0.2, 0.1, 0.08][i % 7]
+                                   for i in range(joints)],
+            "model.radius_proximal": [0.05] * joints, "model.radius_distal": [0.04] * joints,
+            "model.joint_axes": [["y", "x", "y", "z", "y", "x", "y"][i % 7]
+                                 for i in range(joints)]})
+    return base.replace({**wide, "law": "norm_optimal", "control.period": period,
+                         "integration_step": min(period, 0.001)})
+
+
+def scale(constrained_too: bool, repeats: int = 5) -> None:
+    """Memory and between-trial update time of the Riccati form, 3 and 7 joints, 100 Hz and
+    1 kHz (module docstring)."""
+    print("joints rate  samples  lifted matrix | traced peak  held    model s  gains s  "
+          "update ms (median of 5)" + ("  constrained update s" if constrained_too else ""))
+    for joints in (3, 7):
+        for period in (0.01, 0.001):
+            config = widened(joints, period)
+            norm_optimal.clear_cache()
+            tracemalloc.start()
+            start = time.perf_counter()
+            model = norm_optimal.lifted_model(config)
+            built = time.perf_counter()
+            matrices = norm_optimal.recursive_matrices(config)
+            gains_s = time.perf_counter() - built
+            peak = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+            count = model.samples
+            held = matrices.gains.nbytes + model.a.nbytes
+            rng = np.random.default_rng(0)
+            u = 0.1 * rng.standard_normal((count, joints))
+            e = 1e-3 * rng.standard_normal((count, joints))
+            times = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                matrices.next_feedforward(u, e)
+                times.append(time.perf_counter() - t0)
+            lifted = (joints * count) ** 2 * 8
+            line = (f"{joints:>6} {1 / period:>5.0f} {count:>8}  {lifted / 1e9:>10.3f} GB | "
+                    f"{peak / 1e6:>8.1f} MB {held / 1e6:>6.1f} MB {built - start:>8.2f} "
+                    f"{gains_s:>8.3f}  {1e3 * float(np.median(times)):>8.2f}")
+            if constrained_too:
+                c = config.replace({"norm_optimal.constrained": True})
+                law = norm_optimal.NormOptimalLaw.from_config(c)
+                record = Experiment(c, 0.1).run_trial(np.zeros((count, joints)), 1)
+                assert law.constraints is not None
+                t0 = time.perf_counter()
+                norm_optimal.solve_constrained_recursive(law.matrices, law.constraints, record)
+                line += f"  {time.perf_counter() - t0:>8.2f}"
+            print(line, flush=True)
+
+
 def main() -> None:
     """Measure and print."""
     parser = argparse.ArgumentParser()
     parser.add_argument("--trials", type=int, default=1000)
     parser.add_argument("--constrained-trials", type=int, default=30)
+    parser.add_argument("--scale", action="store_true",
+                        help="only the cost of the Riccati form at 3/7 joints, 100 Hz/1 kHz")
+    parser.add_argument("--constrained", action="store_true",
+                        help="with --scale: also time one constrained (QP) update")
     args = parser.parse_args()
+    if args.scale:
+        scale(args.constrained)
+        return
     speed_and_floor(args.trials)
     constrained(args.constrained_trials)
 

@@ -76,7 +76,10 @@ def test_learning_matrix_is_cached_per_configuration() -> None:
     session.stage({"error_bound": 0.002})
     record = Experiment(session.config).run_trial(session.feedforward, 1)
     session.conclude(record)
-    assert session.active_law.matrices is first  # type: ignore[attr-defined]
+    law = session.active_law
+    assert isinstance(law, norm_optimal.NormOptimalLaw)
+    assert law.matrices is norm_optimal.recursive_matrices(config)  # the law's (Riccati) form
+    assert law.matrices.model is first.model
 
 
 def test_exact_model_learns_almost_everything_in_one_trial() -> None:

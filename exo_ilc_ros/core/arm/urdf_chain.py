@@ -1,0 +1,556 @@
+"""A serial arm from its URDF: the arrays the compiled kernels of :mod:`exo_ilc_ros.core.dynamics`
+take, read with the standard library's XML parser.
+
+The chain runs from ``base_link`` to ``tip_link``. Its moving joints are the revolute and
+continuous joints on that path that are not locked; every other link is merged, rigidly, into
+the moving body it hangs from:
+
+* fixed joints, and joints named in ``locked`` (any type, held at the given value: an angle for
+  a revolute or continuous joint, a length for a prismatic one), join their child link to the
+  parent's body (mass, centre of mass and inertia combined by the parallel-axis theorem);
+* a subtree hanging off the chain from the base's body (the links before the first moving
+  joint) through a joint that could move is dropped, whole: it is fixed to the ground as far as
+  the chain is concerned (its links are listed in :attr:`UrdfChain.dropped_links`);
+* a joint that could move anywhere else (a branch off a moving link, or beyond the tip) is an
+  error naming it: lock it, or choose another tip.
+
+The kernels' convention (:mod:`exo_ilc_ros.core.dynamics`) is that all link frames are parallel
+to the base frame at q = 0. A URDF's joint frames are rotated by their ``origin rpy``; with R0_i
+the orientation of joint i's frame at q = 0 (in the base frame), the kernel's arrays are
+``axes[i] = R0_i a_i``, ``offsets[i] = R0_i-1 p_i`` (joint i's origin from joint i-1's),
+``coms[i] = R0_i c_i`` and ``inertias[i] = R0_i I_i R0_i^T`` (I_i about the body's centre of
+mass), which leaves the dynamics unchanged (tested against Pinocchio). Gravity is (0, 0, -g) in
+the URDF's root link, expressed in the base link's frame (the base's fixed or locked joints
+up to the root at their q = 0 or locked values).
+
+Errors (:class:`UrdfError`) name the file or the element: missing file, bad XML, a joint that is
+prismatic, floating or planar on the path, a branch that could move, a base or tip link that is
+not there or not connected, a mass matrix that is singular. ``package://`` is resolved the ROS
+way (``ament_index_python``) where the package is installed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ModelError
+from .dynamics import inertia_and_bias
+
+MOVING_TYPES = ("revolute", "continuous")
+LOCKABLE_TYPES = ("revolute", "continuous", "prismatic")
+KNOWN_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+SINGULAR_TOLERANCE = 1e-10
+"""A Cholesky pivot of the mass matrix below this share of its largest diagonal entry counts as
+singular."""
+
+
+class UrdfError(ModelError):
+    """The URDF cannot give the chain asked for; the message names the file and the element."""
+
+
+@dataclass(frozen=True)
+class _Inertial:
+    mass: float
+    rotation: np.ndarray
+    origin: np.ndarray
+    inertia: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Joint:
+    name: str
+    type: str
+    parent: str
+    child: str
+    rotation: np.ndarray
+    origin: np.ndarray
+    axis: np.ndarray
+    lower: float
+    upper: float
+    effort: float
+    velocity: float
+    damping: float
+    friction: float
+
+
+@dataclass(frozen=True, eq=False)
+class UrdfChain:
+    """The moving chain from ``base_link`` to ``tip_link``: the kernels' arrays
+    (:attr:`kernel_args`, as :attr:`exo_ilc_ros.core.model.ArmModel.kernel_args`) and what the
+    URDF says of each moving joint."""
+
+    robot_name: str
+    base_link: str
+    tip_link: str
+    joint_names: tuple[str, ...]
+    link_names: tuple[str, ...]
+    """The child link of each moving joint (its body carries the links merged into it)."""
+    masses: np.ndarray
+    axes: np.ndarray
+    offsets: np.ndarray
+    coms: np.ndarray
+    inertias: np.ndarray
+    gravity: np.ndarray
+    position_lower: np.ndarray
+    """rad; -inf for a continuous joint."""
+    position_upper: np.ndarray
+    effort_limit: np.ndarray
+    """N m; inf where the URDF gives none."""
+    velocity_limit: np.ndarray
+    """rad/s; inf where the URDF gives none."""
+    damping: np.ndarray
+    """``<dynamics damping>`` (N m s/rad), 0 where absent."""
+    friction: np.ndarray
+    """``<dynamics friction>`` (N m), 0 where absent."""
+    continuous: tuple[bool, ...]
+    digest: str
+    """SHA-256 of the URDF's text (its contents, not its path)."""
+    locked: tuple[tuple[str, float], ...] = ()
+    merged_links: tuple[tuple[str, ...], ...] = ()
+    """Per moving joint: every link of its body (its child link first)."""
+    dropped_links: tuple[str, ...] = ()
+    link_poses: Mapping[str, tuple[int, np.ndarray, np.ndarray]] = field(default_factory=dict)
+    """Every kept link: (moving joint whose body holds it, -1 for the base's; its rotation and
+    origin in that body's frame as the kernels orient it, parallel to the base at q = 0)."""
+    source: str = field(default="", compare=False)
+    """The file read, or ``<text>``."""
+
+    @property
+    def dof(self) -> int:
+        """Number of moving joints."""
+        return len(self.joint_names)
+
+    @property
+    def kernel_args(self) -> tuple[np.ndarray, ...]:
+        """(masses, axes, offsets, coms, inertias, gravity) for the compiled kernels."""
+        return (self.masses, self.axes, self.offsets, self.coms, self.inertias, self.gravity)
+
+
+class LimitError(ModelError):
+    """A reference leaves a joint's URDF limits; the message names the joint, time and value."""
+
+
+def check_reference_limits(chain: UrdfChain, time: np.ndarray, position: np.ndarray,
+                           velocity: np.ndarray, what: str = "the reference") -> None:
+    """:class:`LimitError` at the earliest sample where ``position`` (rad) leaves a joint's
+    ``<limit lower upper>`` or ``|velocity|`` (rad/s) exceeds its ``<limit velocity>``
+    (``position``, ``velocity``: one row per sample of ``time``, one column per joint)."""
+    q, qd = np.asarray(position, dtype=float), np.asarray(velocity, dtype=float)
+    shape = (np.shape(time)[0], chain.dof)
+    if q.shape != shape or qd.shape != shape:
+        raise LimitError(f"{what}: {q.shape[1] if q.ndim == 2 else '?'} joints, the URDF's "
+                         f"chain has {chain.dof} ({', '.join(chain.joint_names)})")
+    checks = [(q < chain.position_lower, q, chain.position_lower, "q", "rad", "below its lower",
+               "lower"),
+              (q > chain.position_upper, q, chain.position_upper, "q", "rad", "above its upper",
+               "upper"),
+              (np.abs(qd) > chain.velocity_limit, qd, chain.velocity_limit, "qdot", "rad/s",
+               "beyond its", "velocity")]
+    first: tuple[int, int, int] | None = None
+    for c, (outside, _, _, _, _, _, _) in enumerate(checks):
+        for j in range(chain.dof):
+            hits = np.flatnonzero(outside[:, j])
+            if hits.size and (first is None or hits[0] < first[0]):
+                first = (int(hits[0]), j, c)
+    if first is None:
+        return
+    i, j, c = first
+    _, values, limits, symbol, unit, relation, attribute = checks[c]
+    raise LimitError(f"{what}: joint {chain.joint_names[j]!r} at t = {float(time[i]):.4g} s: "
+                     f"{symbol} = {values[i, j]:.6g} {unit} is {relation} limit "
+                     f"{limits[j]:.6g} {unit} ({chain.source} <limit {attribute}>)")
+
+
+def resolve_package_uri(uri: str) -> Path:
+    """``package://name/rest`` to a path the ROS way (the package's share directory from
+    ``ament_index_python``); :class:`UrdfError` when it cannot be."""
+    rest = uri[len("package://"):]
+    package, _, relative = rest.partition("/")
+    try:
+        from ament_index_python.packages import (  # optional: a ROS install
+            PackageNotFoundError,
+            get_package_share_directory,
+        )
+    except ImportError:
+        raise UrdfError(f"{uri}: cannot resolve package://: ament_index_python is not "
+                        "installed (source a ROS 2 install, or give a file path)") from None
+    try:
+        share = get_package_share_directory(package)
+    except PackageNotFoundError:
+        raise UrdfError(f"{uri}: package {package!r} is not installed (not in the ament "
+                        "index); source its workspace or give a file path") from None
+    except OSError:  # AMENT_PREFIX_PATH unset: no ROS environment sourced
+        raise UrdfError(f"{uri}: cannot find package {package!r}: AMENT_PREFIX_PATH is not "
+                        "set (source a ROS 2 install or workspace, or give a file path)"
+                        ) from None
+    return Path(share) / relative
+
+
+def rpy_rotation(rpy: np.ndarray) -> np.ndarray:
+    """The URDF's ``rpy``: R = Rz(yaw) Ry(pitch) Rx(roll) (fixed axes x, y, z)."""
+    r, p, y = (float(v) for v in rpy)
+    cr, sr, cp, sp, cy, sy = (math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y),
+                              math.sin(y))
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+def axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation by ``angle`` about the unit vector ``axis`` (Rodrigues)."""
+    x, y, z = (float(v) for v in axis)
+    c, s = math.cos(angle), math.sin(angle)
+    v = 1.0 - c
+    return np.array([[c + x * x * v, x * y * v - z * s, x * z * v + y * s],
+                     [y * x * v + z * s, c + y * y * v, y * z * v - x * s],
+                     [z * x * v - y * s, z * y * v + x * s, c + z * z * v]])
+
+
+def _floats(text: str | None, count: int, default: tuple[float, ...], where: str
+            ) -> np.ndarray:
+    if text is None:
+        return np.array(default, dtype=float)
+    try:
+        values = [float(v) for v in text.split()]
+    except ValueError:
+        raise UrdfError(f"{where}: {text!r} is not {count} numbers") from None
+    if len(values) != count:
+        raise UrdfError(f"{where}: {text!r} is not {count} numbers")
+    return np.array(values, dtype=float)
+
+
+def _number(element: ET.Element | None, name: str, default: float, where: str) -> float:
+    if element is None or element.get(name) is None:
+        return default
+    try:
+        return float(element.get(name, ""))
+    except ValueError:
+        raise UrdfError(f"{where}: {name}={element.get(name)!r} is not a number") from None
+
+
+def _origin(element: ET.Element | None, where: str) -> tuple[np.ndarray, np.ndarray]:
+    if element is None:
+        return np.eye(3), np.zeros(3)
+    xyz = _floats(element.get("xyz"), 3, (0.0, 0.0, 0.0), f"{where} <origin xyz>")
+    rpy = _floats(element.get("rpy"), 3, (0.0, 0.0, 0.0), f"{where} <origin rpy>")
+    return rpy_rotation(rpy), xyz
+
+
+def read_urdf_text(source: str | Path) -> tuple[str, str]:
+    """(text, where) of a path, a ``package://`` URI or URDF text."""
+    if isinstance(source, str) and source.lstrip().startswith("<"):
+        return source, "<text>"
+    path = resolve_package_uri(str(source)) if str(source).startswith("package://") \
+        else Path(source)
+    try:
+        return path.read_text(encoding="utf-8"), str(path)
+    except FileNotFoundError:
+        raise UrdfError(f"{path}: no such URDF file") from None
+    except OSError as exc:
+        raise UrdfError(f"{path}: cannot read the URDF ({exc.strerror})") from None
+
+
+def _parse(text: str, where: str) -> tuple[str, dict[str, _Inertial | None], dict[str, _Joint]]:
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise UrdfError(f"{where}: not well-formed XML ({exc})") from None
+    if root.tag != "robot":
+        raise UrdfError(f"{where}: the root element is <{root.tag}>, not <robot>")
+    links: dict[str, _Inertial | None] = {}
+    for link in root.findall("link"):
+        name = link.get("name")
+        if not name:
+            raise UrdfError(f"{where}: a <link> has no name")
+        if name in links:
+            raise UrdfError(f"{where}: link {name!r} is defined twice")
+        inertial = link.find("inertial")
+        if inertial is None:
+            links[name] = None
+            continue
+        at = f"{where}: link {name!r} <inertial>"
+        rotation, origin = _origin(inertial.find("origin"), at)
+        mass = _number(inertial.find("mass"), "value", 0.0, f"{at} <mass>")
+        element = inertial.find("inertia")
+        i = {k: _number(element, k, 0.0, f"{at} <inertia>")
+             for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
+        tensor = np.array([[i["ixx"], i["ixy"], i["ixz"]], [i["ixy"], i["iyy"], i["iyz"]],
+                           [i["ixz"], i["iyz"], i["izz"]]])
+        if mass < 0.0:
+            raise UrdfError(f"{at}: negative mass {mass}")
+        links[name] = _Inertial(mass, rotation, origin, tensor)
+    joints: dict[str, _Joint] = {}
+    for joint in root.findall("joint"):
+        name = joint.get("name") or ""
+        at = f"{where}: joint {name!r}"
+        if not name:
+            raise UrdfError(f"{where}: a <joint> has no name")
+        if name in joints:
+            raise UrdfError(f"{at} is defined twice")
+        kind = joint.get("type", "")
+        if kind not in KNOWN_TYPES:
+            raise UrdfError(f"{at}: unknown type {kind!r} (one of {', '.join(KNOWN_TYPES)})")
+        parent, child = joint.find("parent"), joint.find("child")
+        if parent is None or child is None or not parent.get("link") or not child.get("link"):
+            raise UrdfError(f"{at}: needs <parent link=...> and <child link=...>")
+        for end in (parent.get("link", ""), child.get("link", "")):
+            if end not in links:
+                raise UrdfError(f"{at}: link {end!r} is not defined")
+        rotation, origin = _origin(joint.find("origin"), at)
+        axis_element = joint.find("axis")
+        axis = _floats(None if axis_element is None else axis_element.get("xyz"), 3,
+                       (1.0, 0.0, 0.0), f"{at} <axis xyz>")
+        norm = float(np.linalg.norm(axis))
+        if kind in LOCKABLE_TYPES and norm == 0.0:
+            raise UrdfError(f"{at}: <axis xyz> is zero")
+        limit, dynamics = joint.find("limit"), joint.find("dynamics")
+        joints[name] = _Joint(
+            name, kind, parent.get("link", ""), child.get("link", ""), rotation, origin,
+            axis / norm if norm > 0.0 else axis,
+            _number(limit, "lower", -math.inf, f"{at} <limit>"),
+            _number(limit, "upper", math.inf, f"{at} <limit>"),
+            _number(limit, "effort", math.inf, f"{at} <limit>"),
+            _number(limit, "velocity", math.inf, f"{at} <limit>"),
+            _number(dynamics, "damping", 0.0, f"{at} <dynamics>"),
+            _number(dynamics, "friction", 0.0, f"{at} <dynamics>"))
+    return root.get("name", ""), links, joints
+
+
+@dataclass
+class _Body:
+    """A rigid body being merged: masses, centres of mass and central inertias in its frame."""
+
+    links: list[str]
+    parts: list[tuple[float, np.ndarray, np.ndarray]]
+
+    def add(self, inertial: _Inertial | None, rotation: np.ndarray, origin: np.ndarray) -> None:
+        if inertial is None or (inertial.mass == 0.0 and not np.any(inertial.inertia)):
+            return
+        r = rotation @ inertial.rotation
+        self.parts.append((inertial.mass, rotation @ inertial.origin + origin,
+                           r @ inertial.inertia @ r.T))
+
+    def combined(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """Mass, centre of mass and inertia about it (parallel-axis theorem)."""
+        if not self.parts:
+            return 0.0, np.zeros(3), np.zeros((3, 3))
+        if len(self.parts) == 1:
+            return self.parts[0]
+        mass = float(sum(m for m, _, _ in self.parts))
+        com = np.zeros(3)
+        if mass > 0.0:
+            for m, c, _ in self.parts:
+                com += m * c
+            com /= mass
+        inertia = np.zeros((3, 3))
+        for m, c, i in self.parts:
+            d = c - com
+            inertia += i + m * (float(d @ d) * np.eye(3) - np.outer(d, d))
+        return mass, com, inertia
+
+
+def _fixed_transform(joint: _Joint, value: float) -> tuple[np.ndarray, np.ndarray]:
+    """Child frame in the parent's of a fixed joint, or of a locked one at ``value``."""
+    if joint.type in ("revolute", "continuous"):
+        return joint.rotation @ axis_rotation(joint.axis, value), joint.origin
+    if joint.type == "prismatic":
+        return joint.rotation, joint.origin + joint.rotation @ (value * joint.axis)
+    return joint.rotation, joint.origin
+
+
+def read_urdf_chain(source: str | Path, base_link: str, tip_link: str,
+                    locked: Mapping[str, float] | None = None, gravity: float = 9.81
+                    ) -> UrdfChain:
+    """The chain from ``base_link`` to ``tip_link`` of the URDF at ``source`` (a path, a
+    ``package://`` URI, or the URDF's text), ``locked`` joints held at the given values
+    (module docstring)."""
+    text, where = read_urdf_text(source)
+    robot, links, joints = _parse(text, where)
+    locked = dict(locked or {})
+    for name, value in locked.items():
+        if name not in joints:
+            raise UrdfError(f"{where}: locked joint {name!r} is not in the URDF")
+        if joints[name].type not in LOCKABLE_TYPES:
+            raise UrdfError(f"{where}: locked joint {name!r} is {joints[name].type}; only "
+                            f"{', '.join(LOCKABLE_TYPES)} joints can be locked")
+        if not math.isfinite(value):
+            raise UrdfError(f"{where}: locked joint {name!r}: value {value} is not finite")
+    parent_joint: dict[str, _Joint] = {}
+    for joint in joints.values():
+        if joint.child in parent_joint:
+            raise UrdfError(f"{where}: link {joint.child!r} has two parent joints "
+                            f"({parent_joint[joint.child].name!r}, {joint.name!r}): not a tree")
+        parent_joint[joint.child] = joint
+    children: dict[str, list[_Joint]] = {name: [] for name in links}
+    for joint in joints.values():
+        children[joint.parent].append(joint)
+    for end, role in ((base_link, "base"), (tip_link, "tip")):
+        if end not in links:
+            raise UrdfError(f"{where}: {role} link {end!r} is not a link of the URDF")
+    path: list[_Joint] = []
+    link = tip_link
+    while link != base_link:
+        above = parent_joint.get(link)
+        if above is None:
+            raise UrdfError(f"{where}: tip link {tip_link!r} is not in the chain below base "
+                            f"link {base_link!r} (walking up from the tip reached the root "
+                            f"{link!r})")
+        path.append(above)
+        link = above.parent
+    path.reverse()
+    moving = []
+    for joint in path:
+        if joint.name in locked or joint.type == "fixed":
+            continue
+        if joint.type in MOVING_TYPES:
+            moving.append(joint)
+        elif joint.type == "prismatic":
+            raise UrdfError(f"{where}: joint {joint.name!r} between {base_link!r} and "
+                            f"{tip_link!r} is prismatic; only revolute and continuous joints "
+                            "are supported (lock it at a value)")
+        else:
+            raise UrdfError(f"{where}: joint {joint.name!r} between {base_link!r} and "
+                            f"{tip_link!r} is {joint.type}: a floating or planar base is not "
+                            "a fixed-base arm (choose a base link below it)")
+    if not moving:
+        raise UrdfError(f"{where}: no revolute or continuous joint between {base_link!r} and "
+                        f"{tip_link!r}")
+    moving_names = {j.name for j in moving}
+
+    # every link's body (0: the base's; i + 1: moving joint i's) and pose in the body's frame
+    bodies = [_Body([base_link], []) for _ in range(len(moving) + 1)]
+    body_of_joint_frame: list[tuple[int, np.ndarray, np.ndarray]] = []  # (body, R, p) per joint
+    dropped: list[str] = []
+    starts = [(0, base_link)] + [(i + 1, j.child) for i, j in enumerate(moving)]
+    frame_of: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
+    for body, start in starts:
+        bodies[body].links = [start]
+        stack = [(start, np.eye(3), np.zeros(3))]
+        while stack:
+            name, rotation, origin = stack.pop()
+            frame_of[name] = (body, rotation, origin)
+            bodies[body].add(links[name], rotation, origin)
+            for joint in children[name]:
+                if joint.name in moving_names:
+                    continue  # starts the next body
+                if joint.type == "fixed" or joint.name in locked:
+                    r, p = _fixed_transform(joint, locked.get(joint.name, 0.0))
+                    stack.append((joint.child, rotation @ r, rotation @ p + origin))
+                    bodies[body].links.append(joint.child)
+                elif body == 0:
+                    dropped.extend(_subtree(joint.child, children))
+                else:
+                    raise UrdfError(
+                        f"{where}: joint {joint.name!r} ({joint.type}) moves link "
+                        f"{joint.child!r} off the chain {base_link!r} -> {tip_link!r} (it hangs "
+                        f"from link {name!r}, which moves): lock it or choose another tip")
+    for joint in moving:
+        body, rotation, origin = frame_of[joint.parent]
+        body_of_joint_frame.append((body, rotation @ joint.rotation,
+                                    rotation @ joint.origin + origin))
+    n = len(moving)
+    masses = np.zeros(n)
+    axes = np.zeros((n, 3))
+    offsets = np.zeros((n, 3))
+    coms = np.zeros((n, 3))
+    inertias = np.zeros((n, 3, 3))
+    orientation = np.eye(3)  # R0 of the previous body (the base's: identity)
+    orientations = []
+    for i, joint in enumerate(moving):
+        _, rotation, origin = body_of_joint_frame[i]  # in the previous moving body's frame
+        offsets[i] = orientation @ origin
+        orientation = orientation @ rotation
+        orientations.append(orientation)
+        axes[i] = orientation @ joint.axis
+        mass, com, inertia = bodies[i + 1].combined()
+        masses[i] = mass
+        coms[i] = orientation @ com
+        inertias[i] = orientation @ inertia @ orientation.T
+    poses = {}
+    for name, (body, rotation, origin) in frame_of.items():
+        r0 = orientations[body - 1] if body > 0 else np.eye(3)
+        poses[name] = (body - 1, r0 @ rotation, r0 @ origin)
+    base_down = _base_orientation(base_link, parent_joint, locked)
+    g = base_down.T @ np.array([0.0, 0.0, -float(gravity)])
+    chain = UrdfChain(
+        robot, base_link, tip_link, tuple(j.name for j in moving),
+        tuple(j.child for j in moving), masses, axes, offsets, coms, inertias, g,
+        np.array([-math.inf if j.type == "continuous" else j.lower for j in moving]),
+        np.array([math.inf if j.type == "continuous" else j.upper for j in moving]),
+        np.array([j.effort for j in moving]), np.array([j.velocity for j in moving]),
+        np.array([j.damping for j in moving]), np.array([j.friction for j in moving]),
+        tuple(j.type == "continuous" for j in moving),
+        hashlib.sha256(text.encode("utf-8")).hexdigest(),
+        tuple(sorted(locked.items())), tuple(tuple(b.links) for b in bodies[1:]),
+        tuple(dropped), poses, where)
+    _check_mass_matrix(chain, where)
+    return chain
+
+
+def _subtree(link: str, children: Mapping[str, list[_Joint]]) -> list[str]:
+    out, stack = [], [link]
+    while stack:
+        name = stack.pop()
+        out.append(name)
+        stack.extend(j.child for j in children[name])
+    return out
+
+
+def _base_orientation(base_link: str, parent_joint: Mapping[str, _Joint],
+                      locked: Mapping[str, float]) -> np.ndarray:
+    """The base link's orientation in the URDF's root link (joints above it at q = 0 or their
+    locked values)."""
+    rotation = np.eye(3)
+    link = base_link
+    while link in parent_joint:
+        joint = parent_joint[link]
+        r, _ = _fixed_transform(joint, locked.get(joint.name, 0.0))
+        rotation = r @ rotation
+        link = joint.parent
+    return rotation
+
+
+def _check_mass_matrix(chain: UrdfChain, where: str, samples: int = 8) -> None:
+    """:class:`UrdfError` naming the first joint whose column of a(q) is (numerically) a
+    combination of the earlier ones, at q = 0 or at seeded random configurations within the
+    position limits."""
+    rng = np.random.default_rng(0)
+    lower = np.where(np.isfinite(chain.position_lower), chain.position_lower, -math.pi)
+    upper = np.where(np.isfinite(chain.position_upper), chain.position_upper, math.pi)
+    zero = np.zeros(chain.dof)
+    for k in range(samples):
+        q = np.clip(zero, lower, upper) if k == 0 else rng.uniform(lower, upper)
+        a, _ = inertia_and_bias(np.ascontiguousarray(q), zero, *chain.kernel_args)
+        joint = _singular_column(a)
+        if joint is not None:
+            name = chain.joint_names[joint]
+            raise UrdfError(
+                f"{where}: the mass matrix of {chain.base_link!r} -> {chain.tip_link!r} is "
+                f"singular at joint {name!r} (q = {np.round(q, 3).tolist()}): nothing beyond "
+                f"it has inertia about its axis that the earlier joints do not already move "
+                f"(give link {chain.link_names[joint]!r} or the links after it mass and "
+                "inertia, or lock the joint)")
+
+
+def _singular_column(a: np.ndarray) -> int | None:
+    """Index of the first Cholesky pivot below :data:`SINGULAR_TOLERANCE` x max diag, or None."""
+    n = a.shape[0]
+    scale = max(float(np.max(np.abs(np.diag(a)))), 1e-300)
+    low = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            s = a[i, j] - float(low[i, :j] @ low[j, :j])
+            if i == j:
+                if s <= SINGULAR_TOLERANCE * scale:
+                    return i
+                low[i, i] = math.sqrt(s)
+            else:
+                low[i, j] = s / low[j, j]
+    return None

@@ -1,0 +1,1 @@
+"""What the loop learns between trials: the patient's joint forces (:mod:`.identification`)."""

@@ -74,8 +74,8 @@ def _default_thresholds() -> tuple[float, ...]:
 
 
 def _default_precision() -> dict[str, float]:
-    return {"viscous": 0.02, "coulomb": 0.02, "stiffness": 0.1, "rest_position": 0.05, "offset": 0.02,
-            "model_scale": 0.01, "reflex_gain": 0.05}
+    return {"viscous": 0.02, "coulomb": 0.02, "stiffness": 0.1, "rest_position": 0.05,
+            "offset": 0.02, "model_scale": 0.01, "reflex_gain": 0.05}
 
 
 def _default_bounds() -> dict[str, tuple[float, float]]:
@@ -129,6 +129,10 @@ class IdentificationSettings:
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=_default_bounds)
     """Plausible range of each parameter; an estimate beyond it by more than three standard
     errors is absurd and never usable."""
+    max_unresolved_motion: float = 5e-4
+    """rad: the largest RMS of the measured position above the smoothing cutoff of a usable
+    trial (a 14-bit encoder's quantisation is 1.1e-4; a chattering spastic elbow 2e-3 to 6e-3,
+    where the filtered regression is biased)."""
     reflex_minimum_torque: float = 0.02
     """N m: a reflex is reported only if its fitted torque at the fastest stretch seen
     exceeds this (and G's interval excludes 0)."""
@@ -302,6 +306,9 @@ class TrialRegressors:
     """Samples left out at the start (burn-in)."""
     transients: np.ndarray
     """(m, 2) orthonormal: the start transients projected out of every column."""
+    unresolved: np.ndarray
+    """(n,) rad: RMS of the measured position above the smoothing cutoff (the motion the
+    regressors do not resolve: encoder noise, or chatter and stick-slip when large)."""
 
 
 def trial_regressors(nominal: ArmModel, settings: IdentificationSettings,
@@ -330,30 +337,35 @@ def trial_regressors(nominal: ArmModel, settings: IdentificationSettings,
     ], axis=2)
     skip = min(int(round(settings.burn_in / period)), q.shape[0] - 1)
     basis = filters.start_transients(q.shape[0])[skip:]
+    unresolved = np.sqrt(np.mean((q - smoothed)[skip:] ** 2, axis=0))
     return TrialRegressors(_project_out(target[skip:], basis), _project_out(columns[skip:], basis),
-                           velocity, skip, basis)
+                           velocity, skip, basis, unresolved)
 
 
 def _project_out(x: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """``x`` (along axis 0) minus its least-squares projection on the columns of ``basis``
     (orthonormal)."""
-    flat = x.reshape(x.shape[0], -1)
+    flat = np.ascontiguousarray(x).reshape(x.shape[0], -1)
     return np.asarray((flat - basis @ (basis.T @ flat)).reshape(x.shape))
 
 
 def reflex_columns(velocity: np.ndarray, thresholds: np.ndarray, delays: tuple[int, ...],
                    filters: _Filters, skip: int) -> np.ndarray:
     """(m, delays x thresholds): H[sgn(v) max(0, |v| - v_th)] with v = qdot(t - tau_r), held
-    over each period (the first value before the trial's start), for one joint's velocity."""
+    over each period (the first value before the trial's start), for one joint's velocity.
+
+    Filtered once undelayed: a filter started at rest at its first value answers the delayed
+    column with that rest value for ``delay`` samples, then with the undelayed answer shifted."""
     n_samples = velocity.shape[0]
-    out = np.empty((n_samples, len(delays) * thresholds.shape[0]))
+    excess = np.maximum(np.abs(velocity)[:, None] - thresholds[None, :], 0.0)
+    filtered = filters.apply(filters.held, np.sign(velocity)[:, None] * excess)
+    width = thresholds.shape[0]
+    out = np.empty((n_samples, len(delays) * width))
     for k, delay in enumerate(delays):
-        v = velocity if delay == 0 else np.concatenate(
-            [np.repeat(velocity[:1], delay), velocity[:n_samples - delay]])
-        excess = np.maximum(np.abs(v)[:, None] - thresholds[None, :], 0.0)
-        out[:, k * thresholds.shape[0]:(k + 1) * thresholds.shape[0]] = \
-            np.sign(v)[:, None] * excess
-    return filters.apply(filters.held, out)[skip:]
+        block = out[:, k * width:(k + 1) * width]
+        block[:delay] = filtered[0]
+        block[delay:] = filtered[:n_samples - delay]
+    return out[skip:]
 
 
 @dataclass
@@ -432,15 +444,17 @@ class _JointInformation:
         self.trials = 0
         self.peak_speed = 0.0
         self.inflation = np.full(p + 1, np.nan)
+        self.unresolved = 0.0
         self._rss: np.ndarray | None = None
 
     def add(self, phi: np.ndarray, reflex: np.ndarray, y: np.ndarray, forgetting: float,
-            speed: float) -> None:
+            speed: float, unresolved: float) -> None:
         lam = forgetting
+        self.unresolved = max(unresolved, lam * self.unresolved)
         self.R = lam * self.R + phi.T @ phi
         self.b = lam * self.b + phi.T @ y
         self.Rxg = lam * self.Rxg + reflex.T @ phi
-        self.Rgg = lam * self.Rgg + np.einsum("ij,ij->j", reflex, reflex)
+        self.Rgg = lam * self.Rgg + np.sum(reflex * reflex, axis=0)
         self.bg = lam * self.bg + reflex.T @ y
         self.yy = lam * self.yy + float(y @ y)
         self.samples = lam * self.samples + y.shape[0]
@@ -517,18 +531,21 @@ class JointForceIdentifier:
         if why:
             return self._conclude(f"trial {self._trial} not used: {why}")
         reg = trial_regressors(self.nominal, s, q, u, self.filters)
+        reflexes = []
         for j, info in enumerate(self.joints):
-            phi = reg.base[:, j, :]
-            y = reg.target[:, j]
-            v = reg.velocity[:, j]
+            phi = np.ascontiguousarray(reg.base[:, j, :])
+            y = np.ascontiguousarray(reg.target[:, j])
+            v = np.ascontiguousarray(reg.velocity[:, j])
             reflex = (self._reflex(v, reg) if s.reflex else np.zeros((y.shape[0], 0)))
+            reflexes.append(reflex)
             alone = _solve(phi.T @ phi, phi.T @ y, float(y @ y))
             well = (alone.condition <= s.max_condition and bool(np.all(
                 alone.excited[:4])))
-            info.add(phi, reflex, y, s.forgetting if well else 1.0, float(np.max(np.abs(v))))
+            info.add(phi, reflex, y, s.forgetting if well else 1.0, float(np.max(np.abs(v))),
+                     float(reg.unresolved[j]))
         estimate = self._conclude("")
         for j, info in enumerate(self.joints):
-            self._update_inflation(j, info, reg, estimate.joints[j])
+            self._update_inflation(j, info, reg, reflexes[j], estimate.joints[j])
         self.estimate = self._conclude("")
         return self.estimate
 
@@ -563,14 +580,14 @@ class JointForceIdentifier:
         return best, _solve(R, b, info.yy), base
 
     def _update_inflation(self, j: int, info: _JointInformation, reg: TrialRegressors,
-                          estimate: JointEstimate) -> None:
+                          reflex: np.ndarray, estimate: JointEstimate) -> None:
         """The autocorrelation inflation of the variances, from this trial's residual under
         the model now reported (lambda-weighted mean over trials)."""
         best, chosen, _ = self._selected(info)
         phi = reg.base[:, j, :]
         p = phi.shape[1]
         if estimate.reflex_detected and best is not None:
-            col = self._reflex(reg.velocity[:, j], reg)[:, best]
+            col = reflex[:, best]
             phi = np.column_stack([phi, col])
             theta = chosen.theta
         else:
@@ -591,10 +608,10 @@ class JointForceIdentifier:
     def _joint(self, j: int, info: _JointInformation) -> JointEstimate:
         s = self.settings
         if info.trials == 0:
-            nan = ParameterEstimate
-            params = {name: nan(name, math.nan, math.nan, math.nan, math.nan, False, False,
-                                "no trial yet") for name in PARAMETERS}
-            return JointEstimate(j, params, False, math.inf, math.nan, 0.0, 0, False,
+            empty = {name: ParameterEstimate(name, math.nan, math.nan, math.nan, math.nan,
+                                             False, False, "no trial yet")
+                     for name in PARAMETERS}
+            return JointEstimate(j, empty, False, math.inf, math.nan, 0.0, 0, False,
                                  ("no trial yet",))
         best, with_reflex, base = self._selected(info)
         p = len(BASE_PARAMETERS)
@@ -650,6 +667,10 @@ class JointForceIdentifier:
                    if not params[name].trustworthy]
         if not math.isfinite(chosen.condition) or chosen.condition > s.max_condition:
             reasons.insert(0, f"condition number {chosen.condition:.3g} > {s.max_condition:g}")
+        if info.unresolved > s.max_unresolved_motion:
+            reasons.insert(0, f"the joint moved faster than the regression resolves "
+                              f"({info.unresolved:.2g} rad RMS above {s.smoothing_cutoff:g} Hz "
+                              f"> {s.max_unresolved_motion:g}: chatter or stick-slip)")
         rms = math.sqrt(chosen.rss / info.samples) if info.samples > 0 else math.nan
         return JointEstimate(j, params, detected, chosen.condition, rms, info.peak_speed,
                              info.trials, not reasons, tuple(reasons))

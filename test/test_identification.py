@@ -15,9 +15,13 @@ from exo_ilc_ros.core.config import load_config, scenario_path
 from exo_ilc_ros.core.experiment import build_arm
 from exo_ilc_ros.core.learning.identification import (
     BASE_PARAMETERS,
+    PARAMETERS,
     IdentificationSettings,
+    JointEstimate,
     JointForceIdentifier,
+    ParameterEstimate,
     PatientEstimate,
+    joint_force_term,
     lagrangian_terms,
     trial_regressors,
 )
@@ -316,3 +320,69 @@ def test_a_chattering_joint_is_not_usable() -> None:
     assert not elbow.trustworthy
     assert any("chatter" in reason for reason in elbow.reasons)
     assert estimate.joints[1].trustworthy
+
+
+def _joint(j: int, values: dict[str, float], trustworthy: bool = True,
+           reflex: bool = False) -> JointEstimate:
+    params = {name: ParameterEstimate(name, values.get(name, 0.0), 0.0, 0.0, 0.0, True,
+                                      trustworthy) for name in PARAMETERS}
+    return JointEstimate(j, params, reflex, 10.0, 0.0, 1.0, 5, trustworthy,
+                         () if trustworthy else ("viscous: imprecise",))
+
+
+def test_joint_force_term_by_hand() -> None:
+    """tau_p = B qdot + F_c tanh(qdot / 0.1) + K (q - q_0) + G sgn(v) max(0, |v| - v_th) with
+    v = qdot 0.1 s (10 samples) earlier, computed by hand on a ramp; a joint that is not
+    trustworthy adds 0 and says why; a value outside its range is held at the range's edge."""
+    t = np.arange(0.0, 1.0, 0.01)
+    q = np.column_stack([0.5 * t ** 2, 0.5 * t ** 2, 0.5 * t ** 2])
+    qd = np.column_stack([t, t, t])
+    first = {"viscous": 0.4, "coulomb": 0.2, "stiffness": 4.0, "rest_position": 0.1,
+             "reflex_gain": 1.0, "reflex_threshold": 0.2, "reflex_delay": 0.1}
+    negative = {"viscous": -0.5, "coulomb": 0.1, "stiffness": 1.0, "rest_position": 0.0}
+    estimate = PatientEstimate(5, (_joint(0, first, reflex=True),
+                                   _joint(1, first, trustworthy=False),
+                                   _joint(2, negative)))
+    term = joint_force_term(estimate, q, qd, 100.0)
+    delayed = np.concatenate([np.zeros(10), t[:-10]])
+    expected = (0.4 * t + 0.2 * np.tanh(t / 0.1) + 4.0 * (0.5 * t ** 2 - 0.1)
+                + 1.0 * np.maximum(delayed - 0.2, 0.0))
+    np.testing.assert_allclose(term.torque[:, 0], expected, rtol=1e-12, atol=1e-12)
+    assert list(term.used) == [True, False, True]
+    assert term.reasons[1] == "viscous: imprecise" and np.all(term.torque[:, 1] == 0.0)
+    np.testing.assert_allclose(term.torque[:, 2], 0.1 * np.tanh(t / 0.1) + 0.5 * t ** 2,
+                               rtol=1e-12, atol=1e-12)  # B held at 0
+
+
+def test_joint_force_term_is_clamped_and_refuses_non_finite() -> None:
+    """The term never exceeds the limit (the clamped samples counted); a non-finite estimate,
+    even one marked trustworthy, adds nothing."""
+    t = np.arange(0.0, 1.0, 0.01)
+    q = np.column_stack([t, t])
+    qd = np.ones_like(q)
+    big = {"viscous": 5.0, "coulomb": 0.0, "stiffness": 50.0, "rest_position": 0.0}
+    broken = {**big, "stiffness": float("nan")}
+    estimate = PatientEstimate(1, (_joint(0, big), _joint(1, broken)))
+    term = joint_force_term(estimate, q, qd, np.array([10.0, 10.0]))
+    assert np.max(np.abs(term.torque[:, 0])) == 10.0
+    assert term.clamped[0] == int(np.sum(5.0 + 50.0 * t > 10.0))
+    assert not term.used[1] and term.reasons[1] == "non-finite estimate"
+    assert np.all(term.torque[:, 1] == 0.0)
+
+
+def test_identified_term_matches_the_patients_along_the_reference() -> None:
+    """After 10 trials of MAS 2 with the encoders, the term along the paper's reference is the
+    virtual patient's own (passive plus reflex) within 5 % of its peak on every joint."""
+    scenarios = ("spastic", "sensor")
+    estimate = _identify(scenarios)
+    truth = _truth(scenarios)
+    reference = _records(scenarios)[0].reference
+    term = joint_force_term(estimate, reference.position, reference.velocity, 20.0)
+    assert np.all(term.used)
+    q, v = reference.position, reference.velocity
+    delayed = np.concatenate([np.repeat(v[:1], 10, axis=0), v[:-10]])
+    true = (truth["viscous"] * v + truth["stiffness"] * (q - truth["rest_position"])
+            + truth["reflex_gain"] * np.sign(delayed)
+            * np.maximum(np.abs(delayed) - truth["reflex_threshold"], 0.0))
+    peak = np.max(np.abs(true), axis=0)
+    assert np.all(np.max(np.abs(term.torque - true), axis=0) <= 0.05 * peak)

@@ -3,12 +3,12 @@ friction, joint stiffness, Coulomb friction), which the paper sets to zero, and 
 per joint, from one trial's commanded effort and measured position, recursive over trials.
 
 The model, per joint j (the virtual patient's, :mod:`exo_ilc_ros.core.patient`), with the arm's
-own dynamics of eq (8) written in Lagrange's form so that no acceleration is needed,
+own dynamics of eq (8) written in Lagrange's form so that no acceleration is needed::
 
     u_j(t - d T) = p_j' + w_j + tau_p,j,   p = a_N(q) qdot,
     w_j = -1/2 qdot^T (d a_N / d q_j) qdot - Q^g_j,
     tau_p,j = B qdot_j + F_c tanh(qdot_j / v_s) + K q_j + c + delta (p_j' + w_j)
-              + G sgn(v) max(0, |v| - v_th),   v = qdot_j(t - tau_r),
+              + G sgn(v) max(0, abs(v) - v_th),   v = qdot_j(t - tau_r),
 
 (a_N, Q^g the nominal model's eqs (2) and (6); p_j' + w_j equals a_N qddot + c_N of eq (7),
 tested) with K (q_j - q_0) = K q_j + c, so q_0 = -c / K; delta: the plant's mass error along
@@ -123,7 +123,7 @@ class IdentificationSettings:
     would have with a column orthogonal to the others): above it the parameter is not
     identifiable from this excitation (collinear with another)."""
     relative_precision: float = 0.25
-    """Largest 95 % half-width over |value| of a usable parameter ..."""
+    """Largest 95 % half-width over abs(value) of a usable parameter ..."""
     absolute_precision: Mapping[str, float] = field(default_factory=_default_precision)
     """... unless the half-width is below this (a parameter near zero)."""
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=_default_bounds)
@@ -190,7 +190,7 @@ class JointEstimate:
     residual_rms: float
     """N m: RMS of the filtered torque the model leaves unexplained."""
     peak_stretch_velocity: float
-    """rad/s: the fastest |qdot| of every trial so far (what excited the reflex)."""
+    """rad/s: the fastest abs(qdot) of every trial so far (what excited the reflex)."""
     trials: int
     trustworthy: bool
     """Every parameter the joint-force term needs (viscous, Coulomb, stiffness, rest position,
@@ -351,7 +351,7 @@ def _project_out(x: np.ndarray, basis: np.ndarray) -> np.ndarray:
 
 def reflex_columns(velocity: np.ndarray, thresholds: np.ndarray, delays: tuple[int, ...],
                    filters: _Filters, skip: int) -> np.ndarray:
-    """(m, delays x thresholds): H[sgn(v) max(0, |v| - v_th)] with v = qdot(t - tau_r), held
+    """(m, delays x thresholds): H[sgn(v) max(0, abs(v) - v_th)] with v = qdot(t - tau_r), held
     over each period (the first value before the trial's start), for one joint's velocity.
 
     Filtered once undelayed: a filter started at rest at its first value answers the delayed
@@ -825,7 +825,7 @@ class JointForceTerm:
 def joint_force_term(estimate: PatientEstimate, position: np.ndarray, velocity: np.ndarray,
                      limit: np.ndarray | float, settings: IdentificationSettings | None = None
                      ) -> JointForceTerm:
-    """tau_p = B qdot + F_c tanh(qdot / v_s) + K (q - q_0) + G sgn(v) max(0, |v| - v_th),
+    """tau_p = B qdot + F_c tanh(qdot / v_s) + K (q - q_0) + G sgn(v) max(0, abs(v) - v_th),
     v = qdot(t - tau_r) (the first value before the start), the term eq (6)'s Q^v, Q^f, Q^c
     and the reflex add to computed torque, eqs (9)/(16): Q = a_N(q) u + c_N(q, qdot) + tau_p,
     along the (samples, n) ``position`` and ``velocity`` (the reference's, so that no measured

@@ -50,7 +50,8 @@ def _identify(scenarios: tuple[str, ...], trials: int = TRIALS,
               settings: IdentificationSettings | None = None,
               nominal: ArmModel | None = None) -> PatientEstimate:
     config = _config(scenarios, **dict(overrides))
-    identifier = JointForceIdentifier(nominal or build_arm(config), settings)
+    identifier = JointForceIdentifier(nominal or build_arm(config),
+                                      settings or IdentificationSettings.from_config(config))
     estimate = None
     for record in _records(scenarios, trials, overrides):
         estimate = identifier.update_record(record)
@@ -386,3 +387,15 @@ def test_identified_term_matches_the_patients_along_the_reference() -> None:
             * np.maximum(np.abs(delayed) - truth["reflex_threshold"], 0.0))
     peak = np.max(np.abs(true), axis=0)
     assert np.all(np.max(np.abs(term.torque - true), axis=0) <= 0.05 * peak)
+
+
+def test_settings_from_config_and_bad_settings() -> None:
+    """The config's control period and actuator delay; a forgetting factor outside (0, 1] or a
+    smoothing cutoff above Nyquist is refused."""
+    config = _config(("realistic",), **{"control.period": 0.005})
+    settings = IdentificationSettings.from_config(config, forgetting=0.8)
+    assert (settings.period, settings.effort_delay, settings.forgetting) == (0.005, 1, 0.8)
+    assert settings.delay_samples == tuple(range(10, 31, 2))
+    for bad in ({"forgetting": 0.0}, {"forgetting": 1.5}, {"smoothing_cutoff": 60.0}):
+        with pytest.raises(ValueError):
+            IdentificationSettings(**bad)

@@ -47,11 +47,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numba import njit
 from scipy import signal
 
+from exo_ilc_ros.core.config import Config
 from exo_ilc_ros.core.dynamics import metric_terms
 from exo_ilc_ros.core.laws import TrialRecord
 from exo_ilc_ros.core.model import ArmModel
@@ -148,6 +150,16 @@ class IdentificationSettings:
             raise ValueError("identification: the smoothing cutoff must be below Nyquist")
         if self.effort_delay < 0:
             raise ValueError("identification: effort_delay must be >= 0")
+
+    @classmethod
+    def from_config(cls, config: Config, **changes: Any) -> IdentificationSettings:
+        """The defaults at the config's control period and actuator delay (the plant's
+        ``patient.effort_delay``: known on an arm from its drive, not identified), with
+        ``changes``."""
+        values: dict[str, Any] = {"period": float(config["control.period"]),
+                                  "effort_delay": int(config["patient.effort_delay"])}
+        values.update(changes)
+        return cls(**values)
 
     @property
     def delay_samples(self) -> tuple[int, ...]:
@@ -447,15 +459,21 @@ class _JointInformation:
         self.unresolved = 0.0
         self._rss: np.ndarray | None = None
 
-    def add(self, phi: np.ndarray, reflex: np.ndarray, y: np.ndarray, forgetting: float,
-            speed: float, unresolved: float) -> None:
+    def add(self, phi: np.ndarray, reflex: np.ndarray, active: np.ndarray, y: np.ndarray,
+            forgetting: float, speed: float, unresolved: float) -> None:
+        """One trial's information; ``reflex`` holds the grid points ``active`` (the others'
+        columns are zero in this trial)."""
         lam = forgetting
         self.unresolved = max(unresolved, lam * self.unresolved)
         self.R = lam * self.R + phi.T @ phi
         self.b = lam * self.b + phi.T @ y
-        self.Rxg = lam * self.Rxg + reflex.T @ phi
-        self.Rgg = lam * self.Rgg + np.sum(reflex * reflex, axis=0)
-        self.bg = lam * self.bg + reflex.T @ y
+        self.Rxg *= lam
+        self.Rgg *= lam
+        self.bg *= lam
+        if active.size:
+            self.Rxg[active] += reflex.T @ phi
+            self.Rgg[active] += np.sum(reflex * reflex, axis=0)
+            self.bg[active] += reflex.T @ y
         self.yy = lam * self.yy + float(y @ y)
         self.samples = lam * self.samples + y.shape[0]
         self.w1 = lam * self.w1 + 1.0
@@ -536,22 +554,31 @@ class JointForceIdentifier:
             phi = np.ascontiguousarray(reg.base[:, j, :])
             y = np.ascontiguousarray(reg.target[:, j])
             v = np.ascontiguousarray(reg.velocity[:, j])
-            reflex = (self._reflex(v, reg) if s.reflex else np.zeros((y.shape[0], 0)))
-            reflexes.append(reflex)
+            reflex, active = self._reflex(v, reg)
+            reflexes.append((reflex, active))
             alone = _solve(phi.T @ phi, phi.T @ y, float(y @ y))
             well = (alone.condition <= s.max_condition and bool(np.all(
                 alone.excited[:4])))
-            info.add(phi, reflex, y, s.forgetting if well else 1.0, float(np.max(np.abs(v))),
-                     float(reg.unresolved[j]))
+            info.add(phi, reflex, active, y, s.forgetting if well else 1.0,
+                     float(np.max(np.abs(v))), float(reg.unresolved[j]))
         estimate = self._conclude("")
         for j, info in enumerate(self.joints):
             self._update_inflation(j, info, reg, reflexes[j], estimate.joints[j])
         self.estimate = self._conclude("")
         return self.estimate
 
-    def _reflex(self, velocity: np.ndarray, reg: TrialRegressors) -> np.ndarray:
-        cols = reflex_columns(velocity, self.thresholds, self.delays, self.filters, reg.skip)
-        return _project_out(cols, reg.transients)
+    def _reflex(self, velocity: np.ndarray,
+                reg: TrialRegressors) -> tuple[np.ndarray, np.ndarray]:
+        """The reflex columns of the grid points whose threshold this trial's stretch exceeds
+        (the others are zero), and their grid indices."""
+        width = self.thresholds.shape[0]
+        if not self.settings.reflex:
+            return np.zeros((reg.target.shape[0], 0)), np.zeros(0, dtype=int)
+        below = np.flatnonzero(self.thresholds < np.max(np.abs(velocity)))
+        active = (np.arange(len(self.delays))[:, None] * width + below[None, :]).ravel()
+        cols = reflex_columns(velocity, self.thresholds[below], self.delays, self.filters,
+                              reg.skip)
+        return _project_out(cols, reg.transients), active
 
     # --- estimation -------------------------------------------------------------------------
 
@@ -580,14 +607,17 @@ class JointForceIdentifier:
         return best, _solve(R, b, info.yy), base
 
     def _update_inflation(self, j: int, info: _JointInformation, reg: TrialRegressors,
-                          reflex: np.ndarray, estimate: JointEstimate) -> None:
+                          reflex: tuple[np.ndarray, np.ndarray],
+                          estimate: JointEstimate) -> None:
         """The autocorrelation inflation of the variances, from this trial's residual under
         the model now reported (lambda-weighted mean over trials)."""
         best, chosen, _ = self._selected(info)
         phi = reg.base[:, j, :]
         p = phi.shape[1]
         if estimate.reflex_detected and best is not None:
-            col = reflex[:, best]
+            columns, active = reflex
+            where = np.flatnonzero(active == best)
+            col = columns[:, where[0]] if where.size else np.zeros(phi.shape[0])
             phi = np.column_stack([phi, col])
             theta = chosen.theta
         else:

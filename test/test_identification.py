@@ -221,6 +221,10 @@ def test_a_still_arm_reports_what_it_cannot_identify() -> None:
         for name in unidentifiable:
             assert any(r.startswith(name) and "not identifiable" in r for r in joint.reasons)
         assert not joint.reflex_detected
+    reference = _records(("friction",), 3, still)[0].reference
+    term = joint_force_term(estimate, reference.position, reference.velocity, 20.0)
+    assert not np.any(term.used) and np.all(term.torque == 0.0)
+    assert all("not identifiable" in reason for reason in term.reasons)
 
 
 def test_an_absurd_estimate_is_flagged_never_usable() -> None:
@@ -311,16 +315,26 @@ def test_seven_joints() -> None:
                                                                  joint.value(name))
 
 
-def test_a_chattering_joint_is_not_usable() -> None:
+def test_a_chattering_trial_is_refused() -> None:
     """A MAS 2 arm reaching and returning under the sign law: the elbow chatters (several
-    rad/s back and forth) from trial 3 on, faster than the filtered regression resolves; its
-    estimate says so and is not usable, the shoulder's stays usable."""
+    rad/s back and forth) from trial 3 on, faster than the filtered regression resolves, which
+    would bias every joint coupled to it. Those trials are refused, saying why; the estimate
+    stays what trials 1 and 2 gave, within 10 % of the truth on every joint."""
     overrides = (("exercise.name", "reach_and_return"),)
-    estimate = _identify(("spastic",), trials=5, overrides=overrides)
-    elbow = estimate.joints[2]
-    assert not elbow.trustworthy
-    assert any("chatter" in reason for reason in elbow.reasons)
-    assert estimate.joints[1].trustworthy
+    config = _config(("spastic",), **dict(overrides))
+    identifier = JointForceIdentifier(build_arm(config))
+    records = _records(("spastic",), 5, overrides)
+    estimates = [identifier.update_record(record) for record in records]
+    assert not estimates[0].rejected and not estimates[1].rejected
+    for later in estimates[2:]:
+        assert "chatter" in later.rejected and "joint 2" in later.rejected
+        for a, b in zip(estimates[1].joints, later.joints, strict=True):
+            assert a.value("viscous") == b.value("viscous")
+    truth = _truth(("spastic",), overrides)
+    for joint in estimates[-1].joints:
+        for name in ("viscous", "stiffness"):
+            assert abs(joint.value(name) - truth[name][joint.joint]) <= \
+                0.1 * truth[name][joint.joint]
 
 
 def _joint(j: int, values: dict[str, float], trustworthy: bool = True,

@@ -58,13 +58,18 @@ from exo_ilc_ros.core.dynamics import metric_terms
 from exo_ilc_ros.core.laws import TrialRecord
 from exo_ilc_ros.core.model import ArmModel
 
-BASE_PARAMETERS = ("viscous", "coulomb", "stiffness", "offset", "model_scale")
-"""The linear parameters every joint's regression has, in column order."""
+PASSIVE_PARAMETERS = ("viscous", "coulomb", "stiffness", "offset", "model_scale")
+"""The linear parameters a usable estimate needs, in column order."""
+BASE_PARAMETERS = (*PASSIVE_PARAMETERS, "voluntary_stiffness", "voluntary_damping")
+"""Every joint's linear columns: the passive ones, then the patient's own effort (nuisance
+parameters, zero columns when no reference is given)."""
 PARAMETERS = ("viscous", "coulomb", "stiffness", "rest_position", "offset", "model_scale",
-              "reflex_gain", "reflex_threshold", "reflex_delay")
+              "voluntary_stiffness", "voluntary_damping", "reflex_gain", "reflex_threshold",
+              "reflex_delay")
 """Every parameter a :class:`JointEstimate` reports."""
 UNITS = {"viscous": "N m s/rad", "coulomb": "N m", "stiffness": "N m/rad",
          "rest_position": "rad", "offset": "N m", "model_scale": "1",
+         "voluntary_stiffness": "N m/rad", "voluntary_damping": "N m s/rad",
          "reflex_gain": "N m s/rad", "reflex_threshold": "rad/s", "reflex_delay": "s"}
 _PHYSICAL = ("viscous", "coulomb", "stiffness", "reflex_gain")
 """Parameters that cannot be negative."""
@@ -112,6 +117,15 @@ class IdentificationSettings:
     """Identify delta (the plant's mass error along the nominal torque); False: trust a_N."""
     reflex: bool = True
     """Identify the stretch reflex (G, v_th, tau_r)."""
+    voluntary: bool = False
+    """With the trial's reference: columns for the patient's own effort toward it,
+    -L[q_d - q] and -L[qdot_d - qdot] (L: a first-order lag), so that it is not taken for
+    stiffness and damping. Off by default: for a passive patient these columns are nearly
+    collinear with the passive ones while the learning converges (the damping then misses
+    10 %); on for a patient known to push (docs/patient-identification.md)."""
+    voluntary_lag: float = 0.15
+    """s: the time constant of L (the virtual patient's voluntary.time_constant of
+    ``voluntary.yaml``)."""
     reflex_thresholds: tuple[float, ...] = field(default_factory=_default_thresholds)
     """v_th grid (rad/s)."""
     reflex_delays: tuple[float, ...] = (0.05, 0.06, 0.07, 0.08, 0.09, 0.1, 0.11, 0.12, 0.13,
@@ -312,7 +326,7 @@ class TrialRegressors:
     target: np.ndarray
     """(m, n): H[u] - H[a_N qddot + c_N], the torque the nominal arm does not explain."""
     base: np.ndarray
-    """(m, n, 5): the columns of :data:`BASE_PARAMETERS`."""
+    """(m, n, 7): the columns of :data:`BASE_PARAMETERS`."""
     velocity: np.ndarray
     """(N+1, n): the smoothed velocity the nonlinear columns were built from (whole trial)."""
     skip: int
@@ -326,9 +340,11 @@ class TrialRegressors:
 
 def trial_regressors(nominal: ArmModel, settings: IdentificationSettings,
                      position: np.ndarray, effort: np.ndarray,
-                     filters: _Filters | None = None) -> TrialRegressors:
+                     filters: _Filters | None = None,
+                     reference: tuple[np.ndarray, np.ndarray] | None = None) -> TrialRegressors:
     """The filtered regression of one trial (module docstring) from its measured position and
-    commanded effort, both (N+1, n)."""
+    commanded effort, both (N+1, n), and the reference (q_d, qdot_d) it tracked (None: no
+    voluntary columns)."""
     filters = filters or _Filters(settings)
     q = np.ascontiguousarray(position, dtype=float)
     u = np.asarray(effort, dtype=float)
@@ -347,12 +363,31 @@ def trial_regressors(nominal: ArmModel, settings: IdentificationSettings,
         filters.apply(filters.smooth, q),
         np.ones_like(q),
         nominal_torque if settings.model_scale else np.zeros_like(q),
+        *_voluntary_columns(settings, filters, q, velocity, reference),
     ], axis=2)
     skip = min(int(round(settings.burn_in / period)), q.shape[0] - 1)
     basis = filters.start_transients(q.shape[0])[skip:]
     unresolved = np.sqrt(np.mean((q - smoothed)[skip:] ** 2, axis=0))
     return TrialRegressors(_project_out(target[skip:], basis), _project_out(columns[skip:], basis),
                            velocity, skip, basis, unresolved)
+
+
+def _voluntary_columns(settings: IdentificationSettings, filters: _Filters, q: np.ndarray,
+                       velocity: np.ndarray,
+                       reference: tuple[np.ndarray, np.ndarray] | None) -> list[np.ndarray]:
+    """-H[L[q_d - q]] and -H[L[qdot_d - qdot]]: the patient's lagged effort toward the
+    reference (it adds to the command, so it enters the resisting torque with a minus), held
+    over each period; zero without a reference."""
+    if reference is None or not settings.voluntary:
+        return [np.zeros_like(q), np.zeros_like(q)]
+    q_ref = np.asarray(reference[0], dtype=float)
+    qd_ref = np.asarray(reference[1], dtype=float)
+    if q_ref.shape != q.shape or qd_ref.shape != q.shape:
+        raise ValueError(f"the reference must be {q.shape}, got {q_ref.shape}, {qd_ref.shape}")
+    a = settings.period / (settings.voluntary_lag + settings.period)
+    lagged = [signal.lfilter([a], [1.0, a - 1.0], x, axis=0)
+              for x in (q_ref - q, qd_ref - velocity)]
+    return [-filters.apply(filters.held, np.asarray(x)) for x in lagged]
 
 
 def _project_out(x: np.ndarray, basis: np.ndarray) -> np.ndarray:
@@ -525,14 +560,17 @@ class JointForceIdentifier:
         self._trial = 0
 
     def update_record(self, record: TrialRecord) -> PatientEstimate:
-        """:meth:`update` with a trial's record (measured position, commanded effort)."""
-        return self.update(record.position, record.effort, record.trial)
+        """:meth:`update` with a trial's record (measured position, commanded effort, its
+        reference)."""
+        return self.update(record.position, record.effort, record.trial,
+                           (record.reference.position, record.reference.velocity))
 
-    def update(self, position: np.ndarray, effort: np.ndarray,
-               trial: int | None = None) -> PatientEstimate:
-        """Add one trial's samples, (N+1, n) each, and return the estimate after it. A trial
-        whose samples are unusable (wrong shape, non-finite, too short) changes nothing: the
-        estimate says why in ``rejected``."""
+    def update(self, position: np.ndarray, effort: np.ndarray, trial: int | None = None,
+               reference: tuple[np.ndarray, np.ndarray] | None = None) -> PatientEstimate:
+        """Add one trial's samples, (N+1, n) each, and return the estimate after it;
+        ``reference``: the (q_d, qdot_d) it tracked (for the patient's own effort). A trial
+        whose samples are unusable (wrong shape, non-finite, too short, chatter) changes
+        nothing: the estimate says why in ``rejected``."""
         self._trial = int(trial) if trial is not None else self._trial + 1
         q = np.asarray(position, dtype=float)
         u = np.asarray(effort, dtype=float)
@@ -547,9 +585,13 @@ class JointForceIdentifier:
             why = f"{q.shape[0]} samples, at least {minimum} are needed"
         elif not (np.all(np.isfinite(q)) and np.all(np.isfinite(u))):
             why = "the samples hold non-finite values"
+        elif reference is not None and not (
+                np.shape(reference[0]) == q.shape and np.shape(reference[1]) == q.shape
+                and np.all(np.isfinite(reference[0])) and np.all(np.isfinite(reference[1]))):
+            why = f"the reference must be finite and {q.shape}"
         if why:
             return self._conclude(f"trial {self._trial} not used: {why}")
-        reg = trial_regressors(self.nominal, s, q, u, self.filters)
+        reg = trial_regressors(self.nominal, s, q, u, self.filters, reference)
         fast = np.flatnonzero(reg.unresolved > s.max_unresolved_motion)
         if fast.size:
             j = int(fast[np.argmax(reg.unresolved[fast])])
@@ -699,7 +741,7 @@ class JointForceIdentifier:
             for name in ("reflex_threshold", "reflex_delay"):
                 params[name] = ParameterEstimate(name, math.nan, math.nan, math.nan, math.nan,
                                                  False, False, reflex_reason)
-        needed = ["viscous", "coulomb", "stiffness", "offset", "model_scale"]
+        needed = list(PASSIVE_PARAMETERS)
         if detected:
             needed += ["reflex_gain", "reflex_threshold", "reflex_delay"]
         reasons = [f"{name}: {params[name].reason}" for name in needed

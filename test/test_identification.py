@@ -116,8 +116,7 @@ def test_recursion_equals_least_squares_over_the_stacked_trials() -> None:
     for j in range(config.joints):
         phi = np.concatenate([reg.base[:, j, :] for reg in regs])
         y = np.concatenate([reg.target[:, j] for reg in regs])
-        passive = len(PASSIVE_PARAMETERS)  # the voluntary columns are off (zero)
-        assert not np.any(phi[:, passive:])
+        passive = len(PASSIVE_PARAMETERS)  # the voluntary columns are not fitted
         theta = np.linalg.lstsq(phi[:, :passive], y, rcond=None)[0]
         got = [estimate.joints[j].value(name) for name in PASSIVE_PARAMETERS]
         np.testing.assert_allclose(got, theta, rtol=1e-6, atol=1e-9)
@@ -439,3 +438,20 @@ def test_voluntary_columns_keep_a_pushing_patient_out_of_the_stiffness() -> None
         if joint.trustworthy:
             assert abs(joint.value("viscous") - truth["viscous"][j]) <= 0.1 * truth["viscous"][j]
     assert results[True].joints[2].trustworthy
+
+
+def test_a_pushing_patient_is_suspected_when_not_modelled() -> None:
+    """Default settings (no voluntary columns): under ``realistic`` the tracking error explains
+    the residual far beyond chance on every joint, which says so and is not usable; the same
+    arm without the voluntary effort raises no such suspicion and is usable."""
+    pushing = _identify(("realistic",))
+    for joint in pushing.joints:
+        assert not joint.trustworthy
+        assert any("own effort" in reason for reason in joint.reasons), joint.reasons
+        assert joint["voluntary_stiffness"].reason == "not fitted (voluntary=False)"
+    relaxed = (("patient.voluntary.stiffness", (0.0, 0.0, 0.0)),
+               ("patient.voluntary.damping", (0.0, 0.0, 0.0)))
+    passive = _identify(("realistic",), overrides=relaxed)
+    for joint in passive.joints:
+        assert not any("own effort" in reason for reason in joint.reasons)
+        assert joint.trustworthy, joint.reasons

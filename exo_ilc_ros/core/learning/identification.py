@@ -123,6 +123,10 @@ class IdentificationSettings:
     stiffness and damping. Off by default: for a passive patient these columns are nearly
     collinear with the passive ones while the learning converges (the damping then misses
     10 %); on for a patient known to push (docs/patient-identification.md)."""
+    voluntary_minimum_torque: float = 1e-3
+    """N m RMS: the least torque the voluntary columns must explain (when not fitted) for the
+    estimate to be suspected of holding the patient's own effort (the shipped scenarios:
+    noise-free friction 2e-5, voluntary and realistic 3e-3 to 3e-2)."""
     voluntary_lag: float = 0.15
     """s: the time constant of L (the virtual patient's voluntary.time_constant of
     ``voluntary.yaml``)."""
@@ -378,7 +382,7 @@ def _voluntary_columns(settings: IdentificationSettings, filters: _Filters, q: n
     """-H[L[q_d - q]] and -H[L[qdot_d - qdot]]: the patient's lagged effort toward the
     reference (it adds to the command, so it enters the resisting torque with a minus), held
     over each period; zero without a reference."""
-    if reference is None or not settings.voluntary:
+    if reference is None:
         return [np.zeros_like(q), np.zeros_like(q)]
     q_ref = np.asarray(reference[0], dtype=float)
     qd_ref = np.asarray(reference[1], dtype=float)
@@ -428,12 +432,16 @@ class _Solution:
     rss: float
 
 
-def _solve(R: np.ndarray, b: np.ndarray, yy: float) -> _Solution:
-    """theta = R^-1 b in column-scaled coordinates; columns with no excitation left out."""
+def _solve(R: np.ndarray, b: np.ndarray, yy: float,
+           fitted: np.ndarray | None = None) -> _Solution:
+    """theta = R^-1 b in column-scaled coordinates; columns with no excitation, and those not
+    ``fitted`` (a mask; None: all), left out (nan)."""
     p = b.shape[0]
     diag = np.clip(np.diag(R), 0.0, None)
     scale = np.sqrt(diag)
     excited = np.isfinite(scale) & (scale > 1e-9 * max(float(np.max(scale, initial=0.0)), 1e-300))
+    if fitted is not None:
+        excited &= fitted
     theta = np.full(p, np.nan)
     cov = np.full((p, p), np.nan)
     condition = math.inf
@@ -478,8 +486,10 @@ class _JointInformation:
     """One joint's accumulated (forgotten) information: the base columns' and every reflex
     grid point's."""
 
-    def __init__(self, grid: int) -> None:
+    def __init__(self, grid: int, fitted: np.ndarray) -> None:
         p = len(BASE_PARAMETERS)
+        self.fitted = fitted
+        """Mask of the base columns fitted (the voluntary ones only when asked for)."""
         self.R = np.zeros((p, p))
         self.b = np.zeros(p)
         self.Rxg = np.zeros((grid, p))
@@ -534,6 +544,10 @@ class _JointInformation:
         full[:, :p, p] = self.Rxg
         full[:, p, p] = self.Rgg
         rhs = np.concatenate([np.broadcast_to(self.b, (grid, p)), self.bg[:, None]], axis=1)
+        unused = np.flatnonzero(~self.fitted)
+        full[:, unused, :] = 0.0
+        full[:, :, unused] = 0.0
+        rhs[:, unused] = 0.0
         d = np.sqrt(np.clip(np.einsum("gii->gi", full), 1e-300, None))
         scaled = full / (d[:, :, None] * d[:, None, :]) + 1e-10 * np.eye(p + 1)
         theta = np.linalg.solve(scaled, (rhs / d)[..., None])[..., 0] / d
@@ -554,7 +568,9 @@ class JointForceIdentifier:
         self.thresholds = np.asarray(self.settings.reflex_thresholds, dtype=float)
         self.delays = self.settings.delay_samples
         grid = len(self.delays) * self.thresholds.shape[0] if self.settings.reflex else 0
-        self.joints = [_JointInformation(grid) for _ in range(nominal.dof)]
+        self.fitted = np.array([name in PASSIVE_PARAMETERS or self.settings.voluntary
+                                for name in BASE_PARAMETERS])
+        self.joints = [_JointInformation(grid, self.fitted) for _ in range(nominal.dof)]
         self.estimate: PatientEstimate | None = None
         """The latest estimate (None before the first trial)."""
         self._trial = 0
@@ -607,7 +623,7 @@ class JointForceIdentifier:
             v = np.ascontiguousarray(reg.velocity[:, j])
             reflex, active = self._reflex(v, reg)
             reflexes.append((reflex, active))
-            alone = _solve(phi.T @ phi, phi.T @ y, float(y @ y))
+            alone = _solve(phi.T @ phi, phi.T @ y, float(y @ y), self.fitted)
             well = (alone.condition <= s.max_condition and bool(np.all(
                 alone.excited[:4])))
             info.add(phi, reflex, active, y, s.forgetting if well else 1.0,
@@ -642,7 +658,7 @@ class JointForceIdentifier:
 
     def _selected(self, info: _JointInformation) -> tuple[int | None, _Solution, _Solution]:
         """The best reflex grid point (None: no reflex column), its solution, the base one."""
-        base = _solve(info.R, info.b, info.yy)
+        base = _solve(info.R, info.b, info.yy, info.fitted)
         if info.Rgg.shape[0] == 0 or info.trials == 0:
             return None, base, base
         rss = info.grid_rss()
@@ -655,7 +671,7 @@ class JointForceIdentifier:
         R[p, :p] = R[:p, p] = info.Rxg[best]
         R[p, p] = info.Rgg[best]
         b = np.append(info.b, info.bg[best])
-        return best, _solve(R, b, info.yy), base
+        return best, _solve(R, b, info.yy, np.append(info.fitted, True)), base
 
     def _update_inflation(self, j: int, info: _JointInformation, reg: TrialRegressors,
                           reflex: tuple[np.ndarray, np.ndarray],
@@ -672,7 +688,7 @@ class JointForceIdentifier:
             phi = np.column_stack([phi, col])
             theta = chosen.theta
         else:
-            theta = _solve(info.R, info.b, info.yy).theta
+            theta = _solve(info.R, info.b, info.yy, info.fitted).theta
         use = np.isfinite(theta)
         if not np.any(use):
             return
@@ -724,6 +740,10 @@ class JointForceIdentifier:
                 params[name] = ParameterEstimate(name, 0.0, 0.0, 0.0, 0.0, True, True,
                                                  "")
                 continue
+            if name.startswith("voluntary") and not s.voluntary:
+                params[name] = ParameterEstimate(name, math.nan, math.nan, math.nan, math.nan,
+                                                 False, False, "not fitted (voluntary=False)")
+                continue
             params[name] = self._parameter(name, theta[k], cov[k, k], chosen.excited[k],
                                            vif[k], chosen.covariance_scaled, k, names)
         params["rest_position"] = self._rest_position(theta, cov, params)
@@ -748,6 +768,10 @@ class JointForceIdentifier:
                    if not params[name].trustworthy]
         if not math.isfinite(chosen.condition) or chosen.condition > s.max_condition:
             reasons.insert(0, f"condition number {chosen.condition:.3g} > {s.max_condition:g}")
+        suspicion = self._voluntary_suspicion(info, best if detected else None, chosen,
+                                              sigma2)
+        if suspicion:
+            reasons.insert(0, suspicion)
         if info.unresolved > s.max_unresolved_motion:
             reasons.insert(0, f"the joint moved faster than the regression resolves "
                               f"({info.unresolved:.2g} rad RMS above {s.smoothing_cutoff:g} Hz "
@@ -755,6 +779,40 @@ class JointForceIdentifier:
         rms = math.sqrt(chosen.rss / info.samples) if info.samples > 0 else math.nan
         return JointEstimate(j, params, detected, chosen.condition, rms, info.peak_speed,
                              info.trials, not reasons, tuple(reasons))
+
+    def _voluntary_suspicion(self, info: _JointInformation, best: int | None,
+                             chosen: _Solution, sigma2: float) -> str:
+        """"" unless the voluntary columns are not fitted, yet would lower the residual
+        significantly (chi^2_2(0.999) = 13.8, with the passive columns' autocorrelation
+        inflation) and by more than ``voluntary_minimum_torque``: then a patient's own effort
+        is likely in the passive estimate."""
+        p = len(BASE_PARAMETERS)
+        if self.settings.voluntary or info.trials == 0:
+            return ""
+        voluntary = ~info.fitted
+        if not np.all(np.diag(info.R)[voluntary] > 0.0):
+            return ""  # no reference given
+        R, b = info.R, info.b
+        mask = np.ones(p, dtype=bool)
+        if best is not None:
+            R = np.zeros((p + 1, p + 1))
+            R[:p, :p] = info.R
+            R[p, :p] = R[:p, p] = info.Rxg[best]
+            R[p, p] = info.Rgg[best]
+            b = np.append(info.b, info.bg[best])
+            mask = np.append(mask, True)
+        full = _solve(R, b, info.yy, mask)
+        inflation = info.inflation[:len(PASSIVE_PARAMETERS)]
+        infl = float(np.nanmedian(inflation)) if np.any(np.isfinite(inflation)) else 1.0
+        scale = sigma2 * max(infl, 1.0) * info.w2 / info.w1
+        drop = (chosen.rss - full.rss) / scale if scale > 0.0 else 0.0
+        explained = math.sqrt(max(chosen.rss - full.rss, 0.0) / max(info.samples, 1.0))
+        if drop > 13.8 and explained > self.settings.voluntary_minimum_torque:
+            return (f"the tracking error explains {explained:.2g} N m RMS of the residual, "
+                    f"{drop:.3g} times chance (chi^2_2(0.999) = 13.8): the patient's own effort "
+                    "is likely in the estimate (identify with voluntary=True, or on relaxed "
+                    "trials)")
+        return ""
 
     def _reflex_rejection(self, info: _JointInformation, best: int, with_reflex: _Solution,
                           base: _Solution) -> str:

@@ -9,12 +9,14 @@ own dynamics of eq (8) written in Lagrange's form so that no acceleration is nee
     w_j = -1/2 qdot^T (d a_N / d q_j) qdot - Q^g_j,
     tau_p,j = B qdot_j + F_c tanh(qdot_j / v_s) + K q_j + c + delta (p_j' + w_j)
               + G sgn(v) max(0, abs(v) - v_th),   v = qdot_j(t - tau_r),
+              [- K_v L[q_d,j - q_j] - D_v L[qdot_d,j - qdot_j]]
 
 (a_N, Q^g the nominal model's eqs (2) and (6); p_j' + w_j equals a_N qddot + c_N of eq (7),
 tested) with K (q_j - q_0) = K q_j + c, so q_0 = -c / K; delta: the plant's mass error along
 the nominal torque (a uniform mass error, eq (15), is exactly this term); d: the actuator's
 delay in control periods, known. The reflex (G, v_th, tau_r) is held over each period, as the
-virtual patient holds it.
+virtual patient holds it. The bracket, the patient's own effort toward the reference (L a
+first-order lag), is fitted only with ``voluntary=True``; otherwise it tests the estimate.
 
 **Filtered regressors** (state-variable filter): every signal passes through the same
 H(s) = w_f^2 / (s + w_f)^2, so the derivative p' enters as (s H)[p], a proper filter of p, and
@@ -37,9 +39,11 @@ each variance inflated by the last trials' ratio of the autocorrelation-robust (
 Bartlett kernel) to the naive variance (filtered residuals are strongly autocorrelated);
 95 % intervals +-1.96 SE; q_0's by the delta method; v_th's and tau_r's from the residual's
 profile over the grid. **Trust**: the condition number of the column-scaled information matrix,
-each parameter's variance inflation (collinearity), excitation, precision and physical bounds
-(:class:`IdentificationSettings`); an estimate that fails any of them says why and is not
-usable (:attr:`JointEstimate.trustworthy`).
+each parameter's variance inflation (collinearity), excitation, precision and physical bounds,
+and no sign of the patient's own effort in the residual (:class:`IdentificationSettings`); an
+estimate that fails any of them says why and is not usable (:attr:`JointEstimate.trustworthy`).
+A trial with non-finite samples, or where any joint moved faster than the regression resolves
+(chatter, which biases every coupled joint), is refused and changes nothing.
 """
 
 from __future__ import annotations

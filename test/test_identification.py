@@ -5,6 +5,7 @@ movement, the sign law learning meanwhile (the data a session produces)."""
 from __future__ import annotations
 
 import functools
+import json
 from typing import Any
 
 import numpy as np
@@ -455,3 +456,16 @@ def test_a_pushing_patient_is_suspected_when_not_modelled() -> None:
     for joint in passive.joints:
         assert not any("own effort" in reason for reason in joint.reasons)
         assert joint.trustworthy, joint.reasons
+
+
+def test_estimate_as_plain_values() -> None:
+    """The estimate as JSON (for a summary, a bag, /diagnostics): every joint and parameter,
+    non-finite values as null, and the values as identified."""
+    estimate = _identify(("spastic",))
+    plain = json.loads(json.dumps(estimate.as_dict(), allow_nan=False))
+    assert plain["trial"] == TRIALS and plain["trustworthy"] is True
+    for joint, values in zip(estimate.joints, plain["joints"], strict=True):
+        assert set(values["parameters"]) == set(PARAMETERS)
+        assert values["parameters"]["stiffness"]["value"] == joint.value("stiffness")
+        assert values["parameters"]["stiffness"]["unit"] == "N m/rad"
+        assert values["parameters"]["voluntary_damping"]["value"] is None

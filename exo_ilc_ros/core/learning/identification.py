@@ -259,6 +259,35 @@ class PatientEstimate:
         """``name``'s estimate on every joint."""
         return np.array([j.value(name) for j in self.joints])
 
+    def as_dict(self) -> dict[str, Any]:
+        """Plain JSON-able values (non-finite numbers as None), for a summary, a bag or
+        ``/diagnostics``: per joint every parameter's value, standard error, interval,
+        identifiable, trustworthy and reason, and the joint's condition number, residual,
+        peak stretch velocity, trials, trustworthy and reasons."""
+        return {"trial": self.trial, "rejected": self.rejected,
+                "trustworthy": self.trustworthy,
+                "joints": [{"joint": j.joint, "trustworthy": j.trustworthy,
+                            "reasons": list(j.reasons), "reflex_detected": j.reflex_detected,
+                            "condition_number": _plain(j.condition_number),
+                            "residual_rms": _plain(j.residual_rms),
+                            "peak_stretch_velocity": _plain(j.peak_stretch_velocity),
+                            "trials": j.trials,
+                            "parameters": {name: {"value": _plain(p.value),
+                                                  "standard_error": _plain(p.standard_error),
+                                                  "low": _plain(p.low), "high": _plain(p.high),
+                                                  "unit": p.unit,
+                                                  "identifiable": bool(p.identifiable),
+                                                  "trustworthy": bool(p.trustworthy),
+                                                  "reason": p.reason}
+                                           for name, p in j.parameters.items()}}
+                           for j in self.joints]}
+
+
+def _plain(x: float) -> float | None:
+    """A finite float, or None."""
+    x = float(x)
+    return x if math.isfinite(x) else None
+
 
 @njit(cache=True, error_model="numpy")
 def lagrangian_terms(q: np.ndarray, qd: np.ndarray, masses: np.ndarray, axes: np.ndarray,

@@ -610,7 +610,8 @@ class JointForceIdentifier:
 
     def update_record(self, record: TrialRecord) -> PatientEstimate:
         """:meth:`update` with a trial's record (measured position, commanded effort, its
-        reference)."""
+        reference). An aborted trial is used whole: the arm's dynamics hold through the safe
+        hold too (a hold that chatters is refused like any chattering trial)."""
         return self.update(record.position, record.effort, record.trial,
                            (record.reference.position, record.reference.velocity))
 

@@ -25,11 +25,9 @@ import numpy as np
 from exo_ilc_ros.core import schema
 from exo_ilc_ros.core.config import Config, load_config, scenario_path
 from exo_ilc_ros.core.experiment import build_arm
-from exo_ilc_ros.core.learning.identification import (
-    IdentificationSettings,
-    JointForceIdentifier,
-    joint_force_term,
-)
+from exo_ilc_ros.core.learning.identification import JointForceIdentifier
+from exo_ilc_ros.core.learning.identification_settings import IdentificationSettings
+from exo_ilc_ros.core.learning.joint_force_term import joint_force_term
 from exo_ilc_ros.core.session import run_trials
 
 TRIALS = 12

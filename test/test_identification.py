@@ -1,6 +1,7 @@
-"""Identification of the patient's joint forces (core/learning/identification.py) on the virtual
-patient, whose truth is known: trials generated in-process with the shipped scenarios, the paper's
-movement, the sign law learning meanwhile (the data a session produces)."""
+"""Identification of the patient's joint forces (core/learning/identification.py and its
+modules) on the virtual patient, whose truth is known: trials generated in-process with the
+shipped scenarios, the paper's movement, the sign law learning meanwhile (the data a session
+produces)."""
 
 from __future__ import annotations
 
@@ -14,18 +15,19 @@ import pytest
 from exo_ilc_ros.core import schema
 from exo_ilc_ros.core.config import load_config, scenario_path
 from exo_ilc_ros.core.experiment import build_arm
-from exo_ilc_ros.core.learning.identification import (
+from exo_ilc_ros.core.learning.identification import JointForceIdentifier
+from exo_ilc_ros.core.learning.identification_settings import (
     BASE_PARAMETERS,
-    PARAMETERS,
     PASSIVE_PARAMETERS,
     IdentificationSettings,
+)
+from exo_ilc_ros.core.learning.joint_force_regressors import lagrangian_terms, trial_regressors
+from exo_ilc_ros.core.learning.joint_force_term import joint_force_term
+from exo_ilc_ros.core.learning.patient_estimate import (
+    PARAMETERS,
     JointEstimate,
-    JointForceIdentifier,
     ParameterEstimate,
     PatientEstimate,
-    joint_force_term,
-    lagrangian_terms,
-    trial_regressors,
 )
 from exo_ilc_ros.core.model import ArmModel
 from exo_ilc_ros.core.patient import MAS_PRESETS

@@ -1,0 +1,85 @@
+"""The identified joint forces as the term computed torque would add, eqs (9)/(16) with eq
+(6)'s Q^v, Q^c, Q^f (and the reflex) back in, within trust limits."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .identification_settings import IdentificationSettings
+from .patient_estimate import PatientEstimate
+
+
+@dataclass(frozen=True, eq=False)
+class JointForceTerm:
+    """The identified joint forces computed torque would add (:func:`joint_force_term`)."""
+
+    torque: np.ndarray
+    """(samples, n) N m: tau_p along the given states, 0 on a joint not used, clamped."""
+    used: np.ndarray
+    """(n,) bool: the joint's estimate was trustworthy and is in ``torque``."""
+    reasons: tuple[str, ...]
+    """Per joint: why it is not used ("" when it is)."""
+    clamped: np.ndarray
+    """(n,) int: samples where the limit clamped the joint's term."""
+
+
+def joint_force_term(estimate: PatientEstimate, position: np.ndarray, velocity: np.ndarray,
+                     limit: np.ndarray | float, settings: IdentificationSettings | None = None
+                     ) -> JointForceTerm:
+    """tau_p = B qdot + F_c tanh(qdot / v_s) + K (q - q_0) + G sgn(v) max(0, abs(v) - v_th),
+    v = qdot(t - tau_r) (the first value before the start), the term eq (6)'s Q^v, Q^f, Q^c
+    and the reflex add to computed torque, eqs (9)/(16): Q = a_N(q) u + c_N(q, qdot) + tau_p,
+    along the (samples, n) ``position`` and ``velocity`` (the reference's, so that no measured
+    velocity is fed back). Only a trustworthy joint's estimate is used (the reflex only when
+    detected), each parameter inside its plausible range, the term clamped to +-``limit``
+    (N m, per joint); any other joint adds 0 and says why."""
+    s = settings or IdentificationSettings()
+    q = np.asarray(position, dtype=float)
+    qd = np.asarray(velocity, dtype=float)
+    n = len(estimate.joints)
+    if q.ndim != 2 or q.shape[1] != n or qd.shape != q.shape:
+        raise ValueError(f"position and velocity must both be (samples, {n}), got {q.shape} "
+                         f"and {qd.shape}")
+    bound = np.broadcast_to(np.asarray(limit, dtype=float), (n,))
+    torque = np.zeros(q.shape)
+    used = np.zeros(n, dtype=bool)
+    clamped = np.zeros(n, dtype=int)
+    reasons = []
+    for j, joint in enumerate(estimate.joints):
+        names = ["viscous", "coulomb", "stiffness", "rest_position"]
+        if joint.reflex_detected:
+            names += ["reflex_gain", "reflex_threshold", "reflex_delay"]
+        values = {name: joint.value(name) for name in names}
+        why = ""
+        if not joint.trustworthy:
+            why = "; ".join(joint.reasons) or "not trustworthy"
+        elif not all(math.isfinite(v) for v in values.values()):
+            why = "non-finite estimate"
+        elif not (np.all(np.isfinite(q[:, j])) and np.all(np.isfinite(qd[:, j]))
+                  and math.isfinite(float(bound[j])) and bound[j] >= 0.0):
+            why = "non-finite states or limit"
+        if why:
+            reasons.append(why)
+            continue
+        for name, value in values.items():
+            if name in s.bounds:
+                low, high = s.bounds[name]
+                values[name] = min(max(value, low), high)
+        v = qd[:, j]
+        term = (values["viscous"] * v
+                + values["coulomb"] * np.tanh(v / s.stribeck_velocity)
+                + values["stiffness"] * (q[:, j] - values["rest_position"]))
+        if joint.reflex_detected:
+            delay = int(round(values["reflex_delay"] / s.period))
+            delayed = np.concatenate([np.repeat(v[:1], delay), v[:v.shape[0] - delay]]) \
+                if delay > 0 else v
+            excess = np.maximum(np.abs(delayed) - values["reflex_threshold"], 0.0)
+            term = term + values["reflex_gain"] * np.sign(delayed) * excess
+        clamped[j] = int(np.sum(np.abs(term) > bound[j]))
+        torque[:, j] = np.clip(term, -bound[j], bound[j])
+        used[j] = True
+        reasons.append("")
+    return JointForceTerm(torque, used, tuple(reasons), clamped)

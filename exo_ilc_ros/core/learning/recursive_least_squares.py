@@ -1,0 +1,150 @@
+"""The least squares of the identification of the patient's joint forces
+(:mod:`.identification`): a solve in column-scaled coordinates, the autocorrelation-robust
+variance inflation, and one joint's information, recursive over trials with forgetting, for
+the base columns and every reflex grid point."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .identification_settings import BASE_PARAMETERS
+
+
+@dataclass
+class Solution:
+    theta: np.ndarray
+    """Per column (nan where not excited)."""
+    covariance_scaled: np.ndarray
+    """pinv of the column-scaled information of the excited columns, full size (nan rows)."""
+    scale: np.ndarray
+    excited: np.ndarray
+    condition: float
+    rss: float
+
+
+def solve_scaled(R: np.ndarray, b: np.ndarray, yy: float,
+           fitted: np.ndarray | None = None) -> Solution:
+    """theta = R^-1 b in column-scaled coordinates; columns with no excitation, and those not
+    ``fitted`` (a mask; None: all), left out (nan)."""
+    p = b.shape[0]
+    diag = np.clip(np.diag(R), 0.0, None)
+    scale = np.sqrt(diag)
+    excited = np.isfinite(scale) & (scale > 1e-9 * max(float(np.max(scale, initial=0.0)), 1e-300))
+    if fitted is not None:
+        excited &= fitted
+    theta = np.full(p, np.nan)
+    cov = np.full((p, p), np.nan)
+    condition = math.inf
+    rss = float(yy)
+    idx = np.flatnonzero(excited)
+    if idx.size:
+        d = scale[idx]
+        Rs = R[np.ix_(idx, idx)] / np.outer(d, d)
+        bs = b[idx] / d
+        if np.all(np.isfinite(Rs)) and np.all(np.isfinite(bs)):
+            eig = np.linalg.eigvalsh(Rs)
+            condition = math.sqrt(eig[-1] / eig[0]) if eig[0] > 0.0 else math.inf
+            ts = np.linalg.lstsq(Rs, bs, rcond=1e-13)[0]
+            theta[idx] = ts / d
+            cov[np.ix_(idx, idx)] = np.linalg.pinv(Rs, rcond=1e-13, hermitian=True)
+            t = theta[idx]
+            rss = float(yy - 2.0 * t @ b[idx] + t @ R[np.ix_(idx, idx)] @ t)
+    return Solution(theta, cov, scale, excited, condition, max(rss, 0.0))
+
+
+def hac_inflation(phi: np.ndarray, residual: np.ndarray, lags: int) -> np.ndarray:
+    """Per column: the Newey-West (Bartlett) variance of the LS estimate over the naive
+    s^2 (Phi^T Phi)^-1 one, at least 1 (nan where undefined)."""
+    m, p = phi.shape
+    if m <= p + 1:
+        return np.full(p, np.nan)
+    g = phi * residual[:, None]
+    meat = g.T @ g
+    for lag in range(1, min(lags, m - 1) + 1):
+        gamma = g[lag:].T @ g[:-lag]
+        meat += (1.0 - lag / (lags + 1.0)) * (gamma + gamma.T)
+    gram = phi.T @ phi
+    inv = np.linalg.pinv(gram, hermitian=True)
+    hac = np.diag(inv @ meat @ inv)
+    naive = residual @ residual / (m - p) * np.diag(inv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(naive > 0.0, hac / naive, np.nan)
+    return np.where(np.isfinite(ratio), np.maximum(ratio, 1.0), np.nan)
+
+
+class JointInformation:
+    """One joint's accumulated (forgotten) information: the base columns' and every reflex
+    grid point's."""
+
+    def __init__(self, grid: int, fitted: np.ndarray) -> None:
+        p = len(BASE_PARAMETERS)
+        self.fitted = fitted
+        """Mask of the base columns fitted (the voluntary ones only when asked for)."""
+        self.R = np.zeros((p, p))
+        self.b = np.zeros(p)
+        self.Rxg = np.zeros((grid, p))
+        self.Rgg = np.zeros(grid)
+        self.bg = np.zeros(grid)
+        self.yy = 0.0
+        self.samples = 0.0
+        self.w1 = 0.0
+        self.w2 = 0.0
+        self.trials = 0
+        self.peak_speed = 0.0
+        self.inflation = np.full(p + 1, np.nan)
+        self.unresolved = 0.0
+        self._rss: np.ndarray | None = None
+
+    def add(self, phi: np.ndarray, reflex: np.ndarray, active: np.ndarray, y: np.ndarray,
+            forgetting: float, speed: float, unresolved: float) -> None:
+        """One trial's information; ``reflex`` holds the grid points ``active`` (the others'
+        columns are zero in this trial)."""
+        lam = forgetting
+        self.unresolved = max(unresolved, lam * self.unresolved)
+        self.R = lam * self.R + phi.T @ phi
+        self.b = lam * self.b + phi.T @ y
+        self.Rxg *= lam
+        self.Rgg *= lam
+        self.bg *= lam
+        if active.size:
+            self.Rxg[active] += reflex.T @ phi
+            self.Rgg[active] += np.sum(reflex * reflex, axis=0)
+            self.bg[active] += reflex.T @ y
+        self.yy = lam * self.yy + float(y @ y)
+        self.samples = lam * self.samples + y.shape[0]
+        self.w1 = lam * self.w1 + 1.0
+        self.w2 = lam * lam * self.w2 + 1.0
+        self.trials += 1
+        self.peak_speed = max(self.peak_speed, speed)
+        self._rss = None
+
+    def grid_rss(self) -> np.ndarray:
+        """Residual of the base columns plus each reflex grid point's column (inf where that
+        column is not excited)."""
+        if self._rss is None:
+            self._rss = self._grid_rss()
+        return self._rss
+
+    def _grid_rss(self) -> np.ndarray:
+        p = self.R.shape[0]
+        grid = self.Rgg.shape[0]
+        full = np.zeros((grid, p + 1, p + 1))
+        full[:, :p, :p] = self.R
+        full[:, p, :p] = self.Rxg
+        full[:, :p, p] = self.Rxg
+        full[:, p, p] = self.Rgg
+        rhs = np.concatenate([np.broadcast_to(self.b, (grid, p)), self.bg[:, None]], axis=1)
+        unused = np.flatnonzero(~self.fitted)
+        full[:, unused, :] = 0.0
+        full[:, :, unused] = 0.0
+        rhs[:, unused] = 0.0
+        d = np.sqrt(np.clip(np.einsum("gii->gi", full), 1e-300, None))
+        scaled = full / (d[:, :, None] * d[:, None, :]) + 1e-10 * np.eye(p + 1)
+        theta = np.linalg.solve(scaled, (rhs / d)[..., None])[..., 0] / d
+        rss = self.yy - np.einsum("gi,gi->g", theta, rhs)
+        rss[~np.isfinite(rss)] = np.inf
+        rss[self.Rgg <= 1e-12 * max(float(self.R[3, 3]), 1e-300)] = np.inf
+        return np.asarray(rss)

@@ -308,8 +308,8 @@ def test_killed_writer_leaves_every_finished_trial(tmp_path: Path, config: Confi
     script = textwrap.dedent(f"""
         import os, signal
         from exo_ilc_ros.bag import run_writer
-        from exo_ilc_ros.core.config import load_config
-        from exo_ilc_ros.core.session import run_trials
+        from exo_ilc_ros.core.params.config import load_config
+        from exo_ilc_ros.core.session.learning_session import run_trials
         real = run_writer.messages.trial_event
         def event(ns, kind, trial, values=()):
             if kind == "start" and trial == 4:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.cli.main import main as cli_main
+from exo_ilc_ros.core.convergence import norm_optimal_robustness
 from exo_ilc_ros.core.convergence.factors import JointLoop, lifted_map
 from exo_ilc_ros.core.errors import ConfigError
 from exo_ilc_ros.core.learning import norm_optimal
@@ -123,10 +124,11 @@ def test_robustness_check_and_analyze_loop(capsys: pytest.CaptureFixture[str],
                                            tmp_path: Path) -> None:
     """The shipped weights are robust over the shipped range; a plant much lighter than the
     model is not, and analyze-loop says so."""
-    report = norm_optimal.robustness(_config())
+    report = norm_optimal_robustness.robustness(_config())
     assert report.robust
     assert all(r.norm <= 1.0 + 1e-6 for r in report.lifted)
-    light = norm_optimal.robustness(_config(**{"norm_optimal.uncertainty_range": [-0.3, -0.3]}))
+    light = norm_optimal_robustness.robustness(
+        _config(**{"norm_optimal.uncertainty_range": [-0.3, -0.3]}))
     assert not light.robust
     config_file = tmp_path / "short.yaml"
     config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n'

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ..analysis.figures import convergence_figure, save, tracking_figure
+from ..analysis import figures
 from ..analysis.report import format_iterations, format_trial_table, write_json
 from ..bag import BagReadError, BagRun, read_bag
 from ..core.session.summary import RunSummary
@@ -168,7 +168,8 @@ def analyze(args: argparse.Namespace) -> int:
         if args.plot:
             plot_labels = [f"{label} ({r.law}, {100 * r.mass_uncertainty:g} %)"
                            for r, label in usable]
-            print(f"wrote {save(convergence_figure(summaries, names, plot_labels), args.plot)}")
+            figure = figures.convergence_figure(summaries, names, plot_labels)
+            print(f"wrote {figures.save(figure, args.plot)}")
         if args.trial is not None:
             for run, label in zip(bag_runs, labels, strict=True):
                 if run not in with_trial:
@@ -178,9 +179,9 @@ def analyze(args: argparse.Namespace) -> int:
                 title = f"{label}: trial {args.trial}, {run.law}, mass uncertainty " \
                         f"{run.mass_uncertainty:g}"
                 path = trial_figure_path(args.plot, args.trial, run.path, len(bag_runs) > 1)
-                figure = tracking_figure(run.trials[args.trial], run.joint_names, title,
+                figure = figures.tracking_figure(run.trials[args.trial], run.joint_names, title,
                                          bound=run.error_bound)
-                print(f"wrote {save(figure, path)}")
+                print(f"wrote {figures.save(figure, path)}")
     return 0
 
 

@@ -10,7 +10,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from ..analysis.figures import save
+from ..analysis import figures
 from ..analysis.study import format_study_table, run_cells, write_study_json
 from ..analysis.study_figure import study_figure
 from ..core.errors import ConfigError
@@ -98,5 +98,5 @@ def study(args: argparse.Namespace) -> int:
         write_study_json(args.json, setup, rows, results)
         print(f"wrote {args.json}")
     if args.figure:
-        print(f"wrote {save(study_figure(rows), args.figure)}")
+        print(f"wrote {figures.save(study_figure(rows), args.figure)}")
     return 0

@@ -43,24 +43,24 @@ def plant_step_times(experiment: Experiment, repeats: int = 2000) -> list[float]
 def between_trials(config: Config) -> None:
     """The supervisor's between-trial computation: each law's update (median of 21) from one
     5 s trial's record, and the norm-optimal law's learning matrix (once per configuration)."""
-    from exo_ilc_ros.core.learning import norm_optimal
+    from exo_ilc_ros.core.learning import norm_optimal_model
 
     experiment = Experiment(config, 0.10)
     record = experiment.run_trial(np.zeros_like(experiment.reference.position), 1)
-    norm_optimal.clear_cache()
+    norm_optimal_model.clear_cache()
     start = time.perf_counter()
-    norm_optimal.learning_matrices(config)
+    norm_optimal_model.learning_matrices(config)
     cold = time.perf_counter() - start
     start = time.perf_counter()
-    norm_optimal.learning_matrices(config.replace({"error_bound": 0.004}))
+    norm_optimal_model.learning_matrices(config.replace({"error_bound": 0.004}))
     cached = time.perf_counter() - start
     n = record.feedforward.size
     print(f"norm-optimal learning matrix ({n} x {n}, linearised model; analyze-loop's): built "
           f"in {cold:.2f} s once per configuration; {cached * 1e3:.2f} ms from the cache after a "
           "live change of another parameter")
-    norm_optimal.clear_cache()
+    norm_optimal_model.clear_cache()
     start = time.perf_counter()
-    gains = norm_optimal.recursive_matrices(config).gains
+    gains = norm_optimal_model.recursive_matrices(config).gains
     print(f"norm-optimal Riccati gains (the law's; {gains.nbytes / 1e6:.1f} MB): built in "
           f"{time.perf_counter() - start:.2f} s once per configuration, the model included")
     variants: list[tuple[str, dict[str, Any]]] = [

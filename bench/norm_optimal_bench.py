@@ -23,7 +23,7 @@ import numpy as np
 
 from exo_ilc_ros.core import load_config, run_trials
 from exo_ilc_ros.core.convergence.growth import fit_growth
-from exo_ilc_ros.core.learning import norm_optimal
+from exo_ilc_ros.core.learning import norm_optimal, norm_optimal_model, norm_optimal_qp
 from exo_ilc_ros.core.loop.plant import saturation_counts
 from exo_ilc_ros.core.params import schema
 from exo_ilc_ros.core.params.config import Config
@@ -118,12 +118,12 @@ def scale(constrained_too: bool, repeats: int = 5) -> None:
     for joints in (3, 7):
         for period in (0.01, 0.001):
             config = widened(joints, period)
-            norm_optimal.clear_cache()
+            norm_optimal_model.clear_cache()
             tracemalloc.start()
             start = time.perf_counter()
-            model = norm_optimal.lifted_model(config)
+            model = norm_optimal_model.lifted_model(config)
             built = time.perf_counter()
-            matrices = norm_optimal.recursive_matrices(config)
+            matrices = norm_optimal_model.recursive_matrices(config)
             gains_s = time.perf_counter() - built
             peak = tracemalloc.get_traced_memory()[1]
             tracemalloc.stop()
@@ -147,7 +147,7 @@ def scale(constrained_too: bool, repeats: int = 5) -> None:
                 record = Experiment(c, 0.1).run_trial(np.zeros((count, joints)), 1)
                 assert law.constraints is not None
                 t0 = time.perf_counter()
-                norm_optimal.solve_constrained_recursive(law.matrices, law.constraints, record)
+                norm_optimal_qp.solve_constrained_recursive(law.matrices, law.constraints, record)
                 line += f"  {time.perf_counter() - t0:>8.2f}"
             print(line, flush=True)
 

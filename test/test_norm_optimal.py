@@ -16,7 +16,7 @@ from exo_ilc_ros.cli.main import main as cli_main
 from exo_ilc_ros.core.convergence import norm_optimal_robustness
 from exo_ilc_ros.core.convergence.factors import JointLoop, lifted_map
 from exo_ilc_ros.core.errors import ConfigError
-from exo_ilc_ros.core.learning import norm_optimal
+from exo_ilc_ros.core.learning import norm_optimal, norm_optimal_model, norm_optimal_qp
 from exo_ilc_ros.core.learning.factory import build_law
 from exo_ilc_ros.core.learning.laws import Memory
 from exo_ilc_ros.core.params.config import Config, load_config
@@ -34,7 +34,7 @@ def test_per_joint_model_is_analyze_loops_lifted_map() -> None:
     """The per_joint model's G holds, per joint, the P_q of convergence.lifted_map."""
     config = _config(**{"norm_optimal.model_kind": "per_joint",
                         "norm_optimal.model_mass_uncertainty": 0.1})
-    model = norm_optimal.lifted_model(config)
+    model = norm_optimal_model.lifted_model(config)
     n, count = config.joints, model.samples
     for j, (kp, kd) in enumerate(zip(config["control.kp"], config["control.kd"], strict=True)):
         loop = JointLoop(1.0 / 1.1, kp, kd, config["control.period"])
@@ -54,7 +54,7 @@ def test_update_is_the_minimiser_of_the_cost() -> None:
     ff = 0.1 * rng.standard_normal(experiment.reference.position.shape)
     record = experiment.run_trial(ff, 1)
     new = law.update(record).feedforward
-    m = norm_optimal.learning_matrices(config)
+    m = norm_optimal_model.learning_matrices(config)
     u, e = record.feedforward.ravel(), record.error.ravel()
     np.testing.assert_allclose(new.ravel(), m.phi @ u + m.learning @ e, atol=1e-9)
     we, wd, wu = m.weights.stacked(m.model.samples)
@@ -67,11 +67,11 @@ def test_learning_matrix_is_cached_per_configuration() -> None:
     """Built once per model and weights: a live change of anything else reuses it; a weight
     change builds a new one; the session's law uses the cached one."""
     config = _config()
-    first = norm_optimal.learning_matrices(config)
-    assert norm_optimal.learning_matrices(config.replace({"error_bound": 0.01})) is first
-    assert norm_optimal.learning_matrices(config.replace({"memory": "feedforward"})) is first
+    first = norm_optimal_model.learning_matrices(config)
+    assert norm_optimal_model.learning_matrices(config.replace({"error_bound": 0.01})) is first
+    assert norm_optimal_model.learning_matrices(config.replace({"memory": "feedforward"})) is first
     heavier = config.replace({"norm_optimal.weight_input_change": [1e-6, 1e-6, 1e-6]})
-    second = norm_optimal.learning_matrices(heavier)
+    second = norm_optimal_model.learning_matrices(heavier)
     assert second is not first and second.model is first.model  # same model, new weights
     session = LearningSession(config.replace({"max_trials": 2}))
     session.stage({"error_bound": 0.002})
@@ -79,7 +79,7 @@ def test_learning_matrix_is_cached_per_configuration() -> None:
     session.conclude(record)
     law = session.active_law
     assert isinstance(law, norm_optimal.NormOptimalLaw)
-    assert law.matrices is norm_optimal.recursive_matrices(config)  # the law's (Riccati) form
+    assert law.matrices is norm_optimal_model.recursive_matrices(config)  # the law's (Riccati) form
     assert law.matrices.model is first.model
 
 
@@ -108,10 +108,10 @@ def test_constrained_update_keeps_the_predicted_effort_within_the_limit() -> Non
     assert any("effort limit active" in n for n in update.notes)
     assert any("feed-forward bound active" in n for n in update.notes)
     assert np.max(np.abs(update.feedforward)) <= 0.3 * (1 + 1e-6)
-    matrices = norm_optimal.learning_matrices(tight)
+    matrices = norm_optimal_model.learning_matrices(tight)
     constraints = norm_optimal.NormOptimalLaw.from_config(tight).constraints
     assert constraints is not None
-    solved = norm_optimal.solve_constrained(matrices, constraints, record)
+    solved = norm_optimal_qp.solve_constrained(matrices, constraints, record)
     assert np.all(np.abs(solved.predicted_effort) <= 0.98 * need * (1 + 1e-6))
 
 

@@ -46,7 +46,7 @@ _WHERE = {
     "error_sums": ".learning.laws",
     "sgn": ".learning.laws",
     "NormOptimalLaw": ".learning.norm_optimal",
-    "learning_matrices": ".learning.norm_optimal",
+    "learning_matrices": ".learning.norm_optimal_model",
     "QFilter": ".learning.qfilter",
     "QFilteredLaw": ".learning.qfilter",
     "PlantDynamics": ".loop.plant",

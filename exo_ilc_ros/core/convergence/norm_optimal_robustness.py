@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..learning.norm_optimal import Weights, learning_matrices, lifted_model
+from ..learning.norm_optimal_model import Weights, learning_matrices, lifted_model
 from ..params.config import Config
 from .joint_loop import JointLoop
 

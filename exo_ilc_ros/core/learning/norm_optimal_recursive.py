@@ -1,4 +1,5 @@
-"""Norm-optimal ILC, (NO1)-(NO3) of :mod:`exo_ilc_ros.core.norm_optimal`, without lifted matrices.
+"""Norm-optimal ILC, (NO1)-(NO3) of :mod:`exo_ilc_ros.core.learning.norm_optimal`, without lifted
+matrices.
 
 The lifted form builds G, L = H^-1 G^T We and Phi = I - H^-1 Wu, each (n (N+1))^2 doubles
 (9.8 GB per matrix for 7 joints over 5 s at 1 kHz). The same minimiser of (NO1) is the solution
@@ -32,8 +33,8 @@ Memory is linear in the samples (K_t, M_t^-1, F_t per sample: 14 MB for 7 joints
 1 kHz); an update is two compiled sweeps of small matrix-vector products.
 
 The constrained update (NO3) is the same sparse quadratic programme over z = (du, x) as
-:func:`exo_ilc_ros.core.norm_optimal.solve_constrained`, assembled here banded (vectorised
-block indices, no per-sample Python loop): :func:`solve_constrained_banded`.
+:func:`exo_ilc_ros.core.learning.norm_optimal_qp.solve_constrained`, assembled here banded
+(vectorised block indices, no per-sample Python loop): :func:`solve_constrained_banded`.
 
 This module imports nothing of the package (numpy, numba, scipy; Clarabel lazily), so any
 layout can use it.
@@ -178,7 +179,7 @@ def _update_kernel(feedback: np.ndarray, b: np.ndarray, gain: np.ndarray, solve:
 class RiccatiGains:
     """The gains (R3) of one model and one set of weights; :meth:`next_feedforward` is the
     update (NO2) by (R4)-(R5), the drop-in for
-    :meth:`exo_ilc_ros.core.norm_optimal.LearningMatrices.next_feedforward`."""
+    :meth:`exo_ilc_ros.core.learning.norm_optimal_model.LearningMatrices.next_feedforward`."""
 
     b: np.ndarray
     """(N+1, 2n, n): B_t of (R1)."""
@@ -228,8 +229,8 @@ class RiccatiGains:
 def riccati_gains(a: np.ndarray, b: np.ndarray, k: np.ndarray, error_weight: np.ndarray,
                   change_weight: np.ndarray, size_weight: np.ndarray) -> RiccatiGains:
     """(R3) for the model x_t+1 = A_t x_t + B_t (u_ff + K_P e + K_D e_dot) of
-    :class:`exo_ilc_ros.core.norm_optimal.LiftedModel` (``a`` (N+1, 2n, 2n), ``b`` (N+1, 2n, n),
-    ``k`` = [K_P K_D]) and the per-joint weights We, Wd, Wu of (NO1)."""
+    :class:`exo_ilc_ros.core.learning.norm_optimal_model.LiftedModel` (``a`` (N+1, 2n, 2n),
+    ``b`` (N+1, 2n, n), ``k`` = [K_P K_D]) and the per-joint weights We, Wd, Wu of (NO1)."""
     a = np.asarray(a, dtype=np.float64)
     b = np.ascontiguousarray(b, dtype=np.float64)
     count, nx, m = b.shape
@@ -273,7 +274,8 @@ def lifted_gradient(gains: RiccatiGains, error: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class BandedStep:
     """The solution of (NO3): the fields of
-    :class:`exo_ilc_ros.core.norm_optimal.ConstrainedStep`, and whether Clarabel solved it."""
+    :class:`exo_ilc_ros.core.learning.norm_optimal_qp.ConstrainedStep`, and whether Clarabel
+    solved it."""
 
     change: np.ndarray
     """u_ff,k+1 - u_ff,k, shape (N+1, joints)."""
@@ -305,7 +307,7 @@ def solve_constrained_banded(a: np.ndarray, b: np.ndarray, k: np.ndarray,
     and the predicted effort tau_k + a_N(q_k)(du - K x) + J_k x within +-``effort_limit`` (the
     margin already applied), abs(u_ff + du) <= ``feedforward_limit`` (inf: none); ``effort``,
     ``inertia``, ``effort_jacobian`` are tau_k, a_N(q_k) and d tau / d x along trial k, as
-    ``norm_optimal._effort_along`` gives them. The matrix is the lifted form's, entry for entry,
+    ``norm_optimal_qp._effort_along`` gives them. The matrix is the lifted form's, entry for entry,
     assembled from vectorised block indices."""
     import clarabel
     from scipy import sparse

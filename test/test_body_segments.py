@@ -14,7 +14,8 @@ from exo_ilc_ros.core.arm.body_segments import (
     segment_inertial,
     with_segments,
 )
-from exo_ilc_ros.core.arm.urdf_chain import UrdfError, read_urdf_chain
+from exo_ilc_ros.core.arm.urdf_chain import read_urdf_chain
+from exo_ilc_ros.core.arm.urdf_xml import UrdfError
 
 ARM = """<robot name="exo2">
   <link name="base"/>

@@ -15,13 +15,8 @@ import pytest
 from exo_ilc_ros.cli.main import main as cli_main
 from exo_ilc_ros.core.arm.build import build_arm
 from exo_ilc_ros.core.arm.dynamics import inertia_and_bias, solve_spd
-from exo_ilc_ros.core.arm.urdf_chain import (
-    LimitError,
-    UrdfError,
-    check_reference_limits,
-    read_urdf_chain,
-    resolve_package_uri,
-)
+from exo_ilc_ros.core.arm.urdf_chain import LimitError, check_reference_limits, read_urdf_chain
+from exo_ilc_ros.core.arm.urdf_xml import UrdfError, resolve_package_uri
 from exo_ilc_ros.core.params.config import load_config
 
 TWO_JOINTS = """<?xml version="1.0"?>

@@ -30,7 +30,8 @@ from enum import Enum
 
 import numpy as np
 
-from .urdf_chain import UrdfChain, UrdfError
+from .urdf_chain import UrdfChain
+from .urdf_xml import UrdfError
 
 
 class Sex(Enum):

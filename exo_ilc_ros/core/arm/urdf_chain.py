@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,42 +41,20 @@ import numpy as np
 
 from ..errors import ModelError
 from .dynamics import inertia_and_bias
+from .urdf_xml import (
+    LOCKABLE_TYPES,
+    MOVING_TYPES,
+    Inertial,
+    UrdfError,
+    UrdfJoint,
+    axis_rotation,
+    parse_urdf,
+    read_urdf_text,
+)
 
-MOVING_TYPES = ("revolute", "continuous")
-LOCKABLE_TYPES = ("revolute", "continuous", "prismatic")
-KNOWN_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 SINGULAR_TOLERANCE = 1e-10
 """A Cholesky pivot of the mass matrix below this share of its largest diagonal entry counts as
 singular."""
-
-
-class UrdfError(ModelError):
-    """The URDF cannot give the chain asked for; the message names the file and the element."""
-
-
-@dataclass(frozen=True)
-class _Inertial:
-    mass: float
-    rotation: np.ndarray
-    origin: np.ndarray
-    inertia: np.ndarray
-
-
-@dataclass(frozen=True)
-class _Joint:
-    name: str
-    type: str
-    parent: str
-    child: str
-    rotation: np.ndarray
-    origin: np.ndarray
-    axis: np.ndarray
-    lower: float
-    upper: float
-    effort: float
-    velocity: float
-    damping: float
-    friction: float
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,161 +145,6 @@ def check_reference_limits(chain: UrdfChain, time: np.ndarray, position: np.ndar
                      f"{limits[j]:.6g} {unit} ({chain.source} <limit {attribute}>)")
 
 
-def resolve_package_uri(uri: str) -> Path:
-    """``package://name/rest`` to a path the ROS way (the package's share directory from
-    ``ament_index_python``); :class:`UrdfError` when it cannot be."""
-    rest = uri[len("package://"):]
-    package, _, relative = rest.partition("/")
-    try:
-        from ament_index_python.packages import (  # optional: a ROS install
-            PackageNotFoundError,
-            get_package_share_directory,
-        )
-    except ImportError:
-        raise UrdfError(f"{uri}: cannot resolve package://: ament_index_python is not "
-                        "installed (source a ROS 2 install, or give a file path)") from None
-    try:
-        share = get_package_share_directory(package)
-    except PackageNotFoundError:
-        raise UrdfError(f"{uri}: package {package!r} is not installed (not in the ament "
-                        "index); source its workspace or give a file path") from None
-    except OSError:  # AMENT_PREFIX_PATH unset: no ROS environment sourced
-        raise UrdfError(f"{uri}: cannot find package {package!r}: AMENT_PREFIX_PATH is not "
-                        "set (source a ROS 2 install or workspace, or give a file path)"
-                        ) from None
-    return Path(share) / relative
-
-
-def rpy_rotation(rpy: np.ndarray) -> np.ndarray:
-    """The URDF's ``rpy``: R = Rz(yaw) Ry(pitch) Rx(roll) (fixed axes x, y, z)."""
-    r, p, y = (float(v) for v in rpy)
-    cr, sr, cp, sp, cy, sy = (math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y),
-                              math.sin(y))
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
-
-
-def axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation by ``angle`` about the unit vector ``axis`` (Rodrigues)."""
-    x, y, z = (float(v) for v in axis)
-    c, s = math.cos(angle), math.sin(angle)
-    v = 1.0 - c
-    return np.array([[c + x * x * v, x * y * v - z * s, x * z * v + y * s],
-                     [y * x * v + z * s, c + y * y * v, y * z * v - x * s],
-                     [z * x * v - y * s, z * y * v + x * s, c + z * z * v]])
-
-
-def _floats(text: str | None, count: int, default: tuple[float, ...], where: str
-            ) -> np.ndarray:
-    if text is None:
-        return np.array(default, dtype=float)
-    try:
-        values = [float(v) for v in text.split()]
-    except ValueError:
-        raise UrdfError(f"{where}: {text!r} is not {count} numbers") from None
-    if len(values) != count:
-        raise UrdfError(f"{where}: {text!r} is not {count} numbers")
-    return np.array(values, dtype=float)
-
-
-def _number(element: ET.Element | None, name: str, default: float, where: str) -> float:
-    if element is None or element.get(name) is None:
-        return default
-    try:
-        return float(element.get(name, ""))
-    except ValueError:
-        raise UrdfError(f"{where}: {name}={element.get(name)!r} is not a number") from None
-
-
-def _origin(element: ET.Element | None, where: str) -> tuple[np.ndarray, np.ndarray]:
-    if element is None:
-        return np.eye(3), np.zeros(3)
-    xyz = _floats(element.get("xyz"), 3, (0.0, 0.0, 0.0), f"{where} <origin xyz>")
-    rpy = _floats(element.get("rpy"), 3, (0.0, 0.0, 0.0), f"{where} <origin rpy>")
-    return rpy_rotation(rpy), xyz
-
-
-def read_urdf_text(source: str | Path) -> tuple[str, str]:
-    """(text, where) of a path, a ``package://`` URI or URDF text."""
-    if isinstance(source, str) and source.lstrip().startswith("<"):
-        return source, "<text>"
-    path = resolve_package_uri(str(source)) if str(source).startswith("package://") \
-        else Path(source)
-    try:
-        return path.read_text(encoding="utf-8"), str(path)
-    except FileNotFoundError:
-        raise UrdfError(f"{path}: no such URDF file") from None
-    except OSError as exc:
-        raise UrdfError(f"{path}: cannot read the URDF ({exc.strerror})") from None
-
-
-def _parse(text: str, where: str) -> tuple[str, dict[str, _Inertial | None], dict[str, _Joint]]:
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError as exc:
-        raise UrdfError(f"{where}: not well-formed XML ({exc})") from None
-    if root.tag != "robot":
-        raise UrdfError(f"{where}: the root element is <{root.tag}>, not <robot>")
-    links: dict[str, _Inertial | None] = {}
-    for link in root.findall("link"):
-        name = link.get("name")
-        if not name:
-            raise UrdfError(f"{where}: a <link> has no name")
-        if name in links:
-            raise UrdfError(f"{where}: link {name!r} is defined twice")
-        inertial = link.find("inertial")
-        if inertial is None:
-            links[name] = None
-            continue
-        at = f"{where}: link {name!r} <inertial>"
-        rotation, origin = _origin(inertial.find("origin"), at)
-        mass = _number(inertial.find("mass"), "value", 0.0, f"{at} <mass>")
-        element = inertial.find("inertia")
-        i = {k: _number(element, k, 0.0, f"{at} <inertia>")
-             for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
-        tensor = np.array([[i["ixx"], i["ixy"], i["ixz"]], [i["ixy"], i["iyy"], i["iyz"]],
-                           [i["ixz"], i["iyz"], i["izz"]]])
-        if mass < 0.0:
-            raise UrdfError(f"{at}: negative mass {mass}")
-        links[name] = _Inertial(mass, rotation, origin, tensor)
-    joints: dict[str, _Joint] = {}
-    for joint in root.findall("joint"):
-        name = joint.get("name") or ""
-        at = f"{where}: joint {name!r}"
-        if not name:
-            raise UrdfError(f"{where}: a <joint> has no name")
-        if name in joints:
-            raise UrdfError(f"{at} is defined twice")
-        kind = joint.get("type", "")
-        if kind not in KNOWN_TYPES:
-            raise UrdfError(f"{at}: unknown type {kind!r} (one of {', '.join(KNOWN_TYPES)})")
-        parent, child = joint.find("parent"), joint.find("child")
-        if parent is None or child is None or not parent.get("link") or not child.get("link"):
-            raise UrdfError(f"{at}: needs <parent link=...> and <child link=...>")
-        for end in (parent.get("link", ""), child.get("link", "")):
-            if end not in links:
-                raise UrdfError(f"{at}: link {end!r} is not defined")
-        rotation, origin = _origin(joint.find("origin"), at)
-        axis_element = joint.find("axis")
-        axis = _floats(None if axis_element is None else axis_element.get("xyz"), 3,
-                       (1.0, 0.0, 0.0), f"{at} <axis xyz>")
-        norm = float(np.linalg.norm(axis))
-        if kind in LOCKABLE_TYPES and norm == 0.0:
-            raise UrdfError(f"{at}: <axis xyz> is zero")
-        limit, dynamics = joint.find("limit"), joint.find("dynamics")
-        joints[name] = _Joint(
-            name, kind, parent.get("link", ""), child.get("link", ""), rotation, origin,
-            axis / norm if norm > 0.0 else axis,
-            _number(limit, "lower", -math.inf, f"{at} <limit>"),
-            _number(limit, "upper", math.inf, f"{at} <limit>"),
-            _number(limit, "effort", math.inf, f"{at} <limit>"),
-            _number(limit, "velocity", math.inf, f"{at} <limit>"),
-            _number(dynamics, "damping", 0.0, f"{at} <dynamics>"),
-            _number(dynamics, "friction", 0.0, f"{at} <dynamics>"))
-    return root.get("name", ""), links, joints
-
-
 @dataclass
 class _Body:
     """A rigid body being merged: masses, centres of mass and central inertias in its frame."""
@@ -330,7 +152,7 @@ class _Body:
     links: list[str]
     parts: list[tuple[float, np.ndarray, np.ndarray]]
 
-    def add(self, inertial: _Inertial | None, rotation: np.ndarray, origin: np.ndarray) -> None:
+    def add(self, inertial: Inertial | None, rotation: np.ndarray, origin: np.ndarray) -> None:
         if inertial is None or (inertial.mass == 0.0 and not np.any(inertial.inertia)):
             return
         r = rotation @ inertial.rotation
@@ -356,7 +178,7 @@ class _Body:
         return mass, com, inertia
 
 
-def _fixed_transform(joint: _Joint, value: float) -> tuple[np.ndarray, np.ndarray]:
+def _fixed_transform(joint: UrdfJoint, value: float) -> tuple[np.ndarray, np.ndarray]:
     """Child frame in the parent's of a fixed joint, or of a locked one at ``value``."""
     if joint.type in ("revolute", "continuous"):
         return joint.rotation @ axis_rotation(joint.axis, value), joint.origin
@@ -372,107 +194,15 @@ def read_urdf_chain(source: str | Path, base_link: str, tip_link: str,
     ``package://`` URI, or the URDF's text), ``locked`` joints held at the given values
     (module docstring)."""
     text, where = read_urdf_text(source)
-    robot, links, joints = _parse(text, where)
-    locked = dict(locked or {})
-    for name, value in locked.items():
-        if name not in joints:
-            raise UrdfError(f"{where}: locked joint {name!r} is not in the URDF")
-        if joints[name].type not in LOCKABLE_TYPES:
-            raise UrdfError(f"{where}: locked joint {name!r} is {joints[name].type}; only "
-                            f"{', '.join(LOCKABLE_TYPES)} joints can be locked")
-        if not math.isfinite(value):
-            raise UrdfError(f"{where}: locked joint {name!r}: value {value} is not finite")
-    parent_joint: dict[str, _Joint] = {}
-    for joint in joints.values():
-        if joint.child in parent_joint:
-            raise UrdfError(f"{where}: link {joint.child!r} has two parent joints "
-                            f"({parent_joint[joint.child].name!r}, {joint.name!r}): not a tree")
-        parent_joint[joint.child] = joint
-    children: dict[str, list[_Joint]] = {name: [] for name in links}
-    for joint in joints.values():
-        children[joint.parent].append(joint)
-    for end, role in ((base_link, "base"), (tip_link, "tip")):
-        if end not in links:
-            raise UrdfError(f"{where}: {role} link {end!r} is not a link of the URDF")
-    path: list[_Joint] = []
-    link = tip_link
-    while link != base_link:
-        above = parent_joint.get(link)
-        if above is None:
-            raise UrdfError(f"{where}: tip link {tip_link!r} is not in the chain below base "
-                            f"link {base_link!r} (walking up from the tip reached the root "
-                            f"{link!r})")
-        path.append(above)
-        link = above.parent
-    path.reverse()
-    moving = []
-    for joint in path:
-        if joint.name in locked or joint.type == "fixed":
-            continue
-        if joint.type in MOVING_TYPES:
-            moving.append(joint)
-        elif joint.type == "prismatic":
-            raise UrdfError(f"{where}: joint {joint.name!r} between {base_link!r} and "
-                            f"{tip_link!r} is prismatic; only revolute and continuous joints "
-                            "are supported (lock it at a value)")
-        else:
-            raise UrdfError(f"{where}: joint {joint.name!r} between {base_link!r} and "
-                            f"{tip_link!r} is {joint.type}: a floating or planar base is not "
-                            "a fixed-base arm (choose a base link below it)")
-    if not moving:
-        raise UrdfError(f"{where}: no revolute or continuous joint between {base_link!r} and "
-                        f"{tip_link!r}")
-    moving_names = {j.name for j in moving}
-
-    # every link's body (0: the base's; i + 1: moving joint i's) and pose in the body's frame
-    bodies = [_Body([base_link], []) for _ in range(len(moving) + 1)]
-    body_of_joint_frame: list[tuple[int, np.ndarray, np.ndarray]] = []  # (body, R, p) per joint
-    dropped: list[str] = []
-    starts = [(0, base_link)] + [(i + 1, j.child) for i, j in enumerate(moving)]
-    frame_of: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
-    for body, start in starts:
-        bodies[body].links = [start]
-        stack = [(start, np.eye(3), np.zeros(3))]
-        while stack:
-            name, rotation, origin = stack.pop()
-            frame_of[name] = (body, rotation, origin)
-            bodies[body].add(links[name], rotation, origin)
-            for joint in children[name]:
-                if joint.name in moving_names:
-                    continue  # starts the next body
-                if joint.type == "fixed" or joint.name in locked:
-                    r, p = _fixed_transform(joint, locked.get(joint.name, 0.0))
-                    stack.append((joint.child, rotation @ r, rotation @ p + origin))
-                    bodies[body].links.append(joint.child)
-                elif body == 0:
-                    dropped.extend(_subtree(joint.child, children))
-                else:
-                    raise UrdfError(
-                        f"{where}: joint {joint.name!r} ({joint.type}) moves link "
-                        f"{joint.child!r} off the chain {base_link!r} -> {tip_link!r} (it hangs "
-                        f"from link {name!r}, which moves): lock it or choose another tip")
-    for joint in moving:
-        body, rotation, origin = frame_of[joint.parent]
-        body_of_joint_frame.append((body, rotation @ joint.rotation,
-                                    rotation @ joint.origin + origin))
-    n = len(moving)
-    masses = np.zeros(n)
-    axes = np.zeros((n, 3))
-    offsets = np.zeros((n, 3))
-    coms = np.zeros((n, 3))
-    inertias = np.zeros((n, 3, 3))
-    orientation = np.eye(3)  # R0 of the previous body (the base's: identity)
-    orientations = []
-    for i, joint in enumerate(moving):
-        _, rotation, origin = body_of_joint_frame[i]  # in the previous moving body's frame
-        offsets[i] = orientation @ origin
-        orientation = orientation @ rotation
-        orientations.append(orientation)
-        axes[i] = orientation @ joint.axis
-        mass, com, inertia = bodies[i + 1].combined()
-        masses[i] = mass
-        coms[i] = orientation @ com
-        inertias[i] = orientation @ inertia @ orientation.T
+    robot, links, joints = parse_urdf(text, where)
+    locked = _checked_locks(dict(locked or {}), joints, where)
+    parent_joint, children = _tree(links, joints, where)
+    moving = _moving_joints(_path(base_link, tip_link, links, parent_joint, where), locked,
+                            base_link, tip_link, where)
+    bodies, frame_of, dropped = _bodies(base_link, tip_link, moving, links, children, locked,
+                                        where)
+    masses, axes, offsets, coms, inertias, orientations = _kernel_arrays(moving, bodies,
+                                                                         frame_of)
     poses = {}
     for name, (body, rotation, origin) in frame_of.items():
         r0 = orientations[body - 1] if body > 0 else np.eye(3)
@@ -494,7 +224,149 @@ def read_urdf_chain(source: str | Path, base_link: str, tip_link: str,
     return chain
 
 
-def _subtree(link: str, children: Mapping[str, list[_Joint]]) -> list[str]:
+def _checked_locks(locked: dict[str, float], joints: Mapping[str, UrdfJoint],
+                   where: str) -> dict[str, float]:
+    """``locked`` if every name is a lockable joint of the URDF at a finite value."""
+    for name, value in locked.items():
+        if name not in joints:
+            raise UrdfError(f"{where}: locked joint {name!r} is not in the URDF")
+        if joints[name].type not in LOCKABLE_TYPES:
+            raise UrdfError(f"{where}: locked joint {name!r} is {joints[name].type}; only "
+                            f"{', '.join(LOCKABLE_TYPES)} joints can be locked")
+        if not math.isfinite(value):
+            raise UrdfError(f"{where}: locked joint {name!r}: value {value} is not finite")
+    return locked
+
+
+def _tree(links: Mapping[str, Inertial | None], joints: Mapping[str, UrdfJoint], where: str
+          ) -> tuple[dict[str, UrdfJoint], dict[str, list[UrdfJoint]]]:
+    """Each link's parent joint and each link's child joints (an error if a link has two
+    parents: not a tree)."""
+    parent_joint: dict[str, UrdfJoint] = {}
+    for joint in joints.values():
+        if joint.child in parent_joint:
+            raise UrdfError(f"{where}: link {joint.child!r} has two parent joints "
+                            f"({parent_joint[joint.child].name!r}, {joint.name!r}): not a tree")
+        parent_joint[joint.child] = joint
+    children: dict[str, list[UrdfJoint]] = {name: [] for name in links}
+    for joint in joints.values():
+        children[joint.parent].append(joint)
+    return parent_joint, children
+
+
+def _path(base_link: str, tip_link: str, links: Mapping[str, Inertial | None],
+          parent_joint: Mapping[str, UrdfJoint], where: str) -> list[UrdfJoint]:
+    """The joints from ``base_link`` down to ``tip_link``, in order."""
+    for end, role in ((base_link, "base"), (tip_link, "tip")):
+        if end not in links:
+            raise UrdfError(f"{where}: {role} link {end!r} is not a link of the URDF")
+    path: list[UrdfJoint] = []
+    link = tip_link
+    while link != base_link:
+        above = parent_joint.get(link)
+        if above is None:
+            raise UrdfError(f"{where}: tip link {tip_link!r} is not in the chain below base "
+                            f"link {base_link!r} (walking up from the tip reached the root "
+                            f"{link!r})")
+        path.append(above)
+        link = above.parent
+    path.reverse()
+    return path
+
+
+def _moving_joints(path: list[UrdfJoint], locked: Mapping[str, float], base_link: str,
+                   tip_link: str, where: str) -> list[UrdfJoint]:
+    """The path's revolute and continuous joints that are not locked (an error for a
+    prismatic, floating or planar joint on it, or for none at all)."""
+    moving = []
+    for joint in path:
+        if joint.name in locked or joint.type == "fixed":
+            continue
+        if joint.type in MOVING_TYPES:
+            moving.append(joint)
+        elif joint.type == "prismatic":
+            raise UrdfError(f"{where}: joint {joint.name!r} between {base_link!r} and "
+                            f"{tip_link!r} is prismatic; only revolute and continuous joints "
+                            "are supported (lock it at a value)")
+        else:
+            raise UrdfError(f"{where}: joint {joint.name!r} between {base_link!r} and "
+                            f"{tip_link!r} is {joint.type}: a floating or planar base is not "
+                            "a fixed-base arm (choose a base link below it)")
+    if not moving:
+        raise UrdfError(f"{where}: no revolute or continuous joint between {base_link!r} and "
+                        f"{tip_link!r}")
+    return moving
+
+
+_Frame = tuple[int, np.ndarray, np.ndarray]
+"""(body, rotation, origin) of a link's frame in its body's frame (body 0: the base's; i + 1:
+moving joint i's)."""
+
+
+def _bodies(base_link: str, tip_link: str, moving: list[UrdfJoint],
+            links: Mapping[str, Inertial | None], children: Mapping[str, list[UrdfJoint]],
+            locked: Mapping[str, float], where: str
+            ) -> tuple[list[_Body], dict[str, _Frame], list[str]]:
+    """Every link merged into the rigid body it belongs to, each link's frame in its body, and
+    the links dropped (a branch off the base's body that could move)."""
+    moving_names = {j.name for j in moving}
+    bodies = [_Body([base_link], []) for _ in range(len(moving) + 1)]
+    dropped: list[str] = []
+    starts = [(0, base_link)] + [(i + 1, j.child) for i, j in enumerate(moving)]
+    frame_of: dict[str, _Frame] = {}
+    for body, start in starts:
+        bodies[body].links = [start]
+        stack = [(start, np.eye(3), np.zeros(3))]
+        while stack:
+            name, rotation, origin = stack.pop()
+            frame_of[name] = (body, rotation, origin)
+            bodies[body].add(links[name], rotation, origin)
+            for joint in children[name]:
+                if joint.name in moving_names:
+                    continue  # starts the next body
+                if joint.type == "fixed" or joint.name in locked:
+                    r, p = _fixed_transform(joint, locked.get(joint.name, 0.0))
+                    stack.append((joint.child, rotation @ r, rotation @ p + origin))
+                    bodies[body].links.append(joint.child)
+                elif body == 0:
+                    dropped.extend(_subtree(joint.child, children))
+                else:
+                    raise UrdfError(
+                        f"{where}: joint {joint.name!r} ({joint.type}) moves link "
+                        f"{joint.child!r} off the chain {base_link!r} -> {tip_link!r} (it hangs "
+                        f"from link {name!r}, which moves): lock it or choose another tip")
+    return bodies, frame_of, dropped
+
+
+def _kernel_arrays(moving: list[UrdfJoint], bodies: list[_Body], frame_of: Mapping[str, _Frame]
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                              list[np.ndarray]]:
+    """masses, axes, offsets, coms, inertias in the kernels' convention (module docstring) and
+    each moving body's orientation R0_i at q = 0."""
+    n = len(moving)
+    masses = np.zeros(n)
+    axes = np.zeros((n, 3))
+    offsets = np.zeros((n, 3))
+    coms = np.zeros((n, 3))
+    inertias = np.zeros((n, 3, 3))
+    orientation = np.eye(3)  # R0 of the previous body (the base's: identity)
+    orientations = []
+    for i, joint in enumerate(moving):
+        _, frame_rotation, frame_origin = frame_of[joint.parent]  # the previous body's frame
+        rotation = frame_rotation @ joint.rotation
+        origin = frame_rotation @ joint.origin + frame_origin
+        offsets[i] = orientation @ origin
+        orientation = orientation @ rotation
+        orientations.append(orientation)
+        axes[i] = orientation @ joint.axis
+        mass, com, inertia = bodies[i + 1].combined()
+        masses[i] = mass
+        coms[i] = orientation @ com
+        inertias[i] = orientation @ inertia @ orientation.T
+    return masses, axes, offsets, coms, inertias, orientations
+
+
+def _subtree(link: str, children: Mapping[str, list[UrdfJoint]]) -> list[str]:
     out, stack = [], [link]
     while stack:
         name = stack.pop()
@@ -503,7 +375,7 @@ def _subtree(link: str, children: Mapping[str, list[_Joint]]) -> list[str]:
     return out
 
 
-def _base_orientation(base_link: str, parent_joint: Mapping[str, _Joint],
+def _base_orientation(base_link: str, parent_joint: Mapping[str, UrdfJoint],
                       locked: Mapping[str, float]) -> np.ndarray:
     """The base link's orientation in the URDF's root link (joints above it at q = 0 or their
     locked values)."""

@@ -1,0 +1,207 @@
+"""A URDF's XML as plain records, with the standard library's parser: its links' inertials and
+its joints (type, origin, axis, limits, dynamics), every number checked, and ``package://``
+resolved the ROS way (``ament_index_python``) where the package is installed. The chain the
+kernels take is built from them by :mod:`.urdf_chain`. Errors (:class:`UrdfError`) name the file
+and the element."""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ModelError
+
+MOVING_TYPES = ("revolute", "continuous")
+LOCKABLE_TYPES = ("revolute", "continuous", "prismatic")
+KNOWN_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+
+
+class UrdfError(ModelError):
+    """The URDF cannot give the chain asked for; the message names the file and the element."""
+
+
+@dataclass(frozen=True)
+class Inertial:
+    mass: float
+    rotation: np.ndarray
+    origin: np.ndarray
+    inertia: np.ndarray
+
+
+@dataclass(frozen=True)
+class UrdfJoint:
+    name: str
+    type: str
+    parent: str
+    child: str
+    rotation: np.ndarray
+    origin: np.ndarray
+    axis: np.ndarray
+    lower: float
+    upper: float
+    effort: float
+    velocity: float
+    damping: float
+    friction: float
+
+
+def resolve_package_uri(uri: str) -> Path:
+    """``package://name/rest`` to a path the ROS way (the package's share directory from
+    ``ament_index_python``); :class:`UrdfError` when it cannot be."""
+    rest = uri[len("package://"):]
+    package, _, relative = rest.partition("/")
+    try:
+        from ament_index_python.packages import (  # optional: a ROS install
+            PackageNotFoundError,
+            get_package_share_directory,
+        )
+    except ImportError:
+        raise UrdfError(f"{uri}: cannot resolve package://: ament_index_python is not "
+                        "installed (source a ROS 2 install, or give a file path)") from None
+    try:
+        share = get_package_share_directory(package)
+    except PackageNotFoundError:
+        raise UrdfError(f"{uri}: package {package!r} is not installed (not in the ament "
+                        "index); source its workspace or give a file path") from None
+    except OSError:  # AMENT_PREFIX_PATH unset: no ROS environment sourced
+        raise UrdfError(f"{uri}: cannot find package {package!r}: AMENT_PREFIX_PATH is not "
+                        "set (source a ROS 2 install or workspace, or give a file path)"
+                        ) from None
+    return Path(share) / relative
+
+
+def rpy_rotation(rpy: np.ndarray) -> np.ndarray:
+    """The URDF's ``rpy``: R = Rz(yaw) Ry(pitch) Rx(roll) (fixed axes x, y, z)."""
+    r, p, y = (float(v) for v in rpy)
+    cr, sr, cp, sp, cy, sy = (math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y),
+                              math.sin(y))
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+def axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation by ``angle`` about the unit vector ``axis`` (Rodrigues)."""
+    x, y, z = (float(v) for v in axis)
+    c, s = math.cos(angle), math.sin(angle)
+    v = 1.0 - c
+    return np.array([[c + x * x * v, x * y * v - z * s, x * z * v + y * s],
+                     [y * x * v + z * s, c + y * y * v, y * z * v - x * s],
+                     [z * x * v - y * s, z * y * v + x * s, c + z * z * v]])
+
+
+def _floats(text: str | None, count: int, default: tuple[float, ...], where: str
+            ) -> np.ndarray:
+    if text is None:
+        return np.array(default, dtype=float)
+    try:
+        values = [float(v) for v in text.split()]
+    except ValueError:
+        raise UrdfError(f"{where}: {text!r} is not {count} numbers") from None
+    if len(values) != count:
+        raise UrdfError(f"{where}: {text!r} is not {count} numbers")
+    return np.array(values, dtype=float)
+
+
+def _number(element: ET.Element | None, name: str, default: float, where: str) -> float:
+    if element is None or element.get(name) is None:
+        return default
+    try:
+        return float(element.get(name, ""))
+    except ValueError:
+        raise UrdfError(f"{where}: {name}={element.get(name)!r} is not a number") from None
+
+
+def _origin(element: ET.Element | None, where: str) -> tuple[np.ndarray, np.ndarray]:
+    if element is None:
+        return np.eye(3), np.zeros(3)
+    xyz = _floats(element.get("xyz"), 3, (0.0, 0.0, 0.0), f"{where} <origin xyz>")
+    rpy = _floats(element.get("rpy"), 3, (0.0, 0.0, 0.0), f"{where} <origin rpy>")
+    return rpy_rotation(rpy), xyz
+
+
+def read_urdf_text(source: str | Path) -> tuple[str, str]:
+    """(text, where) of a path, a ``package://`` URI or URDF text."""
+    if isinstance(source, str) and source.lstrip().startswith("<"):
+        return source, "<text>"
+    path = resolve_package_uri(str(source)) if str(source).startswith("package://") \
+        else Path(source)
+    try:
+        return path.read_text(encoding="utf-8"), str(path)
+    except FileNotFoundError:
+        raise UrdfError(f"{path}: no such URDF file") from None
+    except OSError as exc:
+        raise UrdfError(f"{path}: cannot read the URDF ({exc.strerror})") from None
+
+
+def parse_urdf(text: str, where: str
+               ) -> tuple[str, dict[str, Inertial | None], dict[str, UrdfJoint]]:
+    """The robot's name, every link's inertial (None: none given) and every joint, by name, of
+    the URDF ``text`` read from ``where`` (named in every error)."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise UrdfError(f"{where}: not well-formed XML ({exc})") from None
+    if root.tag != "robot":
+        raise UrdfError(f"{where}: the root element is <{root.tag}>, not <robot>")
+    links: dict[str, Inertial | None] = {}
+    for link in root.findall("link"):
+        name = link.get("name")
+        if not name:
+            raise UrdfError(f"{where}: a <link> has no name")
+        if name in links:
+            raise UrdfError(f"{where}: link {name!r} is defined twice")
+        inertial = link.find("inertial")
+        if inertial is None:
+            links[name] = None
+            continue
+        at = f"{where}: link {name!r} <inertial>"
+        rotation, origin = _origin(inertial.find("origin"), at)
+        mass = _number(inertial.find("mass"), "value", 0.0, f"{at} <mass>")
+        element = inertial.find("inertia")
+        i = {k: _number(element, k, 0.0, f"{at} <inertia>")
+             for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
+        tensor = np.array([[i["ixx"], i["ixy"], i["ixz"]], [i["ixy"], i["iyy"], i["iyz"]],
+                           [i["ixz"], i["iyz"], i["izz"]]])
+        if mass < 0.0:
+            raise UrdfError(f"{at}: negative mass {mass}")
+        links[name] = Inertial(mass, rotation, origin, tensor)
+    joints: dict[str, UrdfJoint] = {}
+    for joint in root.findall("joint"):
+        name = joint.get("name") or ""
+        at = f"{where}: joint {name!r}"
+        if not name:
+            raise UrdfError(f"{where}: a <joint> has no name")
+        if name in joints:
+            raise UrdfError(f"{at} is defined twice")
+        kind = joint.get("type", "")
+        if kind not in KNOWN_TYPES:
+            raise UrdfError(f"{at}: unknown type {kind!r} (one of {', '.join(KNOWN_TYPES)})")
+        parent, child = joint.find("parent"), joint.find("child")
+        if parent is None or child is None or not parent.get("link") or not child.get("link"):
+            raise UrdfError(f"{at}: needs <parent link=...> and <child link=...>")
+        for end in (parent.get("link", ""), child.get("link", "")):
+            if end not in links:
+                raise UrdfError(f"{at}: link {end!r} is not defined")
+        rotation, origin = _origin(joint.find("origin"), at)
+        axis_element = joint.find("axis")
+        axis = _floats(None if axis_element is None else axis_element.get("xyz"), 3,
+                       (1.0, 0.0, 0.0), f"{at} <axis xyz>")
+        norm = float(np.linalg.norm(axis))
+        if kind in LOCKABLE_TYPES and norm == 0.0:
+            raise UrdfError(f"{at}: <axis xyz> is zero")
+        limit, dynamics = joint.find("limit"), joint.find("dynamics")
+        joints[name] = UrdfJoint(
+            name, kind, parent.get("link", ""), child.get("link", ""), rotation, origin,
+            axis / norm if norm > 0.0 else axis,
+            _number(limit, "lower", -math.inf, f"{at} <limit>"),
+            _number(limit, "upper", math.inf, f"{at} <limit>"),
+            _number(limit, "effort", math.inf, f"{at} <limit>"),
+            _number(limit, "velocity", math.inf, f"{at} <limit>"),
+            _number(dynamics, "damping", 0.0, f"{at} <dynamics>"),
+            _number(dynamics, "friction", 0.0, f"{at} <dynamics>"))
+    return root.get("name", ""), links, joints

@@ -6,6 +6,7 @@ oracle) or assembled banded (:func:`solve_constrained_recursive`, what the law u
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -98,12 +99,11 @@ def solve_constrained(matrices: LearningMatrices | RecursiveMatrices, constraint
                       record: TrialRecord) -> ConstrainedStep:
     """(NO3) as a sparse QP over z = (du_ff, x_0..x_N) with the model's dynamics as equalities,
     solved by Clarabel (interior point). Active: within 1e-6 (relative) of a bound."""
-    import clarabel
     from scipy import sparse
 
     model, w = matrices.model, matrices.weights
     count, n = record.error.shape
-    nv, nx = count * n, count * 2 * n
+    nv = count * n
     we, wd, wu = w.stacked(count)
     u_ff = record.feedforward.ravel()
     # cost 1/2 z' P z + q' z: sum we (e - dq)^2 + wd du^2 + wu (u_ff + du)^2 (constants dropped)
@@ -113,14 +113,40 @@ def solve_constrained(matrices: LearningMatrices | RecursiveMatrices, constraint
     qx[:, :n] = -2.0 * we.reshape(count, n) * record.error
     p = sparse.diags(np.concatenate([2.0 * (wd + wu), px.ravel()])).tocsc()
     q = np.concatenate([2.0 * wu * u_ff, qx.ravel()])
+    tau, inertia, jacobian = _effort_along(record, constraints.nominal)
+    lim = constraints.effort_limit * (1.0 - constraints.effort_margin)
+    a, b, equalities = _constraint_rows(model.a, model.b, model.k, u_ff, tau, inertia, jacobian,
+                                        lim, constraints.feedforward_limit)
+    z, status = _clarabel(p, q, a, b, equalities, record.trial)
+    du = z[:nv].reshape(count, n)
+    x = z[nv:].reshape(count, 2 * n)
+    predicted = (tau + np.einsum("ijk,ik->ij", inertia, du - x @ model.k.T)
+                 + np.einsum("ijk,ik->ij", jacobian, x))
+    tol = 1e-6
+    effort_active = np.sum(np.abs(predicted) >= lim * (1.0 - tol), axis=0)
+    new = record.feedforward + du
+    ff_active = np.sum(np.abs(new) >= constraints.feedforward_limit * (1.0 - tol), axis=0)
+    return ConstrainedStep(du, predicted, effort_active, ff_active, status)
 
-    def x_col(i: int) -> int:
-        return nv + i * 2 * n
 
+def _constraint_rows(a_model: np.ndarray, b_model: np.ndarray, k: np.ndarray,
+                     u_ff: np.ndarray, tau: np.ndarray, inertia: np.ndarray,
+                     jacobian: np.ndarray, lim: np.ndarray, feedforward_limit: np.ndarray
+                     ) -> tuple[Any, np.ndarray, int]:
+    """The QP's constraint matrix A (sparse), right-hand side b and number of equality rows:
+    the model's dynamics x_i+1 = (A_i - B_i K) x_i + B_i du_i from x_0 = 0, then the effort
+    bounds of (NO3) and the feed-forward bound."""
+    from scipy import sparse
+
+    count, n = tau.shape
+    nv = count * n
     rows: list[np.ndarray] = []
     cols: list[np.ndarray] = []
     vals: list[np.ndarray] = []
     row = 0
+
+    def x_col(i: int) -> int:
+        return nv + i * 2 * n
 
     def block(r0: int, c0: int, m: np.ndarray) -> None:
         rr, cc = np.nonzero(np.ones_like(m, dtype=bool))
@@ -131,26 +157,24 @@ def solve_constrained(matrices: LearningMatrices | RecursiveMatrices, constraint
     # equalities: x_0 = 0; x_i+1 - (A_i - B_i K) x_i - B_i du_i = 0
     block(row, x_col(0), np.eye(2 * n))
     row += 2 * n
-    closed = model.a - model.b @ model.k
+    closed = a_model - b_model @ k
     for i in range(count - 1):
         block(row, x_col(i + 1), np.eye(2 * n))
         block(row, x_col(i), -closed[i])
-        block(row, i * n, -model.b[i])
+        block(row, i * n, -b_model[i])
         row += 2 * n
     equalities = row
-    tau, inertia, jacobian = _effort_along(record, constraints.nominal)
-    lim = constraints.effort_limit * (1.0 - constraints.effort_margin)
     bounds: list[np.ndarray] = []
     # effort: +-(a_N,i (du_i - K x_i) + J_i x_i) <= lim -+ tau_i
     for sign in (1.0, -1.0):
         for i in range(count):
             block(row, i * n, sign * inertia[i])
-            block(row, x_col(i), sign * (jacobian[i] - inertia[i] @ model.k))
+            block(row, x_col(i), sign * (jacobian[i] - inertia[i] @ k))
             row += n
         bounds.append((lim - sign * tau).ravel())
-    bounded = np.flatnonzero(np.isfinite(np.tile(constraints.feedforward_limit, count)))
+    bounded = np.flatnonzero(np.isfinite(np.tile(feedforward_limit, count)))
     if bounded.size:
-        ff_lim = np.tile(constraints.feedforward_limit, count)[bounded]
+        ff_lim = np.tile(feedforward_limit, count)[bounded]
         for sign in (1.0, -1.0):
             rows.append(row + np.arange(bounded.size))
             cols.append(bounded)
@@ -158,32 +182,30 @@ def solve_constrained(matrices: LearningMatrices | RecursiveMatrices, constraint
             row += bounded.size
             bounds.append(ff_lim - sign * u_ff[bounded])
     a = sparse.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(row, nv + nx))
-    b = np.concatenate([np.zeros(equalities), *bounds])
+                          shape=(row, nv + count * 2 * n))
+    return a, np.concatenate([np.zeros(equalities), *bounds]), equalities
+
+
+def _clarabel(p: Any, q: np.ndarray, a: Any, b: np.ndarray, equalities: int,
+              trial: int) -> tuple[np.ndarray, str]:
+    """The QP min 1/2 z' P z + q' z, A z + s = b, s in {0}^equalities x R+^rest, by Clarabel:
+    its solution and status (an error if not solved)."""
+    import clarabel
+
     settings = clarabel.DefaultSettings()
     settings.verbose = False
     # Tight: the input-change weight is tiny, so the cost is flat along the directions the
     # model barely sees; the default 1e-8 gap leaves ~1e-4 rad/s^2 of slack in u_ff there.
     settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = QP_TOLERANCE
     settings.tol_ktratio = 1e-10
-    solver = clarabel.DefaultSolver(p, q, a, b, [clarabel.ZeroConeT(equalities),
-                                                 clarabel.NonnegativeConeT(row - equalities)],
-                                    settings)
+    cones = [clarabel.ZeroConeT(equalities), clarabel.NonnegativeConeT(a.shape[0] - equalities)]
+    solver = clarabel.DefaultSolver(p, q, a, b, cones, settings)
     solution = solver.solve()
     status = str(solution.status)
     if "Solved" not in status:
-        raise SafetyError(f"trial {record.trial}: the constrained norm-optimal update was not "
+        raise SafetyError(f"trial {trial}: the constrained norm-optimal update was not "
                           f"solved ({status}); the limits may be infeasible together")
-    z = np.asarray(solution.x)
-    du = z[:nv].reshape(count, n)
-    x = z[nv:].reshape(count, 2 * n)
-    predicted = (tau + np.einsum("ijk,ik->ij", inertia, du - x @ model.k.T)
-                 + np.einsum("ijk,ik->ij", jacobian, x))
-    tol = 1e-6
-    effort_active = np.sum(np.abs(predicted) >= lim * (1.0 - tol), axis=0)
-    new = record.feedforward + du
-    ff_active = np.sum(np.abs(new) >= constraints.feedforward_limit * (1.0 - tol), axis=0)
-    return ConstrainedStep(du, predicted, effort_active, ff_active, status)
+    return np.asarray(solution.x), status
 
 
 def solve_constrained_recursive(matrices: RecursiveMatrices, constraints: Constraints,

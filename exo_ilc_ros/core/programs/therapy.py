@@ -21,7 +21,9 @@ from ..loop.patient import PatientLearning, PatientModel
 from ..loop.record import TrialRecord
 from ..params.config import Config
 from ..persistence.patient_states import PatientState, read_legacy
-from ..persistence.profiles import Profile, ProfileBook, ProfileWriter, check_name, default_root
+from ..persistence.profile_format import Profile
+from ..persistence.profile_writer import ProfileWriter
+from ..persistence.profiles import ProfileBook, check_name, default_root
 from ..reference.build import build_reference
 from ..session.learning_session import TrialConclusion, run_trials
 from ..session.result import RunResult

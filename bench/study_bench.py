@@ -25,8 +25,8 @@ from exo_ilc_ros.core.programs.study import (
     resolve_law,
     resolve_scenario,
     study_cells,
-    study_rows,
 )
+from exo_ilc_ros.core.programs.study_rows import study_rows
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")  # no node here; house rule
 

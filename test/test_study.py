@@ -31,8 +31,8 @@ from exo_ilc_ros.core.programs.study import (
     resolve_scenario,
     run_cell,
     study_cells,
-    study_rows,
 )
+from exo_ilc_ros.core.programs.study_rows import study_rows
 from exo_ilc_ros.core.session.learning_session import run_trials
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -25,14 +25,8 @@ import numpy as np
 from .. import __version__
 from ..core.convergence.growth import MIN_TRIALS
 from ..core.errors import ExoIlcError
-from ..core.programs.study import (
-    FLOOR_WINDOW,
-    CellResult,
-    StudyCell,
-    StudyRow,
-    growth_window,
-    run_cell,
-)
+from ..core.programs.study import CellResult, StudyCell, run_cell
+from ..core.programs.study_rows import FLOOR_WINDOW, StudyRow, growth_window
 
 OnDone = Callable[[StudyCell], None]
 """Called in the caller's process once per finished cell (progress)."""

@@ -13,7 +13,7 @@ from matplotlib.colors import TwoSlopeNorm
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
-from ..core.programs.study import FLOOR_WINDOW, StudyRow
+from ..core.programs.study_rows import FLOOR_WINDOW, StudyRow
 
 DECADES_BELOW = 3.0
 DECADES_ABOVE = 2.0

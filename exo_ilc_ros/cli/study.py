@@ -21,8 +21,8 @@ from ..core.programs.study import (
     resolve_scenario,
     shipped_scenarios,
     study_cells,
-    study_rows,
 )
+from ..core.programs.study_rows import study_rows
 from .arguments import figure_path, integer, json_file, nonempty, parameter, seed
 from .tune import default_jobs
 

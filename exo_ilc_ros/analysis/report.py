@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..core.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth
+from ..core.spread import IterationSpread
 from ..core.summary import RunSummary
 from .loop import format_growth
 
@@ -125,4 +126,35 @@ def format_iterations(runs: Sequence[RunSummary], joint_names: Sequence[str],
         lines.append(f"{label:<{first}}{r.law:<{w}}{r.mass_uncertainty:>7.3f}  {cells}"
                      f"{_fmt(paper):>15}")
     lines.append("('-': never within the bound / not within at the last trial)")
+    if any("spread" in r.extra for r in runs):
+        lines.append("")
+        lines.append(format_spread(runs, joint_names))
+    elif any(r.law == "sign" for r in runs):
+        lines.append("(one run each: the sign law amplifies last-bit differences, so a count can "
+                     "move by several trials; --spread 20 shows median [min-max] over 20 runs "
+                     "from initial states perturbed by 1e-12 rad)")
+    return "\n".join(lines)
+
+
+def format_spread(runs: Sequence[RunSummary], joint_names: Sequence[str]) -> str:
+    """The iterations to the bound of each run's perturbed runs (``extra["spread"]``, from
+    :func:`~exo_ilc_ros.core.spread.iteration_spread`): median [min-max] per joint."""
+    spreads = [r.extra["spread"] for r in runs if "spread" in r.extra]
+    count = {s["count"] for s in spreads}
+    size = {s["perturbation"] for s in spreads}
+    lines = [f"The same over {'/'.join(map(str, sorted(count)))} runs from initial states "
+             f"perturbed by {'/'.join(f'{x:g}' for x in sorted(size))} rad (sd per joint, every "
+             "trial): median [min-max]; the single run above starts exactly at x_d(0)"]
+    w = max([8] + [len(r.law) + 1 for r in runs])
+    cell = max([len(name) + 2 for name in joint_names] + [28])
+    header = f"{'law':<{w}}{'delta':>7}  " + "".join(f"{name:>{cell}}" for name in joint_names)
+    lines += [header, "-" * len(header)]
+    for r in runs:
+        data = r.extra.get("spread")
+        if data is None:
+            continue
+        spread = IterationSpread(float(data["perturbation"]), data["first"], data["settled"])
+        cells = "".join(f"{spread.cell(j):>{cell}}" for j in range(len(joint_names)))
+        lines.append(f"{r.law:<{w}}{r.mass_uncertainty:>7.3f}  {cells}")
+    lines.append("(never: not within the bound by the last trial)")
     return "\n".join(lines)

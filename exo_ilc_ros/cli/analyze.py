@@ -44,6 +44,14 @@ def register(sub: Any) -> None:
     parser.set_defaults(func=analyze)
 
 
+def analyze_arguments(argv: Sequence[str]) -> argparse.Namespace:
+    """``analyze``'s arguments parsed by its own parser (for commands that end in an analysis,
+    like ``paper``), so a flag added to ``analyze`` can never be missing from them."""
+    parser = argparse.ArgumentParser(prog="exo-ilc")
+    register(parser.add_subparsers(dest="command", required=True))
+    return parser.parse_args(["analyze", *argv])
+
+
 def describe(run: BagRun) -> str:
     """A few lines about one bag: origin, provenance, trials, parameter changes, notes."""
     prov = run.provenance

@@ -11,7 +11,7 @@ from typing import Any
 from tqdm import tqdm
 
 from ..core.errors import ConfigError
-from .analyze import analyze
+from .analyze import analyze, analyze_arguments
 from .arguments import (
     config_with_flags,
     directory,
@@ -29,7 +29,7 @@ def register(sub: Any) -> None:
     """Add the sub-command."""
     parser = sub.add_parser(
         "paper", help="the paper's experiment through the graph: 3 bags, 1 figure, 1 table",
-        description="Run the experiment at 5, 10 and 15 %% mass uncertainty through the ROS 2 "
+        description="Run the experiment at 5, 10 and 15 % mass uncertainty through the ROS 2 "
         "graph (each run recorded by bag_recorder), then analyse the three bags: the "
         "per-trial table, iterations to the bound beside the paper's, Figures 5-7.")
     parser.add_argument("--config", type=input_file,
@@ -84,6 +84,8 @@ def paper(args: argparse.Namespace) -> int:
                               nodes=recording.graph_nodes())
                 bags.append(recording.path)
         print(f"bag: {bags[-1]}", file=sys.stderr)
-    return analyze(argparse.Namespace(bags=[str(b) for b in bags], plot=args.plot, trial=None,
-                                      csv=args.csv, json=args.json, config_out=None,
-                                      quiet=args.quiet))
+    analysis = [str(b) for b in bags] + ["--plot", str(args.plot)]
+    analysis += ["--csv", str(args.csv)] if args.csv else []
+    analysis += ["--json", str(args.json)] if args.json else []
+    analysis += ["--quiet"] if args.quiet else []
+    return analyze(analyze_arguments(analysis))

@@ -15,13 +15,16 @@ from ..analysis.report import (
     write_json,
 )
 from ..core.config import Config
+from ..core.errors import ConfigError
 from ..core.session import run_trials
+from ..core.spread import iteration_spread
 from ..core.summary import RunSummary
 from .arguments import (
     add_scenario_argument,
     config_with_flags,
     directory,
     input_file,
+    integer,
     json_file,
     parameter,
 )
@@ -71,6 +74,10 @@ def register(sub: Any) -> None:
                         "config)")
     parser.add_argument("--resume", action="store_true", help="with --store: continue each "
                         "run after the last trial stored (bit-identical to an uninterrupted run)")
+    parser.add_argument("--spread", metavar="N", type=integer(2), help="also run each mass "
+                        "uncertainty N times from initial states perturbed by 1e-12 rad and "
+                        "print the iterations to the bound as median [min-max] (the sign law "
+                        "amplifies last-bit differences; 20 is a good N)")
     parser.add_argument("--replay", metavar="BAG", help="run a recorded run again in-process: "
                         "the bag's config, mass uncertainty, trial count and live parameter "
                         "changes (at the trials they took effect), then compare every trial "
@@ -82,7 +89,7 @@ def register(sub: Any) -> None:
 
 
 REPLAY_EXCLUDES = ("config", "scenario", "mass_uncertainty", "trials", "law", "store", "bag",
-                   "patient")
+                   "patient", "spread")
 
 
 def replay_bag(args: argparse.Namespace) -> int:
@@ -132,6 +139,9 @@ def simulate(args: argparse.Namespace) -> int:
     from .therapy import simulate_session, uses_therapy
 
     if uses_therapy(args):
+        if args.spread:
+            raise ConfigError("--spread", "runs the experiment again from perturbed states; a "
+                              "therapy session (--patient) runs once")
         _, runs = simulate_session(args, config)
         print_report(args, config, runs)
         return 0
@@ -148,6 +158,8 @@ def simulate(args: argparse.Namespace) -> int:
             result = run_trials(config, delta, trials, on_trial=progress, store=args.store,
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
+        if args.spread:
+            runs[-1].extra["spread"] = _spread(config, delta, trials, args.spread)
         if args.json:  # the therapy metrics of every trial (core/metrics.py)
             from ..core.metrics import config_metrics
 
@@ -164,6 +176,15 @@ def simulate(args: argparse.Namespace) -> int:
             print(f"bag: {write_run(path, config, result)}", file=sys.stderr)
     print_report(args, config, runs)
     return 0
+
+
+def _spread(config: Config, delta: float, trials: int, count: int) -> dict[str, Any]:
+    """--spread: the iterations to the bound of ``count`` perturbed runs, as JSON."""
+    with tqdm(total=count, desc=f"spread delta={delta:g}", unit="run", file=sys.stderr,
+              disable=None) as bar:
+        spread = iteration_spread(config, delta, trials, count,
+                                  on_run=lambda _: bar.update(1))
+    return spread.to_json()
 
 
 def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary]) -> None:

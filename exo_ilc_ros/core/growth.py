@@ -9,6 +9,7 @@ Works on any (trials, joints) table: an in-process run, a JSON export or a bag's
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,10 +73,10 @@ def fit_growth(max_abs_feedforward: np.ndarray, window: int = DEFAULT_WINDOW,
         k = np.arange(first, table.shape[0], dtype=float)[used]
         y = np.log(column[used])
         kc = k - k.mean()
-        sxx = float(kc @ kc)
-        rate[j] = float(kc @ (y - y.mean())) / sxx
+        sxx = math.fsum(kc * kc)
+        rate[j] = math.fsum(kc * (y - y.mean())) / sxx
         residual = y - y.mean() - kc * rate[j]
-        stderr[j] = np.sqrt(float(residual @ residual) / (k.size - 2) / sxx)
+        stderr[j] = np.sqrt(math.fsum(residual * residual) / (k.size - 2) / sxx)
     with np.errstate(invalid="ignore"):
         growing = (rate > min_rate) & (rate > significance * stderr)
     return GrowthFit(rate, stderr, growing, first + 1, table.shape[0])

@@ -27,6 +27,7 @@ Definitions (per joint j over the samples of the trial; an aborted trial up to t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -191,9 +192,9 @@ def velocity_slope(resistance: np.ndarray, velocity: np.ndarray) -> np.ndarray:
     out = np.zeros(resistance.shape[1])
     for j in range(resistance.shape[1]):
         v = velocity[:, j] - velocity[:, j].mean()
-        denominator = float(v @ v)
+        denominator = math.fsum(v * v)
         if denominator > 1e-12:
-            out[j] = float(v @ (resistance[:, j] - resistance[:, j].mean())) / denominator
+            out[j] = math.fsum(v * (resistance[:, j] - resistance[:, j].mean())) / denominator
     return out
 
 

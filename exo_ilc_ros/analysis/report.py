@@ -146,15 +146,18 @@ def format_spread(runs: Sequence[RunSummary], joint_names: Sequence[str]) -> str
              f"perturbed by {'/'.join(f'{x:g}' for x in sorted(size))} rad (sd per joint, every "
              "trial): median [min-max]; the single run above starts exactly at x_d(0)"]
     w = max([8] + [len(r.law) + 1 for r in runs])
-    cell = max([len(name) + 2 for name in joint_names] + [28])
-    header = f"{'law':<{w}}{'delta':>7}  " + "".join(f"{name:>{cell}}" for name in joint_names)
-    lines += [header, "-" * len(header)]
+    rows = []
     for r in runs:
         data = r.extra.get("spread")
-        if data is None:
-            continue
-        spread = IterationSpread(float(data["perturbation"]), data["first"], data["settled"])
-        cells = "".join(f"{spread.cell(j):>{cell}}" for j in range(len(joint_names)))
-        lines.append(f"{r.law:<{w}}{r.mass_uncertainty:>7.3f}  {cells}")
+        if data is not None:
+            spread = IterationSpread(float(data["perturbation"]), data["first"], data["settled"])
+            rows.append((r, [spread.cell(j) for j in range(len(joint_names))]))
+    cell = max([len(name) for name in joint_names]
+               + [len(text) for _, cells in rows for text in cells]) + 2
+    header = f"{'law':<{w}}{'delta':>7}  " + "".join(f"{name:>{cell}}" for name in joint_names)
+    lines += [header, "-" * len(header)]
+    for r, cells in rows:
+        lines.append(f"{r.law:<{w}}{r.mass_uncertainty:>7.3f}  "
+                     + "".join(f"{text:>{cell}}" for text in cells))
     lines.append("(never: not within the bound by the last trial)")
     return "\n".join(lines)

@@ -33,7 +33,7 @@ import yaml
 
 from ..core.experiment import build_reference
 from ..core.protocol import STEP_TIMEOUT
-from ..core.summary import RunSummary
+from ..core.summary import RunSummary, law_segments
 from ..wire import protocol, topics
 from ..wire.cdr import joint_states
 from . import messages
@@ -214,6 +214,17 @@ class BagRun:
             extra["aborted_trials"] = self.aborted
         if self.resumed_after is not None:
             extra["resumed_after"] = self.resumed_after
+        changes = [{"trial": c.effective_trial, "node": c.node, "parameter": c.name,
+                    "value": c.value} for c in self.parameter_changes]
+        if changes:
+            extra["live_changes"] = changes
+        again = [{"trial": k, "reason": reason} for k, t in sorted(self.trials.items())
+                 for reason in t.reruns]
+        if again:
+            extra["reruns"] = again
+        laws = law_segments(self.law, changes)
+        if laws:
+            extra["laws"] = laws
         return RunSummary(self.mass_uncertainty, self.law, self.error_bound, errors,
                           None if np.isnan(ff).all() else ff,
                           None if np.isnan(effort).all() else effort, extra, true)

@@ -10,7 +10,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ..analysis.report import format_iterations, format_trial_table, write_json
+from ..analysis.report import (
+    format_iterations,
+    format_run_events,
+    format_trial_table,
+    write_json,
+)
 from ..bag import BagReadError, BagRun, read_bag
 from ..core.summary import RunSummary
 from .arguments import figure_path, integer, json_file
@@ -159,6 +164,10 @@ def analyze(args: argparse.Namespace) -> int:
     print()
     if not args.quiet:
         print(format_trial_table(summaries, names, labels=usable_labels))
+        print()
+    events = format_run_events(summaries, usable_labels)
+    if events:
+        print(events)
         print()
     print(format_iterations(summaries, names, labels=usable_labels))
     if args.csv:

@@ -11,6 +11,7 @@ from tqdm import tqdm
 from ..analysis.report import (
     format_iterations,
     format_long_run,
+    format_run_events,
     format_trial_table,
     write_json,
 )
@@ -193,6 +194,10 @@ def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary
     names = config["joint_names"]
     if not args.quiet:
         print(format_trial_table(runs, names))
+        print()
+    events = format_run_events(runs)
+    if events:
+        print(events)
         print()
         if args.learned:
             for quantity in ("feedforward", "effort"):

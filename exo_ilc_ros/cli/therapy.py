@@ -11,6 +11,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from ..analysis import session_report as keys
 from ..analysis.therapy import format_session_metrics
 from ..core.errors import ConfigError
 from ..core.exercise import exercises_path, load_book
@@ -80,7 +81,7 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
     session = session_id()
     results: list[ExerciseResult] = []
     runs: list[RunSummary] = []
-    for item, (name, trials) in zip(prepared, plan, strict=True):
+    for order, (item, (name, trials)) in enumerate(zip(prepared, plan, strict=True), start=1):
         count = trials or item.config["max_trials"]
         start = "from zero" if item.start is None else \
             f"from profile v{item.start.version} ({item.start.provenance.get('trials_total')} " \
@@ -106,7 +107,7 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
             path = unique_path(args.bag, run_name(f"sim_{args.patient}_{name}", done.result.law,
                                                   done.result.mass_uncertainty))
             write_run(path, done.config, done.result, metrics=done.metrics,
-                      extra_custom_data=therapy_custom_data(done, session))
+                      extra_custom_data=therapy_custom_data(done, session, order))
             print(f"bag: {path}", file=sys.stderr)
     for done in results:
         print(format_session_metrics(done, list(done.config["joint_names"])))
@@ -114,13 +115,12 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
     return results, runs
 
 
-def therapy_custom_data(done: ExerciseResult, session: str) -> dict[str, str]:
-    """The bag's custom data naming the patient, exercise, session and profile versions."""
-    from ..analysis import session_report as keys
-
+def therapy_custom_data(done: ExerciseResult, session: str, order: int) -> dict[str, str]:
+    """The bag's custom data naming the patient, exercise (and its place ``order`` in the
+    session), session and profile versions."""
     return {keys.PATIENT: done.patient, keys.EXERCISE: done.exercise, keys.SESSION: session,
             keys.PROFILE_STARTED_FROM: str(done.started_from or ""),
-            keys.PROFILE_VERSION: str(done.version or "")}
+            keys.PROFILE_VERSION: str(done.version or ""), keys.EXERCISE_ORDER: str(order)}
 
 
 def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
@@ -166,7 +166,7 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
             "max_trials": step.trials or item.config["max_trials"],
             "store.directory": str(store_root), "patient.session": version}), args.resume)
     runs: list[RunSummary] = []
-    for step in steps:
+    for order, step in enumerate(steps, start=1):
         name = step.name
         if step.done is not None:  # reported from its store, as the first run would have
             print(f"patient {args.patient}, exercise {name}: session {session}'s "
@@ -215,7 +215,7 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
                 if bag:
                     _write_sidecar(Path(bag), args.patient, name, session,
                                    item.start.version if item.start else None,
-                                   writer.version)
+                                   writer.version, order)
             if done is not None:
                 print(f"profile: {writer.directory} v{writer.version} ({len(done)} trials)",
                       file=sys.stderr)
@@ -246,10 +246,11 @@ node does not know them)."""
 
 
 def _write_sidecar(bag: Path, patient: str, exercise: str, session: str,
-                   started_from: int | None, version: int) -> None:
+                   started_from: int | None, version: int, order: int) -> None:
     from ..core.store import write_json_atomic
 
     if bag.is_dir():
         write_json_atomic(bag / SIDECAR, {"patient": patient, "exercise": exercise,
                                           "session": session, "profile_started_from":
-                                          started_from, "profile_version": version})
+                                          started_from, "profile_version": version,
+                                          "exercise_order": order})

@@ -32,6 +32,7 @@ from ..core.laws import TrialRecord
 from ..core.metrics import TrialMetrics, config_metrics
 from ..core.profiles import ProfileBook
 from .therapy import DEGREES, DISPLAY, share_note, shown
+from .wording import counted
 
 PATIENT = PREFIX + "patient"
 EXERCISE = PREFIX + "exercise"
@@ -312,7 +313,7 @@ def render_session(runs: Sequence[ExerciseRun], book: ProfileBook | None = None)
             "from no stored profile"
         aan = ", assist-as-needed" if run.assist else ""
         sections.append(
-            f"<h2>{_e(run.exercise)}</h2><p>{len(run.metrics)} trials, learning law "
+            f"<h2>{_e(run.exercise)}</h2><p>{counted(len(run.metrics), 'trial')}, learning law "
             f"{_e(run.law)}{aan}, started {start}"
             + (f", saved as profile v{_e(run.profile_version)}" if run.profile_version else "")
             + f". Error bound {run.error_bound * DEGREES:.2g}°. "

@@ -25,6 +25,7 @@ import numpy as np
 from .. import __version__
 from ..core.errors import ExoIlcError
 from ..core.growth import MIN_TRIALS
+from ..core.redact import redact
 from ..core.study import (
     FLOOR_WINDOW,
     CellResult,
@@ -138,7 +139,8 @@ def _run_on_dask(cells: Sequence[StudyCell], address: str | Any,
     try:
         client = Client(address, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as exc:
-        raise ClusterError(f"cannot reach the Dask scheduler {address!r}: {exc}") from None
+        raise ClusterError(f"cannot reach the Dask scheduler {redact(repr(address))}: "
+                           f"{redact(str(exc))}") from None
     futures: list[Any] = []
     try:
         futures = client.map(run_cell, list(cells), pure=False)

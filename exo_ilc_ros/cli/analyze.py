@@ -16,6 +16,7 @@ from ..analysis.report import (
     format_trial_table,
     write_json,
 )
+from ..analysis.wording import counted
 from ..bag import BagReadError, BagRun, read_bag
 from ..core.summary import RunSummary
 from .arguments import figure_path, integer, json_file
@@ -63,7 +64,7 @@ def describe(run: BagRun) -> str:
     lines = [f"bag {run.path} ({run.storage}): {run.law}, mass uncertainty "
              f"{run.mass_uncertainty:g}; recorded by {prov.recorded_by or 'unknown'}"
              + (f" (exo_ilc_ros {prov.version})" if prov.version else "")
-             + f"; {len(run.completed)} trials completed"
+             + f"; {counted(len(run.completed), 'trial')} completed"
              + (f", incomplete: {run.incomplete}" if run.incomplete else "")]
     if prov.options:
         lines.append("  options: " + ", ".join(f"{k}={v}" for k, v in prov.options.items()))

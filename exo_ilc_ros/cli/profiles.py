@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from ..analysis.wording import counted
 from ..core.profiles import ProfileBook, export_profile
 from ..core.therapy import profiles_root
 from .arguments import directory, integer, output_file
@@ -90,7 +91,8 @@ def run(args: argparse.Namespace) -> int:
         for exercise in book.exercises(args.patient):
             index = book.require_index(args.patient, exercise)
             entry = index["versions"][index["current"] - 1] if index["current"] else None
-            print(f"{exercise}: {len(index['versions'])} versions, current v{index['current']}"
+            versions = counted(len(index["versions"]), "version")
+            print(f"{exercise}: {versions}, current v{index['current']}"
                   + ("" if entry is None else f" ({entry.get('trials_total', 0)} trials "
                      f"learned, {entry.get('status')})"))
         return 0

@@ -13,6 +13,7 @@ from ..analysis.report import (
     format_long_run,
     format_run_events,
     format_trial_table,
+    run_title,
     write_json,
 )
 from ..core.config import Config
@@ -27,6 +28,7 @@ from .arguments import (
     input_file,
     integer,
     json_file,
+    mass_uncertainty,
     parameter,
 )
 
@@ -37,7 +39,7 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
                         "shipped config/exo_ilc.yaml (any subset of keys)")
     add_scenario_argument(parser)
-    parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
+    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
                         metavar="D", help="plant mass uncertainty delta, one run each (default: "
                         "the config's plant_simulator mass_uncertainty)")
     parser.add_argument("--trials", type=parameter("max_trials"),
@@ -145,7 +147,7 @@ def simulate(args: argparse.Namespace) -> int:
                               "therapy session (--patient) runs once")
         _, runs = simulate_session(args, config)
         print_report(args, config, runs)
-        return 0
+        return aborted_exit(runs, "simulate")
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     trials = config["max_trials"]
     runs = []
@@ -176,7 +178,7 @@ def simulate(args: argparse.Namespace) -> int:
             path = unique_path(args.bag, run_name("sim", result.law, delta))
             print(f"bag: {write_run(path, config, result)}", file=sys.stderr)
     print_report(args, config, runs)
-    return 0
+    return aborted_exit(runs, "simulate")
 
 
 def _spread(config: Config, delta: float, trials: int, count: int) -> dict[str, Any]:
@@ -186,6 +188,47 @@ def _spread(config: Config, delta: float, trials: int, count: int) -> dict[str, 
         spread = iteration_spread(config, delta, trials, count,
                                   on_run=lambda _: bar.update(1))
     return spread.to_json()
+
+
+EXIT_ABORTED = 4
+"""Exit code of ``simulate`` and ``run``: every run completed, but the error envelope aborted
+trials (listed on stderr; nothing was learned from them): not a clean run."""
+
+
+def aborted_exit(runs: list[RunSummary], command: str) -> int:
+    """Say loudly which trials the error envelope aborted; :data:`EXIT_ABORTED` if any, else
+    0."""
+    any_aborted = False
+    for run in runs:
+        aborted = [int(k) for k in run.extra.get("aborted_trials", [])]
+        if not aborted:
+            continue
+        any_aborted = True
+        count = len(run.max_abs_error)
+        share = "ALL" if len(aborted) == count else f"{len(aborted)} of {count}"
+        print(f"exo-ilc {command}: WARNING: {run_title(run)}: {share} trials ABORTED by the "
+              f"error envelope (safety.error_envelope; the robot held the arm there and nothing "
+              f"was learned from them): trial{'s' if len(aborted) > 1 else ''} "
+              f"{_spans(aborted)}", file=sys.stderr)
+    if any_aborted:
+        print(f"exo-ilc {command}: exit {EXIT_ABORTED}: trials were aborted (check the mass "
+              "uncertainty, the gains and the envelope)", file=sys.stderr)
+        return EXIT_ABORTED
+    return 0
+
+
+def _spans(trials: list[int]) -> str:
+    """``1-5, 8`` from sorted trial numbers."""
+    parts: list[str] = []
+    start = previous = trials[0]
+    for k in [*trials[1:], None]:
+        if k is not None and k == previous + 1:
+            previous = k
+            continue
+        parts.append(str(start) if start == previous else f"{start}-{previous}")
+        if k is not None:
+            start = previous = k
+    return ", ".join(parts)
 
 
 def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary]) -> None:

@@ -13,12 +13,13 @@ from tqdm import tqdm
 
 from ..analysis import session_report as keys
 from ..analysis.therapy import format_session_metrics
+from ..analysis.wording import counted
 from ..core.errors import ConfigError
 from ..core.exercise import exercises_path, load_book
 from ..core.profiles import ProfileBook
 from ..core.summary import RunSummary
 from ..core.therapy import ExerciseResult, prepare, profiles_root, run_exercise, session_id
-from .arguments import directory, nonempty
+from .arguments import directory, nonempty, shown_command
 
 
 def add_therapy_arguments(parser: argparse.ArgumentParser) -> None:
@@ -86,7 +87,7 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
         start = "from zero" if item.start is None else \
             f"from profile v{item.start.version} ({item.start.provenance.get('trials_total')} " \
             "trials learned)"
-        print(f"patient {args.patient}, exercise {name}: {count} trials, {start}",
+        print(f"patient {args.patient}, exercise {name}: {counted(count, 'trial')}, {start}",
               file=sys.stderr)
         with tqdm(total=count, desc=f"{args.patient} {name}", unit="trial", file=sys.stderr,
                   disable=None) as bar:
@@ -189,17 +190,19 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
         cfg = writer.config
         start = "from zero" if item.start is None else f"from profile v{item.start.version}"
         again = f" (resuming v{writer.version})" if step.reopen else ""
-        print(f"patient {args.patient}, exercise {name}: {count} trials through the graph, "
+        print(f"patient {args.patient}, exercise {name}: {counted(count, 'trial')} through the "
+              f"graph, "
               f"{start}, session {writer.version}{again}, session id {session}, store "
               f"{store_root}",
               file=sys.stderr, flush=True)
         summary: RunSummary | None = None
         try:
             summary = run_one(args, cfg, cfg["mass_uncertainty"], count)
-        except GraphError as exc:  # run.py prints it with the error
+        except (GraphError, KeyboardInterrupt) as exc:  # run.py prints it with the error
             setattr(exc, "resume",  # noqa: B010 (an attribute GraphError does not declare)
                     f"to continue this session exactly (v{writer.version} of {name}):\n  "
-                    + resume_command(list(args.argv), str(store_root), session))
+                    + resume_command(list(args.argv), str(store_root), session,
+                                     shown_command()))
             raise
         finally:
             stored = RunStore(store_root, cfg, reference).load()
@@ -217,7 +220,8 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
                                    item.start.version if item.start else None,
                                    writer.version, order)
             if done is not None:
-                print(f"profile: {writer.directory} v{writer.version} ({len(done)} trials)",
+                print(f"profile: {writer.directory} v{writer.version} "
+                      f"({counted(len(done), 'trial')})",
                       file=sys.stderr)
         if summary is not None:
             runs.append(summary)

@@ -24,6 +24,7 @@ from ..core.experiment import build_reference
 from ..core.profiles import ProfileBook
 from ..core.summary import RunSummary
 from ..core.therapy import PreparedExercise, prepare
+from .arguments import shown_command
 
 RUN_STORE = "run_store"
 """The index entry's key of the run store a graph session saves its trials in (None: an
@@ -74,10 +75,10 @@ def unfinished(book: ProfileBook, patient: str, exercises: list[str]) -> list[Un
     return found
 
 
-def resume_command(argv: list[str], store: str, key: str) -> str:
+def resume_command(argv: list[str], store: str, key: str, program: str = "") -> str:
     """The exact command resuming session ``key``: ``argv`` without --resume [value],
     --store DIR and --new-patient (the patient has a profile now), then --store and
-    --resume ``key``."""
+    --resume ``key``; ``program`` is how to type exo-ilc here (default: ``shown_command()``)."""
     kept: list[str] = []
     skip = False
     for i, arg in enumerate(argv):
@@ -91,7 +92,8 @@ def resume_command(argv: list[str], store: str, key: str) -> str:
         if arg.startswith(("--store=", "--resume=")) or arg == "--new-patient":
             continue
         kept.append(arg)
-    return "exo-ilc " + shlex.join([*kept, "--store", store, "--resume", key])
+    return (program or shown_command()) + " " + shlex.join([*kept, "--store", store, "--resume",
+                                                             key])
 
 
 def _listing(found: list[Unfinished], argv: list[str], store: Path) -> str:

@@ -36,6 +36,8 @@ class RunSummary:
                       result.max_abs_errors, result.max_abs_feedforward, result.max_abs_effort,
                       true_max_abs_error=result.true_max_abs_errors() if measured else None)
         summary.extra.update(live_changes(result.applied, result.law))
+        if result.aborted:
+            summary.extra["aborted_trials"] = list(result.aborted)
         return summary
 
     @property

@@ -71,6 +71,9 @@ def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSu
     applied = {s.trial + 1: json.loads(s.values[PARAMETERS_CHANGED]) for s in summaries
                if s.values.get(PARAMETERS_CHANGED)}
     summary.extra.update(live_changes(applied, str(config["law"])))
+    aborted = [s.trial for s in summaries if "aborted_at" in s.values]
+    if aborted:
+        summary.extra["aborted_trials"] = aborted
     return summary
 
 

@@ -12,6 +12,7 @@ from tqdm import tqdm
 
 from ..core.errors import ConfigError
 from .analyze import analyze, analyze_arguments
+from .run import graph_domain
 from .arguments import (
     config_with_flags,
     directory,
@@ -46,14 +47,15 @@ def register(sub: Any) -> None:
     parser.add_argument("--in-process", action="store_true",
                         help="run in-process (exo-ilc simulate --bag) instead of the graph; "
                         "the bags hold the same topics")
-    parser.add_argument("--domain-id", type=domain_id, help="ROS domain id of the graph")
+    parser.add_argument("--domain-id", type=domain_id, help="ROS domain id of the graph (default: "
+                        "an exported ROS_DOMAIN_ID, else a free one)")
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")
     parser.set_defaults(func=paper)
 
 
 def paper(args: argparse.Namespace) -> int:
     """Three runs, three bags, then ``analyze`` on them."""
-    if args.in_process and args.domain_id is not None:
+    if args.in_process and args.domain_id is not None:  # an exported ROS_DOMAIN_ID is fine
         raise ConfigError("--in-process", "starts no graph: --domain-id would be ignored; drop "
                           "one")
     config = config_with_flags(args.config, {} if args.trials is None else
@@ -80,7 +82,7 @@ def paper(args: argparse.Namespace) -> int:
 
                 run_config = run_config.replace({"wait_for_recorder": True})
                 with Recording(run_config, args.bag_dir) as recording:
-                    run_graph(run_config, args.domain_id, on_summary=progress,
+                    run_graph(run_config, graph_domain(args.domain_id), on_summary=progress,
                               nodes=recording.graph_nodes())
                 bags.append(recording.path)
         print(f"bag: {bags[-1]}", file=sys.stderr)

@@ -69,9 +69,11 @@ def register(sub: Any) -> None:
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")
     parser.add_argument("--learned", action="store_true", help="also print per-trial tables "
                         "of max |u_ff| (learned feed-forward) and max |effort| per joint")
-    parser.add_argument("--bag", metavar="DIR", type=directory, help="also write each run as "
-                        "a rosbag2 bag DIR/<run-name>/ with the graph's topics (what "
-                        "bag_recorder records)")
+    parser.add_argument("--bag-dir", dest="bag", metavar="DIR", type=directory,
+                        help="also write each run as a rosbag2 bag DIR/<run-name>/ with the "
+                        "graph's topics (what bag_recorder records; the flag of run and paper)")
+    parser.add_argument("--bag", dest="bag_deprecated", metavar="DIR", type=directory,
+                        help=argparse.SUPPRESS)  # the old name of --bag-dir
     parser.add_argument("--store", metavar="DIR", type=directory, help="save every trial and "
                         "the learned feed-forward to DIR (atomic writes, keyed by trajectory + "
                         "config)")
@@ -133,6 +135,12 @@ def replay_bag(args: argparse.Namespace) -> int:
 
 def simulate(args: argparse.Namespace) -> int:
     """Run and report."""
+    if args.bag_deprecated is not None:
+        if args.bag is not None:
+            raise ConfigError("--bag", "is the old name of --bag-dir; give one of them")
+        print("exo-ilc simulate: note: --bag is deprecated, use --bag-dir (the name run and "
+              "paper use)", file=sys.stderr)
+        args.bag = args.bag_deprecated
     if args.replay:
         return replay_bag(args)
     if args.resume and not args.store:

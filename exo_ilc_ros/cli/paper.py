@@ -12,7 +12,6 @@ from tqdm import tqdm
 
 from ..core.errors import ConfigError
 from .analyze import analyze, analyze_arguments
-from .run import graph_domain
 from .arguments import (
     config_with_flags,
     directory,
@@ -22,6 +21,7 @@ from .arguments import (
     json_file,
     parameter,
 )
+from .run import graph_domain
 
 PAPER_UNCERTAINTIES = (0.05, 0.10, 0.15)
 

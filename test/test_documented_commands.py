@@ -71,7 +71,9 @@ class Command:
 
 def _code_blocks(text: str) -> list[tuple[int, list[str]]]:
     """(first line number, lines) of every fenced code block."""
-    blocks, current, start, fence = [], [], 0, ""
+    blocks: list[tuple[int, list[str]]] = []
+    current: list[str] = []
+    start, fence = 0, ""
     for number, line in enumerate(text.splitlines(), start=1):
         stripped = line.strip()
         if not fence and stripped.startswith(("```", "~~~")):
@@ -114,7 +116,8 @@ ALL = [c for page in PAGES for c in documented_commands(page)]
 
 def _subparser(name: str) -> Any:
     parser = build_parser()
-    actions = [a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction"]
+    actions: list[Any] = [a for a in parser._actions
+                          if a.__class__.__name__ == "_SubParsersAction"]
     return actions[0].choices[name]
 
 

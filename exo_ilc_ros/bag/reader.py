@@ -20,6 +20,7 @@ interrupted run's bag, not this one.
 
 from __future__ import annotations
 
+import json
 import math
 import struct
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -216,6 +217,15 @@ class BagRun:
             extra["resumed_after"] = self.resumed_after
         changes = [{"trial": c.effective_trial, "node": c.node, "parameter": c.name,
                     "value": c.value} for c in self.parameter_changes]
+        if not changes:  # no /parameter_events recorded (in-process): the summaries say it
+            for k in range(1, count + 1):
+                text = self.summaries.get(k, {}).get(protocol.PARAMETERS_CHANGED)
+                try:
+                    applied = json.loads(text) if text else {}
+                except ValueError:
+                    applied = {}
+                changes += [{"trial": k + 1, "node": "ilc_supervisor", "parameter": name,
+                             "value": value} for name, value in sorted(applied.items())]
         if changes:
             extra["live_changes"] = changes
         again = [{"trial": k, "reason": reason} for k, t in sorted(self.trials.items())

@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 import pytest
 from matplotlib.figure import Figure
-from matplotlib.ticker import MaxNLocator
 
 from exo_ilc_ros.analysis import figures
 from exo_ilc_ros.analysis.loop import format_growth
@@ -132,29 +131,40 @@ def test_therapy_tables_name_the_exercise_and_drop_the_paper_column(
     assert "paper joint 1" not in out
 
 
-def test_session_report_order_history_axes_and_ticks(
-        sessions: dict[str, Any], tmp_path: Path) -> None:
-    """Exercises in session order, only earlier sessions in the comparison, the share plot in %
-    like the table, whole trials on the axis."""
-    first = sorted(str(p) for p in sessions["bags1"].iterdir())  # the shell's bags1/*
-    html = tmp_path / "r.html"
+@pytest.fixture(scope="module")
+def report(sessions: dict[str, Any]) -> str:
+    """The HTML report of session 1 (its bags as the shell's ``bags1/*`` lists them)."""
+    first = sorted(str(p) for p in sessions["bags1"].iterdir())
+    html = sessions["root"] / "r.html"
     assert exo_ilc(["report", *first, "--html", str(html), "--profiles",
                     str(sessions["root"] / "profiles")]) == 0
-    page = html.read_text()
-    headings = re.findall(r"<h2>([a-z_]+)</h2>", page)
-    assert headings[:3] == PLAN
-    for history in page.split("Compared with earlier sessions")[1:]:
+    return html.read_text()
+
+
+def test_session_report_lists_exercises_in_session_order(report: str) -> None:
+    assert re.findall(r"<h2>([a-z_]+)</h2>", report)[:3] == PLAN
+
+
+def test_session_report_compares_with_earlier_sessions_only(report: str) -> None:
+    """Session 1's report does not list session 2 (a later one) as an earlier session."""
+    for history in report.split("Compared with earlier sessions")[1:]:
         table = history.split("</table>")[0]
-        versions = re.findall(r"<td class=l>v(\d+)", table)
-        assert versions == ["1"], versions  # session 2 came later
-    assert "rad" not in page.split("How to read this page")[0].replace("radius", "")
-    run = exercise_run(read_bag(Path(first[0])))
-    figure = exercise_figure(run)
-    share_axis = figure.axes[3]
-    assert "(%)" in share_axis.get_ylabel()
+        assert re.findall(r"<td class=l>v(\d+)", table) == ["1"]
+
+
+def test_session_report_speaks_degrees(report: str) -> None:
+    body = report.split("How to read this page")[0]
+    assert " rad" not in re.sub(r"base64,[^']*'", "", body)
+    assert "°" in body
+
+
+def test_session_figure_share_in_per_cent_and_whole_trials(sessions: dict[str, Any]) -> None:
+    """The share plot in % like the table; whole trials on the trial axis."""
+    bag = sorted(sessions["bags1"].iterdir())[0]
+    figure = exercise_figure(exercise_run(read_bag(bag)))
+    assert "(%)" in figure.axes[3].get_ylabel()
+    figure.canvas.draw()
     for ax in figure.axes[:4]:
-        assert isinstance(ax.xaxis.get_major_locator(), MaxNLocator)
-        figure.canvas.draw()
         ticks = [t for t in ax.get_xticks() if 1 <= t <= 3]
         assert ticks and all(float(t).is_integer() for t in ticks), ticks
 

@@ -102,7 +102,7 @@ def test_therapy_session_through_the_graph_prints_metrics_and_names_its_bag(
                       "--quiet", timeout=300, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
     assert "Therapy metrics: patient p4, exercise shoulder_abduction, 2 trials" in result.stdout
-    assert "B on shoulder_flexion not measurable" in result.stdout
+    assert ": B on shoulder_flexion not measurable" in result.stdout
     assert "paper joint 1" not in result.stdout
     bags = sorted(p.name for p in (tmp_path / "bags").iterdir())
     assert len(bags) == 1 and bags[0].startswith("graph_p4_shoulder_abduction_sign_d0.05_")

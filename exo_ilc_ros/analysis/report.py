@@ -124,7 +124,8 @@ def format_long_run(runs: Sequence[RunSummary], joint_names: Sequence[str],
     lines = ["Learned input at the last trial and its growth (max |u_ff| per joint, rad/s^2; "
              "max |effort|, N m)"]
     for r in runs:
-        head = f"{r.law:<8}{r.mass_uncertainty:>7.3f}  "
+        exercise = exercise_of(r)
+        head = (f"{exercise}: " if exercise else "") + f"{law_of(r):<8}{r.mass_uncertainty:>7.3f}  "
         if r.max_abs_feedforward is None or len(r.max_abs_feedforward) == 0:
             lines.append(head + "no feed-forward recorded")
             continue

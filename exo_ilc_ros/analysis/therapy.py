@@ -50,7 +50,7 @@ def reasons(metrics: Sequence[TrialMetrics], joint_names: Sequence[str]) -> list
     out = []
     for m in metrics:
         for name, why in zip(joint_names, m.spasticity_reasons(), strict=True):
-            line = f"B on {name} not measurable: {why}"
+            line = f"trial {m.trial}: B on {name} not measurable: {why}"
             if why and line not in out:
                 out.append(line)
     return out

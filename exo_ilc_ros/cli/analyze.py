@@ -68,9 +68,9 @@ def describe(run: BagRun) -> str:
              + (f", incomplete: {run.incomplete}" if run.incomplete else "")]
     if prov.options:
         lines.append("  options: " + ", ".join(f"{k}={v}" for k, v in prov.options.items()))
-    for change in run.parameter_changes:
-        lines.append(f"  parameter {change.node} {change.name} = {json.dumps(change.value)} "
-                     f"from trial {change.effective_trial}")
+    for change in run.live_changes():
+        lines.append(f"  parameter {change['node']} {change['parameter']} = "
+                     f"{json.dumps(change['value'])} from trial {change['trial']}")
     lines += [f"  note: {note}" for note in run.notes]
     return "\n".join(lines)
 

@@ -10,7 +10,8 @@ earlier one wrote: ``analyze bags/*`` after ``run``), made short:
   is copied with a 1 s movement; one the page only names (``my_params.yaml``) is written as just
   that 1 s movement; a command that takes ``--config`` and names none gets it;
 * ``<date>`` and other ``<placeholders>`` in a path match anything (``*``, expanded like the
-  shell); ``[optional]`` parts are left out;
+  shell; a path that matches nothing fails); a command with a placeholder that is no path
+  (``--resume <session id>``) is only parsed; ``[optional]`` parts are left out;
 * what needs something outside this machine (``postgresql://``, ``tcp://<host>``) or a running
   graph (``exo-ilc param``) is only parsed, with the page's values.
 
@@ -28,6 +29,7 @@ import io
 import os
 import re
 import shlex
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -187,11 +189,12 @@ def _prepare(command: Command, cwd: Path, graph: bool) -> list[str] | None:
         before = words[k - 1] if k else ""
         if before in SMALL and word.isdigit():
             word = str(min(int(word), int(SMALL[before])))
+        placeholder = "<" in word
         word = re.sub(r"<[^>]*>", "*", word)
         if any(c in word for c in "*?"):
             matches = sorted(glob.glob(word, root_dir=cwd))
-            if not matches and not graph:
-                return None  # a bag of a graph run, skipped here
+            if not matches and (not graph or (placeholder and "/" not in word)):
+                return None  # a graph run's bag (skipped here), or a value like <session id>
             out += matches or [word]
             continue
         out.append(word)
@@ -229,13 +232,16 @@ def _run_page(page: Path, tmp: Path, graph: bool) -> list[Outcome]:
                 if not graph or flags in seen:
                     continue
                 seen.add(flags)
-            text = io.StringIO()
             began = time.perf_counter()
-            with contextlib.redirect_stdout(text), contextlib.redirect_stderr(text):
-                code = exo_ilc(argv)
+            # A real file, not a StringIO: the graph hands the nodes' output its descriptor.
+            with tempfile.TemporaryFile("w+") as text:
+                with contextlib.redirect_stdout(text), contextlib.redirect_stderr(text):
+                    code = exo_ilc(argv)
+                text.seek(0)
+                output = text.read()
             if os.environ.get("EXO_ILC_TEST_TIMES"):
                 print(f"{time.perf_counter() - began:6.1f} s  {command.where()}")
-            outcomes.append(Outcome(command, argv, code, text.getvalue()))
+            outcomes.append(Outcome(command, argv, code, output))
     finally:
         os.chdir(old)
     return outcomes

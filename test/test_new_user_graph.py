@@ -52,7 +52,7 @@ def test_live_change_shows_in_run_and_analyze_and_a_mistyped_node_fails_fast(
     out = tmp_path / "run.json"
     run = subprocess.Popen(
         [sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--config", "short.yaml",
-         "--trials", "600", "--no-store", "--quiet", "--json", str(out)],
+         "--trials", "300", "--no-store", "--quiet", "--json", str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env,
         text=True, cwd=tmp_path)
     try:

@@ -190,8 +190,9 @@ class GraphSession:
     def close(self) -> dict[str, int]:
         """Stop the processes (SIGINT, then SIGKILL), the monitor node, the domain claim."""
         codes = self.processes.stop() if self.processes.processes else {}
-        if self.node is not None:
-            self.executor.remove_node(self.node)
+        if self.node is not None:  # the executor may be missing: __enter__ failed before it
+            if self.executor is not None:
+                self.executor.remove_node(self.node)
             self.node.destroy_node()
             self.node = None
         if self.context is not None:

@@ -5,12 +5,12 @@ in page order, and run in one scratch directory per page (a later command may re
 earlier one wrote: ``analyze bags/*`` after ``run``), made short:
 
 * ``--trials N`` becomes ``--trials 2`` (added where the command takes it), ``--budget`` 2,
-  ``--seeds`` 2, ``--jobs``/``--workers`` 1, ``--lifted`` 50;
+  ``--seeds`` 2, ``--jobs``/``--workers`` 1, ``--lifted`` 50, ``--trial K`` at most 2;
 * ``--config`` and every other ``.yaml`` a command reads: a shipped one (``config/robust.yaml``)
   is copied with a 1 s movement; one the page only names (``my_params.yaml``) is written as just
   that 1 s movement; a command that takes ``--config`` and names none gets it;
-* ``<date>`` and other ``<placeholders>`` in a path match anything (``*``, expanded like the
-  shell; a path that matches nothing fails); a command with a placeholder that is no path
+* ``<date>`` and other ``<placeholders>`` in a path match anything (``*``, the newest match;
+  a path that matches nothing fails); a command with a placeholder that is no path
   (``--resume <session id>``) is only parsed; ``[optional]`` parts are left out;
 * what needs something outside this machine (``postgresql://``, ``tcp://<host>``) or a running
   graph (``exo-ilc param``) is only parsed, with the page's values.
@@ -46,7 +46,7 @@ PAGES = sorted([ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))])
 SHORT_MOVEMENT = 1.0
 """Seconds of the movement in the scratch configs (101 samples a trial)."""
 SMALL = {"--trials": "2", "--budget": "2", "--seeds": "2", "--jobs": "1", "--workers": "1",
-         "--lifted": "50"}
+         "--lifted": "50", "--trial": "2"}
 """Counts made small, and added where the command takes the flag but does not give it."""
 ADDED = ("--trials", "--workers", "--jobs", "--budget")
 """Of those, the ones added to a command that does not give them."""
@@ -195,6 +195,8 @@ def _prepare(command: Command, cwd: Path, graph: bool) -> list[str] | None:
             matches = sorted(glob.glob(word, root_dir=cwd))
             if not matches and (not graph or (placeholder and "/" not in word)):
                 return None  # a graph run's bag (skipped here), or a value like <session id>
+            if placeholder and matches:  # <date> names one: the newest
+                matches = matches[-1:]
             out += matches or [word]
             continue
         out.append(word)

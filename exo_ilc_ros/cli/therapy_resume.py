@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..analysis.wording import counted
 from ..core.config import Config
 from ..core.errors import ProfileError
 from ..core.experiment import build_reference
@@ -47,8 +48,9 @@ class Unfinished:
         """``exercise vN (status, trials, from vM, begun DATE)``."""
         e = self.entry
         start = "zero" if e.get("started_from") is None else f"v{e['started_from']}"
-        return (f"{self.exercise} v{e['version']} ({e.get('status')}, {e.get('trials', 0)} "
-                f"trials, from {start}, begun {e.get('created', '?')})")
+        return (f"{self.exercise} v{e['version']} ({e.get('status')}, "
+                f"{counted(e.get('trials', 0), 'trial')}, from {start}, begun "
+                f"{e.get('created', '?')})")
 
 
 @dataclass

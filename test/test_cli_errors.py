@@ -238,8 +238,10 @@ def test_flag_values_that_pass_still_run(tmp_path: Path,
     short = tmp_path / "short.yaml"
     short.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 0.5\n')
     out = tmp_path / "run.json"
+    # -0.9 (an arm a tenth of its model) is accepted and runs; its trials leave the error
+    # envelope, which the run reports with exit 4 (issue 25), the JSON still written.
     assert main(["simulate", "--config", str(short), "--trials", "2", "--quiet",
-                 "--mass-uncertainty", "-0.9", "--json", str(out)]) == 0
+                 "--mass-uncertainty", "-0.9", "--json", str(out)]) == 4
     assert out.is_file()
     plot = tmp_path / "f.png"
     assert main(["analyze-loop", "--cutoff", "5", "--mass-uncertainty", "0.1",

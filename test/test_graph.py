@@ -176,7 +176,8 @@ def test_live_threshold_changes_next_trial_and_bad_values_are_rejected() -> None
 
 
 def test_ctrl_c_stops_every_process(tmp_path: Path) -> None:
-    """SIGINT to `exo-ilc run` mid-run: exit 130, every node process gone."""
+    """SIGINT to `exo-ilc run` mid-run: exit 130, the command that resumes the run printed,
+    every node process gone."""
     claim = claim_domain_id()
     env = dict(os.environ, ROS_DOMAIN_ID=str(claim.domain_id))
     process = subprocess.Popen(
@@ -194,6 +195,7 @@ def test_ctrl_c_stops_every_process(tmp_path: Path) -> None:
         process.send_signal(signal.SIGINT)
         _, err = process.communicate(timeout=30)
         assert process.returncode == 130, err[-2000:]
+        assert "Continue with:" in err and " --resume" in err, err[-2000:]  # issue 25
         gone_by = time.monotonic() + 15.0
         while time.monotonic() < gone_by and any(alive(pid) for pid in nodes):
             time.sleep(0.1)

@@ -221,26 +221,27 @@ def test_reflex_is_clipped_at_its_ceiling_by_hand() -> None:
 
 
 def test_the_reflex_ceiling_keeps_the_safe_hold_finite() -> None:
-    """The tuned sign law under ``spastic`` at 10 %: with the MAS 2 reflex unbounded (the
+    """The tuned sign law under ``spastic`` at 15 %: with the MAS 2 reflex unbounded (the
     preset's values as ``custom``, no ceiling) and the safe hold on the controller's gains (as
-    before ``safety.hold_*``) the hold after the envelope abort of trial 161 runs away to a
-    non-finite state (the study's FAILED cell before the ceiling); the shipped hold's damping
-    keeps even the unbounded reflex finite; with the preset's ceiling the envelope aborts
-    trials too, and every trial stays finite."""
+    before ``safety.hold_*``) the hold after the envelope abort of trial 169 runs away to a
+    non-finite state (the study's FAILED cell before the ceiling; it was trial 161 at 10 %
+    until the quintic's coefficients became exact, issue 25: the run is chaotic in the last
+    bits); the shipped hold's damping keeps even the unbounded reflex finite; with the preset's
+    ceiling (at 10 %) the envelope aborts trials too, and every trial stays finite."""
     law, scenario = resolve_law("tuned"), resolve_scenario("spastic")
     k, b, g, th, _ = MAS_PRESETS["2"]
-    [unbounded] = study_cells([law], [scenario], [0.1], [0], 162)
+    [unbounded] = study_cells([law], [scenario], [0.15], [0], 169)
     values = {**unbounded.values, "patient.spasticity.mas_grade": "custom",
               "patient.spasticity.stiffness": [k] * 3, "patient.spasticity.damping": [b] * 3,
               "patient.spasticity.reflex_gain": [g] * 3,
               "patient.spasticity.reflex_threshold": [th] * 3}
     soft = {**values, "safety.hold_kp": values["control.kp"],
             "safety.hold_kd": values["control.kd"], "safety.hold_ramp": 0.0}
-    old = run_cell(StudyCell("tuned", "spastic", 0.1, 0, soft))
+    old = run_cell(StudyCell("tuned", "spastic", 0.15, 0, soft))
     assert old.aborted and old.nonfinite is not None and "safe hold" in old.nonfinite
-    held = run_cell(StudyCell("tuned", "spastic", 0.1, 0, values))
+    held = run_cell(StudyCell("tuned", "spastic", 0.15, 0, values))
     assert held.aborted == old.aborted and held.nonfinite is None
-    [bounded] = study_cells([law], [scenario], [0.1], [0], 220)
+    [bounded] = study_cells([law], [scenario], [0.1], [0], 220)  # aborts there too
     new = run_cell(bounded)
     assert new.aborted and new.aborted[-1] == 220  # the safe hold ran
     assert new.nonfinite is None and new.failure is None

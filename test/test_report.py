@@ -18,8 +18,9 @@ from exo_ilc_ros.cli.main import main
 from exo_ilc_ros.core.programs.metrics import TrialMetrics
 
 ROOT = Path(__file__).resolve().parents[1]
-UNIT = re.compile(r"^-?[0-9.]+(e[-+]?[0-9]+)? (rad|N m|rad/s\^2|%|N m s/rad)$"
+UNIT = re.compile(r"^-?[0-9.]+(e[-+]?[0-9]+)? (deg|N m|deg/s\^2|%|N m s/deg)$"
                   r"|^-?[0-9.]+ \(SPARC, dimensionless\)$")
+"""A therapist reads angles in degrees (issue 25); the data files keep rad."""
 
 
 @pytest.fixture(scope="module")

@@ -142,7 +142,7 @@ def test_rollback_and_the_profiles_command(tmp_path: Path, capsys: pytest.Captur
     assert "p1: paper_quintic" in capsys.readouterr().out
     assert main([*root, "show", "p1", "paper_quintic"]) == 0
     shown = capsys.readouterr().out
-    assert " * v2" in shown and "   v1" in shown and "rad" in shown
+    assert " * v2" in shown and "   v1" in shown and "deg" in shown  # for a therapist: degrees
     assert main([*root, "rollback", "p1", "paper_quintic", "1"]) == 0
     assert book.latest("p1", "paper_quintic").version == 1  # type: ignore[union-attr]
     third = session(book, trials=1)

@@ -224,8 +224,9 @@ def test_a_resume_that_could_continue_two_sessions_is_refused_naming_both(
         err = capsys.readouterr().err
         assert says in err, err
         for key, version in (("s-a", 2), ("s-b", 3)):
-            assert f"  session {key}: {EXERCISE} v{version} (in_progress, 1 trials, from v1" in err
-            command = "exo-ilc " + " ".join([*base, "--store", str(store_a), "--resume", key])
+            assert f"  session {key}: {EXERCISE} v{version} (in_progress, 1 trial, from v1" in err
+            # after exo-ilc as typed here (issue 25: .venv/bin/exo-ilc where it is not on PATH)
+            command = " " + " ".join([*base, "--store", str(store_a), "--resume", key])
             assert command in err, err
         assert {p: p.read_bytes() for p in (tmp_path / "profiles").rglob("*")
                 if p.is_file()} == snapshot

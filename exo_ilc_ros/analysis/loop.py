@@ -104,14 +104,29 @@ def format_robustness(report: Robustness) -> str:
 
 
 def format_growth(fit: GrowthFit | None, joint_names: Sequence[str]) -> str:
-    """One line: per joint the fitted factor per trial and, if flagged, GROWING."""
+    """One line: per joint the fitted factor per trial and, if flagged, GROWING; a joint
+    without enough data says so (never a NaN)."""
     if fit is None:
         return f"growth of max |u_ff|: too few trials (< {MIN_TRIALS}) to tell"
     cells = []
-    for name, r, s, flag in zip(joint_names, fit.rate, fit.stderr, fit.growing, strict=True):
-        cells.append(f"{name} {100.0 * r:+.3f}+-{100.0 * s:.3f} %/trial"
-                     + (" GROWING" if flag else ""))
-    verdict = ("LEARNED INPUT KEEPS GROWING (the error may still look fine)"
-               if fit.any_growing else "bounded")
+    span = fit.last_trial - fit.first_trial + 1
+    usable = fit.usable if fit.usable.size else np.full(len(joint_names), span)
+    converging = fit.converging if fit.converging.size else np.zeros(len(joint_names), bool)
+    for name, r, s, flag, n, settling in zip(joint_names, fit.rate, fit.stderr, fit.growing,
+                                            usable, converging, strict=True):
+        if n == 0:
+            cells.append(f"{name} joint still (no learned input)")
+        elif not np.isfinite(r):
+            cells.append(f"{name} not enough data ({n} trial{'s' if n != 1 else ''} with a "
+                         f"learned input, needs {MIN_TRIALS})")
+        else:
+            cells.append(f"{name} {100.0 * r:+.3f}+-{100.0 * s:.3f} %/trial"
+                         + (" GROWING" if flag else
+                            " (approaching its limit)" if settling and r > 0 else ""))
+    if not np.any(np.isfinite(fit.rate)):
+        verdict = "not enough data to tell"
+    else:
+        verdict = ("LEARNED INPUT KEEPS GROWING (the error may still look fine)"
+                   if fit.any_growing else "bounded")
     return (f"growth of max |u_ff| over trials {fit.first_trial}-{fit.last_trial}: "
             + "; ".join(cells) + f" -> {verdict}")

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..core.convergence.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth
+from ..core.programs.spread import IterationSpread
 from ..core.session.summary import RunSummary
 from .loop import format_growth
 
@@ -35,6 +36,19 @@ TABLE_QUANTITIES = {"error": ("e", "max |e| (rad)"),
 """What :func:`format_trial_table` can show: column prefix and title."""
 
 
+def exercise_of(run: RunSummary) -> str | None:
+    """The therapy exercise ``run`` is (None: not a therapy run)."""
+    therapy = run.extra.get("therapy")
+    return str(therapy.get("exercise")) if isinstance(therapy, dict) else None
+
+
+def run_title(run: RunSummary) -> str:
+    """``sign d=0.05``, or ``reach_and_return: sign d=0.05`` for a therapy exercise."""
+    exercise = exercise_of(run)
+    head = f"{exercise}: " if exercise else ""
+    return f"{head}{run.law} d={run.mass_uncertainty:g}"
+
+
 def _table_of(run: RunSummary, quantity: str) -> np.ndarray | None:
     if quantity == "error":
         return run.true_errors
@@ -53,8 +67,7 @@ def format_trial_table(runs: Sequence[RunSummary], joint_names: Sequence[str],
     n = len(joint_names)
     head1 = f"{'trial':>5} "
     head2 = f"{'':>5} "
-    titles = [labels[i] if labels is not None else f"{r.law} d={r.mass_uncertainty:g}"
-              for i, r in enumerate(runs)]
+    titles = [labels[i] if labels is not None else run_title(r) for i, r in enumerate(runs)]
     widths = [max(n * 11, len(title)) for title in titles]  # a whole label over each group
     for title, width in zip(titles, widths, strict=True):
         head1 += f"| {title:^{width}}"
@@ -75,9 +88,30 @@ def format_trial_table(runs: Sequence[RunSummary], joint_names: Sequence[str],
                 line += "| " + "".join(cells).ljust(width)
             else:
                 line += "| " + " " * width
-        lines.append(line)
+        switched = [f"{title}: {segment['law']} from here" for r, title in zip(runs, titles,
+                                                                          strict=True)
+                    for segment in r.extra.get("laws", [])[1:]
+                    if int(segment["from_trial"]) == k + 1]
+        lines.append(line + ("  <- " + "; ".join(switched) if switched else ""))
     if quantity == "error":
         lines.append("(* above the bound)")
+    return "\n".join(lines)
+
+
+def format_run_events(runs: Sequence[RunSummary], labels: Sequence[str] | None = None) -> str:
+    """The live parameter changes (with the first trial run with each) and the trials run
+    again (watchdog trip, lost samples, ...) of every run; "" when there were none."""
+    lines = []
+    for i, r in enumerate(runs):
+        title = labels[i] if labels is not None else run_title(r)
+        for change in r.extra.get("live_changes", []):
+            lines.append(f"{title}: live change from trial {change['trial']}: "
+                         f"{change.get('node', 'ilc_supervisor')} {change['parameter']} = "
+                         f"{json.dumps(change['value'])}")
+        for again in r.extra.get("reruns", []):
+            lines.append(f"{title}: trial {again['trial']} was run again ({again['reason']}: "
+                         "the attempt was discarded, the trial repeated with the same "
+                         "feed-forward)")
     return "\n".join(lines)
 
 
@@ -90,7 +124,8 @@ def format_long_run(runs: Sequence[RunSummary], joint_names: Sequence[str],
     lines = ["Learned input at the last trial and its growth (max |u_ff| per joint, rad/s^2; "
              "max |effort|, N m)"]
     for r in runs:
-        head = f"{r.law:<8}{r.mass_uncertainty:>7.3f}  "
+        exercise = exercise_of(r)
+        head = (f"{exercise}: " if exercise else "") + f"{law_of(r):<8}{r.mass_uncertainty:>7.3f}  "
         if r.max_abs_feedforward is None or len(r.max_abs_feedforward) == 0:
             lines.append(head + "no feed-forward recorded")
             continue
@@ -106,23 +141,74 @@ def format_long_run(runs: Sequence[RunSummary], joint_names: Sequence[str],
 
 def format_iterations(runs: Sequence[RunSummary], joint_names: Sequence[str],
                       labels: Sequence[str] | None = None) -> str:
-    """Iterations to the bound per joint (first / settled) beside the paper's numbers;
-    ``labels`` (e.g. bag names) in a first column, one per run."""
-    lines = [f"Iterations to the bound, first within / settled within (paper: joint 1 "
-             f"35/96/101 at 5/10/15 %, joints 2-3 within {PAPER_OTHER_JOINTS_WITHIN})"]
+    """Iterations to the bound per joint (first / settled) beside the paper's numbers (not for
+    therapy exercises: another movement than the paper's); ``labels`` (e.g. bag names) in a
+    first column, one per run, else the exercise for a therapy run."""
+    therapy = all(exercise_of(r) for r in runs)
+    if labels is None and therapy:
+        labels = [str(exercise_of(r)) for r in runs]
+    lines = ["Iterations to the bound, first within / settled within"
+             + ("" if therapy else f" (paper: joint 1 35/96/101 at 5/10/15 %, joints 2-3 "
+                                   f"within {PAPER_OTHER_JOINTS_WITHIN})")]
     w = max([8] + [len(r.law) + 1 for r in runs])  # 8 for sign / linear, wider for norm_optimal
     cell = max([len(name) + 2 for name in joint_names] + [20])
     first = max([len(label) + 2 for label in labels] + [5]) if labels is not None else 0
-    header = (f"{'bag' if labels is not None else '':<{first}}{'law':<{w}}{'delta':>7}  "
+    column = "exercise" if therapy and labels is not None else "bag" if labels else ""
+    header = (f"{column:<{first}}{'law':<{w}}{'delta':>7}  "
               + "".join(f"{name:>{cell}}" for name in joint_names))
-    lines += [header + f"{'paper joint 1':>15}", "-" * (len(header) + 15)]
+    paper_width = 0 if therapy else 15
+    lines += [header + ("" if therapy else f"{'paper joint 1':>15}"),
+              "-" * (len(header) + paper_width)]
     for i, r in enumerate(runs):
         its = r.iterations_to_bound()
         cells = "".join(f"{_fmt(f) + ' / ' + _fmt(s):>{cell}}"
                         for f, s in zip(its.first, its.settled, strict=True))
         paper = PAPER_FIRST_JOINT1.get(round(r.mass_uncertainty, 4))
         label = labels[i] if labels is not None else ""
-        lines.append(f"{label:<{first}}{r.law:<{w}}{r.mass_uncertainty:>7.3f}  {cells}"
-                     f"{_fmt(paper):>15}")
+        lines.append(f"{label:<{first}}{law_of(r):<{w}}{r.mass_uncertainty:>7.3f}  {cells}"
+                     + ("" if therapy else f"{_fmt(paper):>15}"))
     lines.append("('-': never within the bound / not within at the last trial)")
+    if any("spread" in r.extra for r in runs):
+        lines.append("")
+        lines.append(format_spread(runs, joint_names))
+    elif any(r.law == "sign" for r in runs) and not therapy:
+        lines.append("(one run each: the sign law amplifies last-bit differences, so a count can "
+                     "move by several trials; --spread 20 shows median [min-max] over 20 runs "
+                     "from initial states perturbed by 1e-12 rad)")
+    return "\n".join(lines)
+
+
+def law_of(run: RunSummary) -> str:
+    """The law, or ``sign->linear`` when a live change switched it (``extra["laws"]``)."""
+    laws = run.extra.get("laws")
+    if not laws:
+        return run.law
+    names = [str(item["law"]) for item in laws]
+    return "->".join(n for k, n in enumerate(names) if k == 0 or n != names[k - 1])
+
+
+def format_spread(runs: Sequence[RunSummary], joint_names: Sequence[str]) -> str:
+    """The iterations to the bound of each run's perturbed runs (``extra["spread"]``, from
+    :func:`~exo_ilc_ros.core.spread.iteration_spread`): median [min-max] per joint."""
+    spreads = [r.extra["spread"] for r in runs if "spread" in r.extra]
+    count = {s["count"] for s in spreads}
+    size = {s["perturbation"] for s in spreads}
+    lines = [f"The same over {'/'.join(map(str, sorted(count)))} runs from initial states "
+             f"perturbed by {'/'.join(f'{x:g}' for x in sorted(size))} rad (sd per joint, every "
+             "trial): median [min-max]; the single run above starts exactly at x_d(0)"]
+    w = max([8] + [len(r.law) + 1 for r in runs])
+    rows = []
+    for r in runs:
+        data = r.extra.get("spread")
+        if data is not None:
+            spread = IterationSpread(float(data["perturbation"]), data["first"], data["settled"])
+            rows.append((r, [spread.cell(j) for j in range(len(joint_names))]))
+    cell = max([len(name) for name in joint_names]
+               + [len(text) for _, cells in rows for text in cells]) + 2
+    header = f"{'law':<{w}}{'delta':>7}  " + "".join(f"{name:>{cell}}" for name in joint_names)
+    lines += [header, "-" * len(header)]
+    for r, cells in rows:
+        lines.append(f"{r.law:<{w}}{r.mass_uncertainty:>7.3f}  "
+                     + "".join(f"{text:>{cell}}" for text in cells))
+    lines.append("(never: not within the bound by the last trial)")
     return "\n".join(lines)

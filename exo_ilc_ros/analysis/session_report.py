@@ -21,21 +21,26 @@ from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from ..bag.provenance import PREFIX
 from ..bag.reader import BagRun, read_metadata
 from ..core.loop.record import TrialRecord
 from ..core.params.config import Config
 from ..core.persistence.profiles import ProfileBook
-from ..core.programs.metrics import METRIC_UNITS, TrialMetrics, config_metrics
+from ..core.programs.metrics import TrialMetrics, config_metrics
 from ..core.reference.build import build_reference
 from ..core.reference.exercise import PAPER_EXERCISE
+from .therapy import DEGREES, DISPLAY, share_note, shown
+from .wording import counted
 
 PATIENT = PREFIX + "patient"
 EXERCISE = PREFIX + "exercise"
 SESSION = PREFIX + "session"
 PROFILE_VERSION = PREFIX + "profile_version"
 PROFILE_STARTED_FROM = PREFIX + "profile_started_from"
+EXERCISE_ORDER = PREFIX + "exercise_order"
+"""The exercise's place in its session (1, 2, ...): the report lists them in that order."""
 
 
 @dataclass
@@ -61,6 +66,8 @@ class ExerciseRun:
     notes: list[str] = field(default_factory=list)
     profile_version: str = ""
     started_from: str = ""
+    order: int = 0
+    """Place in the session (1, 2, ...); 0: unknown (a bag of an earlier version)."""
 
 
 def _record_of(run: BagRun, k: int, config: Config) -> TrialRecord | None:
@@ -88,7 +95,8 @@ def exercise_run(run: BagRun) -> ExerciseRun:
             custom.update({PATIENT: str(side["patient"]), EXERCISE: str(side["exercise"]),
                            SESSION: str(side["session"]),
                            PROFILE_VERSION: str(side.get("profile_version") or ""),
-                           PROFILE_STARTED_FROM: str(side.get("profile_started_from") or "")})
+                           PROFILE_STARTED_FROM: str(side.get("profile_started_from") or ""),
+                           EXERCISE_ORDER: str(side.get("exercise_order") or "")})
         except (OSError, ValueError, KeyError) as exc:
             run.notes.append(f"{sidecar}: unreadable ({exc}); patient unknown")
     config = run.provenance.config
@@ -115,15 +123,19 @@ def exercise_run(run: BagRun) -> ExerciseRun:
         list(values.get("safety.error_envelope", [])), run.law,
         bool(values.get("assist_as_needed.enabled", False)), run.period,
         int(values.get("safety.watchdog_periods", 0)), aborts, reruns, list(run.notes),
-        custom.get(PROFILE_VERSION, ""), custom.get(PROFILE_STARTED_FROM, ""))
+        custom.get(PROFILE_VERSION, ""), custom.get(PROFILE_STARTED_FROM, ""),
+        int(custom.get(EXERCISE_ORDER) or 0) if str(custom.get(EXERCISE_ORDER) or "").isdigit()
+        else 0)
 
 
 def group_by_session(runs: Sequence[ExerciseRun]) -> dict[tuple[str, str], list[ExerciseRun]]:
-    """(patient, session) -> its exercises, in the order given."""
+    """(patient, session) -> its exercises in session order (``order``; bags without it after
+    those with it, in the order given)."""
     out: dict[tuple[str, str], list[ExerciseRun]] = {}
     for run in runs:
         out.setdefault((run.patient, run.session), []).append(run)
-    return out
+    return {key: sorted(members, key=lambda r: r.order or 1 << 30)
+            for key, members in out.items()}
 
 
 def _png(fig: Figure) -> str:
@@ -133,31 +145,34 @@ def _png(fig: Figure) -> str:
 
 
 def exercise_figure(run: ExerciseRun) -> Figure:
-    """Per trial: peak true |e| (rad, log), assistance RMS (N m), learned feed-forward RMS
-    (rad/s^2), the patient's share (1); one line per joint."""
+    """Per trial: peak true |e| (deg, log), assistance RMS (N m), learned feed-forward RMS
+    (deg/s^2), the patient's share (%, as in the table); one line per joint, whole trials on
+    the trial axis."""
     fig = Figure(figsize=(10.0, 6.4), layout="constrained")
     axes = fig.subplots(2, 2, sharex=True)
     trials = np.array([m.trial for m in run.metrics])
-    panels = ((axes[0, 0], "max_error", "peak true |e| (rad)"),
-              (axes[0, 1], "assistance_rms", "assistance: RMS torque beyond gravity (N m)"),
-              (axes[1, 0], "feedforward_rms", "learned feed-forward RMS (rad/s²)"),
-              (axes[1, 1], "patient_share", "patient's share of the work (fraction, 1 = 100 %)"))
-    for ax, name, label in panels:
-        table = np.array([getattr(m, name) for m in run.metrics])
+    panels = ((axes[0, 0], "max_error", "peak true |e| (°)", DEGREES),
+              (axes[0, 1], "assistance_rms", "assistance: RMS torque beyond gravity (N m)", 1.0),
+              (axes[1, 0], "feedforward_rms", "learned feed-forward RMS (°/s²)", DEGREES),
+              (axes[1, 1], "patient_share", "patient's share of the work (%)", 100.0))
+    for ax, name, label, scale in panels:
+        table = np.array([getattr(m, name) for m in run.metrics]) * scale
         for j, joint in enumerate(run.joint_names):
             ax.plot(trials, table[:, j], marker=".", markersize=3, linewidth=1.0, label=joint)
         ax.set_ylabel(label, fontsize=8)
         ax.grid(True, linewidth=0.3)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     axes[0, 0].set_yscale("log")
-    axes[0, 0].axhline(run.error_bound, color="k", linestyle="--", linewidth=0.8,
-                       label=f"bound {run.error_bound:g} rad")
-    share = np.array([m.patient_share_total for m in run.metrics])
+    axes[0, 0].axhline(run.error_bound * DEGREES, color="k", linestyle="--", linewidth=0.8,
+                       label=f"bound {run.error_bound * DEGREES:.2g}°")
+    share = 100.0 * np.array([m.patient_share_total for m in run.metrics])
     axes[1, 1].plot(trials, share, color="k", linewidth=1.6, label="whole arm")
     for ax in axes[1]:
         ax.set_xlabel("trial")
     for ax in axes.ravel():
         ax.legend(fontsize=7)
-    fig.suptitle(f"{run.exercise}: {len(run.metrics)} trials", fontsize=10)
+    fig.suptitle(f"{run.exercise}: {len(run.metrics)} trial{'s' if len(run.metrics) != 1 else ''}",
+                 fontsize=10)
     return fig
 
 
@@ -188,15 +203,13 @@ def _number(x: float, unit: str) -> str:
 def _joint_rows(run: ExerciseRun) -> str:
     first, last = run.metrics[0], run.metrics[-1]
     rows = []
-    labels = (("max_error", "peak true |e|"), ("rms_error", "RMS true error"),
-              ("assistance_rms", "assistance (RMS torque beyond gravity compensation)"),
-              ("feedforward_rms", "learned feed-forward (RMS)"),
-              ("patient_share", "patient's share of the work"),
-              ("spasticity", "velocity-dependent resistance B (spasticity indicator)"))
-    for name, label in labels:
-        unit = METRIC_UNITS[name]
+    for name, (label, unit, _) in DISPLAY.items():
         for which, m in ((f"trial {first.trial}", first), (f"trial {last.trial}", last)):
-            cells = "".join(f"<td>{_number(x, unit)}</td>" for x in getattr(m, name))
+            why = m.spasticity_reasons() if name == "spasticity" else [""] * len(run.joint_names)
+            cells = "".join(
+                f"<td>{shown(name, x)}{'' if not np.isfinite(x) else ' ' + _e(unit)}"
+                + (f"<br><span class=note>{_e(w)}</span>" if w else "") + "</td>"
+                for x, w in zip(getattr(m, name), why, strict=True))
             rows.append(f"<tr><td class=l>{_e(label)}</td><td class=l>{which}</td>{cells}</tr>")
     for name, label, unit in (("patient_share_total", "patient's share, whole arm", "1"),
                               ("smoothness", "smoothness, SPARC of the speed", "SPARC")):
@@ -205,8 +218,9 @@ def _joint_rows(run: ExerciseRun) -> str:
                     f"{last.trial}</td><td colspan={len(run.joint_names)}>{_number(a, unit)} → "
                     f"{_number(b, unit)}</td></tr>")
     head = "".join(f"<th>{_e(n)}</th>" for n in run.joint_names)
+    note = share_note([first, last])
     return (f"<table><tr><th class=l>metric</th><th class=l>trial</th>{head}</tr>"
-            + "".join(rows) + "</table>")
+            + "".join(rows) + "</table>" + (f"<p class=note>{_e(note)}.</p>" if note else ""))
 
 
 def _events(run: ExerciseRun) -> str:
@@ -255,7 +269,7 @@ def _history(run: ExerciseRun, book: ProfileBook | None) -> str:
     if index is None:
         return f"<p class=note>No earlier sessions of {_e(run.exercise)} in {_e(book.root)}.</p>"
     rows = []
-    for entry in index["versions"]:
+    for entry in _earlier_versions(index["versions"], run.profile_version):
         metrics = entry.get("metrics") or {}
         peak = max(entry.get("final_max_abs_error") or [float("nan")])
         assist = metrics.get("assistance_rms")
@@ -265,7 +279,7 @@ def _history(run: ExerciseRun, book: ProfileBook | None) -> str:
             f"<tr><td class=l>v{entry['version']}{mark}</td><td class=l>"
             f"{_e(entry.get('updated', entry.get('created', '?')))}</td>"
             f"<td>{entry.get('trials', 0)}</td><td>{entry.get('trials_total', 0)}</td>"
-            f"<td>{peak:.3g} rad</td>"
+            f"<td>{peak * DEGREES:.3g}°</td>"
             f"<td>{'-' if assist is None else f'{max(assist):.3g} N m'}</td>"
             f"<td>{'-' if share is None else _number(share, '1')}</td>"
             f"<td class=l>{_e(entry.get('status', '?'))}</td></tr>")
@@ -273,6 +287,17 @@ def _history(run: ExerciseRun, book: ProfileBook | None) -> str:
             "<th>trials</th><th>trials in all</th><th>final peak |e|, worst joint</th>"
             "<th>final assistance RMS, worst joint</th><th>final patient share</th>"
             "<th class=l>status</th></tr>" + "".join(rows) + "</table>")
+
+
+def _earlier_versions(versions: Sequence[dict[str, Any]],
+                      this: str) -> list[dict[str, Any]]:
+    """The profile versions up to this session's (a later session is not an earlier one);
+    all of them when this session's version is unknown."""
+    try:
+        limit = int(this)
+    except ValueError:
+        return list(versions)
+    return [v for v in versions if int(v["version"]) <= limit]
 
 
 def render_session(runs: Sequence[ExerciseRun], book: ProfileBook | None = None) -> str:
@@ -288,30 +313,33 @@ def render_session(runs: Sequence[ExerciseRun], book: ProfileBook | None = None)
             "from no stored profile"
         aan = ", assist-as-needed" if run.assist else ""
         sections.append(
-            f"<h2>{_e(run.exercise)}</h2><p>{len(run.metrics)} trials, learning law "
+            f"<h2>{_e(run.exercise)}</h2><p>{counted(len(run.metrics), 'trial')}, learning law "
             f"{_e(run.law)}{aan}, started {start}"
             + (f", saved as profile v{_e(run.profile_version)}" if run.profile_version else "")
-            + f". Error bound {run.error_bound:g} rad. Bag: <code>{_e(run.path)}</code></p>"
+            + f". Error bound {run.error_bound * DEGREES:.2g}°. "
+            f"Bag: <code>{_e(run.path)}</code></p>"
             f"<img alt='error, assistance, feed-forward and patient share over the trials of "
             f"{_e(run.exercise)}' src='data:image/png;base64,{_png(exercise_figure(run))}'>"
             + _joint_rows(run) + "<h3>Safety events</h3>" + _events(run)
             + "<h3>Compared with earlier sessions</h3>" + _history(run, book))
     glossary = (
         "<h2>How to read this page</h2><ul class=note>"
-        "<li><b>peak / RMS true |e|</b> (rad): how far the arm was from the planned movement "
+        "<li><b>peak / RMS true |e|</b> (degrees): how far the arm was from the planned movement "
         "(largest and typical), from the arm's true position.</li>"
         "<li><b>assistance</b> (N m): the robot's torque beyond what merely holds the arm up "
         "against gravity (RMS over the movement); falling assistance with a small error means "
         "the patient does more.</li>"
-        "<li><b>learned feed-forward</b> (rad/s²): the part of the assistance the robot learned "
+        "<li><b>learned feed-forward</b> (°/s²): the part of the assistance the robot learned "
         "from earlier trials.</li>"
         "<li><b>patient's share of the work</b> (%): 1 - robot torque / torque the movement "
         "needs (Guidali et al. 2013); 0 %: the robot did it all, 100 %: the patient did, "
-        "below 0 %: the patient worked against the robot.</li>"
+        "below 0 %: the patient worked against the robot; 0 % also when the difference is "
+        "within what the measurement resolves (a passive patient).</li>"
         "<li><b>smoothness</b> (SPARC, dimensionless): spectral arc length of the speed "
         "(Balasubramanian et al. 2015); closer to 0 is smoother.</li>"
-        "<li><b>velocity-dependent resistance B</b> (N m s/rad): extra torque per unit speed "
-        "the robot needed; rises with spasticity.</li></ul>")
+        "<li><b>velocity-dependent resistance B</b> (N m per °/s): extra torque per unit speed "
+        "the robot needed; rises with spasticity. Not measurable on a joint the exercise "
+        "barely moves (under 5°).</li></ul>")
     title = f"Therapy session: patient {first.patient}, session {first.session}"
     return ("<!DOCTYPE html><html lang=en><head><meta charset='utf-8'>"
             f"<title>{_e(title)}</title><style>{STYLE}</style></head><body>"

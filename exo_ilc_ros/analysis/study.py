@@ -25,6 +25,7 @@ import numpy as np
 from .. import __version__
 from ..core.convergence.growth import MIN_TRIALS
 from ..core.errors import ExoIlcError
+from ..core.params.redact import redact
 from ..core.programs.study import CellResult, StudyCell, run_cell
 from ..core.programs.study_rows import FLOOR_WINDOW, StudyRow, growth_window
 
@@ -132,7 +133,8 @@ def _run_on_dask(cells: Sequence[StudyCell], address: str | Any,
     try:
         client = Client(address, timeout=CONNECT_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as exc:
-        raise ClusterError(f"cannot reach the Dask scheduler {address!r}: {exc}") from None
+        raise ClusterError(f"cannot reach the Dask scheduler {redact(repr(address))}: "
+                           f"{redact(str(exc))}") from None
     futures: list[Any] = []
     try:
         futures = client.map(run_cell, list(cells), pure=False)

@@ -5,6 +5,7 @@ growing learned inputs hatched, envelope aborts and failed runs marked in the ce
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Sequence
 
 import numpy as np
@@ -94,7 +95,19 @@ def study_figure(rows: Sequence[StudyRow]) -> Figure:
         bar.set_label("settled floor (rad); bound in the middle", fontsize=8)
     window = min(FLOOR_WINDOW, rows[0].trials) if rows else FLOOR_WINDOW
     seeds = f", median over {rows[0].seeds} seeds" if rows and rows[0].seeds > 1 else ""
-    fig.suptitle(f"Which law survives which patient: median true max |e| over the last "
-                 f"{window} of {rows[0].trials if rows else 0} trials, worst joint{seeds}\n"
-                 "hatched: learned input still growing; grey: run failed", fontsize=9)
+    title = (f"Which law survives which patient: median true max |e| over the last "
+             f"{window} of {rows[0].trials if rows else 0} trials, worst joint{seeds}\n"
+             "hatched: learned input still growing; grey: run failed")
+    fig.suptitle(fit_title(title, fig.get_figwidth(), TITLE_SIZE), fontsize=TITLE_SIZE)
     return fig
+
+
+TITLE_SIZE = 9
+
+
+def fit_title(text: str, width_inches: float, fontsize: float) -> str:
+    """``text`` wrapped at word boundaries to lines that fit ``width_inches`` at ``fontsize``
+    (a sans-serif character is at most about 0.6 em wide on average), so no title is clipped
+    by a narrow figure."""
+    per_line = max(20, int(width_inches * 72.0 / (0.6 * fontsize)))
+    return "\n".join(textwrap.fill(line, per_line) for line in text.splitlines())

@@ -45,6 +45,7 @@ import optuna
 from ..core.errors import ExoIlcError
 from ..core.loop.record import TrialRecord
 from ..core.params.config import Config
+from ..core.params.redact import redact
 from ..core.session.learning_session import run_trials
 
 TERMS = ("position", "velocity", "acceleration")
@@ -366,14 +367,14 @@ def check_database_driver(url: str) -> None:
     try:
         dialect = make_url(url).get_dialect()
     except (ArgumentError, NoSuchModuleError, ValueError) as exc:
-        raise TuningError(f"--storage {url}: not a database URL SQLAlchemy knows ({exc})") \
+        raise TuningError(f"--storage {redact(url)}: not a database URL SQLAlchemy knows ({exc})") \
             from None
     try:
         dialect.import_dbapi()
     except ImportError as exc:
         module = exc.name or str(exc)
         package = DRIVER_PACKAGES.get(module.split(".")[0], module)
-        raise TuningError(f"--storage {url}: the database driver {module!r} "
+        raise TuningError(f"--storage {redact(url)}: the database driver {module!r} "
                           f"({dialect.name}+{dialect.driver}) is not installed; install it "
                           f"with: pip install {package}") from None
 
@@ -410,7 +411,7 @@ def _create_study(storage: str, name: str, seed: int | None) -> optuna.Study:
                                        direction="minimize", sampler=make_sampler(seed),
                                        load_if_exists=True)
         except ImportError as exc:  # a driver's own dependency (check_database_driver)
-            raise TuningError(f"--storage {storage}: {exc}") from None
+            raise TuningError(f"--storage {redact(storage)}: {exc}") from None
         except Exception as exc:
             from sqlalchemy.exc import IntegrityError, ProgrammingError, SQLAlchemyError
 
@@ -421,7 +422,7 @@ def _create_study(storage: str, name: str, seed: int | None) -> optuna.Study:
                 time.sleep(0.2 * attempt)  # another process is creating the tables
                 continue
             reason = str(getattr(exc, "orig", None) or exc).strip().splitlines()[0]
-            raise TuningError(f"--storage {storage}: cannot open the database ({reason})") \
+            raise TuningError(f"--storage {redact(storage)}: cannot open the database ({reason})") \
                 from None
     raise AssertionError("unreachable")  # pragma: no cover
 
@@ -446,7 +447,7 @@ def open_study(problem: TuningProblem, storage: str, study_name: str | None = No
     else:
         conflicts = problem.conflicts(stored, study.user_attrs.get("problem", {}))
         if conflicts:
-            raise TuningError(f"study {name!r} in {storage} was made for another problem "
+            raise TuningError(f"study {name!r} in {redact(storage)} was made for another problem "
                               f"({', '.join(conflicts[:5])} differ); use another --study-name "
                               "or the original options")
     if not study.trials:

@@ -16,6 +16,7 @@ from .. import __version__
 from ..core.errors import ConfigError
 from ..core.params import schema
 from ..core.params.config import Config, load_config
+from ..core.params.redact import redact
 
 PREFIX = "exo_ilc_ros."
 VERSION = PREFIX + "version"
@@ -54,7 +55,7 @@ def provenance_data(config: Config, *, recorded_by: str, run_name: str = "",
     if law is not None:
         values["law"] = law
     effective = config.replace({"mass_uncertainty": delta, "law": values["law"]})
-    return {
+    entries = {
         VERSION: __version__,
         RECORDED_BY: recorded_by,
         RUN_NAME: run_name,
@@ -66,6 +67,7 @@ def provenance_data(config: Config, *, recorded_by: str, run_name: str = "",
         LAW: str(values["law"]),
         OPTIONS: json.dumps(interpretation_options(values), sort_keys=True),
     }
+    return {key: redact(value) for key, value in entries.items()}  # no credential recorded
 
 
 @dataclass

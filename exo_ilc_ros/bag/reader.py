@@ -20,6 +20,7 @@ interrupted run's bag, not this one.
 
 from __future__ import annotations
 
+import json
 import math
 import struct
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -33,7 +34,7 @@ import yaml
 
 from ..core.protocol.timing import STEP_TIMEOUT
 from ..core.reference.build import build_reference
-from ..core.session.summary import RunSummary
+from ..core.session.summary import RunSummary, law_segments
 from ..wire import protocol, topics
 from ..wire.cdr import joint_states
 from . import messages
@@ -172,6 +173,25 @@ class BagRun:
         values = self.provenance.config_values or {}
         return float(values.get("error_bound", 0.005))
 
+    def live_changes(self, count: int | None = None) -> list[dict[str, Any]]:
+        """The run's live parameter changes, each with the first trial run with it: the
+        supervisor's own record (its summaries' ``parameters_changed``, as ``simulate --replay``
+        uses it) where the bag has it, the other nodes' from the recorder's
+        ``/parameter_events`` (whose trial a change sent near a boundary may be one off)."""
+        applied: list[dict[str, Any]] = []
+        for k in range(1, (max(self.completed, default=0) if count is None else count) + 1):
+            text = self.summaries.get(k, {}).get(protocol.PARAMETERS_CHANGED)
+            try:
+                values = json.loads(text) if text else {}
+            except ValueError:
+                values = {}
+            applied += [{"trial": k + 1, "node": "ilc_supervisor", "parameter": name,
+                         "value": value} for name, value in sorted(values.items())]
+        recorded = [{"trial": c.effective_trial, "node": c.node.lstrip("/"), "parameter": c.name,
+                     "value": c.value} for c in self.parameter_changes
+                    if not (applied and c.node.lstrip("/") == "ilc_supervisor")]
+        return sorted(applied + recorded, key=lambda c: int(c["trial"]))
+
     def summary(self) -> RunSummary:
         """The per-trial table of the ended trials 1..K: max |e| from the recorded samples, or
         from the trial's summary where samples are missing; NaN rows for trials not recorded."""
@@ -214,6 +234,16 @@ class BagRun:
             extra["aborted_trials"] = self.aborted
         if self.resumed_after is not None:
             extra["resumed_after"] = self.resumed_after
+        changes = self.live_changes(count)
+        if changes:
+            extra["live_changes"] = changes
+        again = [{"trial": k, "reason": reason} for k, t in sorted(self.trials.items())
+                 for reason in t.reruns]
+        if again:
+            extra["reruns"] = again
+        laws = law_segments(self.law, changes)
+        if laws:
+            extra["laws"] = laws
         return RunSummary(self.mass_uncertainty, self.law, self.error_bound, errors,
                           None if np.isnan(ff).all() else ff,
                           None if np.isnan(effort).all() else effort, extra, true)

@@ -11,7 +11,8 @@ from pathlib import Path
 from typing import Any
 
 from ..analysis import figures
-from ..analysis.report import format_iterations, format_trial_table, write_json
+from ..analysis.report import format_iterations, format_run_events, format_trial_table, write_json
+from ..analysis.wording import counted
 from ..bag import BagReadError, BagRun, read_bag
 from ..core.session.summary import RunSummary
 from .arguments import figure_path, integer, json_file
@@ -45,19 +46,27 @@ def register(sub: Any) -> None:
     parser.set_defaults(func=analyze)
 
 
+def analyze_arguments(argv: Sequence[str]) -> argparse.Namespace:
+    """``analyze``'s arguments parsed by its own parser (for commands that end in an analysis,
+    like ``paper``), so a flag added to ``analyze`` can never be missing from them."""
+    parser = argparse.ArgumentParser(prog="exo-ilc")
+    register(parser.add_subparsers(dest="command", required=True))
+    return parser.parse_args(["analyze", *argv])
+
+
 def describe(run: BagRun) -> str:
     """A few lines about one bag: origin, provenance, trials, parameter changes, notes."""
     prov = run.provenance
     lines = [f"bag {run.path} ({run.storage}): {run.law}, mass uncertainty "
              f"{run.mass_uncertainty:g}; recorded by {prov.recorded_by or 'unknown'}"
              + (f" (exo_ilc_ros {prov.version})" if prov.version else "")
-             + f"; {len(run.completed)} trials completed"
+             + f"; {counted(len(run.completed), 'trial')} completed"
              + (f", incomplete: {run.incomplete}" if run.incomplete else "")]
     if prov.options:
         lines.append("  options: " + ", ".join(f"{k}={v}" for k, v in prov.options.items()))
-    for change in run.parameter_changes:
-        lines.append(f"  parameter {change.node} {change.name} = {json.dumps(change.value)} "
-                     f"from trial {change.effective_trial}")
+    for change in run.live_changes():
+        lines.append(f"  parameter {change['node']} {change['parameter']} = "
+                     f"{json.dumps(change['value'])} from trial {change['trial']}")
     lines += [f"  note: {note}" for note in run.notes]
     return "\n".join(lines)
 
@@ -152,6 +161,10 @@ def analyze(args: argparse.Namespace) -> int:
     print()
     if not args.quiet:
         print(format_trial_table(summaries, names, labels=usable_labels))
+        print()
+    events = format_run_events(summaries, usable_labels)
+    if events:
+        print(events)
         print()
     print(format_iterations(summaries, names, labels=usable_labels))
     if args.csv:

@@ -8,7 +8,14 @@ from typing import Any
 from ..analysis.loop import format_analysis, format_robustness, plot_analysis
 from ..core.convergence.factors import analyze_loop
 from ..core.convergence.norm_optimal_robustness import robustness
-from .arguments import config_with_flags, figure_file, input_file, integer, parameter
+from .arguments import (
+    config_with_flags,
+    figure_file,
+    input_file,
+    integer,
+    mass_uncertainty,
+    parameter,
+)
 
 
 def register(sub: Any) -> None:
@@ -23,7 +30,7 @@ def register(sub: Any) -> None:
                         "shipped config/exo_ilc.yaml (any subset of keys)")
     parser.add_argument("--law", choices=("sign", "linear", "norm_optimal"),
                         help="learning law (default: the config's law)")
-    parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
+    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
                         metavar="D",
                         help="plant mass uncertainty delta, one analysis each (default: the "
                         "config's)")

@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 import math
 import re
+import shutil
+import sys
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -75,6 +77,26 @@ def parameter(name: str, extra: Callable[[Any], str | None] | None = None
 
     convert.__name__ = name
     return convert
+
+
+MAX_MASS_UNCERTAINTY = 1.0
+"""A --mass-uncertainty above this (+100 %: twice the model's masses) is taken for a percentage
+typed as a number and refused."""
+
+
+def plausible_fraction(value: Any) -> str | None:
+    """The rule of ``--mass-uncertainty`` beyond the schema's: a fraction, not a percentage."""
+    if value <= MAX_MASS_UNCERTAINTY:
+        return None
+    return (f"is a fraction of the model's masses (0.10 = 10 %) and at most "
+            f"{MAX_MASS_UNCERTAINTY:g} (+100 %); {value:g} would make every mass "
+            f"{1 + value:g} times the model's: did you mean {value / 100:g} ({value:g} %)?")
+
+
+def mass_uncertainty(text: str) -> float:
+    """argparse type of every ``--mass-uncertainty``: the schema's rule and
+    :func:`plausible_fraction`."""
+    return float(parameter("mass_uncertainty", plausible_fraction)(text))
 
 
 def integer(minimum: int | None = None, maximum: int | None = None,
@@ -262,6 +284,22 @@ def hide_password(url: str) -> str:
         return make_url(url).render_as_string(hide_password=True)
     except (ArgumentError, ValueError):
         return url
+
+
+def shown_command() -> str:
+    """How to type ``exo-ilc`` here, for the commands we print: ``exo-ilc`` when that name on
+    PATH is this program, else the path of the running script (``.venv/bin/exo-ilc`` in a
+    checkout whose venv is not activated)."""
+    script = Path(sys.argv[0]) if sys.argv and sys.argv[0] else None
+    on_path = shutil.which("exo-ilc")
+    if script is None or script.name != "exo-ilc":
+        return "exo-ilc" if on_path else f"{Path(sys.executable).name} -m exo_ilc_ros.cli.main"
+    if on_path and Path(on_path).resolve() == script.resolve():
+        return "exo-ilc"
+    try:
+        return str(script.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(script.resolve())
 
 
 def seed(text: str) -> int:

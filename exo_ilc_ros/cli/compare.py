@@ -21,6 +21,7 @@ from .arguments import (
     input_file,
     integer,
     json_file,
+    mass_uncertainty,
     parameter,
 )
 from .tune import default_jobs
@@ -51,7 +52,7 @@ def register(sub: Any) -> None:
     parser.add_argument("--no-tuned", action="store_true", help="leave the tuned law out")
     parser.add_argument("--no-norm-optimal", action="store_true",
                         help="leave the norm-optimal law (law: norm_optimal) out")
-    parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
+    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
                         metavar="D", default=[0.05, 0.10, 0.15], help="default: 0.05 0.10 0.15")
     parser.add_argument("--trials", type=parameter("max_trials"),
                         help="trials per run (default: max_trials)")

@@ -7,8 +7,10 @@ import importlib
 import os
 import sys
 from collections.abc import Sequence
+from typing import Any, TextIO
 
 from ..core.errors import ExoIlcError
+from ..core.params.redact import redact, secrets_in
 from .arguments import hide_password
 
 COMMANDS = ("simulate", "urdf", "tune", "compare", "run", "param", "analyze", "paper",
@@ -27,8 +29,38 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class RedactingStream:
+    """A text stream that writes through another with every URL's password as ``***``
+    (core/redact.py): what the command prints (its own lines, tqdm, a library's log or
+    message) never shows a credential."""
+
+    def __init__(self, stream: TextIO, secrets: Sequence[str] = ()) -> None:
+        self.stream = stream
+        self.secrets = list(secrets)
+
+    def write(self, text: str) -> int:
+        self.stream.write(redact(text, self.secrets))
+        return len(text)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.stream, name)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``exo-ilc``; returns the exit code."""
+    """Entry point of ``exo-ilc``; returns the exit code (README: 0 done; 1 a bug, or a replay
+    that differs; 2 a refused input; 3 the graph stopped; 4 trials aborted by the error
+    envelope; 130 Ctrl-C). Nothing it prints shows a password (:class:`RedactingStream`)."""
+    out, err = sys.stdout, sys.stderr
+    secrets = secrets_in(list(sys.argv[1:] if argv is None else argv))
+    sys.stdout, sys.stderr = RedactingStream(out, secrets), RedactingStream(err, secrets)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = out, err
+
+
+def _main(argv: Sequence[str] | None = None) -> int:
+    """:func:`main` inside the redacting streams."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

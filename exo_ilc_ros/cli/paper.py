@@ -15,7 +15,7 @@ from ..core.errors import ConfigError
 from ..core.session.learning_session import run_trials
 from ..orchestration.graph import run_graph
 from ..orchestration.recording import Recording
-from .analyze import analyze
+from .analyze import analyze, analyze_arguments
 from .arguments import (
     config_with_flags,
     directory,
@@ -25,6 +25,7 @@ from .arguments import (
     json_file,
     parameter,
 )
+from .run import graph_domain
 
 PAPER_UNCERTAINTIES = (0.05, 0.10, 0.15)
 
@@ -33,7 +34,7 @@ def register(sub: Any) -> None:
     """Add the sub-command."""
     parser = sub.add_parser(
         "paper", help="the paper's experiment through the graph: 3 bags, 1 figure, 1 table",
-        description="Run the experiment at 5, 10 and 15 %% mass uncertainty through the ROS 2 "
+        description="Run the experiment at 5, 10 and 15 % mass uncertainty through the ROS 2 "
         "graph (each run recorded by bag_recorder), then analyse the three bags: the "
         "per-trial table, iterations to the bound beside the paper's, Figures 5-7.")
     parser.add_argument("--config", type=input_file,
@@ -50,14 +51,15 @@ def register(sub: Any) -> None:
     parser.add_argument("--in-process", action="store_true",
                         help="run in-process (exo-ilc simulate --bag) instead of the graph; "
                         "the bags hold the same topics")
-    parser.add_argument("--domain-id", type=domain_id, help="ROS domain id of the graph")
+    parser.add_argument("--domain-id", type=domain_id, help="ROS domain id of the graph (default: "
+                        "an exported ROS_DOMAIN_ID, else a free one)")
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")
     parser.set_defaults(func=paper)
 
 
 def paper(args: argparse.Namespace) -> int:
     """Three runs, three bags, then ``analyze`` on them."""
-    if args.in_process and args.domain_id is not None:
+    if args.in_process and args.domain_id is not None:  # an exported ROS_DOMAIN_ID is fine
         raise ConfigError("--in-process", "starts no graph: --domain-id would be ignored; drop "
                           "one")
     config = config_with_flags(args.config, {} if args.trials is None else
@@ -78,10 +80,12 @@ def paper(args: argparse.Namespace) -> int:
             else:
                 run_config = run_config.replace({"wait_for_recorder": True})
                 with Recording(run_config, args.bag_dir) as recording:
-                    run_graph(run_config, args.domain_id, on_summary=progress,
+                    run_graph(run_config, graph_domain(args.domain_id), on_summary=progress,
                               nodes=recording.graph_nodes())
                 bags.append(recording.path)
         print(f"bag: {bags[-1]}", file=sys.stderr)
-    return analyze(argparse.Namespace(bags=[str(b) for b in bags], plot=args.plot, trial=None,
-                                      csv=args.csv, json=args.json, config_out=None,
-                                      quiet=args.quiet))
+    analysis = [str(b) for b in bags] + ["--plot", str(args.plot)]
+    analysis += ["--csv", str(args.csv)] if args.csv else []
+    analysis += ["--json", str(args.json)] if args.json else []
+    analysis += ["--quiet"] if args.quiet else []
+    return analyze(analyze_arguments(analysis))

@@ -7,6 +7,7 @@ import argparse
 import difflib
 import os
 import sys
+import time
 from typing import Any
 
 import yaml
@@ -91,9 +92,7 @@ def param(args: argparse.Namespace) -> int:
     executor.add_node(node)
     try:
         client = AsyncParameterClient(node, node_name)
-        if not client.wait_for_services(timeout_sec=args.timeout):
-            raise ParamError(f"node {args.node} not found on ROS domain {domain} within "
-                             f"{args.timeout:g} s")
+        _wait_for_node(node, client, node_name, args.node, domain, args.timeout)
 
         def wait(future: Any) -> Any:
             executor.spin_until_future_complete(future, timeout_sec=args.timeout)
@@ -144,6 +143,39 @@ def _list_kind(value: Any) -> str:
     if isinstance(value, (int, float)):
         return "number"
     return type(value).__name__
+
+
+SETTLE = 2.0
+"""Seconds after discovery found the graph's other nodes for NODE to appear among them;
+then a mistyped NODE fails with the names of the running ones (not after --timeout)."""
+
+
+def _wait_for_node(node: Any, client: Any, target: str, given: str, domain: int,
+                   timeout: float) -> None:
+    """Until ``client``'s services are ready; ParamError when the graph's nodes are discovered
+    and ``target`` is not one of them (listing them, with the closest name), or when no node
+    answers within ``timeout``."""
+    start = time.monotonic()
+    seen_at: float | None = None
+    wanted = "/" + target.lstrip("/")
+    running: list[str] = []
+    while time.monotonic() - start < timeout:
+        if client.wait_for_services(timeout_sec=0.1):
+            return
+        running = sorted({f"{ns.rstrip('/')}/{name}" for name, ns
+                          in node.get_node_names_and_namespaces()} - {"/exo_ilc_param"})
+        if wanted in running or not running:
+            continue
+        seen_at = seen_at or time.monotonic()
+        if time.monotonic() - seen_at > SETTLE:
+            close = difflib.get_close_matches(wanted, running, n=1)
+            hint = f"; did you mean {close[0].lstrip('/')}?" if close else ""
+            raise ParamError(f"no node {given} on ROS domain {domain}{hint} Running nodes: "
+                             + ", ".join(n.lstrip("/") for n in running))
+    raise ParamError(f"node {given} not found on ROS domain {domain} within {timeout:g} s"
+                     + (f" (running: {', '.join(n.lstrip('/') for n in running)})" if running
+                        else " (no node at all: is `exo-ilc run` running, and is ROS_DOMAIN_ID "
+                        "the one it printed?)"))
 
 
 def _environment_domain_id() -> int:

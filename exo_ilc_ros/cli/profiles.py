@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from ..analysis.therapy import DEGREES
+from ..analysis.wording import counted
 from ..core.persistence.profiles import ProfileBook, export_profile
 from ..core.programs.therapy import profiles_root
 from .arguments import directory, integer, output_file
@@ -43,14 +45,14 @@ def register(sub: Any) -> None:
 
 def _version_line(entry: dict[str, Any], current: int | None) -> str:
     mark = "*" if entry["version"] == current else " "
-    error = " ".join(f"{x:.2e}" for x in entry.get("final_max_abs_error", []))
+    error = " ".join(f"{x * DEGREES:.3g}" for x in entry.get("final_max_abs_error", []))
     share = (entry.get("metrics") or {}).get("patient_share_total")
-    share_text = "" if share is None else f", patient share {share:.3f}"
+    share_text = "" if share is None else f", patient share {100.0 * share:.3g} %"
     return (f" {mark} v{entry['version']:<3} {entry.get('updated', entry.get('created', '?'))}  "
-            f"{entry.get('status', '?'):<11} {entry.get('trials', 0):>4} trials "
+            f"{entry.get('status', '?'):<11} {counted(entry.get('trials', 0), 'trial'):>10} "
             f"({entry.get('trials_total', 0)} in all), law {entry.get('law', '?')}"
             f"{', assist-as-needed' if entry.get('assist_as_needed') else ''}, "
-            f"final max |e| {error} rad{share_text}, from "
+            f"final max |e| {error} deg{share_text}, from "
             f"{'v' + str(entry['started_from']) if entry.get('started_from') else 'zero'}"
             f"{_not_included(entry)}, config {entry.get('config_digest', '?')}"
             f"{_resumed(entry)}")
@@ -90,7 +92,8 @@ def run(args: argparse.Namespace) -> int:
         for exercise in book.exercises(args.patient):
             index = book.require_index(args.patient, exercise)
             entry = index["versions"][index["current"] - 1] if index["current"] else None
-            print(f"{exercise}: {len(index['versions'])} versions, current v{index['current']}"
+            versions = counted(len(index["versions"]), "version")
+            print(f"{exercise}: {versions}, current v{index['current']}"
                   + ("" if entry is None else f" ({entry.get('trials_total', 0)} trials "
                      f"learned, {entry.get('status')})"))
         return 0
@@ -101,9 +104,10 @@ def run(args: argparse.Namespace) -> int:
         for entry in index["versions"]:
             print(_version_line(entry, index["current"]))
         profile = book.load(args.patient, args.exercise)
-        peak = " ".join(f"{x:.3g}" for x in np.max(np.abs(profile.feedforward), axis=0))
+        peak = " ".join(f"{x * DEGREES:.3g}"
+                        for x in np.max(np.abs(profile.feedforward), axis=0))
         print(f"current v{profile.version}: {profile.feedforward.shape[0]} samples, "
-              f"max |u_ff| per joint {peak} rad/s^2 (sha256 checked)")
+              f"max |u_ff| per joint {peak} deg/s^2 (sha256 checked)")
         return 0
     if args.action == "export":
         profile = book.load(args.patient, args.exercise, args.version)

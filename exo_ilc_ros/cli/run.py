@@ -13,6 +13,8 @@ from typing import Any
 
 from tqdm import tqdm
 
+from ..analysis.therapy import format_filed_metrics
+from ..bag.run_writer import run_name
 from ..core.errors import ConfigError
 from ..core.params.config import Config
 from ..core.programs.metrics import TrialMetrics
@@ -22,8 +24,8 @@ from ..orchestration.graph import TrialSummary, run_graph
 from ..orchestration.launcher import GraphError, graph_nodes
 from ..orchestration.recording import Recording
 from ..wire import topics
-from .arguments import directory, domain_id
-from .simulate import add_config_arguments, config_from_args, print_report
+from .arguments import directory, domain_id, shown_command
+from .simulate import aborted_exit, add_config_arguments, config_from_args, print_report
 from .therapy import add_therapy_arguments, run_session_graph, uses_therapy
 
 
@@ -38,7 +40,8 @@ def register(sub: Any) -> None:
         "simulate`.")
     add_config_arguments(parser)
     parser.add_argument("--domain-id", type=domain_id, help="ROS domain id of the graph (default: "
-                        "a free one, claimed with a lock file)")
+                        "an exported ROS_DOMAIN_ID, else a free one, claimed with a lock "
+                        "file)")
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")
     parser.add_argument("--learned", action="store_true", help="also print per-trial tables "
                         "of max |u_ff| (learned feed-forward) and max |effort| per joint")
@@ -108,15 +111,22 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--no-store", "cannot be combined with --patient (the profile "
                               "is written from the run's store)")
         try:
-            print_report(args, config, run_session_graph(args, config, root, _run_one))
-        except GraphError as exc:
-            print(f"exo-ilc run: {exc}\nexo-ilc run: the graph was stopped; the profile holds "
-                  f"every completed trial (and the store {root})", file=sys.stderr)
+            exercises = run_session_graph(args, config, root, _run_one)
+            print_report(args, config, exercises)
+            for summary in exercises:
+                print()
+                print(format_filed_metrics(summary.extra.get("therapy") or {},
+                                           config["joint_names"]))
+            return aborted_exit(exercises, "run")
+        except (GraphError, KeyboardInterrupt) as exc:
+            interrupted = isinstance(exc, KeyboardInterrupt)
+            print(f"exo-ilc run: {'interrupted' if interrupted else exc}\nexo-ilc run: the graph "
+                  f"was stopped; the profile holds every completed trial (and the store "
+                  f"{root})", file=sys.stderr)
             resume = getattr(exc, "resume", None)  # set by run_session_graph
             if resume:
                 print(f"exo-ilc run: {resume}", file=sys.stderr)
-            return 3
-        return 0
+            return EXIT_INTERRUPTED if interrupted else EXIT_GRAPH
     runs: list[RunSummary] = []
     for delta in deltas:
         run_config = config.replace({"mass_uncertainty": delta})
@@ -128,18 +138,57 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr, flush=True)
         try:
             runs.append(_run_one(args, run_config, delta, trials))
-        except GraphError as exc:
-            print(f"exo-ilc run: {exc}", file=sys.stderr)
+        except (GraphError, KeyboardInterrupt) as exc:
+            interrupted = isinstance(exc, KeyboardInterrupt)
+            print(f"exo-ilc run: {'interrupted' if interrupted else exc}", file=sys.stderr)
             if root is not None:
-                again = [a for a in sys.argv[1:] if a not in ("--resume",)]
+                again = [a for a in args.argv if a not in ("--resume",)]
                 if "--store" not in again:
                     again += ["--store", str(root)]
+                if len(deltas) > 1:  # the runs still to do, this one first
+                    again = _with_deltas(again, deltas[deltas.index(delta):])
                 print(f"exo-ilc run: the graph was stopped; every completed trial is saved in "
-                      f"{root}. Continue with:\n  exo-ilc {shlex.join(again)} --resume",
+                      f"{root}. Continue with:\n  {shown_command()} {shlex.join(again)} --resume",
                       file=sys.stderr)
-            return 3
+            return EXIT_INTERRUPTED if interrupted else EXIT_GRAPH
     print_report(args, config, runs)
-    return 0
+    return aborted_exit(runs, "run")
+
+
+EXIT_GRAPH = 3
+"""Exit code: the graph stopped (a node died, a timeout); the store keeps what completed."""
+EXIT_INTERRUPTED = 130
+"""Exit code: Ctrl-C (the resume command is printed)."""
+
+
+def _with_deltas(argv: list[str], deltas: list[float]) -> list[str]:
+    """``argv`` with ``--mass-uncertainty`` naming only ``deltas``."""
+    out: list[str] = []
+    skipping = False
+    for word in argv:
+        if word == "--mass-uncertainty":
+            skipping = True
+            continue
+        if skipping and not word.startswith("-"):
+            continue
+        skipping = False
+        out.append(word)
+    return [*out, "--mass-uncertainty", *(f"{d:g}" for d in deltas)]
+
+
+def graph_domain(requested: int | None) -> int | None:
+    """The domain id a graph runs on: ``--domain-id``, else an exported ``ROS_DOMAIN_ID`` (a ROS
+    user's choice is honoured), else None (a free one is claimed)."""
+    if requested is not None:
+        return requested
+    exported = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if not exported:
+        return None
+    try:
+        return domain_id(exported)
+    except argparse.ArgumentTypeError as exc:
+        raise ConfigError("ROS_DOMAIN_ID", f"the exported value is not a domain id: {exc}") \
+            from None
 
 
 def announce_graph(bar: Any, bag: Path | None) -> Callable[[Any], None]:
@@ -147,11 +196,21 @@ def announce_graph(bar: Any, bag: Path | None) -> Callable[[Any], None]:
     and where the bag goes, printed once the nodes are up and before trial 1."""
     def on_start(session: Any) -> None:
         bar.write(f"graph on ROS_DOMAIN_ID={session.domain_id} (from another terminal: export "
-                  f"ROS_DOMAIN_ID={session.domain_id}, then exo-ilc param ...)", file=sys.stderr)
+                  f"ROS_DOMAIN_ID={session.domain_id}, then {shown_command()} param ...)",
+                  file=sys.stderr)
         if bag is not None:
             bar.write(f"recording to bag: {bag}", file=sys.stderr)
         sys.stderr.flush()
     return on_start
+
+
+def bag_name(args: argparse.Namespace, config: Config) -> str:
+    """``graph_<law>_d<delta>_<date>``, or for a therapy exercise
+    ``graph_<patient>_<exercise>_<law>_d<delta>_<date>`` (as ``simulate --patient`` names its
+    ``sim_<patient>_...`` bags: ``report bags/*_<patient>_*`` finds both)."""
+    patient = getattr(args, "patient", None)
+    source = f"graph_{patient}_{config['exercise.name']}" if patient else "graph"
+    return run_name(source, config["law"], config["mass_uncertainty"])
 
 
 def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
@@ -170,13 +229,15 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
                           file=sys.stderr)
             errors = summary.row("max_abs_error", config["joint_names"])
             bar.set_postfix_str("max|e| " + " ".join(f"{x:.1e}" for x in errors))
+        domain = graph_domain(args.domain_id)
         if args.no_bag:
-            result = run_graph(run_config, args.domain_id, on_summary=progress,
+            result = run_graph(run_config, domain, on_summary=progress,
                                on_start=announce_graph(bar, None), nodes=nodes)
         else:
             run_config = run_config.replace({"wait_for_recorder": True})
-            with Recording(run_config, args.bag_dir) as recording:
-                result = run_graph(run_config, args.domain_id, on_summary=progress,
+            with Recording(run_config, args.bag_dir, name=bag_name(args, run_config)) \
+                    as recording:
+                result = run_graph(run_config, domain, on_summary=progress,
                                    nodes=recording.graph_nodes(args.isolated_recorder, nodes),
                                    on_start=announce_graph(bar, recording.path))
             bar.write(f"bag: {recording.path}", file=sys.stderr)

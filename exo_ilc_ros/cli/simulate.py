@@ -8,11 +8,20 @@ from typing import Any
 
 from tqdm import tqdm
 
-from ..analysis.report import format_iterations, format_long_run, format_trial_table, write_json
+from ..analysis.report import (
+    format_iterations,
+    format_long_run,
+    format_run_events,
+    format_trial_table,
+    run_title,
+    write_json,
+)
 from ..bag import BagError, read_bag, run_name, unique_path, write_run
 from ..bag.replay import replay
+from ..core.errors import ConfigError
 from ..core.params.config import Config
 from ..core.programs.metrics import config_metrics
+from ..core.programs.spread import iteration_spread
 from ..core.session.learning_session import run_trials
 from ..core.session.summary import RunSummary
 from .arguments import (
@@ -20,7 +29,9 @@ from .arguments import (
     config_with_flags,
     directory,
     input_file,
+    integer,
     json_file,
+    mass_uncertainty,
     parameter,
 )
 from .therapy import add_therapy_arguments, simulate_session, uses_therapy
@@ -32,7 +43,7 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
                         "shipped config/exo_ilc.yaml (any subset of keys)")
     add_scenario_argument(parser)
-    parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
+    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
                         metavar="D", help="plant mass uncertainty delta, one run each (default: "
                         "the config's plant_simulator mass_uncertainty)")
     parser.add_argument("--trials", type=parameter("max_trials"),
@@ -62,14 +73,20 @@ def register(sub: Any) -> None:
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")
     parser.add_argument("--learned", action="store_true", help="also print per-trial tables "
                         "of max |u_ff| (learned feed-forward) and max |effort| per joint")
-    parser.add_argument("--bag", metavar="DIR", type=directory, help="also write each run as "
-                        "a rosbag2 bag DIR/<run-name>/ with the graph's topics (what "
-                        "bag_recorder records)")
+    parser.add_argument("--bag-dir", dest="bag", metavar="DIR", type=directory,
+                        help="also write each run as a rosbag2 bag DIR/<run-name>/ with the "
+                        "graph's topics (what bag_recorder records; the flag of run and paper)")
+    parser.add_argument("--bag", dest="bag_deprecated", metavar="DIR", type=directory,
+                        help=argparse.SUPPRESS)  # the old name of --bag-dir
     parser.add_argument("--store", metavar="DIR", type=directory, help="save every trial and "
                         "the learned feed-forward to DIR (atomic writes, keyed by trajectory + "
                         "config)")
     parser.add_argument("--resume", action="store_true", help="with --store: continue each "
                         "run after the last trial stored (bit-identical to an uninterrupted run)")
+    parser.add_argument("--spread", metavar="N", type=integer(2), help="also run each mass "
+                        "uncertainty N times from initial states perturbed by 1e-12 rad and "
+                        "print the iterations to the bound as median [min-max] (the sign law "
+                        "amplifies last-bit differences; 20 is a good N)")
     parser.add_argument("--replay", metavar="BAG", help="run a recorded run again in-process: "
                         "the bag's config, mass uncertainty, trial count and live parameter "
                         "changes (at the trials they took effect), then compare every trial "
@@ -80,7 +97,7 @@ def register(sub: Any) -> None:
 
 
 REPLAY_EXCLUDES = ("config", "scenario", "mass_uncertainty", "trials", "law", "store", "bag",
-                   "patient")
+                   "patient", "spread")
 
 
 def replay_bag(args: argparse.Namespace) -> int:
@@ -119,6 +136,12 @@ def replay_bag(args: argparse.Namespace) -> int:
 
 def simulate(args: argparse.Namespace) -> int:
     """Run and report."""
+    if args.bag_deprecated is not None:
+        if args.bag is not None:
+            raise ConfigError("--bag", "is the old name of --bag-dir; give one of them")
+        print("exo-ilc simulate: note: --bag is deprecated, use --bag-dir (the name run and "
+              "paper use)", file=sys.stderr)
+        args.bag = args.bag_deprecated
     if args.replay:
         return replay_bag(args)
     if args.resume and not args.store:
@@ -127,9 +150,12 @@ def simulate(args: argparse.Namespace) -> int:
     config = config_from_args(args)
 
     if uses_therapy(args):
+        if args.spread:
+            raise ConfigError("--spread", "runs the experiment again from perturbed states; a "
+                              "therapy session (--patient) runs once")
         _, runs = simulate_session(args, config)
         print_report(args, config, runs)
-        return 0
+        return aborted_exit(runs, "simulate")
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     trials = config["max_trials"]
     runs = []
@@ -143,6 +169,8 @@ def simulate(args: argparse.Namespace) -> int:
             result = run_trials(config, delta, trials, on_trial=progress, store=args.store,
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
+        if args.spread:
+            runs[-1].extra["spread"] = _spread(config, delta, trials, args.spread)
         if args.json:  # the therapy metrics of every trial (core/programs/metrics.py)
 
             measured = config.replace({"mass_uncertainty": delta})
@@ -155,7 +183,57 @@ def simulate(args: argparse.Namespace) -> int:
             path = unique_path(args.bag, run_name("sim", result.law, delta))
             print(f"bag: {write_run(path, config, result)}", file=sys.stderr)
     print_report(args, config, runs)
+    return aborted_exit(runs, "simulate")
+
+
+def _spread(config: Config, delta: float, trials: int, count: int) -> dict[str, Any]:
+    """--spread: the iterations to the bound of ``count`` perturbed runs, as JSON."""
+    with tqdm(total=count, desc=f"spread delta={delta:g}", unit="run", file=sys.stderr,
+              disable=None) as bar:
+        spread = iteration_spread(config, delta, trials, count,
+                                  on_run=lambda _: bar.update(1))
+    return spread.to_json()
+
+
+EXIT_ABORTED = 4
+"""Exit code of ``simulate`` and ``run``: every run completed, but the error envelope aborted
+trials (listed on stderr; nothing was learned from them): not a clean run."""
+
+
+def aborted_exit(runs: list[RunSummary], command: str) -> int:
+    """Say loudly which trials the error envelope aborted; :data:`EXIT_ABORTED` if any, else
+    0."""
+    any_aborted = False
+    for run in runs:
+        aborted = [int(k) for k in run.extra.get("aborted_trials", [])]
+        if not aborted:
+            continue
+        any_aborted = True
+        count = len(run.max_abs_error)
+        share = "ALL" if len(aborted) == count else f"{len(aborted)} of {count}"
+        print(f"exo-ilc {command}: WARNING: {run_title(run)}: {share} trials ABORTED by the "
+              f"error envelope (safety.error_envelope; the robot held the arm there and nothing "
+              f"was learned from them): trial{'s' if len(aborted) > 1 else ''} "
+              f"{_spans(aborted)}", file=sys.stderr)
+    if any_aborted:
+        print(f"exo-ilc {command}: exit {EXIT_ABORTED}: trials were aborted (check the mass "
+              "uncertainty, the gains and the envelope)", file=sys.stderr)
+        return EXIT_ABORTED
     return 0
+
+
+def _spans(trials: list[int]) -> str:
+    """``1-5, 8`` from sorted trial numbers."""
+    parts: list[str] = []
+    start = previous = trials[0]
+    for k in [*trials[1:], None]:
+        if k is not None and k == previous + 1:
+            previous = k
+            continue
+        parts.append(str(start) if start == previous else f"{start}-{previous}")
+        if k is not None:
+            start = previous = k
+    return ", ".join(parts)
 
 
 def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary]) -> None:
@@ -164,6 +242,10 @@ def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary
     names = config["joint_names"]
     if not args.quiet:
         print(format_trial_table(runs, names))
+        print()
+    events = format_run_events(runs)
+    if events:
+        print(events)
         print()
         if args.learned:
             for quantity in ("feedforward", "effort"):

@@ -13,7 +13,9 @@ from tqdm import tqdm
 from ..analysis import figures
 from ..analysis.study import format_study_table, run_cells, write_study_json
 from ..analysis.study_figure import study_figure
+from ..analysis.wording import counted
 from ..core.errors import ConfigError
+from ..core.params.redact import redact
 from ..core.programs.study import (
     SHIPPED_LAWS,
     StudyCell,
@@ -23,7 +25,7 @@ from ..core.programs.study import (
     study_cells,
 )
 from ..core.programs.study_rows import study_rows
-from .arguments import figure_path, integer, json_file, nonempty, parameter, seed
+from .arguments import figure_path, integer, json_file, mass_uncertainty, nonempty, parameter, seed
 from .tune import default_jobs
 
 DEFAULT_LAWS = ("sign", "tuned", "linear", "robust", "norm_optimal")
@@ -45,7 +47,7 @@ def register(sub: Any) -> None:
     parser.add_argument("--scenarios", nargs="+", type=nonempty, metavar="SCENARIO",
                         help="shipped scenarios (config/scenarios/NAME.yaml), overlay files, "
                         "or LABEL=FILE (default: every shipped scenario)")
-    parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
+    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
                         metavar="D", default=[0.05, 0.10, 0.15], help="default: 0.05 0.10 0.15")
     parser.add_argument("--trials", type=parameter("max_trials"), default=DEFAULT_TRIALS,
                         metavar="K", help=f"trials per cell (default: {DEFAULT_TRIALS})")
@@ -75,11 +77,12 @@ def study(args: argparse.Namespace) -> int:
     seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     cells = study_cells(laws, scenarios, args.mass_uncertainty, seeds, args.trials)
     workers = args.workers or default_jobs()
-    where = f"the Dask cluster at {args.dask}" if args.dask else \
+    where = f"the Dask cluster at {redact(args.dask)}" if args.dask else \
         f"{min(workers, len(cells))} local process(es)"
-    print(f"study: {len(laws)} laws x {len(scenarios)} scenarios x "
-          f"{len(args.mass_uncertainty)} uncertainties x {len(seeds)} seeds = {len(cells)} "
-          f"cells of {args.trials} trials on {where}", file=sys.stderr)
+    print(f"study: {counted(len(laws), 'law')} x {counted(len(scenarios), 'scenario')} x "
+          f"{counted(len(args.mass_uncertainty), 'uncertainty')} x "
+          f"{counted(len(seeds), 'seed')} = {counted(len(cells), 'cell')} of "
+          f"{counted(args.trials, 'trial')} on {where}", file=sys.stderr)
     for law in laws:
         print(f"  law {law.describe()}", file=sys.stderr)
     with tqdm(total=len(cells), desc="study", unit="cell", file=sys.stderr,

@@ -13,6 +13,7 @@ from tqdm import tqdm
 
 from ..analysis import session_report as keys
 from ..analysis.therapy import format_session_metrics
+from ..analysis.wording import counted
 from ..bag import run_name, unique_path, write_run
 from ..core.errors import ConfigError
 from ..core.loop.patient import PatientModel
@@ -26,7 +27,7 @@ from ..core.reference.exercise import exercises_path, load_book
 from ..core.session.learning_session import stored_trials
 from ..core.session.summary import RunSummary
 from ..orchestration.launcher import GraphError
-from .arguments import directory, nonempty
+from .arguments import directory, nonempty, shown_command
 from .therapy_resume import Step, resume_command, resumed_steps, stored_summary
 
 
@@ -90,12 +91,12 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
     session = session_id()
     results: list[ExerciseResult] = []
     runs: list[RunSummary] = []
-    for item, (name, trials) in zip(prepared, plan, strict=True):
+    for order, (item, (name, trials)) in enumerate(zip(prepared, plan, strict=True), start=1):
         count = trials or item.config["max_trials"]
         start = "from zero" if item.start is None else \
             f"from profile v{item.start.version} ({item.start.provenance.get('trials_total')} " \
             "trials learned)"
-        print(f"patient {args.patient}, exercise {name}: {count} trials, {start}",
+        print(f"patient {args.patient}, exercise {name}: {counted(count, 'trial')}, {start}",
               file=sys.stderr)
         with tqdm(total=count, desc=f"{args.patient} {name}", unit="trial", file=sys.stderr,
                   disable=None) as bar:
@@ -114,7 +115,7 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
             path = unique_path(args.bag, run_name(f"sim_{args.patient}_{name}", done.result.law,
                                                   done.result.mass_uncertainty))
             write_run(path, done.config, done.result, metrics=done.metrics,
-                      extra_custom_data=therapy_custom_data(done, session))
+                      extra_custom_data=therapy_custom_data(done, session, order))
             print(f"bag: {path}", file=sys.stderr)
     for done in results:
         print(format_session_metrics(done, list(done.config["joint_names"])))
@@ -122,12 +123,12 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
     return results, runs
 
 
-def therapy_custom_data(done: ExerciseResult, session: str) -> dict[str, str]:
-    """The bag's custom data naming the patient, exercise, session and profile versions."""
-
+def therapy_custom_data(done: ExerciseResult, session: str, order: int) -> dict[str, str]:
+    """The bag's custom data naming the patient, exercise (and its place ``order`` in the
+    session), session and profile versions."""
     return {keys.PATIENT: done.patient, keys.EXERCISE: done.exercise, keys.SESSION: session,
             keys.PROFILE_STARTED_FROM: str(done.started_from or ""),
-            keys.PROFILE_VERSION: str(done.version or "")}
+            keys.PROFILE_VERSION: str(done.version or ""), keys.EXERCISE_ORDER: str(order)}
 
 
 def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
@@ -167,7 +168,7 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
             "max_trials": step.trials or item.config["max_trials"],
             "store.directory": str(store_root), "patient.session": version}), args.resume)
     runs: list[RunSummary] = []
-    for step in steps:
+    for order, step in enumerate(steps, start=1):
         name = step.name
         if step.done is not None:  # reported from its store, as the first run would have
             print(f"patient {args.patient}, exercise {name}: session {session}'s "
@@ -190,17 +191,19 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
         cfg = writer.config
         start = "from zero" if item.start is None else f"from profile v{item.start.version}"
         again = f" (resuming v{writer.version})" if step.reopen else ""
-        print(f"patient {args.patient}, exercise {name}: {count} trials through the graph, "
+        print(f"patient {args.patient}, exercise {name}: {counted(count, 'trial')} through the "
+              f"graph, "
               f"{start}, session {writer.version}{again}, session id {session}, store "
               f"{store_root}",
               file=sys.stderr, flush=True)
         summary: RunSummary | None = None
         try:
             summary = run_one(args, cfg, cfg["mass_uncertainty"], count)
-        except GraphError as exc:  # run.py prints it with the error
+        except (GraphError, KeyboardInterrupt) as exc:  # run.py prints it with the error
             setattr(exc, "resume",  # noqa: B010 (an attribute GraphError does not declare)
                     f"to continue this session exactly (v{writer.version} of {name}):\n  "
-                    + resume_command(list(args.argv), str(store_root), session))
+                    + resume_command(list(args.argv), str(store_root), session,
+                                     shown_command()))
             raise
         finally:
             stored = RunStore(store_root, cfg, reference).load()
@@ -216,9 +219,10 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
                 if bag:
                     _write_sidecar(Path(bag), args.patient, name, session,
                                    item.start.version if item.start else None,
-                                   writer.version)
+                                   writer.version, order)
             if done is not None:
-                print(f"profile: {writer.directory} v{writer.version} ({len(done)} trials)",
+                print(f"profile: {writer.directory} v{writer.version} "
+                      f"({counted(len(done), 'trial')})",
                       file=sys.stderr)
         if summary is not None:
             runs.append(summary)
@@ -246,8 +250,9 @@ node does not know them)."""
 
 
 def _write_sidecar(bag: Path, patient: str, exercise: str, session: str,
-                   started_from: int | None, version: int) -> None:
+                   started_from: int | None, version: int, order: int) -> None:
     if bag.is_dir():
         write_json_atomic(bag / SIDECAR, {"patient": patient, "exercise": exercise,
                                           "session": session, "profile_started_from":
-                                          started_from, "profile_version": version})
+                                          started_from, "profile_version": version,
+                                          "exercise_order": order})

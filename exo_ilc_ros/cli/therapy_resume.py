@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..analysis.wording import counted
 from ..core.errors import ProfileError
 from ..core.params.config import Config
 from ..core.persistence.profiles import ProfileBook
@@ -27,6 +28,7 @@ from ..core.programs.therapy import PreparedExercise, prepare
 from ..core.reference.build import build_reference
 from ..core.session.result import RunResult
 from ..core.session.summary import RunSummary
+from .arguments import shown_command
 
 RUN_STORE = "run_store"
 """The index entry's key of the run store a graph session saves its trials in (None: an
@@ -49,8 +51,9 @@ class Unfinished:
         """``exercise vN (status, trials, from vM, begun DATE)``."""
         e = self.entry
         start = "zero" if e.get("started_from") is None else f"v{e['started_from']}"
-        return (f"{self.exercise} v{e['version']} ({e.get('status')}, {e.get('trials', 0)} "
-                f"trials, from {start}, begun {e.get('created', '?')})")
+        return (f"{self.exercise} v{e['version']} ({e.get('status')}, "
+                f"{counted(e.get('trials', 0), 'trial')}, from {start}, begun "
+                f"{e.get('created', '?')})")
 
 
 @dataclass
@@ -77,10 +80,10 @@ def unfinished(book: ProfileBook, patient: str, exercises: list[str]) -> list[Un
     return found
 
 
-def resume_command(argv: list[str], store: str, key: str) -> str:
+def resume_command(argv: list[str], store: str, key: str, program: str = "") -> str:
     """The exact command resuming session ``key``: ``argv`` without --resume [value],
     --store DIR and --new-patient (the patient has a profile now), then --store and
-    --resume ``key``."""
+    --resume ``key``; ``program`` is how to type exo-ilc here (default: ``shown_command()``)."""
     kept: list[str] = []
     skip = False
     for i, arg in enumerate(argv):
@@ -94,7 +97,8 @@ def resume_command(argv: list[str], store: str, key: str) -> str:
         if arg.startswith(("--store=", "--resume=")) or arg == "--new-patient":
             continue
         kept.append(arg)
-    return "exo-ilc " + shlex.join([*kept, "--store", store, "--resume", key])
+    return (program or shown_command()) + " " + shlex.join([*kept, "--store", store, "--resume",
+                                                             key])
 
 
 def _listing(found: list[Unfinished], argv: list[str], store: Path) -> str:

@@ -14,17 +14,21 @@ import optuna
 from tqdm import tqdm
 
 from ..analysis.tuning import RunScore, TuningProblem, TuningResult, best_result, optimize
+from ..analysis.wording import counted
 from ..core.errors import ConfigError
 from ..core.params.config import load_config
+from ..core.params.redact import redact
 from .arguments import (
     add_scenario_argument,
     at_least_two_trials,
     input_file,
     integer,
+    mass_uncertainty,
     nonempty,
     number,
     parameter,
     seed,
+    shown_command,
     storage,
     yaml_out,
 )
@@ -61,7 +65,7 @@ def register(sub: Any) -> None:
     parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
                         "shipped config; its schedules are the starting point (trial 0)")
     add_scenario_argument(parser)
-    parser.add_argument("--mass-uncertainty", type=parameter("mass_uncertainty"), nargs="+",
+    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
                         metavar="D",
                         default=[0.05, 0.10, 0.15], help="uncertainties scored at once "
                         "(default: 0.05 0.10 0.15)")
@@ -128,8 +132,11 @@ def tune(args: argparse.Namespace) -> int:
     problem = TuningProblem.from_config(config, args.mass_uncertainty, trials,
                                         args.peak_weight, args.aggregate, args.law)
     name = args.study_name or problem.default_study_name()
-    print(f"study {name} in {args.storage}: {args.budget} more trials on {args.jobs} job(s), "
-          f"{trials} trials x {len(problem.mass_uncertainties)} uncertainties each")
+    more = counted(args.budget, "more trial")
+    deltas = counted(len(problem.mass_uncertainties), "uncertainty")
+    print(f"study {name} in {redact(args.storage)}: {more} on {counted(args.jobs, 'job')}, "
+          f"{counted(trials, 'trial')} x {deltas}"
+          " each")
     with tqdm(total=args.budget, desc="tune", unit="trial", file=sys.stderr,
               disable=None) as bar:
         start: list[int] = []
@@ -154,17 +161,18 @@ def tune(args: argparse.Namespace) -> int:
     deltas = " ".join(f"{d:g}" for d in problem.mass_uncertainties)
     what = "Sign-law schedules" if args.law == "sign" else "Norm-optimal weights and model"
     header = (f"{what} tuned by `exo-ilc tune` (Optuna study {name}, storage "
-              f"{args.storage}).\n"
+              f"{redact(args.storage)}).\n"
               f"Objective {result.best_value:.1f} (starting schedules: "
               f"{'-' if result.baseline_value is None else f'{result.baseline_value:.1f}'}): "
               f"worst trial from which every joint stays within the bound over delta = {deltas},"
               f" {trials} trials each, + {problem.peak_weight:g} per 100 % peak overshoot.\n"
-              "Use: exo-ilc simulate --config THIS_FILE, or --params-file THIS_FILE for the "
-              "nodes.")
+              f"Use: {shown_command()} simulate --config THIS_FILE, or --params-file THIS_FILE "
+              "for the nodes.")
     out.write_text(tuned.to_ros_yaml(header))
     if load_config(out).values != tuned.values:
         raise ConfigError("<file>", "the written tuned config does not read back unchanged",
                           str(out))
     print(f"wrote {out}")
-    print(f"use it with: exo-ilc simulate --config {out}; exo-ilc compare --tuned {out}")
+    program = shown_command()
+    print(f"use it with: {program} simulate --config {out}; {program} compare --tuned {out}")
     return 0

@@ -8,6 +8,7 @@ returns a :class:`report.RunSummary`, the same as ``exo-ilc simulate`` reports.
 
 from __future__ import annotations
 
+import json
 import os
 import tempfile
 import time
@@ -22,10 +23,10 @@ import numpy as np
 from ..core.params.config import Config
 from ..core.persistence.store import RunStore
 from ..core.reference.build import build_reference
-from ..core.session.summary import RunSummary
+from ..core.session.summary import RunSummary, live_changes
 from ..nodes.common import EVENTS_QOS
 from ..wire import topics
-from ..wire.protocol import int_value, per_joint, summary_values
+from ..wire.protocol import PARAMETERS_CHANGED, int_value, per_joint, summary_values
 from .launcher import (
     GRAPH_NODES,
     DomainClaim,
@@ -62,7 +63,7 @@ def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSu
     """The :class:`RunSummary` of a graph run, as ``RunSummary.from_result`` gives in-process."""
     joints = config["joint_names"]
     first = summaries[0].values if summaries else {}
-    return RunSummary(float(first.get("mass_uncertainty", config["mass_uncertainty"])),
+    summary = RunSummary(float(first.get("mass_uncertainty", config["mass_uncertainty"])),
                       str(first.get("law", config["law"])), float(config["error_bound"]),
                       np.array([s.row("max_abs_error", joints) for s in summaries]),
                       np.array([s.row("max_abs_feedforward", joints) for s in summaries]),
@@ -70,6 +71,26 @@ def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSu
                       true_max_abs_error=np.array([s.row("true_max_abs_error", joints)
                                                    for s in summaries])
                       if f"true_max_abs_error/{joints[0]}" in first else None)
+    applied = {s.trial + 1: json.loads(s.values[PARAMETERS_CHANGED]) for s in summaries
+               if s.values.get(PARAMETERS_CHANGED)}
+    summary.extra.update(live_changes(applied, str(config["law"])))
+    aborted = [s.trial for s in summaries if "aborted_at" in s.values]
+    if aborted:
+        summary.extra["aborted_trials"] = aborted
+    return summary
+
+
+def reruns(events: Sequence[tuple[str, dict[str, str], float]]) -> list[dict[str, Any]]:
+    """The trials run again (an ``aborted`` event for another reason than the error envelope:
+    a watchdog trip, lost samples, a timeout), each with its reason, in order."""
+    out: list[dict[str, Any]] = []
+    for message, values, _ in events:
+        if message == "aborted" and values.get("reason") != topics.ENVELOPE_REASON:
+            trial = int_value(values, "trial")
+            if trial is not None:
+                out.append({"trial": trial,
+                            "reason": values.get("reason") or values.get("phase") or "?"})
+    return out
 
 
 def stored_summaries(config: Config) -> list[TrialSummary]:
@@ -169,8 +190,9 @@ class GraphSession:
     def close(self) -> dict[str, int]:
         """Stop the processes (SIGINT, then SIGKILL), the monitor node, the domain claim."""
         codes = self.processes.stop() if self.processes.processes else {}
-        if self.node is not None:
-            self.executor.remove_node(self.node)
+        if self.node is not None:  # the executor may be missing: __enter__ failed before it
+            if self.executor is not None:
+                self.executor.remove_node(self.node)
             self.node.destroy_node()
             self.node = None
         if self.context is not None:
@@ -278,4 +300,8 @@ def run_graph(config: Config, domain_id: int | None = None, extra: Sequence[Node
         if session.started_at is not None and session.finished_at is not None:
             wall = session.finished_at - session.started_at
         summaries = merge_with_store(session.summaries, config)
-        return GraphRun(summaries_to_run(summaries, config), summaries, wall)
+        summary = summaries_to_run(summaries, config)
+        again = reruns(session.events)
+        if again:
+            summary.extra["reruns"] = again
+        return GraphRun(summary, summaries, wall)

@@ -3,13 +3,18 @@
 A learning law whose trial-to-trial factor exceeds 1 somewhere (:mod:`.convergence`) grows the
 learned input geometrically in that band, max |u_ff|_k ~ c rho^k, long before the tracking error
 shows it. Fitting log max |u_ff| = a + r k over the last ``window`` trials estimates r = log rho
-per trial; a run is flagged when r is both above a practical floor and significantly above 0.
+per trial; a run is flagged when r is both above a practical floor and significantly above 0,
+and the trial-to-trial increments of max |u_ff| are not shrinking. A learned input that still
+approaches its limit (increments falling geometrically, as a converging law's do in its first
+tens of trials) also has r > 0 over a short window, but it is not growing: flagging it was the
+false ``GROWING`` of norm_optimal at 30 trials (issue 25).
 Works on any (trials, joints) table: an in-process run, a JSON export or a bag's trials.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -33,6 +38,11 @@ class GrowthFit:
     growing: np.ndarray
     first_trial: int
     last_trial: int
+    usable: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    """Per joint: trials of the window with a learned input (max |u_ff| > 0); fewer than
+    :data:`MIN_TRIALS` give no rate (NaN), none means the joint learned nothing."""
+    converging: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    """Per joint: the increments of max |u_ff| shrink significantly (approach to a limit)."""
 
     @property
     def any_growing(self) -> bool:
@@ -44,13 +54,41 @@ class GrowthFit:
         return np.asarray(np.exp(self.rate))
 
 
+def _slope(k: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Least-squares slope of y against k and its standard error (compensated sums: the same
+    bits whatever BLAS the machine has)."""
+    kc = k - k.mean()
+    sxx = math.fsum(kc * kc)
+    slope = math.fsum(kc * (y - y.mean())) / sxx
+    residual = y - y.mean() - kc * slope
+    return slope, math.sqrt(math.fsum(residual * residual) / (k.size - 2) / sxx)
+
+
+def increments_shrink(column: np.ndarray, significance: float = DEFAULT_SIGNIFICANCE) -> bool:
+    """True if the trial-to-trial changes of ``column`` (max |u_ff| of one joint) fall
+    geometrically: the slope of log |u_(k+1) - u_k| is significantly below 0. Changes at the
+    rounding level of the values (below :data:`INCREMENT_FLOOR` of them) carry no trend and
+    are left out; too few left: False."""
+    change = np.abs(np.diff(column))
+    used = change > INCREMENT_FLOOR * np.abs(column[1:])
+    if np.count_nonzero(used) < MIN_TRIALS - 1:
+        return False
+    slope, stderr = _slope(np.flatnonzero(used).astype(float), np.log(change[used]))
+    return bool(slope < 0.0 and slope < -significance * stderr)
+
+
+INCREMENT_FLOOR = 1e-9
+"""Relative size below which a change of max |u_ff| is rounding, not learning."""
+
+
 def fit_growth(max_abs_feedforward: np.ndarray, window: int = DEFAULT_WINDOW,
                min_rate: float = DEFAULT_MIN_RATE,
                significance: float = DEFAULT_SIGNIFICANCE) -> GrowthFit | None:
     """Least-squares fit of log max |u_ff|_k = a + r k per joint over the last ``window`` trials.
 
     Flags a joint when r > ``min_rate`` and r > ``significance`` * stderr(r) (ordinary least
-    squares standard error). Zero entries (trial 1's zero feed-forward) are left out; a joint
+    squares standard error), unless its increments shrink (:func:`increments_shrink`: still
+    approaching a limit). Zero entries (trial 1's zero feed-forward) are left out; a joint
     with fewer than :data:`MIN_TRIALS` usable trials gets NaN and no flag. None if the table has
     fewer than :data:`MIN_TRIALS` trials.
     """
@@ -64,18 +102,17 @@ def fit_growth(max_abs_feedforward: np.ndarray, window: int = DEFAULT_WINDOW,
     joints = table.shape[1]
     rate = np.full(joints, np.nan)
     stderr = np.full(joints, np.nan)
+    usable = np.zeros(joints, dtype=int)
+    converging = np.zeros(joints, dtype=bool)
     for j in range(joints):
         column = table[first:, j]
         used = column > 0.0  # a zero feed-forward (trial 1) has no logarithm
-        if np.count_nonzero(used) < MIN_TRIALS:
+        usable[j] = np.count_nonzero(used)
+        if usable[j] < MIN_TRIALS:
             continue
         k = np.arange(first, table.shape[0], dtype=float)[used]
-        y = np.log(column[used])
-        kc = k - k.mean()
-        sxx = float(kc @ kc)
-        rate[j] = float(kc @ (y - y.mean())) / sxx
-        residual = y - y.mean() - kc * rate[j]
-        stderr[j] = np.sqrt(float(residual @ residual) / (k.size - 2) / sxx)
+        rate[j], stderr[j] = _slope(k, np.log(column[used]))
+        converging[j] = increments_shrink(column[used], significance)
     with np.errstate(invalid="ignore"):
-        growing = (rate > min_rate) & (rate > significance * stderr)
-    return GrowthFit(rate, stderr, growing, first + 1, table.shape[0])
+        growing = (rate > min_rate) & (rate > significance * stderr) & ~converging
+    return GrowthFit(rate, stderr, growing, first + 1, table.shape[0], usable, converging)

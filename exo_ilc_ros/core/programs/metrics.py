@@ -14,7 +14,11 @@ Definitions (per joint j over the samples of the trial; an aborted trial up to t
   the model with the trial's true masses) along the true movement, qdd by central differences,
   plus the passive arm's friction and stiffness (:class:`PassiveArm`; not its spasticity).
   0: the robot did all of it; 1: the patient did; < 0: the patient worked against the robot.
-  Per joint and over all joints together;
+  Per joint and over all joints together. Its resolution: the robot's torque is held over a
+  control period while the movement's need changes within it, so the two sums cannot be told
+  apart closer than half the sum of the need's sample-to-sample changes,
+  r = sum|tau_req(i+1) - tau_req(i)| / (2 sum|tau_req|); a share within +-r is 0 (a passive
+  patient's share, never a tiny negative number that would read "worked against the robot");
 * smoothness: the spectral arc length (SPARC, Balasubramanian et al., J NeuroEng Rehabil 12:112,
   2015) of the joint-space speed |qdot|: negative, closer to 0 is smoother (a rest-to-rest
   quintic gives about -1.5);
@@ -22,11 +26,15 @@ Definitions (per joint j over the samples of the trial; an aborted trial up to t
   add beyond the required one, tau_robot - tau_required (what the patient resisted), against
   the joint velocity (McCrea et al. 2003: a velocity-dependent resistance B qdot that rises
   with the Modified Ashworth grade). About 0 for a relaxed arm, > 0 when the arm resists
-  motion in proportion to its speed.
+  motion in proportion to its speed. Not measurable (NaN) on a joint that moved less than
+  :data:`MIN_RANGE_OF_MOTION` in the trial: its velocities are too small and too few for a
+  velocity-dependent term to be told apart from the rest (a fit there gave -6.5 N m s/rad on a
+  joint an exercise held still).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -47,7 +55,12 @@ METRIC_UNITS = {
 PER_JOINT = ("rms_error", "max_error", "assistance_rms", "feedforward_rms", "patient_share",
              "spasticity")
 """Metrics with one value per joint (the rest: one value for the whole arm)."""
+OPTIONAL_PER_JOINT = ("range_of_motion", "patient_share_resolution")
+"""Per-joint values added later (a bag or export without them reads them as unknown)."""
 SUMMARY_PREFIX = "metric/"
+MIN_RANGE_OF_MOTION = float(np.radians(5.0))
+"""rad: a joint that moved less than 5 degrees in a trial has no measurable spasticity
+indicator."""
 
 
 @dataclass(frozen=True)
@@ -64,32 +77,61 @@ class TrialMetrics:
     smoothness: float
     spasticity: np.ndarray
     aborted: bool = False
+    range_of_motion: np.ndarray | None = None
+    """rad, max q - min q per joint (None: not recorded, a bag of an earlier version)."""
+    patient_share_resolution: np.ndarray | None = None
+    """Per joint: the share's resolution r (module docstring; None: not recorded)."""
+    patient_share_total_resolution: float = 0.0
 
     def to_json(self) -> dict[str, Any]:
-        """Plain numbers, by metric name (``patient_share_total`` beside the per-joint one)."""
+        """Plain numbers, by metric name (``patient_share_total`` beside the per-joint one);
+        a value not measurable is null."""
         out: dict[str, Any] = {"trial": self.trial, "aborted": self.aborted}
-        for name in PER_JOINT:
-            out[name] = [float(x) for x in getattr(self, name)]
+        for name in PER_JOINT + OPTIONAL_PER_JOINT:
+            values = getattr(self, name)
+            if values is not None:
+                out[name] = [float(x) if np.isfinite(x) else None for x in values]
         out["patient_share_total"] = float(self.patient_share_total)
+        out["patient_share_total_resolution"] = float(self.patient_share_total_resolution)
         out["smoothness"] = float(self.smoothness)
         return out
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> TrialMetrics:
         """Inverse of :meth:`to_json`."""
-        arrays = {name: np.asarray(data[name], dtype=float) for name in PER_JOINT}
+        arrays = {name: np.array([np.nan if x is None else x for x in data[name]], dtype=float)
+                  for name in PER_JOINT + OPTIONAL_PER_JOINT if name in data}
         return cls(int(data["trial"]), patient_share_total=float(data["patient_share_total"]),
                    smoothness=float(data["smoothness"]), aborted=bool(data.get("aborted")),
-                   **arrays)
+                   patient_share_total_resolution=float(
+                       data.get("patient_share_total_resolution", 0.0)), **arrays)
+
+    def spasticity_reasons(self) -> list[str]:
+        """Per joint: why the spasticity indicator is not measurable ("" where it is)."""
+        out = []
+        for j, value in enumerate(self.spasticity):
+            moved = None if self.range_of_motion is None else float(self.range_of_motion[j])
+            if moved is not None and moved < MIN_RANGE_OF_MOTION:
+                out.append(f"the joint barely moved ({np.degrees(moved):.2g} deg, needs "
+                           f"{np.degrees(MIN_RANGE_OF_MOTION):g} deg)")
+            elif not np.isfinite(value):
+                out.append("no velocity to fit against")
+            else:
+                out.append("")
+        return out
 
     def summary_values(self, names: Sequence[str]) -> list[tuple[str, str]]:
         """``metric/<name>/<joint>`` and ``metric/<name>`` key-values (floats as repr) for the
         trial summary (``wire.protocol``)."""
         out = []
-        for name in PER_JOINT:
-            out += [(f"{SUMMARY_PREFIX}{name}/{n}", repr(float(x)))
-                    for n, x in zip(names, getattr(self, name), strict=True)]
+        for name in PER_JOINT + OPTIONAL_PER_JOINT:
+            values = getattr(self, name)
+            if values is not None:
+                out += [(f"{SUMMARY_PREFIX}{name}/{n}", repr(float(x)))
+                        for n, x in zip(names, values, strict=True)]
         out.append((f"{SUMMARY_PREFIX}patient_share", repr(float(self.patient_share_total))))
+        out.append((f"{SUMMARY_PREFIX}patient_share_resolution",
+                    repr(float(self.patient_share_total_resolution))))
         out.append((f"{SUMMARY_PREFIX}smoothness", repr(float(self.smoothness))))
         return out
 
@@ -102,10 +144,15 @@ class TrialMetrics:
                                       for n in names]) for name in PER_JOINT}
             total = float(values[f"{SUMMARY_PREFIX}patient_share"])
             smooth = float(values[f"{SUMMARY_PREFIX}smoothness"])
+            for name in OPTIONAL_PER_JOINT:
+                keys = [f"{SUMMARY_PREFIX}{name}/{n}" for n in names]
+                if all(key in values for key in keys):
+                    arrays[name] = np.array([float(values[key]) for key in keys])
+            resolution = float(values.get(f"{SUMMARY_PREFIX}patient_share_resolution", 0.0))
         except (KeyError, ValueError):
             return None
         return cls(trial, patient_share_total=total, smoothness=smooth, aborted=aborted,
-                   **arrays)
+                   patient_share_total_resolution=resolution, **arrays)
 
 
 def sparc(speed: np.ndarray, rate_hz: float, pad_level: int = 4, cutoff_hz: float = 10.0,
@@ -186,16 +233,36 @@ def required_torque(model: ArmModel, position: np.ndarray, velocity: np.ndarray,
     return rigid if passive is None else rigid + passive.torque(position, velocity)
 
 
-def velocity_slope(resistance: np.ndarray, velocity: np.ndarray) -> np.ndarray:
-    """Per joint the least-squares slope B of resistance = B qdot + c (0 where qdot is
-    constant)."""
-    out = np.zeros(resistance.shape[1])
+def velocity_slope(resistance: np.ndarray, velocity: np.ndarray,
+                   range_of_motion: np.ndarray | None = None) -> np.ndarray:
+    """Per joint the least-squares slope B of resistance = B qdot + c; NaN where it is not
+    identifiable: qdot constant, or the joint moved less than :data:`MIN_RANGE_OF_MOTION`
+    (``range_of_motion``, rad)."""
+    out = np.full(resistance.shape[1], np.nan)
     for j in range(resistance.shape[1]):
+        if range_of_motion is not None and range_of_motion[j] < MIN_RANGE_OF_MOTION:
+            continue
         v = velocity[:, j] - velocity[:, j].mean()
-        denominator = float(v @ v)
+        denominator = math.fsum(v * v)
         if denominator > 1e-12:
-            out[j] = float(v @ (resistance[:, j] - resistance[:, j].mean())) / denominator
+            out[j] = math.fsum(v * (resistance[:, j] - resistance[:, j].mean())) / denominator
     return out
+
+
+def share_resolution(required: np.ndarray) -> tuple[np.ndarray, float]:
+    """r = sum|tau_req(i+1) - tau_req(i)| / (2 sum|tau_req|) per joint and for the whole arm:
+    how closely sums of a torque held over each control period can match the movement's need
+    (module docstring)."""
+    change = np.sum(np.abs(np.diff(required, axis=0)), axis=0)
+    need = np.sum(np.abs(required), axis=0)
+    per_joint = np.where(need > 0.0, 0.5 * change / np.where(need > 0.0, need, 1.0), 0.0)
+    total = 0.5 * float(np.sum(change)) / float(np.sum(need)) if np.sum(need) > 0 else 0.0
+    return np.asarray(per_joint), total
+
+
+def _resolved(share: np.ndarray | float, resolution: np.ndarray | float) -> Any:
+    """``share``, with 0 where it is within +-``resolution`` (not resolvable from 0)."""
+    return np.where(np.abs(share) <= resolution, 0.0, share)
 
 
 def trial_metrics(record: TrialRecord, nominal: ArmModel, plant: ArmModel,
@@ -218,11 +285,15 @@ def trial_metrics(record: TrialRecord, nominal: ArmModel, plant: ArmModel,
     needed = np.sum(np.abs(required), axis=0)
     share = np.where(needed > 0.0, 1.0 - robot / np.where(needed > 0.0, needed, 1.0), 0.0)
     total = 1.0 - float(np.sum(robot)) / float(np.sum(needed)) if np.sum(needed) > 0 else 0.0
+    resolution, total_resolution = share_resolution(required)
     speed = np.linalg.norm(qd, axis=1)
+    moved = np.max(q, axis=0) - np.min(q, axis=0)
     return TrialMetrics(record.trial, _rms(error), np.max(np.abs(error), axis=0),
                         _rms(beyond_gravity), _rms(np.asarray(record.feedforward)[:end]),
-                        np.asarray(share), total, sparc(speed, 1.0 / period),
-                        velocity_slope(effort - required, qd), record.aborted)
+                        np.asarray(_resolved(share, resolution)),
+                        float(_resolved(total, total_resolution)), sparc(speed, 1.0 / period),
+                        velocity_slope(effort - required, qd, moved), record.aborted, moved,
+                        resolution, total_resolution)
 
 
 @dataclass(frozen=True)

@@ -23,24 +23,22 @@ class QuinticTrajectory:
     def rest_to_rest(cls, start: Sequence[float], goal: Sequence[float],
                      duration: float) -> QuinticTrajectory:
         """The quintic through q(0) = start, q(T) = goal with zero velocity and acceleration at
-        both ends, eq (14); solved from its six boundary conditions."""
+        both ends, eq (14), in closed form: a0 = q0, a1 = a2 = 0, a3 = 10 d / T^3,
+        a4 = -15 d / T^4, a5 = 6 d / T^5 with d = goal - start.
+
+        Closed form rather than a linear solve: a1 and a2 come out exactly 0 (a LAPACK solve gives
+        about 1e-16 with a sign that depends on the BLAS kernel the CPU selects, and the sign law
+        takes the sign of the error's acceleration at rest, so runs diverged between machines).
+        """
         if duration <= 0.0:
             raise ValueError("trajectory duration must be positive")
         q0 = np.asarray(start, dtype=float)
-        qf = np.asarray(goal, dtype=float)
+        d = np.asarray(goal, dtype=float) - q0
         t = float(duration)
-        # rows: q(0), qd(0), qdd(0), q(T), qd(T), qdd(T) as linear functions of a0..a5
-        conditions = np.array([
-            [1, 0, 0, 0, 0, 0],
-            [0, 1, 0, 0, 0, 0],
-            [0, 0, 2, 0, 0, 0],
-            [1, t, t**2, t**3, t**4, t**5],
-            [0, 1, 2 * t, 3 * t**2, 4 * t**3, 5 * t**4],
-            [0, 0, 2, 6 * t, 12 * t**2, 20 * t**3],
-        ], dtype=float)
         zeros = np.zeros_like(q0)
-        rhs = np.vstack([q0, zeros, zeros, qf, zeros, zeros])
-        return cls(np.linalg.solve(conditions, rhs), t)
+        coefficients = np.vstack([q0, zeros, zeros, 10.0 * d / t**3, -15.0 * d / t**4,
+                                  6.0 * d / t**5])
+        return cls(coefficients, t)
 
     @property
     def dof(self) -> int:

@@ -3,6 +3,7 @@ ran: in-process, through the graph, or read back from a bag or a JSON export."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,11 +30,15 @@ class RunSummary:
 
     @classmethod
     def from_result(cls, result: RunResult) -> RunSummary:
-        """From an in-process run."""
+        """From an in-process run (with its live changes, :func:`live_changes`)."""
         measured = any(r.true_position is not None for r in result.records)
-        return cls(result.mass_uncertainty, result.law, result.error_bound,
-                   result.max_abs_errors, result.max_abs_feedforward, result.max_abs_effort,
-                   true_max_abs_error=result.true_max_abs_errors() if measured else None)
+        summary = cls(result.mass_uncertainty, result.law, result.error_bound,
+                      result.max_abs_errors, result.max_abs_feedforward, result.max_abs_effort,
+                      true_max_abs_error=result.true_max_abs_errors() if measured else None)
+        summary.extra.update(live_changes(result.applied, result.law))
+        if result.aborted:
+            summary.extra["aborted_trials"] = list(result.aborted)
+        return summary
 
     @property
     def true_errors(self) -> np.ndarray:
@@ -83,3 +88,30 @@ class RunSummary:
                    errors if errors is not None else np.zeros((0, 0)),
                    table("max_abs_feedforward"), table("max_abs_effort"),
                    true_max_abs_error=true)
+
+
+def law_segments(first_law: str, changes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """``[{"from_trial": 1, "law": "sign"}, {"from_trial": 7, "law": "linear"}]``: the law each
+    trial ran, from the run's first law and its live ``changes`` (:func:`live_changes`'
+    entries); empty when no change switched the law."""
+    segments = [{"from_trial": 1, "law": str(first_law)}]
+    for change in sorted(changes, key=lambda c: int(c["trial"])):
+        if change["parameter"] == "law" and change["value"] != segments[-1]["law"]:
+            segments.append({"from_trial": int(change["trial"]), "law": str(change["value"])})
+    return segments if len(segments) > 1 else []
+
+
+def live_changes(applied: Mapping[int, Mapping[str, Any]], first_law: str,
+                 node: str = "ilc_supervisor") -> dict[str, Any]:
+    """The ``extra`` entries of a run's live parameter changes (``applied``: the first trial
+    run with them -> values): ``live_changes`` and ``laws`` (:func:`law_segments`); empty
+    without changes."""
+    if not applied:
+        return {}
+    changes = [{"trial": int(k), "node": node, "parameter": str(name), "value": value}
+               for k, values in sorted(applied.items()) for name, value in sorted(values.items())]
+    out: dict[str, Any] = {"live_changes": changes}
+    laws = law_segments(first_law, changes)
+    if laws:
+        out["laws"] = laws
+    return out

@@ -1,0 +1,275 @@
+"""Every ``exo-ilc`` command that README.md and docs/*.md show runs to completion (issue 25).
+
+The commands are read from the Markdown code blocks at test time (whatever the pages hold then),
+in page order, and run in one scratch directory per page (a later command may read what an
+earlier one wrote: ``analyze bags/*`` after ``run``), made short:
+
+* ``--trials N`` becomes ``--trials 2`` (added where the command takes it), ``--budget`` 2,
+  ``--seeds`` 2, ``--jobs``/``--workers`` 1, ``--lifted`` 50, ``--trial K`` at most 2;
+* ``--config`` and every other ``.yaml`` a command reads: a shipped one (``config/robust.yaml``)
+  is copied with a 1 s movement; one the page only names (``my_params.yaml``) is written as just
+  that 1 s movement; a command that takes ``--config`` and names none gets it;
+* ``<date>`` and other ``<placeholders>`` in a path match anything (``*``, the newest match;
+  a path that matches nothing fails); a command with a placeholder that is no path
+  (``--resume <session id>``) is only parsed; ``[optional]`` parts are left out;
+* what needs something outside this machine (``postgresql://``, ``tcp://<host>``) or a running
+  graph (``exo-ilc param``) is only parsed, with the page's values.
+
+A command whose line ends in ``# exit N`` must exit N (a refused value shown on purpose); every
+other must exit 0. Every command is also parsed as written
+(:func:`test_every_documented_command_parses`), so a flag a page shows that the parser does not
+know fails here in seconds.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import io
+import os
+import re
+import shlex
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from exo_ilc_ros.cli.main import build_parser
+from exo_ilc_ros.cli.main import main as exo_ilc
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = sorted([ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))])
+SHORT_MOVEMENT = 1.0
+"""Seconds of the movement in the scratch configs (101 samples a trial)."""
+SMALL = {"--trials": "2", "--budget": "2", "--seeds": "2", "--jobs": "1", "--workers": "1",
+         "--lifted": "50", "--trial": "2"}
+"""Counts made small, and added where the command takes the flag but does not give it."""
+ADDED = ("--trials", "--workers", "--jobs", "--budget")
+"""Of those, the ones added to a command that does not give them."""
+OUTPUTS = ("--out", "--config-out", "--json", "--csv", "--plot", "--html", "--figure")
+"""Flags whose value is written, never made up beforehand."""
+EXTERNAL = re.compile(r"postgresql://|mysql://|tcp://|<host>")
+GRAPH_COMMANDS = ("run", "paper", "param")
+
+
+@dataclass
+class Command:
+    """One documented command: where it is and its words after ``exo-ilc``."""
+
+    page: Path
+    line: int
+    words: list[str]
+    text: str = field(default="")
+    expected: int = 0
+    """The exit code the page says (a trailing ``# exit N``), else 0."""
+
+    @property
+    def name(self) -> str:
+        return self.words[0] if self.words else ""
+
+    def where(self) -> str:
+        return f"{self.page.name}:{self.line}: {self.text}"
+
+
+def _code_blocks(text: str) -> list[tuple[int, list[str]]]:
+    """(first line number, lines) of every fenced code block."""
+    blocks: list[tuple[int, list[str]]] = []
+    current: list[str] = []
+    start, fence = 0, ""
+    for number, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        if not fence and stripped.startswith(("```", "~~~")):
+            fence, current, start = stripped[:3], [], number + 1
+        elif fence and stripped.startswith(fence):
+            blocks.append((start, current))
+            fence = ""
+        elif fence:
+            current.append(line)
+    return blocks
+
+
+def documented_commands(page: Path) -> list[Command]:
+    """The ``exo-ilc ...`` command lines of ``page``'s code blocks (continuations joined,
+    comments and a leading ``$`` dropped)."""
+    out = []
+    for start, lines in _code_blocks(page.read_text()):
+        k = 0
+        while k < len(lines):
+            number, line = start + k, lines[k]
+            while line.rstrip().endswith("\\") and k + 1 < len(lines):
+                k += 1
+                line = line.rstrip()[:-1] + " " + lines[k].strip()
+            k += 1
+            text = line.strip().removeprefix("$ ")
+            first = text.split(maxsplit=1)[0] if text else ""
+            if first != "exo-ilc" and not first.endswith("/exo-ilc"):
+                continue
+            said = re.search(r"#\s*exits?\s+(\d+)\s*$", text)
+            text = re.sub(r"\[[^\]]*\]", " ", text)  # [optional] parts left out
+            try:
+                words = shlex.split(text, comments=True)
+            except ValueError as exc:
+                pytest.fail(f"{page.name}:{number}: cannot split {text!r}: {exc}")
+            out.append(Command(page, number, words[1:], " ".join(words),
+                               int(said.group(1)) if said else 0))
+    return out
+
+
+ALL = [c for page in PAGES for c in documented_commands(page)]
+
+
+def _subparser(name: str) -> Any:
+    parser = build_parser()
+    actions: list[Any] = [a for a in parser._actions
+                          if a.__class__.__name__ == "_SubParsersAction"]
+    return actions[0].choices[name]
+
+
+def _takes(name: str, flag: str) -> bool:
+    return flag in _subparser(name)._option_string_actions
+
+
+def test_the_pages_show_commands() -> None:
+    """The reader above finds the commands (else every test here would pass vacuously)."""
+    assert len(ALL) >= 5, [str(p) for p in PAGES]
+    assert {"simulate", "analyze"} <= {c.name for c in ALL}
+
+
+@pytest.mark.parametrize("command", ALL, ids=[f"{c.page.name}:{c.line}" for c in ALL])
+def test_every_documented_command_parses(command: Command, tmp_path: Path,
+                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """The command as the page writes it (its counts, its URLs; placeholders as ``x``, the
+    files it reads made) is accepted by the parser (unless the page shows it refused)."""
+    if command.expected == 2:
+        return
+    monkeypatch.chdir(tmp_path)
+    words = [re.sub(r"<[^>]*>", "x", w) for w in command.words]
+    _make_inputs(words, tmp_path)
+    err = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            build_parser().parse_args(words)
+    except SystemExit as exc:
+        pytest.fail(f"{command.where()}: the parser refuses it (exit {exc.code}):\n"
+                    f"{err.getvalue()}")
+
+
+def _short_yaml(source: Path | None) -> str:
+    """A ROS parameter YAML: ``source``'s parameters (or none) with a 1 s movement."""
+    data = yaml.safe_load(source.read_text()) if source is not None else None
+    data = data or {}
+    params = data.setdefault("/**", {}).setdefault("ros__parameters", {})
+    params.setdefault("trajectory", {})["duration"] = SHORT_MOVEMENT
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+def _make_inputs(words: list[str], cwd: Path) -> None:
+    """Write every ``.yaml`` the command reads and ``cwd`` lacks (module docstring)."""
+    for k, word in enumerate(words):
+        value = word.split("=", 1)[-1]  # LABEL=FILE
+        if value.endswith((".yaml", ".yml")) and (k == 0 or words[k - 1] not in OUTPUTS) \
+                and not (cwd / value).exists():
+            shipped = ROOT / value
+            (cwd / value).parent.mkdir(parents=True, exist_ok=True)
+            (cwd / value).write_text(_short_yaml(shipped if shipped.is_file() else None))
+
+
+def _prepare(command: Command, cwd: Path, graph: bool) -> list[str] | None:
+    """The command's words made short and runnable in ``cwd`` (module docstring); None when it
+    can only be parsed, or (not ``graph``) reads what only a graph command makes."""
+    words = list(command.words)
+    if command.name == "param" or any(EXTERNAL.search(w) for w in words):
+        return None
+    out: list[str] = []
+    for k, word in enumerate(words):
+        before = words[k - 1] if k else ""
+        if before in SMALL and word.isdigit():
+            word = str(min(int(word), int(SMALL[before])))
+        placeholder = "<" in word
+        word = re.sub(r"<[^>]*>", "*", word)
+        if any(c in word for c in "*?"):
+            matches = sorted(glob.glob(word, root_dir=cwd))
+            if not matches and (not graph or (placeholder and "/" not in word)):
+                return None  # a graph run's bag (skipped here), or a value like <session id>
+            if placeholder and matches:  # <date> names one: the newest
+                matches = matches[-1:]
+            out += matches or [word]
+            continue
+        out.append(word)
+    _make_inputs(out, cwd)
+    for flag in ADDED:
+        if flag not in out and "--replay" not in out and _takes(command.name, flag):
+            out += [flag, SMALL[flag]]
+    if "--config" not in out and "--replay" not in out and _takes(command.name, "--config"):
+        out += ["--config", "short.yaml"]
+    return out
+
+
+@dataclass
+class Outcome:
+    command: Command
+    argv: list[str] | None
+    code: int
+    output: str
+
+
+def _run_page(page: Path, tmp: Path, graph: bool) -> list[Outcome]:
+    """Run ``page``'s commands in order in ``tmp``: the in-process ones, and the graph ones
+    when ``graph`` (a graph command with the same flags as one already run is run once)."""
+    (tmp / "short.yaml").write_text(_short_yaml(None))
+    outcomes, seen = [], set()
+    old = Path.cwd()
+    os.chdir(tmp)
+    try:
+        for command in documented_commands(page):
+            argv = _prepare(command, tmp, graph)
+            if argv is None:
+                continue
+            if command.name in GRAPH_COMMANDS and "--in-process" not in argv:
+                flags = (command.name, frozenset(w for w in argv if w.startswith("--")))
+                if not graph or flags in seen:
+                    continue
+                seen.add(flags)
+            began = time.perf_counter()
+            # A real file, not a StringIO: the graph hands the nodes' output its descriptor.
+            with tempfile.TemporaryFile("w+") as text:
+                with contextlib.redirect_stdout(text), contextlib.redirect_stderr(text):
+                    code = exo_ilc(argv)
+                text.seek(0)
+                output = text.read()
+            if os.environ.get("EXO_ILC_TEST_TIMES"):
+                print(f"{time.perf_counter() - began:6.1f} s  {command.where()}")
+            outcomes.append(Outcome(command, argv, code, output))
+    finally:
+        os.chdir(old)
+    return outcomes
+
+
+def _failures(outcomes: list[Outcome]) -> str:
+    return "\n\n".join(f"{o.command.where()}\n  ran: exo-ilc {shlex.join(o.argv or [])}\n  "
+                       f"exit {o.code} (the page says {o.command.expected}):\n{o.output[-1500:]}"
+                       for o in outcomes if o.code != o.command.expected)
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[p.name for p in PAGES])
+def test_documented_in_process_commands_run(page: Path, tmp_path: Path) -> None:
+    """Every in-process command of ``page`` (simulate, analyze, tune, study, paper
+    --in-process, profiles, report, clean, ...) exits 0."""
+    outcomes = _run_page(page, tmp_path, graph=False)
+    assert not _failures(outcomes), _failures(outcomes)
+
+
+@pytest.mark.graph
+@pytest.mark.parametrize("page", [p for p in PAGES if any(
+    c.name in ("run", "paper") for c in documented_commands(p))],
+    ids=lambda p: p.name)
+def test_documented_commands_run_with_the_graph(page: Path, tmp_path: Path) -> None:
+    """All of ``page``'s commands in order, the graph ones too (``run``, ``paper``: real DDS,
+    2 trials of 1 s), so ``analyze bags/graph_*`` reads what ``run`` recorded."""
+    outcomes = _run_page(page, tmp_path, graph=True)
+    assert any(o.command.name in ("run", "paper") for o in outcomes)
+    assert not _failures(outcomes), _failures(outcomes)

@@ -56,10 +56,12 @@ setup(
         "clarabel>=0.9",
         "mujoco>=4",
         "distributed>=2024.1",  # exo-ilc study --dask: cells on a Dask cluster
+        "foxglove-sdk>=0.30.3,<0.31",  # exo-ilc run --live: the Foxglove WebSocket server
     ],
     extras_require={
         "test": ["pytest>=8", "hypothesis>=6.100", "pin>=3", "ruff>=0.6", "mypy>=1.10",
-                 "types-PyYAML", "colcon-core", "colcon-ros", "psycopg[binary]>=3.1"],
+                 "types-PyYAML", "websockets>=12", "colcon-core", "colcon-ros",
+                 "psycopg[binary]>=3.1"],
         # `exo-ilc tune --storage postgresql://...`: SQLAlchemy 2.x opens it with psycopg 3.
         "postgres": ["psycopg[binary]>=3.1"],
     },

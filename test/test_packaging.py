@@ -32,6 +32,7 @@ ROSDEP_KEYS: dict[str, str] = {
     "clarabel": "python3-clarabel-pip",
     "mujoco": "python3-mujoco-pip",
     "distributed": "python3-distributed",
+    "foxglove-sdk": "python3-foxglove-sdk-pip",
 }
 """pip name -> rosdep key (rosdistro's rosdep/python.yaml: the system package where there is
 one, a ``-pip`` key otherwise; ``mcap-ros2-support`` is that key's own name there)."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import shlex
 import sys
@@ -16,6 +17,7 @@ from tqdm import tqdm
 from ..core.config import Config
 from ..core.errors import ConfigError
 from ..core.summary import RunSummary
+from ..orchestration.live import DEFAULT_HOST, DEFAULT_PORT, LiveView
 from ..wire import topics
 from .arguments import directory, domain_id
 from .simulate import add_config_arguments, config_from_args, print_report
@@ -60,7 +62,27 @@ def register(sub: Any) -> None:
     parser.add_argument("--plant", choices=("simulator", "mujoco"), default="simulator",
                         help="the arm: our simulator (default) or MuJoCo (mujoco_plant, no "
                         "reset service: sets protocol homing)")
+    parser.add_argument("--live", action="store_true",
+                        help="serve the running graph to the Foxglove app (foxglove_bridge, a "
+                        "process of its own; docs/live-view.md): open ws://127.0.0.1:8765")
+    parser.add_argument("--live-port", type=port_number, default=None, metavar="PORT",
+                        help="with --live: the WebSocket port (default 8765; 0: any free one)")
+    parser.add_argument("--live-host", default=None, metavar="HOST",
+                        help="with --live: the address to bind (default 127.0.0.1, this "
+                        "machine only; 0.0.0.0 lets anyone who can reach this machine watch "
+                        "the run, without a password: docs/live-view.md)")
     parser.set_defaults(func=run)
+
+
+def port_number(text: str) -> int:
+    """A TCP port, 0 (any free one) to 65535."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a port number: {text!r}") from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"a port is 0..65535, got {value}")
+    return value
 
 
 def _store_root(args: argparse.Namespace) -> Path | None:
@@ -100,6 +122,9 @@ def run(args: argparse.Namespace) -> int:
     if args.no_bag and (args.bag_dir is not None or args.isolated_recorder):
         given = "--bag-dir" if args.bag_dir is not None else "--isolated-recorder"
         raise ConfigError("--no-bag", f"records nothing: {given} would be ignored; drop one")
+    if not args.live and (args.live_port is not None or args.live_host is not None):
+        given = "--live-port" if args.live_port is not None else "--live-host"
+        raise ConfigError(given, "needs --live")
     args.bag_dir = "bags" if args.bag_dir is None else args.bag_dir
     config = config_from_args(args)  # an invalid YAML fails here, before any node starts
     if args.plant == "mujoco" and config["protocol"] != "homing":
@@ -167,13 +192,29 @@ def announce_graph(bar: Any, bag: Path | None) -> Callable[[Any], None]:
 
 def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
              trials: int) -> RunSummary:
-    """One graph run (one mass uncertainty)."""
-    from ..orchestration.graph import TrialSummary, run_graph
+    """One graph run (one mass uncertainty), with the live view beside it (``--live``)."""
     from ..orchestration.launcher import graph_nodes
-    from ..orchestration.recording import Recording
 
     config = run_config
     nodes = graph_nodes(args.plant, config["protocol"])
+    with contextlib.ExitStack() as stack:
+        extra: list[Any] = []
+        if getattr(args, "live", False):
+            live = stack.enter_context(LiveView(
+                run_config, DEFAULT_PORT if args.live_port is None else args.live_port,
+                args.live_host or DEFAULT_HOST))
+            print(f"live view: {live.url} (Foxglove app: Open connection, Foxglove WebSocket; "
+                  "layout config/layouts/foxglove.json)", file=sys.stderr, flush=True)
+            extra.append(live.spec)
+        return _run_graph_once(args, run_config, delta, trials, nodes, extra)
+
+
+def _run_graph_once(args: argparse.Namespace, run_config: Config, delta: float, trials: int,
+                    nodes: Any, extra: list[Any]) -> RunSummary:
+    from ..orchestration.graph import TrialSummary, run_graph
+    from ..orchestration.recording import Recording
+
+    config = run_config
     with tqdm(total=trials, desc=f"graph {config['law']} delta={delta:g}", unit="trial",
               file=sys.stderr, disable=None) as bar:
         def progress(summary: TrialSummary, bar: Any = bar) -> None:
@@ -186,13 +227,13 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
             bar.set_postfix_str("max|e| " + " ".join(f"{x:.1e}" for x in errors))
         if args.no_bag:
             result = run_graph(run_config, args.domain_id, on_summary=progress,
-                               on_start=announce_graph(bar, None), nodes=nodes)
+                               on_start=announce_graph(bar, None), nodes=nodes, extra=extra)
         else:
             run_config = run_config.replace({"wait_for_recorder": True})
             with Recording(run_config, args.bag_dir) as recording:
                 result = run_graph(run_config, args.domain_id, on_summary=progress,
                                    nodes=recording.graph_nodes(args.isolated_recorder, nodes),
-                                   on_start=announce_graph(bar, recording.path))
+                                   on_start=announce_graph(bar, recording.path), extra=extra)
             bar.write(f"bag: {recording.path}", file=sys.stderr)
             result.summary.extra["bag"] = str(recording.path)
     from ..core.metrics import TrialMetrics

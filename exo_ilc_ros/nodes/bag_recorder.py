@@ -1,12 +1,15 @@
 """bag_recorder: records every topic of the graph into a rosbag2 MCAP bag, as received.
 
-Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.wire.topics.TYPES` (depth
-``RECORDER_DEPTH``; the feed-forward transient local, as published) and stores the CDR bytes
-untouched, stamped with the wall-clock time DDS received them (what ``ros2 bag record`` does
-without ``--use-sim-time``). The subscriptions are :class:`~.common.Inbox` es, so the recorder
-does not wake once per message next to the control loop. Within a trial it stays out of the
-loop's way: it reads only the trial events every ``INBOX_PERIOD``, and takes and writes the
-other topics (the samples, commands, /clock) at the next trial event, or after
+Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.wire.topics.TYPES` (QoS per
+topic: :func:`subscription_qos`, documented in docs/live-view.md) and stores the CDR bytes
+untouched. Log time = simulated time, as ``ros2 bag record --use-sim-time`` logs it: the
+recorder's sim clock at receipt (:class:`~exo_ilc_ros.wire.sim_time.SimClock`: every sample and
+/clock message at its own stamp, a message without one at the sim time of the last stamped
+message received before it). Publish time = the wall-clock time (ns since the epoch) DDS
+received the message (kept for latency analysis). The subscriptions are :class:`~.common.Inbox`
+es, so the recorder does not wake once per message next to the control loop. Within a trial it
+stays out of the loop's way: it reads only the trial events every ``INBOX_PERIOD``, and takes
+and writes the other topics (the samples, commands, /clock) at the next trial event, or after
 :data:`DATA_PERIOD` at the latest; DDS holds them meanwhile (``RECORDER_DEPTH``). The samples
 between two trial events go to the bag as one batch (``BagWriter.write_many``).
 ``exo-ilc run`` starts it in the supervisor's process (``container ilc_supervisor
@@ -51,6 +54,7 @@ from ..core.config import load_config
 from ..wire import topics
 from ..wire.protocol import int_value, key_values
 from ..wire.qos import RECORDER_DEPTH, TRANSIENT_LOCAL_TOPICS, offered_qos
+from ..wire.sim_time import SimClock
 from .common import (
     EVENTS_QOS,
     Inbox,
@@ -132,6 +136,8 @@ class BagRecorder(Node):
         self.summarised: set[int] = set()
         self.changes: list[ParameterChange] = []
         self.messages = 0
+        self.sim_clock = SimClock()
+        """The recorder's sim clock: every message's log time."""
         self.exit_code: int | None = None
         """Never set: the recorder has no fatal error of its own (a bag error raises)."""
 
@@ -173,14 +179,15 @@ class BagRecorder(Node):
         if taken or everything or now >= self.data_due:
             self.data_due = now + DATA_PERIOD
             taken = sorted([*taken, *self.inbox.take()], key=receive_time)
-        samples: list[tuple[int, str, bytes]] = []  # written as one batch up to an event
-        for item in taken:
-            if item[1] in PROTOCOL_TOPICS:
+        samples: list[tuple[int, str, bytes, int]] = []  # one batch up to an event
+        for received, topic, raw in taken:
+            log_time = self.sim_clock.advance(topic, raw)
+            if topic in PROTOCOL_TOPICS:
                 self.messages += self.writer.write_many(samples)
                 samples = []
-                self.on_message(item[1], item[2], item[0])
+                self.on_message(topic, raw, received)
             else:
-                samples.append(item)
+                samples.append((log_time, topic, raw, received))
         self.messages += self.writer.write_many(samples)
         return len(taken)
 
@@ -189,11 +196,11 @@ class BagRecorder(Node):
         return self.poll(everything=True)
 
     def on_message(self, topic: str, raw: bytes, received_ns: int) -> None:
-        """Store the bytes stamped with their DDS receive time (wall clock, ns); follow the
-        trial protocol to split the bag at trial boundaries."""
+        """Store the bytes at the sim clock (publish time: the DDS receive time, wall clock,
+        ns); follow the trial protocol to split the bag at trial boundaries."""
         if topic == topics.TRIAL_EVENTS:
             self._before_event(raw)
-        self.writer.write(topic, received_ns, raw)
+        self.writer.write(topic, self.sim_clock.ns, raw, received_ns)
         self.messages += 1
         if topic == topics.TRIAL_EVENTS:
             self._after_event(raw)

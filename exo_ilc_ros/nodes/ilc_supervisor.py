@@ -22,6 +22,7 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
@@ -46,7 +47,7 @@ from .common import (
 )
 from .guard import Health, JointStateGate, Rejections, rejections_check
 from .identified import STATUS_READER_QOS, Admission, StatusAdmission, gate_classifier
-from .messages import feedforward_message, trial_summary
+from .messages import feedforward_message, trial_metrics_message, trial_summary
 
 NAME = schema.SUPERVISOR
 PLANT_PARAMETERS = [p.name for p in schema.PARAMETERS if p.section == schema.PLANT]
@@ -77,6 +78,8 @@ class IlcSupervisor(Node):
                                                      LATCHED_QOS)
         self.events_pub = self.create_publisher(DiagnosticArray, topics.TRIAL_EVENTS, EVENTS_QOS)
         self.summary_pub = self.create_publisher(DiagnosticArray, topics.TRIAL_SUMMARY,
+                                                 EVENTS_QOS)
+        self.metrics_pub = self.create_publisher(Float64MultiArray, topics.TRIAL_METRICS,
                                                  EVENTS_QOS)
         self.health_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
                                                 DIAGNOSTICS_QOS)
@@ -260,6 +263,7 @@ class IlcSupervisor(Node):
                 (k, self.protocol.plant_report.get(k, "")) for k in (
                     "late_commands", "periods", "first_late")]).values
         self.summary_pub.publish(diagnostic_array(self, [summary], end_ns))
+        self.metrics_pub.publish(trial_metrics_message(summary, self.joint_names))
         self.event("end", [(kv.key, kv.value) for kv in summary.values], end_ns)
 
     def event(self, message: str, values: Sequence[tuple[str, str]],

@@ -34,7 +34,7 @@ VOLATILE, TRANSIENT_LOCAL = "volatile", "transient_local"
 
 OFFERED: dict[str, tuple[tuple[str, int], ...]] = {
     topics.JOINT_STATES: ((VOLATILE, OFFERED_DEPTH),),
-    topics.CLOCK: ((VOLATILE, 1),),
+    topics.CLOCK: ((VOLATILE, OFFERED_DEPTH),),
     topics.EFFORT_COMMANDS: ((VOLATILE, OFFERED_DEPTH),),
     topics.FEEDFORWARD: ((TRANSIENT_LOCAL, 1),),
     topics.TRIAL_EVENTS: ((TRANSIENT_LOCAL, OFFERED_DEPTH),),

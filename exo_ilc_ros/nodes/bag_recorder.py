@@ -57,6 +57,7 @@ from ..wire.qos import RECORDER_DEPTH, TRANSIENT_LOCAL_TOPICS, offered_qos
 from ..wire.sim_time import SimClock
 from .common import (
     EVENTS_QOS,
+    CountingPublisher,
     Inbox,
     diagnostic_array,
     receive_time,
@@ -66,9 +67,13 @@ from .common import (
 )
 
 NAME = "bag_recorder"
-READY_TOPICS = (topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
-                topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY)
-"""Topics whose publishers must be matched before the recorder reports ``ready``."""
+READY_TOPICS = (topics.JOINT_STATES, topics.CLOCK, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
+                topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.TRIAL_METRICS)
+"""Topics whose subscriptions must be matched with a publisher before the recorder reports
+``ready`` (the supervisor starts trial 1 only then). Matched, not merely known to the graph:
+each reader-writer pair is discovered on its own, and a volatile topic published before its
+pair matched is lost to the recorder (/clock was not waited for, and once its first 26
+messages of trial 1 were missing)."""
 PROTOCOL_TOPICS = frozenset({topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.PARAMETER_EVENTS})
 """Topics the recorder reads as well as writes (trial boundaries, parameter changes); the rest
 are written in batches."""
@@ -143,22 +148,26 @@ class BagRecorder(Node):
 
         self.events = Inbox(self, "events")  # PROTOCOL_TOPICS, read at every poll
         self.inbox = Inbox(self)  # every other topic, taken at events (see poll)
+        self.subscriptions_by_topic: dict[str, Any] = {}
         for topic, msgtype in topics.TYPES.items():
             self.writer.add_topic(topic, msgtype, offered_qos(topic))
             inbox = self.events if topic in PROTOCOL_TOPICS else self.inbox
-            inbox.subscribe(message_class(msgtype), topic, subscription_qos(topic))
+            self.subscriptions_by_topic[topic] = inbox.subscribe(
+                message_class(msgtype), topic, subscription_qos(topic))
         self.data_due = 0.0
         """Monotonic time by which the other topics are taken again (:data:`DATA_PERIOD`)."""
         self.status_pub = self.create_publisher(
-            message_class(topics.TYPES[topics.DIAGNOSTICS]), topics.DIAGNOSTICS, EVENTS_QOS)
+            message_class(topics.TYPES[topics.DIAGNOSTICS]), topics.DIAGNOSTICS, EVENTS_QOS,
+            publisher_class=CountingPublisher)
         self.create_timer(0.2, self.on_status_timer, clock=wall_clock())
         self.get_logger().info(f"recording {len(topics.TYPES)} topics to {path}")
 
     def on_status_timer(self) -> None:
-        """``ready`` on /diagnostics once every recorded graph topic has a publisher (the
-        supervisor waits for it when ``wait_for_recorder`` is set)."""
+        """``ready`` on /diagnostics once the subscription of every :data:`READY_TOPICS` is
+        matched with a publisher (the supervisor waits for it when ``wait_for_recorder`` is
+        set)."""
         missing = [topic for topic in READY_TOPICS
-                   if self.count_publishers(topic) < 1]
+                   if self.subscriptions_by_topic[topic].get_publisher_count() < 1]
         message = "waiting" if missing else "ready"
         values = [*self.status_values(), *(("waiting_for", topic) for topic in missing)]
         self.status_pub.publish(diagnostic_array(

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import array
 import difflib
+import json
 import re
 import signal
 import sys
@@ -24,6 +25,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
@@ -64,6 +66,36 @@ DIAGNOSTICS_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """/diagnostics: a supervisor that matched late still sees the controller's last
 acknowledgements."""
+
+
+class CountingPublisher(Publisher):
+    """A publisher that counts what it published (``published``): :func:`run_nodes` prints
+    every node's counts per topic when it stops (:data:`PUBLISHED_PREFIX`), so a test can hold
+    them against what the bag recorded."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.published = 0
+
+    def publish(self, msg: Any) -> None:
+        """Publish, then count."""
+        super().publish(msg)
+        self.published += 1
+
+
+PUBLISHED_PREFIX = "[exo_ilc_ros] published "
+"""Start of the line (stderr) a stopping process writes per node: ``<prefix><node> <JSON
+{topic: count}>``."""
+
+
+def published_counts(node: Node) -> dict[str, int]:
+    """Per topic, what ``node``'s :class:`CountingPublisher` s published."""
+    counts: dict[str, int] = {}
+    for publisher in node.publishers:
+        if isinstance(publisher, CountingPublisher):
+            counts[publisher.topic_name] = counts.get(publisher.topic_name, 0) + \
+                publisher.published
+    return counts
 
 
 def wall_clock() -> Clock:
@@ -495,6 +527,10 @@ def _run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None) 
                 code = int(codes[0])
                 break
         _deliver(nodes)
+        for node in nodes:  # (a draining node's own status goes on while it drains)
+            print(f"{PUBLISHED_PREFIX}{node.get_name()} "
+                  f"{json.dumps(published_counts(node), sort_keys=True)}",
+                  file=sys.stderr, flush=True)
         draining = [node for node in polling
                     if isinstance(node, DrainingNode) and node.DRAINS_ON_STOP]
         leaving = [n for n in nodes if n not in draining]

@@ -39,6 +39,7 @@ from ..wire.publishers import max_bytes
 from .common import (
     DIAGNOSTICS_QOS,
     SAMPLES_QOS,
+    CountingPublisher,
     SchemaParameters,
     diagnostic_array,
     spin,
@@ -98,9 +99,10 @@ class ComputedTorqueController(Node):
         self.latency_count = 0
 
         self.command_pub = self.create_publisher(Float64MultiArray, topics.EFFORT_COMMANDS,
-                                                 SAMPLES_QOS)
+                                                 SAMPLES_QOS, publisher_class=CountingPublisher)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
-                                                     DIAGNOSTICS_QOS)
+                                                     DIAGNOSTICS_QOS,
+                                                     publisher_class=CountingPublisher)
         joints, samples = config.joints, self.step_count
         self.state_sub = TrustedInput(  # the plant's samples only (wire.publishers)
             self, JointState, topics.JOINT_STATES, TRUSTED_READER_QOS, self.on_joint_state,

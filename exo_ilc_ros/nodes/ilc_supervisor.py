@@ -37,6 +37,7 @@ from .common import (
     DIAGNOSTICS_QOS,
     EVENTS_QOS,
     LATCHED_QOS,
+    CountingPublisher,
     Inbox,
     SchemaParameters,
     diagnostic_array,
@@ -75,14 +76,15 @@ class IlcSupervisor(Node):
         self.start_client = self.create_client(Trigger, topics.START_SERVICE)
         self.plant_params = AsyncParameterClient(self, schema.PLANT)
         self.feedforward_pub = self.create_publisher(JointTrajectory, topics.FEEDFORWARD,
-                                                     LATCHED_QOS)
-        self.events_pub = self.create_publisher(DiagnosticArray, topics.TRIAL_EVENTS, EVENTS_QOS)
+                                                     LATCHED_QOS, publisher_class=CountingPublisher)
+        self.events_pub = self.create_publisher(DiagnosticArray, topics.TRIAL_EVENTS, EVENTS_QOS,
+                                                publisher_class=CountingPublisher)
         self.summary_pub = self.create_publisher(DiagnosticArray, topics.TRIAL_SUMMARY,
-                                                 EVENTS_QOS)
+                                                 EVENTS_QOS, publisher_class=CountingPublisher)
         self.metrics_pub = self.create_publisher(Float64MultiArray, topics.TRIAL_METRICS,
-                                                 EVENTS_QOS)
+                                                 EVENTS_QOS, publisher_class=CountingPublisher)
         self.health_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
-                                                DIAGNOSTICS_QOS)
+                                                DIAGNOSTICS_QOS, publisher_class=CountingPublisher)
         self.rejections = Rejections(self)
         self.gate = JointStateGate(self.joint_names, self.rejections)
         self.samples_from = self._state_admission(topics.JOINT_STATES)  # the plant's only

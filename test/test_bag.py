@@ -611,11 +611,14 @@ def test_layouts_name_every_joint_and_known_topics(config: Config) -> None:
     plotjuggler = (layouts / "plotjuggler.xml").read_text()
     paths = [p["value"] for panel in foxglove["configById"].values()
              for p in panel.get("paths", [])]
+    labels = [p["label"] for panel in foxglove["configById"].values()
+              for p in panel.get("paths", [])]
     for name in config["joint_names"]:
         assert f"/joint_states/{name}/position" in plotjuggler
-        assert any(name in p for p in paths)
+        assert name in labels
+    scripts = {"/studio_script/tracking_error"}  # the layout's user script (test_live.py)
     for path in paths:
-        assert path.split(".")[0] in topics.TYPES
+        assert path.split(".")[0] in {*topics.TYPES, *scripts}
 
 
 def test_joint_states_decoded_row_wise_equal_rosbags() -> None:

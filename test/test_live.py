@@ -154,6 +154,34 @@ def test_the_reference_urdf_is_well_formed_and_prefixed() -> None:
     assert {j.find("parent").get("link") for j in root.iter("joint")} <= set(links)  # type: ignore[union-attr]
 
 
+def test_the_shipped_layout_draws_the_views_channels() -> None:
+    """config/layouts/foxglove.json: the per-trial plots index /ilc/trial_metrics where the
+    layout puts each joint's value, x = the trial; the error plot draws its user script's
+    output; the 3D panel shows the URDF and the reference arm on the ``reference/`` frames."""
+    import json
+
+    layout = json.loads((ROOT / "config" / "layouts" / "foxglove.json").read_text())
+    panels = layout["configById"]
+    names = list(load_config()["joint_names"])
+    for panel, row in (("Plot!max_error", "max_abs_error"), ("Plot!rms_error", "rms_error"),
+                       ("Plot!level_M", "level/M")):
+        config = panels[panel]
+        assert config["xAxisPath"]["value"] == f"{topics.TRIAL_METRICS}.data[0]"
+        assert [p["value"] for p in config["paths"]] == \
+            [f"{topics.TRIAL_METRICS}.data[{index(row, j, len(names))}]"
+             for j in range(len(names))]
+        assert [p["label"] for p in config["paths"]] == names
+    (script,) = layout["userNodes"].values()
+    assert 'export const output = "/studio_script/tracking_error"' in script["sourceCode"]
+    assert all(p["value"].startswith("/studio_script/tracking_error.error[")
+               for p in panels["Plot!tracking_error"]["paths"])
+    three_d = panels["3D!arm"]
+    assert three_d["topics"][ROBOT_DESCRIPTION]["visible"] and three_d["followTf"] == "base_link"
+    reference = three_d["layers"]["reference"]
+    assert (reference["topic"], reference["framePrefix"]) == (ROBOT_DESCRIPTION, REFERENCE_PREFIX)
+    assert panels["DiagnosticSummary!diagnostics"]["topicToRender"] == topics.DIAGNOSTICS
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

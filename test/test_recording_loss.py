@@ -69,9 +69,12 @@ def loaded_run(directory: Path, trials: int, duration: float | None = 1.0) -> tu
         Counter[tuple[str, str]], Counter[tuple[str, str]]]:
     """One recorded graph run of ``trials`` trials with a CPU hog beside it; (published,
     recorded) per (node, topic), the recorder's own status left out (it reports until its
-    last moment, after its last drain)."""
-    config = load_config(overrides={"trajectory.duration": duration, "max_trials": trials,
-                                    "wait_for_recorder": True})
+    last moment, after its last drain). ``duration``: of the trajectory (None: the shipped
+    one)."""
+    overrides: dict[str, object] = {"max_trials": trials, "wait_for_recorder": True}
+    if duration is not None:
+        overrides["trajectory.duration"] = duration
+    config = load_config(overrides=overrides)
     log_dir = directory / "logs"
     hog = subprocess.Popen([sys.executable, "-c", HOG], stdin=subprocess.DEVNULL)
     try:

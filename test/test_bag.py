@@ -6,6 +6,7 @@ In-process tests write bags with ``write_run`` (the graph's topics and messages,
 
 from __future__ import annotations
 
+import glob
 import json
 import signal
 import subprocess
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+from mcap.reader import make_reader
 from test_bag_integrity import assert_bag_verifiable
 
 from exo_ilc_ros.analysis.figures import convergence_figure, tracking_figure
@@ -29,12 +31,14 @@ from exo_ilc_ros.bag import (
     trials_filed,
     write_run,
 )
+from exo_ilc_ros.bag import messages as bag_messages
 from exo_ilc_ros.bag.provenance import read_provenance
 from exo_ilc_ros.cli.main import main as exo_ilc
 from exo_ilc_ros.core.config import Config, load_config
 from exo_ilc_ros.core.session import RunResult, run_trials
 from exo_ilc_ros.core.summary import RunSummary
 from exo_ilc_ros.wire import topics
+from exo_ilc_ros.wire.qos import offered_qos
 
 TRIALS = 5
 SHORT = {"trajectory.duration": 1.0, "max_trials": TRIALS}
@@ -165,6 +169,58 @@ def test_independent_mcap_reader_reads_every_message(mcap_bag: Path, config: Con
     assert counts == expected
     assert counts[topics.JOINT_STATES] == TRIALS * 101
     assert sum(counts.values()) == info["message_count"]
+
+
+def _old_layout_bag(bag: Path, out: Path) -> Path:
+    """``bag`` rewritten as the recorder wrote bags before issue 26: one file, wall-clock log
+    times (DDS receipt: a run of 5 s sim time logged within about 1.5 s, topics interleaved
+    with jitter), /clock at every sample, no /diagnostics, no /ilc/trial_metrics, trial 1's
+    summary without the ``level/`` keys, and only topics with messages listed."""
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    kept: list[tuple[int, str, bytes]] = []
+    for file in sorted(glob.glob(str(bag / "*.mcap"))):
+        with open(file, "rb") as handle:
+            for _, channel, message in make_reader(handle).iter_messages():
+                if channel.topic in (topics.DIAGNOSTICS, topics.TRIAL_METRICS, topics.CLOCK):
+                    continue
+                data = message.data
+                if channel.topic in (topics.TRIAL_SUMMARY, topics.TRIAL_EVENTS):
+                    msg = bag_messages.typestore().deserialize_cdr(data, topics.TYPES[
+                        topics.TRIAL_SUMMARY])
+                    for status in msg.status:
+                        status.values = [kv for kv in status.values if kv.value != "nan"]
+                    data = bag_messages.serialize(msg, topics.TYPES[topics.TRIAL_SUMMARY])
+                kept.append((message.log_time, channel.topic, bytes(data)))
+                if channel.topic == topics.JOINT_STATES:
+                    kept.append((message.log_time, topics.CLOCK,
+                                 bag_messages.clock(message.log_time)))
+    rng = np.random.default_rng(3)
+    wall = 1_796_000_000 * 10**9
+    old = [(wall + int(stamp * 0.3) + int(rng.integers(0, 200_000)), topic, data)
+           for stamp, topic, data in kept]
+    old.sort(key=lambda item: item[0])
+    present = {topic for _, topic, _ in old}
+    with BagWriter(out, custom_data=info["custom_data"]) as writer:
+        for topic in topics.TYPES:
+            if topic in present:
+                writer.add_topic(topic, topics.TYPES[topic], offered_qos(topic))
+        writer.write_many(old)
+    return out
+
+
+def test_analyze_reads_an_old_layout_bag_as_before(tmp_path: Path, mcap_bag: Path) -> None:
+    """A bag of the old layout (wall-clock log times, /clock every sample, no /diagnostics,
+    one file) analyses to the same table as the new layout's."""
+    old = _old_layout_bag(mcap_bag, tmp_path / "old")
+    info = yaml.safe_load((old / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert len(info["relative_file_paths"]) == 1
+    assert info["starting_time"]["nanoseconds_since_epoch"] > 10**18  # wall clock
+    listed = {t["topic_metadata"]["name"] for t in info["topics_with_message_count"]}
+    assert topics.DIAGNOSTICS not in listed and topics.TRIAL_METRICS not in listed
+    old_run, new_run = read_bag(old), read_bag(mcap_bag)
+    assert sorted(old_run.trials) == sorted(new_run.trials)
+    assert_same_table(old_run.summary(), new_run.summary(), tol=0.0)
+    assert exo_ilc(["analyze", str(old), "--quiet"]) == 0
 
 
 def test_sqlite3_bag_analyses_identically(tmp_path: Path, mcap_bag: Path, config: Config,

@@ -32,7 +32,7 @@ from exo_ilc_ros.bag import (
     write_run,
 )
 from exo_ilc_ros.bag import messages as bag_messages
-from exo_ilc_ros.bag.provenance import read_provenance
+from exo_ilc_ros.bag.provenance import CONFIG_JSON, CONFIG_YAML, RECORDED_BY, read_provenance
 from exo_ilc_ros.cli.main import main as exo_ilc
 from exo_ilc_ros.core.config import Config, load_config
 from exo_ilc_ros.core.session import RunResult, run_trials
@@ -221,6 +221,20 @@ def test_analyze_reads_an_old_layout_bag_as_before(tmp_path: Path, mcap_bag: Pat
     assert sorted(old_run.trials) == sorted(new_run.trials)
     assert_same_table(old_run.summary(), new_run.summary(), tol=0.0)
     assert exo_ilc(["analyze", str(old), "--quiet"]) == 0
+
+
+def test_every_storage_file_carries_the_runs_configuration(mcap_bag: Path) -> None:
+    """Each MCAP file's own rosbag2 metadata record holds the run's config and provenance, as
+    metadata.yaml does (a file copied alone still says what run it is)."""
+    info = yaml.safe_load((mcap_bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert len(info["relative_file_paths"]) > 1
+    for name in info["relative_file_paths"]:
+        with open(mcap_bag / name, "rb") as handle:
+            (record,) = [m for m in make_reader(handle).iter_metadata() if m.name == "rosbag2"]
+        split = yaml.safe_load(record.metadata["serialized_metadata"])
+        for key in (CONFIG_JSON, CONFIG_YAML, RECORDED_BY):
+            assert split["custom_data"][key] == info["custom_data"][key], (name, key)
+        assert split["relative_file_paths"] == [name]
 
 
 def test_sqlite3_bag_analyses_identically(tmp_path: Path, mcap_bag: Path, config: Config,

@@ -7,7 +7,8 @@ asserts nothing (wall-clock timing is noisy on a shared 2-core machine).
 The graph's lock-step control steps per second within trials (graph_bench's measure: start to
 end events, trials 4 on, median), recorded as ``exo-ilc run`` records it (the recorder in the
 supervisor's process), without ``--live`` and with it (foxglove_bridge, its own process, and
-a headless WebSocket client subscribed to every channel: test/live_client.py), in turn (ABBA)
+a headless WebSocket client in a process of its own, subscribed to every channel:
+test/live_client.py), in turn (ABBA)
 in one run. Also: what the client received (messages, /tf messages, per second) and the other
 tenants' load per round. Target: the view costs at most 10 % within trials.
 """
@@ -15,10 +16,11 @@ tenants' load per round. Target: the view costs at most 10 % within trials.
 from __future__ import annotations
 
 import argparse
+import json
 import socket
+import subprocess
 import sys
 import tempfile
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -30,8 +32,8 @@ from exo_ilc_ros.orchestration.live import LiveView
 from exo_ilc_ros.orchestration.recording import Recording
 from exo_ilc_ros.wire.tf import TF
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
-from live_client import Received, collect  # the test's client
+CLIENT = Path(__file__).resolve().parents[1] / "test" / "live_client.py"
+"""The headless client, run as a process of its own (as the Foxglove app would be)."""
 
 
 def _free_port() -> int:
@@ -44,16 +46,19 @@ def live_steps_per_second(config: Config, bag_dir: Path) -> dict[str, float]:
     """One recorded run with the live view and a client subscribed to everything."""
     recorded = config.replace({"wait_for_recorder": True})
     port = _free_port()
-    received = Received()
-    client = threading.Thread(target=collect, args=(f"ws://127.0.0.1:{port}", 120.0),
-                              kwargs={"received": received}, daemon=True)
-    client.start()
-    with Recording(recorded, bag_dir) as recording, LiveView(recorded, port) as live:
-        rates = graph_rate(recorded, [*recording.graph_nodes(), live.spec])
-    client.join(30)
-    count = sum(len(m) for m in received.messages.values())
-    return {**rates, "client_messages": float(count),
-            "client_tf": float(len(received.messages.get(TF, [])))}
+    client = subprocess.Popen([sys.executable, str(CLIENT), f"ws://127.0.0.1:{port}", "120"],
+                              stdout=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True)
+    try:
+        with Recording(recorded, bag_dir) as recording, LiveView(recorded, port) as live:
+            rates = graph_rate(recorded, [*recording.graph_nodes(), live.spec])
+        out, _ = client.communicate(timeout=60)
+    finally:
+        if client.poll() is None:
+            client.kill()
+            client.wait()
+    counts = json.loads(out.strip().splitlines()[-1]) if out.strip() else {}
+    return {**rates, "client_messages": float(sum(counts.values())),
+            "client_tf": float(counts.get(TF, 0))}
 
 
 def bench_live(trials: int, repeats: int, bag_dir: Path) -> None:

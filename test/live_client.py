@@ -79,3 +79,16 @@ def collect(url: str, connect_timeout: float = 60.0, duration: float | None = No
     out = received if received is not None else Received()
     asyncio.run(_collect(url, out, connect_timeout, duration))
     return out
+
+
+def main() -> None:
+    """``python test/live_client.py ws://127.0.0.1:8765``: collect until the server closes,
+    then print the messages per topic as JSON (the live bench's client process)."""
+    import sys
+
+    received = collect(sys.argv[1], float(sys.argv[2]) if len(sys.argv) > 2 else 120.0)
+    print(json.dumps({topic: len(m) for topic, m in received.messages.items()}), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -9,6 +9,7 @@ slide along it, fixed ones do not move. Checked against Pinocchio's ``oMf`` (tes
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -72,8 +73,23 @@ def quaternion(rotation: np.ndarray) -> np.ndarray:
     return out if out[3] >= 0.0 else -out
 
 
+def _product(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, ...]:
+    """Hamilton product a b of (x, y, z, w) quaternions (the rotation b, then a)."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz)
+
+
+Transform = tuple[str, str, tuple[float, ...], tuple[float, ...]]
+"""(parent frame, child frame, translation x y z, rotation quaternion x y z w)."""
+
+
 class UrdfKinematics:
-    """The joints of a URDF, for per-joint transforms at given joint positions."""
+    """The joints of a URDF, for per-joint transforms at given joint positions (plain floats:
+    the live view computes one set per sample, so no numpy in :meth:`transforms`)."""
 
     def __init__(self, urdf: str) -> None:
         root = ET.fromstring(urdf)
@@ -93,18 +109,28 @@ class UrdfKinematics:
                                          xyz, rpy_matrix(rpy), a / norm if norm else a))
         self.moving = [j.name for j in self.joints if j.kind != "fixed"]
         """The names of the joints a position is needed for, in URDF order."""
+        self._plain = [(j.name, j.kind, j.parent, j.child,
+                        tuple(float(x) for x in j.xyz),
+                        tuple(float(x) for x in quaternion(j.rotation)),
+                        tuple(float(x) for x in j.axis),
+                        tuple(tuple(float(x) for x in row) for row in j.rotation))
+                       for j in self.joints]
 
-    def transforms(self, positions: dict[str, float]
-                   ) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+    def transforms(self, positions: dict[str, float]) -> list[Transform]:
         """(parent, child, translation, quaternion x y z w) per joint at ``positions``
-        (radians or metres by joint name; a joint not given stays at 0)."""
-        out = []
-        for joint in self.joints:
-            q = float(positions.get(joint.name, 0.0))
-            translation, rotation = joint.xyz, joint.rotation
-            if joint.kind in ("revolute", "continuous"):
-                rotation = rotation @ axis_angle_matrix(joint.axis, q)
-            elif joint.kind == "prismatic":
-                translation = translation + rotation @ (joint.axis * q)
-            out.append((joint.parent, joint.child, translation, quaternion(rotation)))
+        (radians or metres by joint name; a joint not given stays at 0): revolute and
+        continuous q_origin (axis sin(q/2), cos(q/2)), prismatic xyz + R_origin axis q."""
+        out: list[Transform] = []
+        for name, kind, parent, child, xyz, origin, axis, rotation in self._plain:
+            q = float(positions.get(name, 0.0))
+            translation = xyz
+            turn = origin
+            if kind in ("revolute", "continuous"):
+                s = math.sin(0.5 * q)
+                turn = _product(origin, (axis[0] * s, axis[1] * s, axis[2] * s,
+                                         math.cos(0.5 * q)))
+            elif kind == "prismatic":
+                translation = tuple(xyz[r] + q * sum(rotation[r][c] * axis[c] for c in range(3))
+                                    for r in range(3))
+            out.append((parent, child, translation, turn))
         return out

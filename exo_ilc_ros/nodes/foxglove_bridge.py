@@ -141,6 +141,7 @@ class FoxgloveBridge(Node):
                              config["control.effort_limit"])
         self.kinematics = UrdfKinematics(self.urdf)
         self.reference_kinematics = UrdfKinematics(prefixed_urdf(self.urdf, REFERENCE_PREFIX))
+        self.reference_names = [REFERENCE_PREFIX + n for n in self.joint_names]
         self.exit_code: int | None = None
         self.sim_clock = SimClock()
         self.reference: tuple[int, np.ndarray] | None = None
@@ -232,15 +233,14 @@ class FoxgloveBridge(Node):
             return
         transforms = self.kinematics.transforms(dict(zip(self.joint_names, position.tolist(),
                                                          strict=True)))
-        transforms.append(("base_link", REFERENCE_PREFIX + "base_link",
-                           np.array(REFERENCE_OFFSET), np.array([0.0, 0.0, 0.0, 1.0])))
+        transforms.append(("base_link", REFERENCE_PREFIX + "base_link", REFERENCE_OFFSET,
+                           (0.0, 0.0, 0.0, 1.0)))
         if self.reference is not None:
             t0, q_d = self.reference
             i = int(round((stamp - t0) / self.period_ns))
             if 0 <= i < q_d.shape[0]:
                 transforms += self.reference_kinematics.transforms(
-                    {REFERENCE_PREFIX + n: float(x)
-                     for n, x in zip(self.joint_names, q_d[i], strict=True)})
+                    dict(zip(self.reference_names, q_d[i].tolist(), strict=True)))
         channel.log(tf_message(stamp, transforms), log_time=stamp)
 
     def destroy_node(self) -> None:

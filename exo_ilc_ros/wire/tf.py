@@ -7,8 +7,6 @@ from __future__ import annotations
 import struct
 from collections.abc import Sequence
 
-import numpy as np
-
 from .cdr import HEADER
 
 TF = "/tf"
@@ -18,23 +16,31 @@ _STAMP = struct.Struct("<iI")
 _SEVEN = struct.Struct("<7d")
 
 
-def _string(body: bytearray, text: str) -> None:
-    body += b"\x00" * (-len(body) % 4)
+def _string(parts: list[bytes], offset: int, text: str) -> int:
+    """Append a CDR string at body ``offset``; returns the offset after it."""
+    pad = -offset % 4
     data = text.encode() + b"\x00"
-    body += _U32.pack(len(data)) + data
+    parts.append(b"\x00" * pad + _U32.pack(len(data)) + data)
+    return offset + pad + 4 + len(data)
 
 
-def tf_message(stamp_ns: int,
-               transforms: Sequence[tuple[str, str, np.ndarray, np.ndarray]]) -> bytes:
+def tf_message(stamp_ns: int, transforms: Sequence[tuple[str, str, Sequence[float],
+                                                         Sequence[float]]]) -> bytes:
     """A TFMessage of (parent frame, child frame, translation xyz, quaternion xyzw), every
     transform stamped ``stamp_ns``."""
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    body = bytearray(_U32.pack(len(transforms)))
+    stamp = _STAMP.pack(sec, nanosec)
+    parts = [_U32.pack(len(transforms))]
+    offset = 4
     for parent, child, translation, rotation in transforms:
-        body += b"\x00" * (-len(body) % 4)
-        body += _STAMP.pack(sec, nanosec)
-        _string(body, parent)
-        _string(body, child)
-        body += b"\x00" * (-len(body) % 8)
-        body += _SEVEN.pack(*(float(x) for x in translation), *(float(x) for x in rotation))
-    return HEADER + bytes(body)
+        pad = -offset % 4
+        parts.append(b"\x00" * pad + stamp)
+        offset += pad + 8
+        offset = _string(parts, offset, parent)
+        offset = _string(parts, offset, child)
+        pad = -offset % 8
+        tx, ty, tz = translation
+        rx, ry, rz, rw = rotation
+        parts.append(b"\x00" * pad + _SEVEN.pack(tx, ty, tz, rx, ry, rz, rw))
+        offset += pad + 56
+    return HEADER + b"".join(parts)

@@ -87,7 +87,9 @@ def main() -> None:
     import sys
 
     received = collect(sys.argv[1], float(sys.argv[2]) if len(sys.argv) > 2 else 120.0)
-    print(json.dumps({topic: len(m) for topic, m in received.messages.items()}), flush=True)
+    counts: dict[str, float] = {topic: len(m) for topic, m in received.messages.items()}
+    counts["cpu_seconds"] = time.process_time()
+    print(json.dumps(counts), flush=True)
 
 
 if __name__ == "__main__":

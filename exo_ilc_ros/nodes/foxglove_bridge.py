@@ -24,12 +24,14 @@ rule), not the graph its rate; /tf is computed only while someone subscribes to 
 
 Parameters: ``host`` (default 127.0.0.1: this machine only), ``port`` (8765; 0 = any free
 port), ``config_file`` (the run's parameter YAML, for the arm; default the shipped one),
-``message_backlog`` (per client, default 4096).
+``message_backlog`` (per client, default 4096), ``scheduling`` (``idle``, the default: the
+process runs at ``SCHED_IDLE``, on CPU the loop leaves free; ``batch``; ``normal``).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sys
 import threading
 import time
@@ -55,7 +57,7 @@ from ..wire.cdr import read_joint_state
 from ..wire.sim_time import SimClock
 from ..wire.tf import TF, TF_TYPE, tf_message
 from .bag_recorder import message_class
-from .common import Inbox, run_nodes
+from .common import Inbox, command_line_parameters, run_nodes
 
 NAME = "foxglove_bridge"
 FORWARDED = (topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD, topics.CLOCK,
@@ -74,6 +76,11 @@ REFERENCE_PREFIX = "reference/"
 REFERENCE_OFFSET = (0.0, 0.6, 0.0)
 """m: where the reference arm's base stands in the measured arm's ``base_link`` frame."""
 READER_DEPTH = 10000
+SCHEDULING = ("idle", "batch", "normal")
+DEFAULT_SCHEDULING = "idle"
+"""The view yields to the control loop (:func:`yield_to_the_loop`): on a busy machine it falls
+behind (its readers hold 10 000 messages per topic; a client then sees the run late, or loses
+the oldest), never the loop."""
 
 
 def reader_qos(topic: str) -> QoSProfile:
@@ -134,6 +141,7 @@ class FoxgloveBridge(Node):
         port = int(self.declare_parameter("port", 8765).value)
         config_file = str(self.declare_parameter("config_file", "").value)
         backlog = int(self.declare_parameter("message_backlog", 4096).value)
+        self.declare_parameter("scheduling", DEFAULT_SCHEDULING)  # applied by main(), first
         config = load_config(config_file or None)
         self.joint_names: list[str] = list(config["joint_names"])
         self.period_ns = int(round(float(config["control.period"]) * 1e9))
@@ -254,8 +262,35 @@ class FoxgloveBridge(Node):
         super().destroy_node()
 
 
+def yield_to_the_loop(policy: str) -> str:
+    """Run this process below the control loop (before any thread starts, so every thread
+    the middleware and the server start inherits it): ``idle`` (``SCHED_IDLE``: the view runs
+    only on CPU the loop and everything else leave free), ``batch`` (``SCHED_BATCH`` at nice
+    10) or ``normal``. Returns what it runs at."""
+    if policy == "normal":
+        return "normal"
+    try:
+        if policy == "idle" and hasattr(os, "SCHED_IDLE"):
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+            return "SCHED_IDLE"
+        if hasattr(os, "SCHED_BATCH"):
+            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+        os.nice(10)
+        return "SCHED_BATCH, nice 10"
+    except OSError as exc:
+        return f"normal ({exc.strerror})"
+
+
 def main(args: list[str] | None = None) -> int:
-    """Entry point: ``ros2 run exo_ilc_ros foxglove_bridge [--ros-args -p port:=8765]``."""
+    """Entry point: ``ros2 run exo_ilc_ros foxglove_bridge [--ros-args -p port:=8765]``; the
+    process yields to the loop first (``-p scheduling:=idle|batch|normal``, default idle)."""
+    given = command_line_parameters(sys.argv if args is None else args, "/" + NAME)
+    policy = str(given["scheduling"].value) if "scheduling" in given else DEFAULT_SCHEDULING
+    if policy not in SCHEDULING:
+        print(f"error: scheduling:={policy}: use one of {', '.join(SCHEDULING)}",
+              file=sys.stderr)
+        return 2
+    print(f"[{NAME}] scheduling: {yield_to_the_loop(policy)}", file=sys.stderr, flush=True)
     return run_nodes([FoxgloveBridge], args)
 
 

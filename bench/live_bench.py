@@ -50,7 +50,8 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def run_once(config: Config, bag_dir: Path, live: bool) -> dict[str, float]:
+def run_once(config: Config, bag_dir: Path, live: bool,
+             bridge: dict[str, str] | None = None) -> dict[str, float]:
     """One recorded run (as ``exo-ilc run`` records), with the live view and a client
     subscribed to everything or without: the in-trial rates (graph_bench's), the CPU time per
     control step of each process from trial 4's start to the end (``cpu_<name>``; the client
@@ -67,7 +68,8 @@ def run_once(config: Config, bag_dir: Path, live: bool) -> dict[str, float]:
             recording = stack.enter_context(Recording(recorded, bag_dir))
             nodes = list(recording.graph_nodes())
             if live:
-                nodes.append(stack.enter_context(LiveView(recorded, port)).spec)
+                nodes.append(stack.enter_context(LiveView(recorded, port,
+                                                          parameters=bridge)).spec)
             session = stack.enter_context(GraphSession(recorded, nodes=nodes))
             pids = {name: p.pid for name, p in session.processes.processes.items()}
             if client is not None:
@@ -106,14 +108,15 @@ def _loop_cpu(run: dict[str, float]) -> float:
     return sum(run.get(f"cpu_{name}", float("nan")) for name in LOOP)
 
 
-def bench_live(trials: int, repeats: int, bag_dir: Path) -> None:
+def bench_live(trials: int, repeats: int, bag_dir: Path,
+               bridge: dict[str, str] | None = None) -> None:
     """The two modes in turn, ``repeats`` rounds; the cost from the medians and per round."""
     config = load_config(overrides={"max_trials": trials})
     without: list[dict[str, float]] = []
     live: list[dict[str, float]] = []
     for round_ in range(repeats):
         for mode in (False, True) if round_ % 2 == 0 else (True, False):
-            (live if mode else without).append(run_once(config, bag_dir, mode))
+            (live if mode else without).append(run_once(config, bag_dir, mode, bridge))
         a, b = without[-1], live[-1]
         print(f"  round {round_ + 1}: steps/s within trials without --live "
               f"{a['steps_per_s_in_trial']:.0f} [other tenants {a['others']:.2f} cores], with "
@@ -146,9 +149,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--trials", type=int, default=8)
     parser.add_argument("--repeats", type=int, default=4, help="ABBA rounds")
+    parser.add_argument("--bridge", nargs="*", default=[], metavar="NAME:=VALUE",
+                        help="foxglove_bridge parameters, e.g. scheduling:=normal "
+                        "sample_reliability:=reliable")
     args = parser.parse_args()
+    bridge = dict(item.split(":=", 1) for item in args.bridge)
+    print(f"foxglove_bridge parameters: {bridge or 'defaults'}", flush=True)
     with tempfile.TemporaryDirectory(prefix="live_bench_") as tmp:
-        bench_live(args.trials, args.repeats, Path(tmp))
+        bench_live(args.trials, args.repeats, Path(tmp), bridge)
 
 
 if __name__ == "__main__":

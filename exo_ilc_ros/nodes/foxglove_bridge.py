@@ -24,8 +24,10 @@ rule), not the graph its rate; /tf is computed only while someone subscribes to 
 
 Parameters: ``host`` (default 127.0.0.1: this machine only), ``port`` (8765; 0 = any free
 port), ``config_file`` (the run's parameter YAML, for the arm; default the shipped one),
-``message_backlog`` (per client, default 4096), ``scheduling`` (``idle``, the default: the
-process runs at ``SCHED_IDLE``, on CPU the loop leaves free; ``batch``; ``normal``).
+``message_backlog`` (per client, default 4096), ``sample_reliability`` (``best_effort``, the
+default, or ``reliable``: how the per-sample topics are read, :func:`reader_qos`),
+``scheduling`` (``idle``, the default: the process runs at ``SCHED_IDLE``, on CPU the loop
+leaves free; ``batch``; ``normal``).
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from ..bag.messages import serialize, typestore
 from ..core.config import load_config
+from ..core.errors import ConfigError
 from ..core.experiment import build_arm
 from ..core.forward_kinematics import UrdfKinematics
 from ..core.urdf import arm_urdf
@@ -83,11 +86,21 @@ behind (its readers hold 10 000 messages per topic; a client then sees the run l
 the oldest), never the loop."""
 
 
-def reader_qos(topic: str) -> QoSProfile:
-    """Reliable, 10 000 deep (between two drains); transient local where the publisher keeps
-    a history (a view started late still gets the trials so far)."""
+SAMPLED = frozenset({topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.CLOCK})
+"""The control loop's per-sample topics."""
+SAMPLE_RELIABILITY = ("best_effort", "reliable")
+
+
+def reader_qos(topic: str, samples: str = "best_effort") -> QoSProfile:
+    """10 000 deep (between two drains). The per-sample topics (:data:`SAMPLED`) best effort
+    by default (``samples``): the loop's writers then never repair a sample for the view, which
+    runs at ``SCHED_IDLE`` and may fall behind; a sample it misses is lost to the view only.
+    The rest reliable, and transient local where the publisher keeps a history (a view started
+    late still gets the trials so far)."""
+    best_effort = topic in SAMPLED and samples == "best_effort"
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=READER_DEPTH,
-                      reliability=ReliabilityPolicy.RELIABLE,
+                      reliability=ReliabilityPolicy.BEST_EFFORT if best_effort
+                      else ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL if topic in LATCHED
                       else DurabilityPolicy.VOLATILE)
 
@@ -141,6 +154,10 @@ class FoxgloveBridge(Node):
         port = int(self.declare_parameter("port", 8765).value)
         config_file = str(self.declare_parameter("config_file", "").value)
         backlog = int(self.declare_parameter("message_backlog", 4096).value)
+        samples = str(self.declare_parameter("sample_reliability", "best_effort").value)
+        if samples not in SAMPLE_RELIABILITY:
+            raise ConfigError("sample_reliability", f"use one of {', '.join(SAMPLE_RELIABILITY)}",
+                              NAME)
         self.declare_parameter("scheduling", DEFAULT_SCHEDULING)  # applied by main(), first
         config = load_config(config_file or None)
         self.joint_names: list[str] = list(config["joint_names"])
@@ -170,7 +187,8 @@ class FoxgloveBridge(Node):
             server_listener=_Listener(self), message_backlog_size=backlog)
         self.inbox = Inbox(self)
         for topic in FORWARDED:
-            self.inbox.subscribe(message_class(topics.TYPES[topic]), topic, reader_qos(topic))
+            self.inbox.subscribe(message_class(topics.TYPES[topic]), topic,
+                                 reader_qos(topic, samples))
         self.forwarded = 0
         self.get_logger().info(f"Foxglove WebSocket server on ws://{host}:{self.server.port} "
                                "(subprotocol foxglove.sdk.v1): open it in the Foxglove app")

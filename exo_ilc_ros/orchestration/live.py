@@ -4,6 +4,7 @@ the graph (it must never share the control loop's processes), with the run's con
 from __future__ import annotations
 
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
 
@@ -20,10 +21,12 @@ class LiveView:
     arm's URDF); a context manager that keeps that file while the graph runs."""
 
     def __init__(self, config: Config, port: int = DEFAULT_PORT,
-                 host: str = DEFAULT_HOST) -> None:
+                 host: str = DEFAULT_HOST, parameters: Mapping[str, str] | None = None) -> None:
         self.config = config
         self.port = port
         self.host = host
+        self.parameters = dict(parameters or {})
+        """More of the bridge's parameters (``sample_reliability``, ``scheduling``, ...)."""
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
         self.config_file: Path | None = None
 
@@ -49,6 +52,8 @@ class LiveView:
         """``foxglove_bridge`` as one more process of the graph."""
         if self.config_file is None:
             raise RuntimeError("LiveView.spec outside its with-block")
+        more = tuple(arg for name, value in self.parameters.items()
+                     for arg in ("-p", f"{name}:={value}"))
         return NodeSpec(BRIDGE.name, BRIDGE.module,
                         ("-p", f"host:={self.host}", "-p", f"port:={self.port}",
-                         "-p", f"config_file:={self.config_file}"))
+                         "-p", f"config_file:={self.config_file}", *more))

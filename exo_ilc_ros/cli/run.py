@@ -71,7 +71,19 @@ def register(sub: Any) -> None:
                         help="with --live: the address to bind (default 127.0.0.1, this "
                         "machine only; 0.0.0.0 lets anyone who can reach this machine watch "
                         "the run, without a password: docs/live-view.md)")
+    parser.add_argument("--live-param", action="append", default=[], metavar="NAME:=VALUE",
+                        type=bridge_parameter,
+                        help="with --live: a foxglove_bridge parameter, e.g. "
+                        "sample_reliability:=reliable or message_backlog:=10000 (repeatable)")
     parser.set_defaults(func=run)
+
+
+def bridge_parameter(text: str) -> tuple[str, str]:
+    """``name:=value`` of ``--live-param``."""
+    name, sep, value = text.partition(":=")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"not name:=value: {text!r}")
+    return name, value
 
 
 def port_number(text: str) -> int:
@@ -122,8 +134,10 @@ def run(args: argparse.Namespace) -> int:
     if args.no_bag and (args.bag_dir is not None or args.isolated_recorder):
         given = "--bag-dir" if args.bag_dir is not None else "--isolated-recorder"
         raise ConfigError("--no-bag", f"records nothing: {given} would be ignored; drop one")
-    if not args.live and (args.live_port is not None or args.live_host is not None):
-        given = "--live-port" if args.live_port is not None else "--live-host"
+    if not args.live and (args.live_port is not None or args.live_host is not None or
+                          args.live_param):
+        given = "--live-port" if args.live_port is not None else \
+            "--live-host" if args.live_host is not None else "--live-param"
         raise ConfigError(given, "needs --live")
     args.bag_dir = "bags" if args.bag_dir is None else args.bag_dir
     config = config_from_args(args)  # an invalid YAML fails here, before any node starts
@@ -202,7 +216,7 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
         if getattr(args, "live", False):
             live = stack.enter_context(LiveView(
                 run_config, DEFAULT_PORT if args.live_port is None else args.live_port,
-                args.live_host or DEFAULT_HOST))
+                args.live_host or DEFAULT_HOST, dict(args.live_param)))
             print(f"live view: {live.url} (Foxglove app: Open connection, Foxglove WebSocket; "
                   "layout config/layouts/foxglove.json)", file=sys.stderr, flush=True)
             extra.append(live.spec)

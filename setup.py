@@ -59,10 +59,12 @@ setup(
         "clarabel>=0.9",
         "mujoco>=4",
         "distributed>=2024.1",  # exo-ilc study --dask: cells on a Dask cluster
+        "foxglove-sdk>=0.30.3,<0.31",  # exo-ilc run --live: the Foxglove WebSocket server
     ],
     extras_require={
         "test": ["pytest>=8", "hypothesis>=6.100", "pin>=3", "ruff>=0.6", "mypy>=1.10",
-                 "types-PyYAML", "colcon-core", "colcon-ros", "psycopg[binary]>=3.1",
+                 "types-PyYAML", "websockets>=12", "colcon-core", "colcon-ros",
+                 "psycopg[binary]>=3.1",
                  # public URDFs (UR5, Panda) for the URDF reader's tests; the loaders pin
                  # example-robot-data 5.0.0 (tested)
                  "example-robot-data-loaders>=5", "example-robot-data>=5",

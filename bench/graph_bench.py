@@ -64,9 +64,14 @@ def middleware_floor(count: int, raw: bool, listener: bool = False) -> dict[str,
 def graph_rate(config: Config, nodes: Sequence[NodeSpec] = GRAPH_NODES) -> dict[str, float]:
     """(b): control steps per second through the graph (``nodes``: its processes, e.g. with
     the recorder), within trials and overall."""
-    samples = int(round(config["trajectory.duration"] / config["control.period"])) + 1
     with GraphSession(config, nodes=nodes) as session:
         session.spin_until(lambda: session.finished, timeout=1800.0, stall_timeout=120.0)
+    return session_rates(session, config)
+
+
+def session_rates(session: GraphSession, config: Config) -> dict[str, float]:
+    """:func:`graph_rate`'s figures of a finished session."""
+    samples = int(round(config["trajectory.duration"] / config["control.period"])) + 1
     # Receipt times are wall times only once the monitor matched the supervisor: the trials
     # before arrive together from the transient-local history. Skip that burst (everything
     # received within 50 ms of the first event) and the first three trials (warm-up). Medians

@@ -1,15 +1,17 @@
 """Launch the exo_ilc_ros graph: plant_simulator, computed_torque_controller, ilc_supervisor,
-and bag_recorder beside them.
+and bag_recorder beside them (and foxglove_bridge, the live view, with ``live:=true``).
 
     ros2 launch exo_ilc_ros exo_ilc.launch.py
     ros2 launch exo_ilc_ros exo_ilc.launch.py params_file:=my.yaml mass_uncertainty:=0.10
     ros2 launch exo_ilc_ros exo_ilc.launch.py bag_path:=bags/today record:=false
     ros2 launch exo_ilc_ros exo_ilc.launch.py plant:=mujoco     # MuJoCo, protocol homing
+    ros2 launch exo_ilc_ros exo_ilc.launch.py live:=true live_port:=8765   # Foxglove live view
 
 Every node reads the shipped config/exo_ilc.yaml, then ``params_file`` (any subset of keys,
 same layout) if given. The nodes are those of ``exo_ilc_ros/nodes/registry.py``. The recorder
 (a process of its own here) writes ``bag_path`` (default ``bags/<run_name>`` under the working
 directory) and copies the run's effective config (written to a temporary file) into the bag.
+The live view (docs/live-view.md) binds ``live_host`` (default 127.0.0.1: this machine only).
 Without launch_ros (a PyPI-only install), ``exo-ilc run`` does the same.
 """
 
@@ -55,10 +57,14 @@ def _nodes(context: LaunchContext) -> list[Node]:
     if LaunchConfiguration("record").perform(context).lower() in ("true", "1", "yes"):
         nodes.append(_recorder(user, delta, LaunchConfiguration("bag_path").perform(context),
                                plant))
+    if LaunchConfiguration("live").perform(context).lower() in ("true", "1", "yes"):
+        nodes.append(_live_view(user, delta, plant,
+                                LaunchConfiguration("live_host").perform(context),
+                                LaunchConfiguration("live_port").perform(context)))
     return nodes
 
 
-def _recorder(user: str, delta: str, bag_path: str, plant: str = "simulator") -> Node:
+def _effective_config_file(user: str, delta: str, plant: str, header: str) -> str:
     from exo_ilc_ros.core.params.config import load_config
 
     overrides: dict[str, object] = {"mass_uncertainty": float(delta)} if delta else {}
@@ -67,7 +73,22 @@ def _recorder(user: str, delta: str, bag_path: str, plant: str = "simulator") ->
     config = load_config(user or None, overrides or None)
     config_file = os.path.join(tempfile.mkdtemp(prefix="exo_ilc_launch_"), "effective.yaml")
     with open(config_file, "w") as out:
-        out.write(config.to_ros_yaml("effective config of ros2 launch exo_ilc_ros"))
+        out.write(config.to_ros_yaml(header))
+    return config_file
+
+
+def _live_view(user: str, delta: str, plant: str, host: str, port: str) -> Node:
+    """foxglove_bridge, a process of its own, with the run's config (for the arm's URDF)."""
+    params: dict[str, object] = {
+        "config_file": _effective_config_file(user, delta, plant, "shown by foxglove_bridge"),
+        "host": host or "127.0.0.1", "port": int(port or 8765)}
+    return Node(package=PACKAGE, executable=registry.BRIDGE.name, name=registry.BRIDGE.name,
+                parameters=[params], output="screen", emulate_tty=True)
+
+
+def _recorder(user: str, delta: str, bag_path: str, plant: str = "simulator") -> Node:
+    config_file = _effective_config_file(user, delta, plant,
+                                         "effective config of ros2 launch exo_ilc_ros")
     params: dict[str, object] = {"config_file": config_file}
     if bag_path:
         params["bag_path"] = bag_path
@@ -89,5 +110,12 @@ def generate_launch_description() -> LaunchDescription:
                               description="start bag_recorder (true/false)"),
         DeclareLaunchArgument("bag_path", default_value="",
                               description="the bag's directory (default: bags/<run_name>)"),
+        DeclareLaunchArgument("live", default_value="false",
+                              description="start foxglove_bridge, the live view (true/false)"),
+        DeclareLaunchArgument("live_port", default_value="8765",
+                              description="the live view's WebSocket port"),
+        DeclareLaunchArgument("live_host", default_value="127.0.0.1",
+                              description="the address the live view binds (0.0.0.0 exposes "
+                              "the run to the network, without a password)"),
         OpaqueFunction(function=_nodes),
     ])

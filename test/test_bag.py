@@ -6,6 +6,7 @@ In-process tests write bags with ``write_run`` (the graph's topics and messages,
 
 from __future__ import annotations
 
+import glob
 import json
 import signal
 import subprocess
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+from mcap.reader import make_reader
 from test_bag_integrity import assert_bag_verifiable
 
 from exo_ilc_ros.analysis.figures import convergence_figure, tracking_figure
@@ -29,13 +31,15 @@ from exo_ilc_ros.bag import (
     trials_filed,
     write_run,
 )
-from exo_ilc_ros.bag.provenance import read_provenance
+from exo_ilc_ros.bag import messages as bag_messages
+from exo_ilc_ros.bag.provenance import CONFIG_JSON, CONFIG_YAML, RECORDED_BY, read_provenance
 from exo_ilc_ros.cli.main import main as exo_ilc
 from exo_ilc_ros.core.params.config import Config, load_config
 from exo_ilc_ros.core.session.learning_session import run_trials
 from exo_ilc_ros.core.session.result import RunResult
 from exo_ilc_ros.core.session.summary import RunSummary
 from exo_ilc_ros.wire import topics
+from exo_ilc_ros.wire.qos import offered_qos
 
 TRIALS = 5
 SHORT = {"trajectory.duration": 1.0, "max_trials": TRIALS}
@@ -149,6 +153,8 @@ def test_independent_mcap_reader_reads_every_message(mcap_bag: Path, config: Con
     info = yaml.safe_load((mcap_bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     expected = {t["topic_metadata"]["name"]: t["message_count"]
                 for t in info["topics_with_message_count"]}
+    assert set(expected) == set(topics.TYPES)  # every recorded topic listed, as rosbag2 does
+    assert expected.pop(topics.PARAMETER_EVENTS) == 0  # the graph's own: none in-process
     files = info["relative_file_paths"]
     assert len(files) == TRIALS // 2 + 1  # split every 2 trials, the rest in the last file
     counts: dict[str, int] = {}
@@ -166,10 +172,77 @@ def test_independent_mcap_reader_reads_every_message(mcap_bag: Path, config: Con
     assert sum(counts.values()) == info["message_count"]
 
 
+def _old_layout_bag(bag: Path, out: Path) -> Path:
+    """``bag`` rewritten as the recorder wrote bags before issue 26: one file, wall-clock log
+    times (DDS receipt: a run of 5 s sim time logged within about 1.5 s, topics interleaved
+    with jitter), /clock at every sample, no /diagnostics, no /ilc/trial_metrics, trial 1's
+    summary without the ``level/`` keys, and only topics with messages listed."""
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    kept: list[tuple[int, str, bytes]] = []
+    for file in sorted(glob.glob(str(bag / "*.mcap"))):
+        with open(file, "rb") as handle:
+            for _, channel, message in make_reader(handle).iter_messages():
+                if channel.topic in (topics.DIAGNOSTICS, topics.TRIAL_METRICS, topics.CLOCK):
+                    continue
+                data = message.data
+                if channel.topic in (topics.TRIAL_SUMMARY, topics.TRIAL_EVENTS):
+                    msg = bag_messages.typestore().deserialize_cdr(data, topics.TYPES[
+                        topics.TRIAL_SUMMARY])
+                    for status in msg.status:
+                        status.values = [kv for kv in status.values if kv.value != "nan"]
+                    data = bag_messages.serialize(msg, topics.TYPES[topics.TRIAL_SUMMARY])
+                kept.append((message.log_time, channel.topic, bytes(data)))
+                if channel.topic == topics.JOINT_STATES:
+                    kept.append((message.log_time, topics.CLOCK,
+                                 bag_messages.clock(message.log_time)))
+    rng = np.random.default_rng(3)
+    wall = 1_796_000_000 * 10**9
+    old = [(wall + int(stamp * 0.3) + int(rng.integers(0, 200_000)), topic, data)
+           for stamp, topic, data in kept]
+    old.sort(key=lambda item: item[0])
+    present = {topic for _, topic, _ in old}
+    with BagWriter(out, custom_data=info["custom_data"]) as writer:
+        for topic in topics.TYPES:
+            if topic in present:
+                writer.add_topic(topic, topics.TYPES[topic], offered_qos(topic))
+        writer.write_many(old)
+    return out
+
+
+def test_analyze_reads_an_old_layout_bag_as_before(tmp_path: Path, mcap_bag: Path) -> None:
+    """A bag of the old layout (wall-clock log times, /clock every sample, no /diagnostics,
+    one file) analyses to the same table as the new layout's."""
+    old = _old_layout_bag(mcap_bag, tmp_path / "old")
+    info = yaml.safe_load((old / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert len(info["relative_file_paths"]) == 1
+    assert info["starting_time"]["nanoseconds_since_epoch"] > 10**18  # wall clock
+    listed = {t["topic_metadata"]["name"] for t in info["topics_with_message_count"]}
+    assert topics.DIAGNOSTICS not in listed and topics.TRIAL_METRICS not in listed
+    old_run, new_run = read_bag(old), read_bag(mcap_bag)
+    assert sorted(old_run.trials) == sorted(new_run.trials)
+    assert_same_table(old_run.summary(), new_run.summary(), tol=0.0)
+    assert exo_ilc(["analyze", str(old), "--quiet"]) == 0
+
+
+def test_every_storage_file_carries_the_runs_configuration(mcap_bag: Path) -> None:
+    """Each MCAP file's own rosbag2 metadata record holds the run's config and provenance, as
+    metadata.yaml does (a file copied alone still says what run it is)."""
+    info = yaml.safe_load((mcap_bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert len(info["relative_file_paths"]) > 1
+    for name in info["relative_file_paths"]:
+        with open(mcap_bag / name, "rb") as handle:
+            (record,) = [m for m in make_reader(handle).iter_metadata() if m.name == "rosbag2"]
+        split = yaml.safe_load(record.metadata["serialized_metadata"])
+        for key in (CONFIG_JSON, CONFIG_YAML, RECORDED_BY):
+            assert split["custom_data"][key] == info["custom_data"][key], (name, key)
+        assert split["relative_file_paths"] == [name]
+
+
 def test_sqlite3_bag_analyses_identically(tmp_path: Path, mcap_bag: Path, config: Config,
                                           result: RunResult) -> None:
     bag = write_run(tmp_path / "run_db3", config, result, storage="sqlite3")
-    assert [p.suffix for p in bag.iterdir() if p.name != "metadata.yaml"] == [".db3"]
+    stored = [p.suffix for p in bag.iterdir() if p.name != "metadata.yaml"]
+    assert stored == [".db3"] * len(stored) and len(stored) >= TRIALS  # one file per trial
     sqlite_run, mcap_run = read_bag(bag), read_bag(mcap_bag)
     assert sqlite_run.storage == "sqlite3" and mcap_run.storage == "mcap"
     assert_same_table(sqlite_run.summary(), mcap_run.summary(), tol=0.0)
@@ -609,11 +682,14 @@ def test_layouts_name_every_joint_and_known_topics(config: Config) -> None:
     plotjuggler = (layouts / "plotjuggler.xml").read_text()
     paths = [p["value"] for panel in foxglove["configById"].values()
              for p in panel.get("paths", [])]
+    labels = [p["label"] for panel in foxglove["configById"].values()
+              for p in panel.get("paths", [])]
     for name in config["joint_names"]:
         assert f"/joint_states/{name}/position" in plotjuggler
-        assert any(name in p for p in paths)
+        assert name in labels
+    scripts = {"/studio_script/tracking_error"}  # the layout's user script (test_live.py)
     for path in paths:
-        assert path.split(".")[0] in topics.TYPES
+        assert path.split(".")[0] in {*topics.TYPES, *scripts}
 
 
 def test_joint_states_decoded_row_wise_equal_rosbags() -> None:

@@ -32,6 +32,7 @@ ROSDEP_KEYS: dict[str, str] = {
     "clarabel": "python3-clarabel-pip",
     "mujoco": "python3-mujoco-pip",
     "distributed": "python3-distributed",
+    "foxglove-sdk": "python3-foxglove-sdk-pip",
 }
 """pip name -> rosdep key (rosdistro's rosdep/python.yaml: the system package where there is
 one, a ``-pip`` key otherwise; ``mcap-ros2-support`` is that key's own name there)."""
@@ -250,3 +251,9 @@ def test_launch_file_starts_the_graph_and_the_recorder(monkeypatch: pytest.Monke
         [("mujoco_plant", "plant_simulator"), *((n.name, n.name) for n in registry.GRAPH[1:])]
     assert all({"protocol": "homing"} in n["parameters"] for n in mujoco[:3])
     assert load_config(mujoco[3]["parameters"][0]["config_file"])["protocol"] == "homing"
+    live = _launched(monkeypatch, live="true", live_port="9001", mass_uncertainty="0.1")
+    assert [n["executable"] for n in live] == [n.name for n in (
+        *registry.GRAPH, registry.RECORDER, registry.BRIDGE)]
+    (bridge,) = live[4]["parameters"]
+    assert (bridge["host"], bridge["port"]) == ("127.0.0.1", 9001)  # this machine only
+    assert load_config(bridge["config_file"])["mass_uncertainty"] == 0.1

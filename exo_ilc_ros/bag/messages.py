@@ -16,6 +16,8 @@ import numpy as np
 
 from ..wire import topics
 from ..wire.protocol import feedforward_frame
+from ..wire.publishers import CONTROLLER, SUPERVISOR
+from ..wire.trial_metrics import trial_metrics as trial_metrics_array
 
 
 @cache
@@ -100,11 +102,12 @@ def feedforward(ns: int, trial: int, names: Sequence[str], time: Any, position: 
 
 
 def _diagnostics(ns: int, name: str, level: int, message: str,
-                 values: Iterable[tuple[str, str]]) -> bytes:
+                 values: Iterable[tuple[str, str]], hardware_id: str = SUPERVISOR) -> bytes:
+    """A DiagnosticArray of one status; ``hardware_id`` the node that sends it in the graph."""
     key_value = _type("diagnostic_msgs/msg/KeyValue")
     status = _type("diagnostic_msgs/msg/DiagnosticStatus")(
         level=level, name=name, message=message,
-        hardware_id="", values=[key_value(key=k, value=v) for k, v in values])
+        hardware_id=hardware_id, values=[key_value(key=k, value=v) for k, v in values])
     msg = _type("diagnostic_msgs/msg/DiagnosticArray")(header=header(ns), status=[status])
     return serialize(msg, topics.TYPES[topics.TRIAL_SUMMARY])
 
@@ -128,3 +131,24 @@ def trial_summary(ns: int, values: Sequence[tuple[str, str]], within_bound: bool
     trial = dict(values).get("trial", "?")
     return _diagnostics(ns, topics.SUMMARY_STATUS, OK if within_bound else WARN,
                         f"trial {trial}", values)
+
+
+def trial_metrics(values: Sequence[tuple[str, str]], names: Sequence[str],
+                  within_bound: bool) -> bytes:
+    """``/ilc/trial_metrics`` of a trial summary's key-values
+    (:mod:`~exo_ilc_ros.wire.trial_metrics`)."""
+    array = trial_metrics_array(dict(values), names, not within_bound)
+    dimension = _type("std_msgs/msg/MultiArrayDimension")
+    layout = _type("std_msgs/msg/MultiArrayLayout")(
+        dim=[dimension(label=d.label, size=d.size, stride=d.stride) for d in array.dims],
+        data_offset=array.data_offset)
+    msg = _type("std_msgs/msg/Float64MultiArray")(layout=layout, data=_f64(array.data))
+    return serialize(msg, topics.TYPES[topics.TRIAL_METRICS])
+
+
+def controller_status(ns: int, message: str, values: Sequence[tuple[str, str]]) -> bytes:
+    """``/diagnostics``: the controller's feed-forward acknowledgement (``loaded``) or trial
+    report (``done``), as computed_torque_controller sends them."""
+    name = topics.FEEDFORWARD_ACK_STATUS if message == "loaded" else \
+        topics.CONTROLLER_TRIAL_STATUS
+    return _diagnostics(ns, name, OK, message, values, CONTROLLER)

@@ -3,9 +3,14 @@ published, on the same topics and types, so users without the graph get the same
 
 Simulated time is the plant simulator's: trial k's sample i is stamped
 ``((k - 1) (N + 1) + 1 + i) * period`` (each reset puts the next t0 one period after the last
-sample). The order per trial is the supervisor's: feed-forward and ``start`` at t0, the samples,
-the summary and ``end`` at the last sample; ``finished`` after the last trial. Log times equal the
-stamps.
+sample). The order per trial is the graph's: feed-forward, the controller's ``loaded`` and
+``start`` at t0, the samples (``/clock`` as the plant sends it: every ``clock_every``-th sample
+and the first and last), the controller's ``done``, the summary, the trial metrics and ``end``
+at the last sample; ``finished`` after the last trial. The same topics and types as the
+recorder's bag, one storage file per trial (``split_every``), each file's metadata with the
+run's configuration. Log and publish times equal the sim stamps (the recorder's rule, see
+``nodes/bag_recorder.py``). Not written (the graph's, not the run's): the nodes' once-a-second
+health on ``/diagnostics`` and ``/parameter_events``, declared with no message.
 """
 
 from __future__ import annotations
@@ -55,7 +60,7 @@ def declare_topics(writer: BagWriter) -> None:
 
 
 def write_run(path: Path | str, config: Config, result: RunResult, *, storage: str = "mcap",
-              split_every: int = 0, name: str = "",
+              split_every: int = 1, name: str = "",
               extra_custom_data: Mapping[str, str] | None = None,
               metrics: Sequence[TrialMetrics] | None = None) -> Path:
     """Write ``result`` (a run of ``config``) as a bag at ``path``; ``split_every`` > 0 starts a
@@ -68,6 +73,7 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                              mass_uncertainty=result.mass_uncertainty, law=result.law)
     custom.update(extra_custom_data or {})
     period_ns = int(round(float(config["control.period"]) * NS))
+    clock_every = max(1, int(config["clock_every"]))
     measured = config.replace({"mass_uncertainty": result.mass_uncertainty})
     with BagWriter(path, storage=storage, custom_data=custom) as writer:
         declare_topics(writer)
@@ -78,11 +84,14 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
             ff = messages.feedforward(t0, k, names, ref.time, ref.position, ref.velocity,
                                       record.feedforward)
             writer.write(topics.FEEDFORWARD, t0, ff)
+            writer.write(topics.DIAGNOSTICS, t0, messages.controller_status(
+                t0, "loaded", [("trial", str(k)), ("t0_ns", str(t0))]))
             writer.write(topics.TRIAL_EVENTS, t0, messages.trial_event(t0, "start", k))
             applied = np.vstack([np.zeros((1, record.effort.shape[1])), record.effort[:-1]])
             for i in range(samples):
                 ns = t0 + i * period_ns
-                writer.write(topics.CLOCK, ns, messages.clock(ns))
+                if i % clock_every == 0 or i == samples - 1:  # as plant_simulator sends it
+                    writer.write(topics.CLOCK, ns, messages.clock(ns))
                 writer.write(topics.JOINT_STATES, ns, messages.joint_state(
                     ns, names, record.position[i], record.velocity[i], applied[i]))
                 writer.write(topics.EFFORT_COMMANDS, ns,
@@ -99,7 +108,12 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
             else:  # as the supervisor files them (core/programs/metrics.py)
                 values += metric_summary_values(record, measured, names)
             within = bool(np.all(record.max_abs_error <= result.error_bound))
+            aborted = -1 if record.aborted_at is None else int(record.aborted_at)
+            writer.write(topics.DIAGNOSTICS, end, messages.controller_status(
+                end, "done", [("trial", str(k)), ("t0_ns", str(t0)),
+                              ("aborted_at", str(aborted)), ("watchdog_trips", "0")]))
             writer.write(topics.TRIAL_SUMMARY, end, messages.trial_summary(end, values, within))
+            writer.write(topics.TRIAL_METRICS, end, messages.trial_metrics(values, names, within))
             writer.write(topics.TRIAL_EVENTS, end, messages.trial_event(end, "end", k, values))
             writer.set_custom_data(TRIALS_COMPLETED, str(k))
             if split_every > 0 and k % split_every == 0:

@@ -148,16 +148,21 @@ class _McapFile:
         self.channels[topic.name] = channel
         return channel
 
-    def write(self, channel: int, timestamp: int, data: bytes | memoryview) -> None:
-        """One message: log and publish time ``timestamp`` (ns), as rosbags wrote them."""
-        self._writer.add_message(channel, timestamp, data, timestamp)
+    def write(self, channel: int, timestamp: int, data: bytes | memoryview,
+              publish_time: int | None = None) -> None:
+        """One message: log time ``timestamp`` (ns), publish time ``publish_time`` (default:
+        the log time)."""
+        self._writer.add_message(channel, timestamp, data,
+                                 timestamp if publish_time is None else publish_time)
 
     def write_batch(self, channels: Mapping[str, int],
-                    batch: Sequence[tuple[int, str, bytes]]) -> None:
-        """Messages of topics connected in this file, in order."""
+                    batch: Sequence[tuple[int, str, bytes] | tuple[int, str, bytes, int]]
+                    ) -> None:
+        """Messages of topics connected in this file, in order; a 4th item is the publish
+        time (else the log time)."""
         add = self._writer.add_message
-        for timestamp, topic, data in batch:
-            add(channels[topic], timestamp, data, timestamp)
+        for item in batch:
+            add(channels[item[1]], item[0], item[2], item[3] if len(item) > 3 else item[0])
 
     def finish(self, metadata: str) -> None:
         """The ``rosbag2`` metadata record, the summary (indexes, statistics, CRC) and the
@@ -196,13 +201,16 @@ class _Sqlite3File:
         self.channels[topic.name] = connection.id
         return int(connection.id)
 
-    def write(self, channel: int, timestamp: int, data: bytes | memoryview) -> None:
+    def write(self, channel: int, timestamp: int, data: bytes | memoryview,
+              publish_time: int | None = None) -> None:
+        del publish_time  # sqlite3 storage has one time per message
         self._writer.write(self._connections[channel], timestamp, data)
 
     def write_batch(self, channels: Mapping[str, int],
-                    batch: Sequence[tuple[int, str, bytes]]) -> None:
-        for timestamp, topic, data in batch:
-            self.write(channels[topic], timestamp, data)
+                    batch: Sequence[tuple[int, str, bytes] | tuple[int, str, bytes, int]]
+                    ) -> None:
+        for item in batch:
+            self.write(channels[item[1]], item[0], item[2])
 
     def finish(self, metadata: str) -> None:
         """Close the database (rosbags also writes a ``metadata.yaml`` in the staging
@@ -337,21 +345,24 @@ class BagWriter:
                                 f"got {type(value).__name__}")
         self.custom_data[key] = value
 
-    def write(self, topic: str, timestamp: int, data: bytes | memoryview) -> None:
-        """Store one message (CDR bytes) of a declared topic at ``timestamp`` ns."""
+    def write(self, topic: str, timestamp: int, data: bytes | memoryview,
+              publish_time: int | None = None) -> None:
+        """Store one message (CDR bytes) of a declared topic at log time ``timestamp`` ns
+        (MCAP: publish time ``publish_time``, default the log time)."""
         if not self._opened or self._closed:
             raise BagWriteError(self.path, "write on a bag that is not open")
         split = self._split or self._open_split()
         channel = split.file.channels.get(topic)
         if channel is None:
             channel = self._connect(split, topic)
-        split.file.write(channel, timestamp, data)
+        split.file.write(channel, timestamp, data, publish_time)
         split.counts[topic] = split.counts.get(topic, 0) + 1
         split.start = min(split.start, timestamp)
         split.end = max(split.end, timestamp)
 
-    def write_many(self, messages: Iterable[tuple[int, str, bytes]]) -> int:
-        """Store ``(timestamp ns, topic, CDR bytes)`` messages in order (an
+    def write_many(self, messages: Iterable[tuple[int, str, bytes] |
+                                        tuple[int, str, bytes, int]]) -> int:
+        """Store ``(log time ns, topic, CDR bytes[, publish time ns])`` messages in order (an
         :class:`~exo_ilc_ros.nodes.common.Inbox`'s batch); returns how many.
 
         The same file as :meth:`write` one by one (tested), with the per-message bookkeeping
@@ -365,17 +376,18 @@ class BagWriter:
         split = self._split or self._open_split()
         channels = split.file.channels
         done = 0
-        for i, (_, topic, _) in enumerate(batch):
+        for i, item in enumerate(batch):
+            topic = item[1]
             if topic not in channels:  # its channel goes where write() would put it
                 split.file.write_batch(channels, batch[done:i])
                 self._connect(split, topic)
                 done = i
         split.file.write_batch(channels, batch[done:])
         counts = split.counts
-        for _, topic, _ in batch:
-            counts[topic] = counts.get(topic, 0) + 1
-        first = min(timestamp for timestamp, _, _ in batch)
-        last = max(timestamp for timestamp, _, _ in batch)
+        for item in batch:
+            counts[item[1]] = counts.get(item[1], 0) + 1
+        first = min(item[0] for item in batch)
+        last = max(item[0] for item in batch)
         split.start = min(split.start, first)
         split.end = max(split.end, last)
         return len(batch)
@@ -389,7 +401,8 @@ class BagWriter:
         produced = split.file.path
         info = self._metadata([_FileInfo(produced.name, split.start, split.end,
                                          sum(split.counts.values()))],
-                              {t: split.counts.get(t, 0) for t in self._topics}, {})
+                              {t: split.counts.get(t, 0) for t in self._topics},
+                              self.custom_data)  # each file carries the run's config too
         split.file.finish(self._split_yaml.dump(info).strip())
         target = self.path / produced.name
         os.replace(produced, target)
@@ -450,8 +463,8 @@ class BagWriter:
             "starting_time": {"nanoseconds_since_epoch": start},
             "message_count": sum(f.count for f in files),
             "topics_with_message_count": [
-                {"topic_metadata": t.metadata(), "message_count": counts[t.name]}
-                for t in self._topics.values() if counts.get(t.name)],
+                {"topic_metadata": t.metadata(), "message_count": counts.get(t.name, 0)}
+                for t in self._topics.values()],  # every recorded topic, as ros2 bag record
             "compression_format": "",
             "compression_mode": "",
             "files": [{"path": f.path, "starting_time": {"nanoseconds_since_epoch": f.start},

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import shlex
 import sys
@@ -22,6 +23,7 @@ from ..core.session.learning_session import stored_trials
 from ..core.session.summary import RunSummary
 from ..orchestration.graph import TrialSummary, run_graph
 from ..orchestration.launcher import GraphError, graph_nodes
+from ..orchestration.live import DEFAULT_HOST, DEFAULT_PORT, LiveView
 from ..orchestration.recording import Recording
 from ..wire import topics
 from .arguments import directory, domain_id, shown_command
@@ -68,7 +70,39 @@ def register(sub: Any) -> None:
     parser.add_argument("--plant", choices=("simulator", "mujoco"), default="simulator",
                         help="the arm: our simulator (default) or MuJoCo (mujoco_plant, no "
                         "reset service: sets protocol homing)")
+    parser.add_argument("--live", action="store_true",
+                        help="serve the running graph to the Foxglove app (foxglove_bridge, a "
+                        "process of its own; docs/live-view.md): open ws://127.0.0.1:8765")
+    parser.add_argument("--live-port", type=port_number, default=None, metavar="PORT",
+                        help="with --live: the WebSocket port (default 8765; 0: any free one)")
+    parser.add_argument("--live-host", default=None, metavar="HOST",
+                        help="with --live: the address to bind (default 127.0.0.1, this "
+                        "machine only; 0.0.0.0 lets anyone who can reach this machine watch "
+                        "the run, without a password: docs/live-view.md)")
+    parser.add_argument("--live-param", action="append", default=[], metavar="NAME:=VALUE",
+                        type=bridge_parameter,
+                        help="with --live: a foxglove_bridge parameter, e.g. "
+                        "sample_reliability:=reliable or message_backlog:=10000 (repeatable)")
     parser.set_defaults(func=run)
+
+
+def bridge_parameter(text: str) -> tuple[str, str]:
+    """``name:=value`` of ``--live-param``."""
+    name, sep, value = text.partition(":=")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"not name:=value: {text!r}")
+    return name, value
+
+
+def port_number(text: str) -> int:
+    """A TCP port, 0 (any free one) to 65535."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a port number: {text!r}") from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"a port is 0..65535, got {value}")
+    return value
 
 
 def _store_root(args: argparse.Namespace) -> Path | None:
@@ -93,6 +127,11 @@ def run(args: argparse.Namespace) -> int:
     if args.no_bag and (args.bag_dir is not None or args.isolated_recorder):
         given = "--bag-dir" if args.bag_dir is not None else "--isolated-recorder"
         raise ConfigError("--no-bag", f"records nothing: {given} would be ignored; drop one")
+    if not args.live and (args.live_port is not None or args.live_host is not None or
+                          args.live_param):
+        given = "--live-port" if args.live_port is not None else \
+            "--live-host" if args.live_host is not None else "--live-param"
+        raise ConfigError(given, "needs --live")
     args.bag_dir = "bags" if args.bag_dir is None else args.bag_dir
     config = config_from_args(args)  # an invalid YAML fails here, before any node starts
     if args.plant == "mujoco" and config["protocol"] != "homing":
@@ -215,10 +254,25 @@ def bag_name(args: argparse.Namespace, config: Config) -> str:
 
 def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
              trials: int) -> RunSummary:
-    """One graph run (one mass uncertainty)."""
+    """One graph run (one mass uncertainty), with the live view beside it (``--live``)."""
 
     config = run_config
     nodes = graph_nodes(args.plant, config["protocol"])
+    with contextlib.ExitStack() as stack:
+        extra: list[Any] = []
+        if getattr(args, "live", False):
+            live = stack.enter_context(LiveView(
+                run_config, DEFAULT_PORT if args.live_port is None else args.live_port,
+                args.live_host or DEFAULT_HOST, dict(args.live_param)))
+            print(f"live view: {live.url} (Foxglove app: Open connection, Foxglove WebSocket; "
+                  "layout config/layouts/foxglove.json)", file=sys.stderr, flush=True)
+            extra.append(live.spec)
+        return _run_graph_once(args, run_config, delta, trials, nodes, extra)
+
+
+def _run_graph_once(args: argparse.Namespace, run_config: Config, delta: float, trials: int,
+                    nodes: Any, extra: list[Any]) -> RunSummary:
+    config = run_config
     with tqdm(total=trials, desc=f"graph {config['law']} delta={delta:g}", unit="trial",
               file=sys.stderr, disable=None) as bar:
         def progress(summary: TrialSummary, bar: Any = bar) -> None:
@@ -232,14 +286,14 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
         domain = graph_domain(args.domain_id)
         if args.no_bag:
             result = run_graph(run_config, domain, on_summary=progress,
-                               on_start=announce_graph(bar, None), nodes=nodes)
+                               on_start=announce_graph(bar, None), nodes=nodes, extra=extra)
         else:
             run_config = run_config.replace({"wait_for_recorder": True})
             with Recording(run_config, args.bag_dir, name=bag_name(args, run_config)) \
                     as recording:
                 result = run_graph(run_config, domain, on_summary=progress,
                                    nodes=recording.graph_nodes(args.isolated_recorder, nodes),
-                                   on_start=announce_graph(bar, recording.path))
+                                   on_start=announce_graph(bar, recording.path), extra=extra)
             bar.write(f"bag: {recording.path}", file=sys.stderr)
             result.summary.extra["bag"] = str(recording.path)
 

@@ -1,12 +1,15 @@
 """bag_recorder: records every topic of the graph into a rosbag2 MCAP bag, as received.
 
-Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.wire.topics.TYPES` (depth
-``RECORDER_DEPTH``; the feed-forward transient local, as published) and stores the CDR bytes
-untouched, stamped with the wall-clock time DDS received them (what ``ros2 bag record`` does
-without ``--use-sim-time``). The subscriptions are :class:`~.common.Inbox` es, so the recorder
-does not wake once per message next to the control loop. Within a trial it stays out of the
-loop's way: it reads only the trial events every ``INBOX_PERIOD``, and takes and writes the
-other topics (the samples, commands, /clock) at the next trial event, or after
+Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.wire.topics.TYPES` (QoS per
+topic: :func:`subscription_qos`, documented in docs/live-view.md) and stores the CDR bytes
+untouched. Log time = simulated time, as ``ros2 bag record --use-sim-time`` logs it: the
+recorder's sim clock at receipt (:class:`~exo_ilc_ros.wire.sim_time.SimClock`: every sample and
+/clock message at its own stamp, a message without one at the sim time of the last stamped
+message received before it). Publish time = the wall-clock time (ns since the epoch) DDS
+received the message (kept for latency analysis). The subscriptions are :class:`~.common.Inbox`
+es, so the recorder does not wake once per message next to the control loop. Within a trial it
+stays out of the loop's way: it reads only the trial events every ``INBOX_PERIOD``, and takes
+and writes the other topics (the samples, commands, /clock) at the next trial event, or after
 :data:`DATA_PERIOD` at the latest; DDS holds them meanwhile (``RECORDER_DEPTH``). The samples
 between two trial events go to the bag as one batch (``BagWriter.write_many``).
 ``exo-ilc run`` starts it in the supervisor's process (``container ilc_supervisor
@@ -52,13 +55,18 @@ from ..core.params.config import load_config
 from ..wire import topics
 from ..wire.protocol import int_value, key_values
 from ..wire.qos import RECORDER_DEPTH, TRANSIENT_LOCAL_TOPICS, offered_qos
-from .common import EVENTS_QOS, Inbox, receive_time, run_nodes, wall_clock
+from ..wire.sim_time import SimClock
+from .common import EVENTS_QOS, CountingPublisher, Inbox, receive_time, run_nodes, wall_clock
 from .diagnostics import diagnostic_array, status
 
 NAME = "bag_recorder"
-READY_TOPICS = (topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
-                topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY)
-"""Topics whose publishers must be matched before the recorder reports ``ready``."""
+READY_TOPICS = (topics.JOINT_STATES, topics.CLOCK, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
+                topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.TRIAL_METRICS)
+"""Topics whose subscriptions must be matched with a publisher before the recorder reports
+``ready`` (the supervisor starts trial 1 only then). Matched, not merely known to the graph:
+each reader-writer pair is discovered on its own, and a volatile topic published before its
+pair matched is lost to the recorder (/clock was not waited for, and once its first 26
+messages of trial 1 were missing)."""
 PROTOCOL_TOPICS = frozenset({topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.PARAMETER_EVENTS})
 """Topics the recorder reads as well as writes (trial boundaries, parameter changes); the rest
 are written in batches."""
@@ -124,27 +132,33 @@ class BagRecorder(Node):
         self.summarised: set[int] = set()
         self.changes: list[ParameterChange] = []
         self.messages = 0
+        self.sim_clock = SimClock()
+        """The recorder's sim clock: every message's log time."""
         self.exit_code: int | None = None
         """Never set: the recorder has no fatal error of its own (a bag error raises)."""
 
         self.events = Inbox(self, "events")  # PROTOCOL_TOPICS, read at every poll
         self.inbox = Inbox(self)  # every other topic, taken at events (see poll)
+        self.subscriptions_by_topic: dict[str, Any] = {}
         for topic, msgtype in topics.TYPES.items():
             self.writer.add_topic(topic, msgtype, offered_qos(topic))
             inbox = self.events if topic in PROTOCOL_TOPICS else self.inbox
-            inbox.subscribe(message_class(msgtype), topic, subscription_qos(topic))
+            self.subscriptions_by_topic[topic] = inbox.subscribe(
+                message_class(msgtype), topic, subscription_qos(topic))
         self.data_due = 0.0
         """Monotonic time by which the other topics are taken again (:data:`DATA_PERIOD`)."""
         self.status_pub = self.create_publisher(
-            message_class(topics.TYPES[topics.DIAGNOSTICS]), topics.DIAGNOSTICS, EVENTS_QOS)
+            message_class(topics.TYPES[topics.DIAGNOSTICS]), topics.DIAGNOSTICS, EVENTS_QOS,
+            publisher_class=CountingPublisher)
         self.create_timer(0.2, self.on_status_timer, clock=wall_clock())
         self.get_logger().info(f"recording {len(topics.TYPES)} topics to {path}")
 
     def on_status_timer(self) -> None:
-        """``ready`` on /diagnostics once every recorded graph topic has a publisher (the
-        supervisor waits for it when ``wait_for_recorder`` is set)."""
+        """``ready`` on /diagnostics once the subscription of every :data:`READY_TOPICS` is
+        matched with a publisher (the supervisor waits for it when ``wait_for_recorder`` is
+        set)."""
         missing = [topic for topic in READY_TOPICS
-                   if self.count_publishers(topic) < 1]
+                   if self.subscriptions_by_topic[topic].get_publisher_count() < 1]
         message = "waiting" if missing else "ready"
         values = [*self.status_values(), *(("waiting_for", topic) for topic in missing)]
         self.status_pub.publish(diagnostic_array(
@@ -165,14 +179,15 @@ class BagRecorder(Node):
         if taken or everything or now >= self.data_due:
             self.data_due = now + DATA_PERIOD
             taken = sorted([*taken, *self.inbox.take()], key=receive_time)
-        samples: list[tuple[int, str, bytes]] = []  # written as one batch up to an event
-        for item in taken:
-            if item[1] in PROTOCOL_TOPICS:
+        samples: list[tuple[int, str, bytes, int]] = []  # one batch up to an event
+        for received, topic, raw in taken:
+            log_time = self.sim_clock.advance(topic, raw)
+            if topic in PROTOCOL_TOPICS:
                 self.messages += self.writer.write_many(samples)
                 samples = []
-                self.on_message(item[1], item[2], item[0])
+                self.on_message(topic, raw, received)
             else:
-                samples.append(item)
+                samples.append((log_time, topic, raw, received))
         self.messages += self.writer.write_many(samples)
         return len(taken)
 
@@ -181,11 +196,11 @@ class BagRecorder(Node):
         return self.poll(everything=True)
 
     def on_message(self, topic: str, raw: bytes, received_ns: int) -> None:
-        """Store the bytes stamped with their DDS receive time (wall clock, ns); follow the
-        trial protocol to split the bag at trial boundaries."""
+        """Store the bytes at the sim clock (publish time: the DDS receive time, wall clock,
+        ns); follow the trial protocol to split the bag at trial boundaries."""
         if topic == topics.TRIAL_EVENTS:
             self._before_event(raw)
-        self.writer.write(topic, received_ns, raw)
+        self.writer.write(topic, self.sim_clock.ns, raw, received_ns)
         self.messages += 1
         if topic == topics.TRIAL_EVENTS:
             self._after_event(raw)

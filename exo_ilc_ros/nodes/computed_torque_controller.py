@@ -36,7 +36,7 @@ from ..wire import topics
 from ..wire.cdr import float64_array
 from ..wire.protocol import trial_of_frame
 from ..wire.publishers import max_bytes
-from .common import DIAGNOSTICS_QOS, SAMPLES_QOS, spin, wall_clock
+from .common import DIAGNOSTICS_QOS, SAMPLES_QOS, CountingPublisher, spin, wall_clock
 from .diagnostics import diagnostic_array, stamp_ns, status
 from .guard import Health, JointStateGate, Rejections, rejections_check
 from .homing_control import HomingControl
@@ -91,9 +91,10 @@ class ComputedTorqueController(Node):
         self.latency_count = 0
 
         self.command_pub = self.create_publisher(Float64MultiArray, topics.EFFORT_COMMANDS,
-                                                 SAMPLES_QOS)
+                                                 SAMPLES_QOS, publisher_class=CountingPublisher)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
-                                                     DIAGNOSTICS_QOS)
+                                                     DIAGNOSTICS_QOS,
+                                                     publisher_class=CountingPublisher)
         joints, samples = config.joints, self.step_count
         self.state_sub = TrustedInput(  # the plant's samples only (wire.publishers)
             self, JointState, topics.JOINT_STATES, TRUSTED_READER_QOS, self.on_joint_state,

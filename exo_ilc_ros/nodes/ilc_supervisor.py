@@ -22,6 +22,7 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
@@ -32,11 +33,19 @@ from ..core.session.learning_session import TrialConclusion
 from ..wire import topics
 from ..wire.protocol import int_value
 from ..wire.publishers import max_bytes
-from .common import DIAGNOSTICS_QOS, EVENTS_QOS, LATCHED_QOS, Inbox, spin, wall_clock
+from .common import (
+    DIAGNOSTICS_QOS,
+    EVENTS_QOS,
+    LATCHED_QOS,
+    CountingPublisher,
+    Inbox,
+    spin,
+    wall_clock,
+)
 from .diagnostics import diagnostic_array, status, values_of
 from .guard import Health, JointStateGate, Rejections, rejections_check
 from .identified import STATUS_READER_QOS, Admission, StatusAdmission, gate_classifier
-from .messages import feedforward_message, trial_summary
+from .messages import feedforward_message, trial_metrics_message, trial_summary
 from .parameters import SchemaParameters
 
 NAME = schema.SUPERVISOR
@@ -65,12 +74,15 @@ class IlcSupervisor(Node):
         self.start_client = self.create_client(Trigger, topics.START_SERVICE)
         self.plant_params = AsyncParameterClient(self, schema.PLANT)
         self.feedforward_pub = self.create_publisher(JointTrajectory, topics.FEEDFORWARD,
-                                                     LATCHED_QOS)
-        self.events_pub = self.create_publisher(DiagnosticArray, topics.TRIAL_EVENTS, EVENTS_QOS)
+                                                     LATCHED_QOS, publisher_class=CountingPublisher)
+        self.events_pub = self.create_publisher(DiagnosticArray, topics.TRIAL_EVENTS, EVENTS_QOS,
+                                                publisher_class=CountingPublisher)
         self.summary_pub = self.create_publisher(DiagnosticArray, topics.TRIAL_SUMMARY,
-                                                 EVENTS_QOS)
+                                                 EVENTS_QOS, publisher_class=CountingPublisher)
+        self.metrics_pub = self.create_publisher(Float64MultiArray, topics.TRIAL_METRICS,
+                                                 EVENTS_QOS, publisher_class=CountingPublisher)
         self.health_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
-                                                DIAGNOSTICS_QOS)
+                                                DIAGNOSTICS_QOS, publisher_class=CountingPublisher)
         self.rejections = Rejections(self)
         self.gate = JointStateGate(self.joint_names, self.rejections)
         self.samples_from = self._state_admission(topics.JOINT_STATES)  # the plant's only
@@ -251,6 +263,7 @@ class IlcSupervisor(Node):
                 (k, self.protocol.plant_report.get(k, "")) for k in (
                     "late_commands", "periods", "first_late")]).values
         self.summary_pub.publish(diagnostic_array(self, [summary], end_ns))
+        self.metrics_pub.publish(trial_metrics_message(summary, self.joint_names))
         self.event("end", [(kv.key, kv.value) for kv in summary.values], end_ns)
 
     def event(self, message: str, values: Sequence[tuple[str, str]],

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticStatus
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..core.params.schema import SUPERVISOR
@@ -15,7 +16,8 @@ from ..core.programs.metrics import metric_summary_values
 from ..core.reference.trajectory import SampledReference
 from ..core.session.learning_session import TrialConclusion
 from ..wire import topics
-from ..wire.protocol import feedforward_frame, summary_values
+from ..wire.protocol import feedforward_frame, key_values, summary_values
+from ..wire.trial_metrics import trial_metrics
 from .diagnostics import doubles, status
 
 
@@ -52,3 +54,16 @@ def trial_summary(conclusion: TrialConclusion, joint_names: Sequence[str]) -> Di
     values += metric_summary_values(record, config, joint_names)  # core/programs/metrics.py
     level = DiagnosticStatus.OK if conclusion.within_bound else DiagnosticStatus.WARN
     return status(topics.SUMMARY_STATUS, f"trial {record.trial}", values, level, SUPERVISOR)
+
+
+def trial_metrics_message(summary: DiagnosticStatus,
+                          joint_names: Sequence[str]) -> Float64MultiArray:
+    """``/ilc/trial_metrics`` of a trial summary status (:mod:`exo_ilc_ros.wire.trial_metrics`)."""
+    array = trial_metrics(key_values(summary), joint_names,
+                          summary.level != DiagnosticStatus.OK)
+    msg = Float64MultiArray()
+    msg.layout.dim = [MultiArrayDimension(label=d.label, size=d.size, stride=d.stride)
+                      for d in array.dims]
+    msg.layout.data_offset = array.data_offset
+    msg.data = doubles(np.asarray(array.data, dtype=float))
+    return msg

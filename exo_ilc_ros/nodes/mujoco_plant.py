@@ -37,7 +37,7 @@ from ..core.sim.mujoco_arm import MujocoArm, effects_not_simulated
 from ..wire import topics
 from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
 from ..wire.publishers import max_bytes
-from .common import CLOCK_QOS, DIAGNOSTICS_QOS, SAMPLES_QOS, spin, wall_clock
+from .common import CLOCK_QOS, DIAGNOSTICS_QOS, SAMPLES_QOS, CountingPublisher, spin, wall_clock
 from .diagnostics import diagnostic_array
 from .guard import Health, Rejections, effort_limit_reasons, rejections_check
 from .identified import TRUSTED_READER_QOS, TrustedInput, effort_classifier
@@ -90,14 +90,17 @@ class FreeRunningPlant(Node):
         self.safe_hold.hold(here, here)
         self.state = JointStateWriter(config["joint_names"])
         self.clock = Clock()
-        self.state_pub = self.create_publisher(JointState, topics.JOINT_STATES, SAMPLES_QOS)
-        self.clock_pub = self.create_publisher(Clock, topics.CLOCK, CLOCK_QOS)
+        self.state_pub = self.create_publisher(JointState, topics.JOINT_STATES, SAMPLES_QOS,
+                                               publisher_class=CountingPublisher)
+        self.clock_pub = self.create_publisher(Clock, topics.CLOCK, CLOCK_QOS,
+                                               publisher_class=CountingPublisher)
         self.command_sub = TrustedInput(  # the controller's commands only (wire.publishers)
             self, Float64MultiArray, topics.EFFORT_COMMANDS, TRUSTED_READER_QOS, self.on_command,
             self.rejections, max_bytes(topics.EFFORT_COMMANDS, config.joints, 0),
             effort_classifier(self.rejections, config.joints))
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
-                                                     DIAGNOSTICS_QOS)
+                                                     DIAGNOSTICS_QOS,
+                                                     publisher_class=CountingPublisher)
         self.health = Health(self, NAME)
         self.health.checks += [self._effort_check, rejections_check(self.rejections,
                                                                     "effort commands"),

@@ -42,7 +42,7 @@ from ..wire import topics
 from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
 from ..wire.protocol import trial_of_frame
 from ..wire.publishers import max_bytes
-from .common import CLOCK_QOS, DIAGNOSTICS_QOS, SAMPLES_QOS, spin, wall_clock
+from .common import CLOCK_QOS, DIAGNOSTICS_QOS, SAMPLES_QOS, CountingPublisher, spin, wall_clock
 from .diagnostics import diagnostic_array, stamp_ns, status
 from .guard import Health, Rejections, effort_limit_reasons, rejections_check
 from .identified import (
@@ -100,8 +100,10 @@ class PlantSimulator(Node):
 
         self.state = JointStateWriter(config["joint_names"])
         self.clock = Clock()
-        self.state_pub = self.create_publisher(JointState, topics.JOINT_STATES, SAMPLES_QOS)
-        self.clock_pub = self.create_publisher(Clock, topics.CLOCK, CLOCK_QOS)
+        self.state_pub = self.create_publisher(JointState, topics.JOINT_STATES, SAMPLES_QOS,
+                                               publisher_class=CountingPublisher)
+        self.clock_pub = self.create_publisher(Clock, topics.CLOCK, CLOCK_QOS,
+                                               publisher_class=CountingPublisher)
         self.command_sub = TrustedInput(  # the controller's commands only (wire.publishers)
             self, Float64MultiArray, topics.EFFORT_COMMANDS, TRUSTED_READER_QOS, self.on_command,
             self.rejections, max_bytes(topics.EFFORT_COMMANDS, config.joints, 0),
@@ -110,8 +112,9 @@ class PlantSimulator(Node):
         self.next_trial: tuple[int, int] | None = None
         """(trial k, t0) of the last /ilc/feedforward: the patient's draws are trial k's."""
         self.truth = JointStateWriter(config["joint_names"])
-        self.truth_pub = self.create_publisher(JointState, topics.TRUE_JOINT_STATES,
-                                               SAMPLES_QOS) if self.patient.measures else None
+        self.truth_pub = self.create_publisher(
+            JointState, topics.TRUE_JOINT_STATES, SAMPLES_QOS,
+            publisher_class=CountingPublisher) if self.patient.measures else None
         self.feedforward_sub = TrustedInput(  # the supervisor's profiles only: their trial
             self, JointTrajectory, topics.FEEDFORWARD, FEEDFORWARD_READER_QOS,
             decoded(JointTrajectory, self.on_feedforward, self.rejections, topics.FEEDFORWARD),
@@ -120,7 +123,8 @@ class PlantSimulator(Node):
             decodes(JointTrajectory, self.rejections, topics.FEEDFORWARD)) \
             if self.patient.enabled else None
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
-                                                     DIAGNOSTICS_QOS)
+                                                     DIAGNOSTICS_QOS,
+                                                     publisher_class=CountingPublisher)
         self.health = Health(self, NAME)
         self.health.checks += [self._effort_check, rejections_check(self.rejections,
                                                                     "effort commands"),

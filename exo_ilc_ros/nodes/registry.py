@@ -47,8 +47,12 @@ PLANTS: dict[str, NodeEntry] = {"simulator": PLANT, "mujoco": MUJOCO_PLANT,
 """The plant a graph runs (``exo-ilc run --plant``, the launch file's ``plant:=``); with
 ``protocol: homing`` the simulator runs as ``free_running_plant``."""
 
+BRIDGE = NodeEntry("foxglove_bridge", "exo_ilc_ros.nodes.foxglove_bridge", "FoxgloveBridge")
+"""The live view: the graph over the Foxglove WebSocket protocol (``exo-ilc run --live``);
+always a process of its own, beside the graph."""
+
 NODES: tuple[NodeEntry, ...] = (PLANT, CONTROLLER, SUPERVISOR, RECORDER, MUJOCO_PLANT,
-                                FREE_RUNNING_PLANT)
+                                FREE_RUNNING_PLANT, BRIDGE)
 """Every node of the package."""
 GRAPH: tuple[NodeEntry, ...] = (PLANT, CONTROLLER, SUPERVISOR)
 """The control graph, in start order; the recorder comes beside it (its own process, or in

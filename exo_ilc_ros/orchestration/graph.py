@@ -55,8 +55,9 @@ class TrialSummary:
         """M, M', M'' (rows) per joint, or None if the trial had none (trial 1, linear law)."""
         if f"level/M/{joints[0]}" not in self.values:
             return None
-        return np.array([self.row(f"level/{symbol}", joints)
-                         for symbol in topics.LEVEL_SYMBOLS])
+        levels = np.array([self.row(f"level/{symbol}", joints)
+                           for symbol in topics.LEVEL_SYMBOLS])
+        return None if np.all(np.isnan(levels)) else levels  # trial 1's are nan
 
 
 def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSummary:

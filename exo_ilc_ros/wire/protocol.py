@@ -13,6 +13,9 @@ import numpy as np
 
 from . import topics
 
+LAWS_WITH_LEVELS = frozenset({"sign"})
+"""Laws whose update has step gains M, M', M'' (eq. (11)): their summaries carry ``level/``
+keys in every trial."""
 PARAMETERS_CHANGED = "parameters_changed"
 """Summary key: the live changes applied at the trial's end (JSON), in effect from the next."""
 
@@ -22,12 +25,17 @@ def summary_values(trial: int, mass_uncertainty: float, law: str, names: Sequenc
                    levels: Any | None, aborted_at: int | None = None,
                    changed: Mapping[str, Any] | None = None,
                    true_max_abs_error: Any | None = None,
-                   learning_notes: Sequence[str] = ()) -> list[tuple[str, str]]:
+                   learning_notes: Sequence[str] = (),
+                   has_levels: bool | None = None) -> list[tuple[str, str]]:
     """The key-values of a trial summary (floats as ``repr`` so they parse back exactly):
     ``aborted_at`` for a trial the envelope aborted, ``parameters_changed`` (JSON) for the
     live changes the session applied at this trial's end (in effect from the next trial),
     ``true_max_abs_error/<joint>`` when the plant's true state differs from the measured one,
-    ``learning_notes`` when the law said something about its update (:data:`LEARNING_NOTES`)."""
+    ``learning_notes`` when the law said something about its update (:data:`LEARNING_NOTES`);
+    ``level/<M>/<joint>`` = ``nan`` where ``levels`` is None under a law that has levels
+    (``has_levels``; default: the sign law, ``law`` ``sign``), so every trial has the same keys."""
+    if has_levels is None:
+        has_levels = law in LAWS_WITH_LEVELS
     out = [("trial", str(trial)), ("mass_uncertainty", repr(float(mass_uncertainty))),
            ("law", law)]
     for key, row in (("max_abs_error", max_abs_error),
@@ -37,6 +45,8 @@ def summary_values(trial: int, mass_uncertainty: float, law: str, names: Sequenc
     if true_max_abs_error is not None:
         out += [(f"true_max_abs_error/{n}", repr(float(x)))
                 for n, x in zip(names, true_max_abs_error, strict=True)]
+    if levels is None and has_levels:  # trial 1: the same keys as every other trial
+        levels = np.full((len(topics.LEVEL_SYMBOLS), len(names)), np.nan)
     if levels is not None:
         for level_name, row in zip(topics.LEVEL_SYMBOLS, np.asarray(levels), strict=False):
             out += [(f"level/{level_name}/{n}", repr(float(x)))

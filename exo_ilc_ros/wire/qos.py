@@ -24,21 +24,25 @@ RECORDER_DEPTH = 10000
 """Queue depth of the recorder's subscriptions, drained every 10 ms (at 2 x 1 kHz, depth 10
 dropped ~1 % when read per message; 10 000 leaves seconds of slack)."""
 
-TRANSIENT_LOCAL_TOPICS = frozenset({topics.FEEDFORWARD})
-"""Topics the recorder subscribes to transient local: the latched feed-forward (depth 1), whose
-last profile a recorder that matched late still needs. (The events, summaries and diagnostics
-are offered transient local too, see :data:`OFFERED`, but the recorder is matched before trial
-1 and takes them as they come.)"""
+TRANSIENT_LOCAL_TOPICS = frozenset({topics.FEEDFORWARD, topics.TRIAL_EVENTS,
+                                    topics.TRIAL_SUMMARY, topics.TRIAL_METRICS,
+                                    topics.DIAGNOSTICS})
+"""Topics the recorder subscribes to transient local: those whose publishers keep a history
+for late joiners (see :data:`OFFERED`). A recorder matched after a message was sent still gets
+it from that history: the latched feed-forward (depth 1), every trial event, summary and
+metrics message (depth 1000) and each node's last 10 /diagnostics (its health from before the
+recorder was up included), so the bag holds every message the nodes published."""
 
 VOLATILE, TRANSIENT_LOCAL = "volatile", "transient_local"
 
 OFFERED: dict[str, tuple[tuple[str, int], ...]] = {
     topics.JOINT_STATES: ((VOLATILE, OFFERED_DEPTH),),
-    topics.CLOCK: ((VOLATILE, 1),),
+    topics.CLOCK: ((VOLATILE, OFFERED_DEPTH),),
     topics.EFFORT_COMMANDS: ((VOLATILE, OFFERED_DEPTH),),
     topics.FEEDFORWARD: ((TRANSIENT_LOCAL, 1),),
     topics.TRIAL_EVENTS: ((TRANSIENT_LOCAL, OFFERED_DEPTH),),
     topics.TRIAL_SUMMARY: ((TRANSIENT_LOCAL, OFFERED_DEPTH),),
+    topics.TRIAL_METRICS: ((TRANSIENT_LOCAL, OFFERED_DEPTH),),
     topics.DIAGNOSTICS: ((TRANSIENT_LOCAL, DIAGNOSTICS_DEPTH), (TRANSIENT_LOCAL, OFFERED_DEPTH)),
     topics.PARAMETER_EVENTS: ((VOLATILE, OFFERED_DEPTH),),
 }

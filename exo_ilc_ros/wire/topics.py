@@ -31,7 +31,12 @@ Every array is in the joint order of the ``joint_names`` parameter; times are si
     is within the bound else WARN, values: ``trial``, ``mass_uncertainty``, ``law``,
     ``max_abs_error/<joint>``, ``max_abs_feedforward/<joint>``, ``max_abs_effort/<joint>``,
     ``level/M/<joint>``, ``level/M'/<joint>``, ``level/M''/<joint>`` (repr of floats, so
-    they parse back exactly).
+    they parse back exactly; every trial of a run has the same keys: ``nan`` where a trial
+    has no level, as trial 1, which no update formed).
+``/ilc/trial_metrics`` (``std_msgs/msg/Float64MultiArray``, ilc_supervisor; transient local)
+    With each summary, the same trial's numbers as numbers (for a Plot panel): trial, level,
+    then max |e|, RMS e, max |u_ff|, max |effort|, M, M', M'' per joint, named by the layout
+    (:mod:`.trial_metrics`).
 ``/diagnostics`` (``diagnostic_msgs/msg/DiagnosticArray``, every node): health.
     computed_torque_controller also acknowledges each feed-forward it loaded here: status
     ``computed_torque_controller/feedforward``, message ``loaded``, values ``trial`` = k and
@@ -44,7 +49,9 @@ Every array is in the joint order of the ``joint_names`` parameter; times are si
 QoS: /joint_states and /effort_controller/commands reliable, volatile, depth 1000;
 /ilc/feedforward reliable, transient local, depth 1; /ilc/trial_events and /ilc/trial_summary
 reliable, transient local, depth 1000 (late joiners get the history); /diagnostics reliable,
-transient local, depth 10; /clock reliable, depth 1. A volatile subscriber matches them all.
+transient local, depth 10; /clock reliable, volatile, depth 1000 (depth 1 lost messages to a
+loaded recorder: a reliable writer repairs a loss only from its history);
+/ilc/trial_metrics as the summary. A volatile subscriber matches them all.
 (Those are the writers'. The nodes read the loop's inputs keeping all, the feed-forward 100
 deep and /diagnostics 1000 deep, and act only on messages from the contract's publisher:
 :mod:`.publishers`.)
@@ -77,6 +84,7 @@ EFFORT_COMMANDS = "/effort_controller/commands"
 FEEDFORWARD = "/ilc/feedforward"
 TRIAL_EVENTS = "/ilc/trial_events"
 TRIAL_SUMMARY = "/ilc/trial_summary"
+TRIAL_METRICS = "/ilc/trial_metrics"
 DIAGNOSTICS = "/diagnostics"
 PARAMETER_EVENTS = "/parameter_events"
 
@@ -87,6 +95,7 @@ TYPES: dict[str, str] = {
     FEEDFORWARD: "trajectory_msgs/msg/JointTrajectory",
     TRIAL_EVENTS: "diagnostic_msgs/msg/DiagnosticArray",
     TRIAL_SUMMARY: "diagnostic_msgs/msg/DiagnosticArray",
+    TRIAL_METRICS: "std_msgs/msg/Float64MultiArray",
     DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray",
     PARAMETER_EVENTS: "rcl_interfaces/msg/ParameterEvent",
 }

@@ -1,0 +1,317 @@
+"""foxglove_bridge: the running graph, live, in the Foxglove app (Foxglove WebSocket protocol,
+served by ``foxglove-sdk``; subprotocol ``foxglove.sdk.v1``).
+
+A process of its own beside the graph (``exo-ilc run --live``, ``ros2 run exo_ilc_ros
+foxglove_bridge``, the launch file's ``live:=true``). It reads the graph's topics through an
+:class:`~.common.Inbox` (raw CDR, drained in batches: no executor wake-up per message) and
+forwards the bytes untouched, each logged at its sim time (:class:`~exo_ilc_ros.wire.sim_time.
+SimClock`, the bags' rule), on channels advertised with their ``ros2msg`` schema:
+``/joint_states``, ``/effort_controller/commands``, ``/ilc/feedforward``, ``/clock``,
+``/ilc/trial_events``, ``/ilc/trial_summary``, ``/ilc/trial_metrics``, ``/diagnostics``. It
+adds ``/robot_description`` (``std_msgs/String``, the arm's URDF from the run's config),
+``/reference/robot_description`` (the same arm, links prefixed ``reference/``) and ``/tf``
+(``tf2_msgs/TFMessage``: per sample one transform per joint of the measured arm, stamped with
+the JointState stamp, by :class:`~exo_ilc_ros.core.forward_kinematics.UrdfKinematics`, and
+the reference pose q_d(t_i) of the trial's feed-forward on the ``reference/`` tree, placed
+:data:`REFERENCE_OFFSET` beside the arm). ``/clock`` drives the app's clock
+(``Capability.Time``). The protocol has no latching: what was logged before a client
+subscribed (the URDFs, the last feed-forward, every trial's summary, metrics and events) is
+logged again when a channel gets a subscriber (its other subscribers then get a copy too).
+
+It never slows the control loop: its own process; ``log()`` never blocks; a client that
+reads too slowly loses its oldest messages (``message_backlog_size`` per client, the SDK's
+rule), not the graph its rate; /tf is computed only while someone subscribes to it.
+
+Parameters: ``host`` (default 127.0.0.1: this machine only), ``port`` (8765; 0 = any free
+port), ``config_file`` (the run's parameter YAML, for the arm; default the shipped one),
+``message_backlog`` (per client, default 4096), ``sample_reliability`` (``best_effort``, the
+default, or ``reliable``: how the per-sample topics are read, :func:`reader_qos`),
+``scheduling`` (``idle``, the default: the process runs at ``SCHED_IDLE``, on CPU the loop
+leaves free; ``batch``; ``normal``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import threading
+import time
+import xml.etree.ElementTree as ET
+from typing import Any
+
+import foxglove
+import numpy as np
+from foxglove import Channel, Schema
+from foxglove.websocket import Capability, ServerListener
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from trajectory_msgs.msg import JointTrajectory
+
+from ..bag.messages import serialize, typestore
+from ..core.arm.build import build_arm
+from ..core.arm.forward_kinematics import UrdfKinematics
+from ..core.arm.urdf import arm_urdf
+from ..core.errors import ConfigError
+from ..core.params.config import load_config
+from ..wire import topics
+from ..wire.cdr import read_joint_state
+from ..wire.sim_time import SimClock
+from ..wire.tf import TF, TF_TYPE, tf_message
+from .bag_recorder import message_class
+from .common import Inbox, run_nodes
+from .parameters import command_line_parameters
+
+NAME = "foxglove_bridge"
+FORWARDED = (topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD, topics.CLOCK,
+             topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.TRIAL_METRICS,
+             topics.DIAGNOSTICS)
+"""The graph's topics the view forwards as they are."""
+LATCHED = frozenset({topics.FEEDFORWARD, topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY,
+                     topics.TRIAL_METRICS, topics.DIAGNOSTICS})
+"""Topics read transient local (their publishers keep a history for late joiners)."""
+REPLAYED = {topics.FEEDFORWARD: 1, topics.TRIAL_EVENTS: None, topics.TRIAL_SUMMARY: None,
+            topics.TRIAL_METRICS: None}
+"""Topic -> how many of its last messages a new subscriber gets again (None: all)."""
+ROBOT_DESCRIPTION = "/robot_description"
+REFERENCE_DESCRIPTION = "/reference/robot_description"
+REFERENCE_PREFIX = "reference/"
+REFERENCE_OFFSET = (0.0, 0.6, 0.0)
+"""m: where the reference arm's base stands in the measured arm's ``base_link`` frame."""
+READER_DEPTH = 10000
+SCHEDULING = ("idle", "batch", "normal")
+DEFAULT_SCHEDULING = "idle"
+"""The view yields to the control loop (:func:`yield_to_the_loop`): on a busy machine it falls
+behind (its readers hold 10 000 messages per topic; a client then sees the run late, or loses
+the oldest), never the loop."""
+
+
+SAMPLED = frozenset({topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.CLOCK})
+"""The control loop's per-sample topics."""
+SAMPLE_RELIABILITY = ("best_effort", "reliable")
+
+
+def reader_qos(topic: str, samples: str = "best_effort") -> QoSProfile:
+    """10 000 deep (between two drains). The per-sample topics (:data:`SAMPLED`) best effort
+    by default (``samples``): the loop's writers then never repair a sample for the view, which
+    runs at ``SCHED_IDLE`` and may fall behind; a sample it misses is lost to the view only.
+    The rest reliable, and transient local where the publisher keeps a history (a view started
+    late still gets the trials so far)."""
+    best_effort = topic in SAMPLED and samples == "best_effort"
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=READER_DEPTH,
+                      reliability=ReliabilityPolicy.BEST_EFFORT if best_effort
+                      else ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if topic in LATCHED
+                      else DurabilityPolicy.VOLATILE)
+
+
+def ros2_channel(topic: str, msgtype: str) -> Channel:
+    """A CDR channel advertised with the full ``ros2msg`` definition of ``msgtype``."""
+    text = typestore().generate_msgdef(msgtype, ros_version=2)[0]
+    return Channel(topic, message_encoding="cdr",
+                   schema=Schema(name=msgtype, encoding="ros2msg", data=text.encode()))
+
+
+def prefixed_urdf(urdf: str, prefix: str) -> str:
+    """The URDF with every link (and joint) name prefixed: a second arm on its own TF tree."""
+    root = ET.fromstring(urdf)
+    root.set("name", prefix + str(root.get("name", "")))
+    for element in root.iter():
+        if element.tag in ("link", "joint") and element.get("name"):
+            element.set("name", prefix + str(element.get("name")))
+        if element.tag in ("parent", "child") and element.get("link"):
+            element.set("link", prefix + str(element.get("link")))
+    return ET.tostring(root, encoding="unicode")
+
+
+def string_message(text: str) -> bytes:
+    """``std_msgs/msg/String`` CDR."""
+    return serialize(typestore().types["std_msgs/msg/String"](data=text), "std_msgs/msg/String")
+
+
+class _Listener(ServerListener):
+    """Re-logs the messages a channel had before its new subscriber came (on an SDK thread)."""
+
+    def __init__(self, bridge: FoxgloveBridge) -> None:
+        self.bridge = bridge
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        self.bridge.replay(str(channel.topic))
+
+
+class FoxgloveBridge(Node):
+    """Serves the graph's topics, the URDF and /tf over the Foxglove WebSocket protocol."""
+
+    DRAINS_ON_STOP = True
+    """On SIGINT/SIGTERM the last messages of the run are still forwarded
+    (:class:`~.common.DrainingNode`), then the server stops."""
+    FLUSH = 0.5
+    """s given to the server to send what it holds before it stops."""
+
+    def __init__(self) -> None:
+        super().__init__(NAME)
+        host = str(self.declare_parameter("host", "127.0.0.1").value)
+        port = int(self.declare_parameter("port", 8765).value)
+        config_file = str(self.declare_parameter("config_file", "").value)
+        backlog = int(self.declare_parameter("message_backlog", 4096).value)
+        samples = str(self.declare_parameter("sample_reliability", "best_effort").value)
+        if samples not in SAMPLE_RELIABILITY:
+            raise ConfigError("sample_reliability", f"use one of {', '.join(SAMPLE_RELIABILITY)}",
+                              NAME)
+        self.declare_parameter("scheduling", DEFAULT_SCHEDULING)  # applied by main(), first
+        config = load_config(config_file or None)
+        self.joint_names: list[str] = list(config["joint_names"])
+        self.period_ns = int(round(float(config["control.period"]) * 1e9))
+        self.urdf = arm_urdf(build_arm(config), self.joint_names,
+                             config["control.effort_limit"])
+        self.kinematics = UrdfKinematics(self.urdf)
+        self.reference_kinematics = UrdfKinematics(prefixed_urdf(self.urdf, REFERENCE_PREFIX))
+        self.reference_names = [REFERENCE_PREFIX + n for n in self.joint_names]
+        self.exit_code: int | None = None
+        self.sim_clock = SimClock()
+        self.reference: tuple[int, np.ndarray] | None = None
+        """(t0 ns, q_d per sample) of the last feed-forward."""
+        self._lock = threading.Lock()
+        self._kept: dict[str, list[tuple[int, bytes]]] = {
+            ROBOT_DESCRIPTION: [(0, string_message(self.urdf))],
+            REFERENCE_DESCRIPTION: [(0, string_message(
+                prefixed_urdf(self.urdf, REFERENCE_PREFIX)))]}
+        self.channels: dict[str, Channel] = {
+            topic: ros2_channel(topic, topics.TYPES[topic]) for topic in FORWARDED}
+        self.channels[ROBOT_DESCRIPTION] = ros2_channel(ROBOT_DESCRIPTION, "std_msgs/msg/String")
+        self.channels[REFERENCE_DESCRIPTION] = ros2_channel(REFERENCE_DESCRIPTION,
+                                                            "std_msgs/msg/String")
+        self.channels[TF] = ros2_channel(TF, TF_TYPE)
+        self.server = foxglove.start_server(
+            name="exo_ilc_ros", host=host, port=port, capabilities=[Capability.Time],
+            server_listener=_Listener(self), message_backlog_size=backlog)
+        self.inbox = Inbox(self)
+        for topic in FORWARDED:
+            self.inbox.subscribe(message_class(topics.TYPES[topic]), topic,
+                                 reader_qos(topic, samples))
+        self.forwarded = 0
+        self.get_logger().info(f"Foxglove WebSocket server on ws://{host}:{self.server.port} "
+                               "(subprotocol foxglove.sdk.v1): open it in the Foxglove app")
+        print(json.dumps({"foxglove_port": self.server.port}), flush=True)
+
+    def replay(self, topic: str) -> None:
+        """Log ``topic``'s kept messages again (a client just subscribed to it)."""
+        channel = self.channels.get(topic)
+        with self._lock:
+            kept = list(self._kept.get(topic, ()))
+        if channel is not None:
+            for log_time, raw in kept:
+                channel.log(raw, log_time=log_time)
+
+    def poll(self) -> int:
+        """Forward what waits, in receive order; returns how many messages."""
+        taken = self.inbox.take()
+        for _, topic, raw in taken:
+            log_time = self.sim_clock.advance(topic, raw)
+            channel = self.channels[topic]
+            if topic in REPLAYED:
+                self._keep(topic, log_time, raw)
+            if channel.has_sinks():
+                channel.log(raw, log_time=log_time)
+            if topic == topics.JOINT_STATES:
+                self._transforms(raw)
+            elif topic == topics.CLOCK:
+                self.server.broadcast_time(log_time)
+            elif topic == topics.FEEDFORWARD:
+                self._load_reference(raw)
+        self.forwarded += len(taken)
+        return len(taken)
+
+    def drain(self) -> int:
+        """Forward everything waiting (after a stop)."""
+        return self.poll()
+
+    def _keep(self, topic: str, log_time: int, raw: bytes) -> None:
+        limit = REPLAYED[topic]
+        with self._lock:
+            kept = self._kept.setdefault(topic, [])
+            kept.append((log_time, raw))
+            if limit is not None and len(kept) > limit:
+                del kept[:-limit]
+
+    def _load_reference(self, raw: bytes) -> None:
+        try:
+            msg = deserialize_message(raw, JointTrajectory)
+            order = [list(msg.joint_names).index(n) for n in self.joint_names]
+            q = np.array([np.asarray(p.positions)[order] for p in msg.points], dtype=float)
+        except Exception as exc:  # a foreign profile: no reference pose, the rest goes on
+            self.get_logger().warning(f"feed-forward not shown as the reference: {exc}")
+            return
+        stamp = msg.header.stamp
+        self.reference = (int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), q)
+
+    def _transforms(self, raw: bytes) -> None:
+        """/tf of one sample: the measured arm's joints and, on the ``reference/`` tree, q_d
+        at the same sample of the trial (by the stamp: t0 + i period)."""
+        channel = self.channels[TF]
+        if not channel.has_sinks():
+            return
+        try:
+            stamp, position, _ = read_joint_state(raw)
+        except ValueError:
+            return
+        if position.shape[0] != len(self.joint_names):
+            return
+        transforms = self.kinematics.transforms(dict(zip(self.joint_names, position.tolist(),
+                                                         strict=True)))
+        transforms.append(("base_link", REFERENCE_PREFIX + "base_link", REFERENCE_OFFSET,
+                           (0.0, 0.0, 0.0, 1.0)))
+        if self.reference is not None:
+            t0, q_d = self.reference
+            i = int(round((stamp - t0) / self.period_ns))
+            if 0 <= i < q_d.shape[0]:
+                transforms += self.reference_kinematics.transforms(
+                    dict(zip(self.reference_names, q_d[i].tolist(), strict=True)))
+        channel.log(tf_message(stamp, transforms), log_time=stamp)
+
+    def destroy_node(self) -> None:
+        """Stop the server (after :data:`FLUSH`), leave the subscriptions, then the node."""
+        self.poll()
+        time.sleep(self.FLUSH)
+        self.server.stop()
+        self.inbox.destroy()
+        print(f"[{NAME}] stopped: {self.forwarded} messages forwarded", file=sys.stderr,
+              flush=True)
+        super().destroy_node()
+
+
+def yield_to_the_loop(policy: str) -> str:
+    """Run this process below the control loop (before any thread starts, so every thread
+    the middleware and the server start inherits it): ``idle`` (``SCHED_IDLE``: the view runs
+    only on CPU the loop and everything else leave free), ``batch`` (``SCHED_BATCH`` at nice
+    10) or ``normal``. Returns what it runs at."""
+    if policy == "normal":
+        return "normal"
+    try:
+        if policy == "idle" and hasattr(os, "SCHED_IDLE"):
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+            return "SCHED_IDLE"
+        if hasattr(os, "SCHED_BATCH"):
+            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+        os.nice(10)
+        return "SCHED_BATCH, nice 10"
+    except OSError as exc:
+        return f"normal ({exc.strerror})"
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point: ``ros2 run exo_ilc_ros foxglove_bridge [--ros-args -p port:=8765]``; the
+    process yields to the loop first (``-p scheduling:=idle|batch|normal``, default idle)."""
+    given = command_line_parameters(sys.argv if args is None else args, "/" + NAME)
+    policy = str(given["scheduling"].value) if "scheduling" in given else DEFAULT_SCHEDULING
+    if policy not in SCHEDULING:
+        print(f"error: scheduling:={policy}: use one of {', '.join(SCHEDULING)}",
+              file=sys.stderr)
+        return 2
+    print(f"[{NAME}] scheduling: {yield_to_the_loop(policy)}", file=sys.stderr, flush=True)
+    return run_nodes([FoxgloveBridge], args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

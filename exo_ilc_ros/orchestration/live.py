@@ -1,0 +1,59 @@
+"""The live view of ``exo-ilc run --live``: ``foxglove_bridge`` as a process of its own beside
+the graph (it must never share the control loop's processes), with the run's config."""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+from types import TracebackType
+
+from ..core.params.config import Config
+from ..nodes.registry import BRIDGE
+from .launcher import NodeSpec
+
+DEFAULT_PORT = 8765
+DEFAULT_HOST = "127.0.0.1"
+
+
+class LiveView:
+    """The bridge's process spec and the run's effective config file it reads (for the
+    arm's URDF); a context manager that keeps that file while the graph runs."""
+
+    def __init__(self, config: Config, port: int = DEFAULT_PORT,
+                 host: str = DEFAULT_HOST, parameters: Mapping[str, str] | None = None) -> None:
+        self.config = config
+        self.port = port
+        self.host = host
+        self.parameters = dict(parameters or {})
+        """More of the bridge's parameters (``sample_reliability``, ``scheduling``, ...)."""
+        self._tmp: tempfile.TemporaryDirectory[str] | None = None
+        self.config_file: Path | None = None
+
+    def __enter__(self) -> LiveView:
+        self._tmp = tempfile.TemporaryDirectory(prefix="exo_ilc_live_")
+        self.config_file = Path(self._tmp.name) / "effective.yaml"
+        self.config_file.write_text(self.config.to_ros_yaml("run shown by foxglove_bridge"))
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
+                 trace: TracebackType | None) -> None:
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+
+    @property
+    def url(self) -> str:
+        """What to open in the Foxglove app."""
+        return f"ws://{self.host}:{self.port}"
+
+    @property
+    def spec(self) -> NodeSpec:
+        """``foxglove_bridge`` as one more process of the graph."""
+        if self.config_file is None:
+            raise RuntimeError("LiveView.spec outside its with-block")
+        more = tuple(arg for name, value in self.parameters.items()
+                     for arg in ("-p", f"{name}:={value}"))
+        return NodeSpec(BRIDGE.name, BRIDGE.module,
+                        ("-p", f"host:={self.host}", "-p", f"port:={self.port}",
+                         "-p", f"config_file:={self.config_file}", *more))

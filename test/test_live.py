@@ -1,0 +1,352 @@
+"""The live view (foxglove_bridge over the Foxglove WebSocket protocol) and the bags it must
+agree with: forward kinematics against Pinocchio, the /tf and trial-metrics encodings against
+rosbags' decoders, and one short graph with ``--live`` read by a real WebSocket client
+(subprotocol ``foxglove.sdk.v1``) that decodes every channel from its advertised schema only and
+finds the run's bag in it."""
+
+from __future__ import annotations
+
+import glob
+import math
+import socket
+import subprocess
+import sys
+import threading
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import yaml
+from live_client import SUBPROTOCOL, Received, collect
+from mcap.reader import make_reader
+from mcap_ros2._dynamic import generate_dynamic
+from mcap_ros2.decoder import DecoderFactory
+
+from exo_ilc_ros.bag.messages import typestore
+from exo_ilc_ros.core.arm.build import build_arm
+from exo_ilc_ros.core.arm.forward_kinematics import UrdfKinematics, quaternion
+from exo_ilc_ros.core.arm.urdf import arm_urdf
+from exo_ilc_ros.core.params.config import load_config
+from exo_ilc_ros.nodes.foxglove_bridge import (
+    REFERENCE_DESCRIPTION,
+    REFERENCE_OFFSET,
+    REFERENCE_PREFIX,
+    ROBOT_DESCRIPTION,
+    prefixed_urdf,
+)
+from exo_ilc_ros.wire import topics
+from exo_ilc_ros.wire.tf import TF, TF_TYPE, tf_message
+from exo_ilc_ros.wire.trial_metrics import ROW_NAMES, decode, index, trial_metrics
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _urdf() -> str:
+    config = load_config()
+    return arm_urdf(build_arm(config), config["joint_names"], config["control.effort_limit"])
+
+
+def _rotation(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix of (x, y, z, w), via Pinocchio (an independent conversion)."""
+    x, y, z, w = q
+    return np.asarray(pin.Quaternion(w, x, y, z).toRotationMatrix())
+
+
+def _pinocchio_joint_placements(model: Any, data: Any, q: np.ndarray) -> dict[str, Any]:
+    """Per joint name: Pinocchio's placement of the joint frame in its parent joint's."""
+    pin.forwardKinematics(model, data, q)
+    return {model.names[j]: data.liMi[j] for j in range(1, model.njoints)}
+
+
+def _check_transforms(transforms: list[tuple[str, str, np.ndarray, np.ndarray]],
+                      urdf: str, q: np.ndarray, prefix: str = "") -> int:
+    """Each parent -> child transform equals Pinocchio's placement of that joint to 1e-9;
+    returns how many were compared."""
+    model = pin.buildModelFromXML(urdf)
+    data = model.createData()
+    placements = _pinocchio_joint_placements(model, data, q)
+    child_of = {j.child: j.name for j in UrdfKinematics(urdf).joints}
+    compared = 0
+    for parent, child, translation, rotation in transforms:
+        if child not in child_of:
+            continue
+        expected = placements[child_of[child]]
+        np.testing.assert_allclose(translation, expected.translation, rtol=0, atol=1e-9,
+                                   err_msg=f"{prefix}{parent}->{child}")
+        np.testing.assert_allclose(_rotation(np.asarray(rotation)), expected.rotation,
+                                   rtol=0, atol=1e-9, err_msg=f"{prefix}{parent}->{child}")
+        compared += 1
+    return compared
+
+
+def test_forward_kinematics_equals_pinocchio() -> None:
+    """Our URDF forward kinematics, per joint and composed to the tip, equals Pinocchio's over
+    random poses to 1e-9."""
+    urdf = _urdf()
+    kinematics = UrdfKinematics(urdf)
+    model = pin.buildModelFromXML(urdf)
+    data = model.createData()
+    rng = np.random.default_rng(7)
+    for _ in range(50):
+        q = rng.uniform(-math.pi, math.pi, model.nq)
+        transforms = kinematics.transforms(dict(zip(kinematics.moving, q, strict=True)))
+        assert _check_transforms(transforms, urdf, q) == model.nq
+        pin.forwardKinematics(model, data, q)
+        pose = np.eye(4)
+        for _, _, translation, rotation in transforms:
+            step = np.eye(4)
+            step[:3, :3], step[:3, 3] = _rotation(rotation), translation
+            pose = pose @ step
+        np.testing.assert_allclose(pose[:3, 3], data.oMi[model.njoints - 1].translation,
+                                   atol=1e-9)
+        np.testing.assert_allclose(pose[:3, :3], data.oMi[model.njoints - 1].rotation,
+                                   atol=1e-9)
+
+
+def test_quaternion_of_every_kind_of_rotation() -> None:
+    """The quaternion branch for each largest diagonal, against Pinocchio's conversion."""
+    for axis in (np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), np.array([0, 0, 1.0]),
+                 np.array([1.0, 2.0, -0.5]) / np.linalg.norm([1.0, 2.0, -0.5])):
+        for angle in (0.0, 0.3, 2.9, math.pi, -3.0):
+            rotation = np.asarray(pin.AngleAxis(angle, axis).toRotationMatrix())
+            np.testing.assert_allclose(_rotation(quaternion(rotation)), rotation, atol=1e-12)
+
+
+def test_tf_message_decodes_with_rosbags() -> None:
+    transforms = [("base_link", "shoulder_link", np.array([0.0, 0.1, -0.2]),
+                   np.array([0.0, 0.0, 0.0, 1.0])),
+                  ("reference/a", "reference/bb", np.array([1.5, -2.0, 3.25]),
+                   np.array([0.5, 0.5, 0.5, 0.5]))]
+    msg = typestore().deserialize_cdr(tf_message(12_345_678_901, transforms), TF_TYPE)
+    assert len(msg.transforms) == 2
+    for got, (parent, child, translation, rotation) in zip(msg.transforms, transforms,
+                                                           strict=True):
+        assert (got.header.stamp.sec, got.header.stamp.nanosec) == (12, 345_678_901)
+        assert (got.header.frame_id, got.child_frame_id) == (parent, child)
+        t, r = got.transform.translation, got.transform.rotation
+        assert [t.x, t.y, t.z] == list(translation) and [r.x, r.y, r.z, r.w] == list(rotation)
+
+
+def test_trial_metrics_from_a_summary_and_back() -> None:
+    names = ["a", "b"]
+    values = {"trial": "3", "max_abs_error/a": "0.5", "max_abs_error/b": "0.25",
+              "metric/rms_error/a": "0.1", "metric/rms_error/b": "0.2",
+              "level/M/a": "0.01", "level/M/b": "nan"}
+    array = trial_metrics(values, names, warn=True)
+    assert array.data[:2] == [3.0, 1.0] and array.data_offset == 2
+    assert array.data[index("max_abs_error", 1, 2)] == 0.25
+    assert array.data[index("level/M", 0, 2)] == 0.01
+    assert math.isnan(array.data[index("level/M", 1, 2)])
+    assert math.isnan(array.data[index("max_abs_feedforward", 0, 2)])  # absent: nan
+    assert len(array.data) == 2 + len(ROW_NAMES) * 2
+    back = decode([d.label for d in array.dims], array.data_offset, array.data)
+    assert back["trial"] == 3 and back["level"] == 1
+    assert back["rms_error"] == {"a": 0.1, "b": 0.2}
+
+
+def test_the_reference_urdf_is_well_formed_and_prefixed() -> None:
+    root = ET.fromstring(prefixed_urdf(_urdf(), REFERENCE_PREFIX))
+    links = [link.get("name") for link in root.iter("link")]
+    assert links and all(str(n).startswith(REFERENCE_PREFIX) for n in links)
+    assert {j.find("parent").get("link") for j in root.iter("joint")} <= set(links)  # type: ignore[union-attr]
+
+
+def test_the_shipped_layout_draws_the_views_channels() -> None:
+    """config/layouts/foxglove.json: the per-trial plots index /ilc/trial_metrics where the
+    layout puts each joint's value, x = the trial; the error plot draws its user script's
+    output; the 3D panel shows the URDF and the reference arm on the ``reference/`` frames."""
+    import json
+
+    layout = json.loads((ROOT / "config" / "layouts" / "foxglove.json").read_text())
+    panels = layout["configById"]
+    names = list(load_config()["joint_names"])
+    for panel, row in (("Plot!max_error", "max_abs_error"), ("Plot!rms_error", "rms_error"),
+                       ("Plot!level_M", "level/M")):
+        config = panels[panel]
+        assert config["xAxisPath"]["value"] == f"{topics.TRIAL_METRICS}.data[0]"
+        assert [p["value"] for p in config["paths"]] == \
+            [f"{topics.TRIAL_METRICS}.data[{index(row, j, len(names))}]"
+             for j in range(len(names))]
+        assert [p["label"] for p in config["paths"]] == names
+    (script,) = layout["userNodes"].values()
+    assert 'export const output = "/studio_script/tracking_error"' in script["sourceCode"]
+    assert all(p["value"].startswith("/studio_script/tracking_error.error[")
+               for p in panels["Plot!tracking_error"]["paths"])
+    three_d = panels["3D!arm"]
+    assert three_d["topics"][ROBOT_DESCRIPTION]["visible"] and three_d["followTf"] == "base_link"
+    reference = three_d["layers"]["reference"]
+    assert (reference["topic"], reference["framePrefix"]) == (ROBOT_DESCRIPTION, REFERENCE_PREFIX)
+    assert panels["DiagnosticSummary!diagnostics"]["topicToRender"] == topics.DIAGNOSTICS
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _bag_messages(bag: Path) -> dict[str, list[tuple[int, int, Any]]]:
+    """Per topic: (log time, publish time, decoded message), from the bag's own schemas."""
+    out: dict[str, list[tuple[int, int, Any]]] = {}
+    for file in sorted(glob.glob(str(bag / "*.mcap"))):
+        with open(file, "rb") as handle:
+            reader = make_reader(handle, decoder_factories=[DecoderFactory()])
+            for _, channel, message, decoded in reader.iter_decoded_messages():
+                out.setdefault(channel.topic, []).append(
+                    (message.log_time, message.publish_time, decoded))
+    return out
+
+
+def _stamp(msg: Any) -> int:
+    stamp = msg.clock if hasattr(msg, "clock") else msg.header.stamp
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def _decoded(received: Received) -> dict[str, list[tuple[int, Any]]]:
+    """Every live message decoded from the schema its channel advertised, and nothing else."""
+    out: dict[str, list[tuple[int, Any]]] = {}
+    for channel in received.channels.values():
+        assert channel["encoding"] == "cdr" and channel["schemaEncoding"] == "ros2msg"
+        decoder = generate_dynamic(channel["schemaName"], channel["schema"])[
+            channel["schemaName"]]
+        out[channel["topic"]] = [(log_time, decoder(payload))
+                                 for log_time, payload in received.messages[channel["topic"]]]
+    return out
+
+
+def _topic_types(bag: Path) -> dict[str, str]:
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    return {t["topic_metadata"]["name"]: t["topic_metadata"]["type"]
+            for t in info["topics_with_message_count"]}
+
+
+@pytest.mark.graph
+def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
+    """``exo-ilc run --live``: a WebSocket client subscribed to every advertised channel gets
+    every JointState, trial summary and trial metrics the bag holds, equal; the URDF; /tf per
+    sample equal to Pinocchio's forward kinematics (the arm and the reference) to 1e-9. The bag
+    logs at the sim stamps; ``simulate --bag`` lists the same topics and types."""
+    config_file = tmp_path / "short.yaml"
+    config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n')
+    port = _free_port()
+    received = Received()
+    client = threading.Thread(target=collect, args=(f"ws://127.0.0.1:{port}", 90.0),
+                              kwargs={"received": received}, daemon=True)
+    client.start()
+    run = subprocess.run(
+        [sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--config", str(config_file),
+         "--trials", "2", "--live", "--live-port", str(port),
+         # every sample is asked for: by default the view reads them best effort and may lose
+         # some on a loaded machine (by design: it never makes the loop repair one for it)
+         "--live-param", "sample_reliability:=reliable", "--bag-dir",
+         str(tmp_path / "bags"), "--no-store", "--quiet"],
+        text=True, capture_output=True, timeout=240, stdin=subprocess.DEVNULL, check=False)
+    assert run.returncode == 0, run.stderr[-3000:]
+    client.join(30)
+    assert not client.is_alive(), "the server did not close the connection at the end"
+    assert f"ws://127.0.0.1:{port}" in run.stderr
+    (bag,) = list((tmp_path / "bags").iterdir())
+    recorded = _bag_messages(bag)
+    live = _decoded(received)
+    assert SUBPROTOCOL == "foxglove.sdk.v1"
+    assert "time" in received.server_info.get("capabilities", [])
+    expected_channels = {topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
+                         topics.CLOCK, topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY,
+                         topics.TRIAL_METRICS, topics.DIAGNOSTICS, ROBOT_DESCRIPTION,
+                         REFERENCE_DESCRIPTION, TF}
+    assert set(live) == expected_channels
+
+    # The bag: log time = the sim stamp of every sample and /clock message.
+    for topic in (topics.JOINT_STATES, topics.CLOCK, topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY):
+        assert recorded[topic] and all(log == _stamp(m) for log, _, m in recorded[topic]), topic
+    logs = [log for messages in recorded.values() for log, _, _ in messages]
+    assert max(logs) < 10**12  # sim time (s since the run's start), not the wall clock
+
+    # Every JointState, equal (and logged at its stamp live too).
+    bag_states = {_stamp(m): m for _, _, m in recorded[topics.JOINT_STATES]}
+    live_states = {_stamp(m): m for _, m in live[topics.JOINT_STATES]}
+    assert all(log == _stamp(m) for log, m in live[topics.JOINT_STATES])
+    assert sorted(live_states) == sorted(bag_states)
+    for stamp, msg in bag_states.items():
+        got = live_states[stamp]
+        assert list(got.name) == list(msg.name)
+        for field in ("position", "velocity", "effort"):
+            assert list(getattr(got, field)) == list(getattr(msg, field)), (stamp, field)
+
+    # Every trial result, equal: the numbers and the summaries.
+    def metrics(messages: list[Any]) -> set[tuple[Any, ...]]:
+        return {(tuple(d.label for d in m.layout.dim), m.layout.data_offset,
+                 tuple(np.nan_to_num(np.asarray(m.data), nan=-1e300))) for m in messages}
+
+    assert metrics([m for _, _, m in recorded[topics.TRIAL_METRICS]]) == \
+        metrics([m for _, m in live[topics.TRIAL_METRICS]])
+    assert len(recorded[topics.TRIAL_METRICS]) >= 2
+
+    def summaries(messages: list[Any]) -> set[tuple[Any, ...]]:
+        return {(s.name, s.level, s.message, s.hardware_id,
+                 tuple((kv.key, kv.value) for kv in s.values))
+                for m in messages for s in m.status}
+
+    bag_summaries = summaries([m for _, _, m in recorded[topics.TRIAL_SUMMARY]])
+    assert bag_summaries == summaries([m for _, m in live[topics.TRIAL_SUMMARY]])
+    keys = [tuple(k for k, _ in s[4] if not k.startswith("aborted")) for s in bag_summaries]
+    assert len(set(keys)) == 1  # every trial's summary has the same keys (trial 1's levels)
+
+    # The URDF, as the run's config makes it (and the reference arm's).
+    urdf = _urdf()
+    assert {m.data for _, m in live[ROBOT_DESCRIPTION]} == {urdf}
+    reference_urdf = prefixed_urdf(urdf, REFERENCE_PREFIX)
+    assert {m.data for _, m in live[REFERENCE_DESCRIPTION]} == {reference_urdf}
+
+    # /tf: one message per sample at its stamp, the arm = Pinocchio's FK of the sample's q,
+    # the reference = Pinocchio's FK of q_d at that sample of the trial's feed-forward.
+    names = list(load_config()["joint_names"])
+    profiles = {_stamp(m): m for _, _, m in recorded[topics.FEEDFORWARD]}
+    period = int(load_config()["control.period"] * 1e9)
+    tf_stamps = []
+    reference_checked = 0
+    for log, msg in live[TF]:
+        stamp = _stamp(msg.transforms[0])
+        assert log == stamp and all(_stamp(t) == stamp for t in msg.transforms)
+        tf_stamps.append(stamp)
+        transforms = [(t.header.frame_id, t.child_frame_id,
+                       np.array([t.transform.translation.x, t.transform.translation.y,
+                                 t.transform.translation.z]),
+                       np.array([t.transform.rotation.x, t.transform.rotation.y,
+                                 t.transform.rotation.z, t.transform.rotation.w]))
+                      for t in msg.transforms]
+        sample = bag_states[stamp]
+        q = np.array([sample.position[list(sample.name).index(n)] for n in names])
+        assert _check_transforms(transforms, urdf, q) == len(names)
+        base = [t for t in transforms if t[1] == REFERENCE_PREFIX + "base_link"]
+        assert len(base) == 1 and list(base[0][2]) == list(REFERENCE_OFFSET)
+        t0 = max((t for t in profiles if t <= stamp), default=None)
+        if t0 is not None and (stamp - t0) // period < len(profiles[t0].points):
+            point = profiles[t0].points[(stamp - t0) // period]
+            q_d = np.array([point.positions[list(profiles[t0].joint_names).index(n)]
+                            for n in names])
+            reference_checked += _check_transforms(transforms, reference_urdf, q_d,
+                                                   "reference ")
+    assert sorted(tf_stamps) == sorted(bag_states)
+    assert reference_checked == len(names) * len(bag_states)
+
+    # simulate --bag writes the same topics and types as the graph's recorder.
+    sim = subprocess.run([sys.executable, "-m", "exo_ilc_ros.cli.main", "simulate", "--config",
+                          str(config_file), "--trials", "2", "--bag", str(tmp_path / "sim")],
+                         text=True, capture_output=True, timeout=120, check=False)
+    assert sim.returncode == 0, sim.stderr[-3000:]
+    (sim_bag,) = list((tmp_path / "sim").iterdir())
+    assert _topic_types(sim_bag) == _topic_types(bag) == dict(topics.TYPES)
+    sim_messages = _bag_messages(sim_bag)
+    for topic in (topics.JOINT_STATES, topics.CLOCK):  # simulate logs at the stamps too
+        assert all(log == _stamp(m) for log, _, m in sim_messages[topic])
+    samples = len(profiles[min(profiles)].points)
+    every = int(load_config()["clock_every"])
+    per_trial = len([i for i in range(samples) if i % every == 0 or i == samples - 1])
+    assert len(sim_messages[topics.CLOCK]) == 2 * per_trial  # as the plant sends /clock
+    assert len(recorded[topics.CLOCK]) % per_trial == 0  # (a rerun attempt sends its own)
+    assert {s.hardware_id for _, _, m in sim_messages[topics.DIAGNOSTICS] for s in m.status} == \
+        {"computed_torque_controller"}

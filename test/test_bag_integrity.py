@@ -373,7 +373,8 @@ def test_another_publishers_junk_in_a_bag_is_left_out_with_a_note() -> None:
     (the nodes refused it live): the reader drops what is not CDR of the topic's type, with a
     note, and keeps the rest in order (decoded, or raw after the encapsulation check)."""
     from exo_ilc_ros.bag import messages
-    from exo_ilc_ros.bag.reader import _keep_decodable, _Stream
+    from exo_ilc_ros.bag.storage import Stream as _Stream
+    from exo_ilc_ros.bag.storage import _keep_decodable
 
     good = messages.joint_state(5, ["a"], [0.1], [0.2], [0.0])
     rng = np.random.default_rng(3)

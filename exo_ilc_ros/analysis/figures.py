@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..bag.reader import TrialData
+from ..bag.run import TrialData
 from ..core.session.summary import RunSummary
 from .report import PAPER_FIRST_JOINT1, PAPER_OTHER_JOINTS_WITHIN
 

@@ -24,7 +24,8 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from ..bag.provenance import PREFIX
-from ..bag.reader import BagRun, read_metadata
+from ..bag.run import BagRun
+from ..bag.storage import read_metadata
 from ..core.loop.record import TrialRecord
 from ..core.params.config import Config
 from ..core.persistence.profiles import ProfileBook

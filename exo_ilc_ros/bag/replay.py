@@ -27,7 +27,8 @@ from ..core.session.result import RunResult
 from ..wire import protocol
 from .errors import BagReadError
 from .provenance import PREFIX
-from .reader import BagRun, read_metadata
+from .run import BagRun
+from .storage import read_metadata
 
 COMPARED = ("max_abs_error", "max_abs_feedforward", "max_abs_effort")
 """The summary quantities a replay must reproduce."""

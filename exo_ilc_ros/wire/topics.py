@@ -35,8 +35,8 @@ Every array is in the joint order of the ``joint_names`` parameter; times are si
     has no level, as trial 1, which no update formed).
 ``/ilc/trial_metrics`` (``std_msgs/msg/Float64MultiArray``, ilc_supervisor; transient local)
     With each summary, the same trial's numbers as numbers (for a Plot panel): trial, level,
-    then max |e|, RMS e, max |u_ff|, max |effort|, M, M', M'' per joint, named by the layout
-    (:mod:`.trial_metrics`).
+    then ``max |e|``, RMS e, ``max |u_ff|``, ``max |effort|``, M, M', M'' per joint, named by
+    the layout (:mod:`.trial_metrics`).
 ``/diagnostics`` (``diagnostic_msgs/msg/DiagnosticArray``, every node): health.
     computed_torque_controller also acknowledges each feed-forward it loaded here: status
     ``computed_torque_controller/feedforward``, message ``loaded``, values ``trial`` = k and

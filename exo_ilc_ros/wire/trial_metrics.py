@@ -14,10 +14,10 @@ generates none), and its layout names the entries, so the message explains itsel
   ``data[2 + r J + j]``; NaN where the trial has none (the levels of trial 1, which no
   update formed, and of laws without levels).
 
-Rows: max |e| (rad), RMS e (rad, the summary's ``metric/rms_error``: of the true error),
-max |u_ff| (rad/s^2), max |effort| (N m), and the step gains M, M', M'' of eq. (11) that formed
-the trial's feed-forward. With 3 joints: max |e| of joint 1 is ``data[2]``, RMS e ``data[5]``,
-M ``data[14]`` (:func:`index`).
+Rows: ``max |e|`` (rad), RMS e (rad, the summary's ``metric/rms_error``: of the true error),
+``max |u_ff|`` (rad/s^2), ``max |effort|`` (N m), and the step gains M, M', M'' of eq. (11)
+that formed the trial's feed-forward. With 3 joints: ``max |e|`` of joint 1 is ``data[2]``, RMS
+e ``data[5]``, M ``data[14]`` (:func:`index`).
 """
 
 from __future__ import annotations

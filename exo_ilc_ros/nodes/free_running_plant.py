@@ -4,7 +4,8 @@ and start services (``protocol: homing``); the node is :class:`.mujoco_plant.Fre
 from __future__ import annotations
 
 from .common import spin
-from .mujoco_plant import NAME, FreeRunningPlant
+from .mujoco_plant import FreeRunningPlant
+from .plant_base import NAME
 
 __all__ = ["NAME", "FreeRunningPlant", "main"]
 

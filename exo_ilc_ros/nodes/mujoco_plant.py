@@ -7,8 +7,10 @@ supervisor reads its mass uncertainty as from our simulator) and publishes ``/jo
 ``/clock``, takes ``/effort_controller/commands``. ``mode: lock_step`` advances one control
 period per command and nothing else (the first sample goes out once a controller is linked, and
 again after 1 s while no command came); ``real_time`` steps on a wall-clock timer with the last
-command held, and after ``safety.watchdog_periods`` periods of wall time without a command
-applies the safe hold around the pose of that moment instead, until commands come again.
+command held, and once the plant's watchdog (:func:`exo_ilc_ros.core.loop.safety.watchdog_for`,
+the controller's rule: ``safety.watchdog_periods`` periods of wall time, never less than
+``watchdog_min_timeout``) saw no command applies the safe hold around the pose of that moment
+instead, until commands come again.
 
 :class:`FreeRunningPlant` is the node with any stepper; ``free_running_plant`` runs it with our
 own simulator's RK4 (``core/loop/plant.py``): our simulator as any arm, for ``protocol: homing``.
@@ -21,91 +23,40 @@ import time
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.node import Node
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
 
-from ..core.loop.controller import GuardedControlStep
 from ..core.loop.stepper import PlantStepper
-from ..core.loop.trial import period_ns
-from ..core.params import schema
-from ..core.params.validation import Cause, Rejection, validate_effort_command
-from ..core.sim.experiment import Experiment
 from ..core.sim.mujoco_arm import MujocoArm, effects_not_simulated
-from ..wire import topics
-from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
-from ..wire.publishers import max_bytes
-from .common import CLOCK_QOS, DIAGNOSTICS_QOS, SAMPLES_QOS, CountingPublisher, spin, wall_clock
-from .diagnostics import diagnostic_array
-from .guard import Health, Rejections, effort_limit_reasons, rejections_check
-from .identified import TRUSTED_READER_QOS, TrustedInput, effort_classifier
-from .parameters import SchemaParameters
+from .common import spin, wall_clock
+from .plant_base import NAME, PlantNode
 from .realtime import plant_scheduling
 
-NAME = schema.PLANT
+__all__ = ["FIRST_SAMPLE_AGAIN", "NAME", "FreeRunningPlant", "MujocoPlant", "main"]
+
 FIRST_SAMPLE_AGAIN = 1.0
 """Lock-step: wall seconds without any command before the first sample is sent again (it may
 have gone out before the controller's subscription matched)."""
 
 
-class FreeRunningPlant(Node):
+class FreeRunningPlant(PlantNode):
     """A plant that keeps its own clock and offers no services (``stepper``: position,
     velocity, applied, step(effort, saturated))."""
 
     engine = "rk4"
+    hold_reason = "no effort command; safe hold"
 
     def __init__(self) -> None:
-        super().__init__(NAME)
-        self.params = SchemaParameters(self, NAME)
+        super().__init__(self.on_command)
         config = self.params.config
-        self.experiment = Experiment(config)
         self.stepper: Any = self.make_stepper()
         ref = self.experiment.reference
         self.stepper_state(ref.position[0], ref.velocity[0])
-        self.lock_step = config["mode"] == "lock_step"
-        self.clock_every = int(config["clock_every"])
-        self.step_ns = period_ns(self.experiment.period)
         self.now_ns = self.step_ns
         self.index = 0
         self.started = False
-        self.limit = np.asarray(self.experiment.effort_limit, dtype=float)
-        self.held = np.zeros(config.joints)
-        self.rejections = Rejections(self)
-        self.saturated = np.zeros(config.joints, dtype=np.int64)
-        self.over_limit = 0
-        self.commands = 0
         self.stalls = 0
         """Periods the plant stepped on its own (the safe hold): no command came in time."""
-        self.timeout_ns = int(config["safety.watchdog_periods"]) * self.step_ns
-        """Real time: wall time without a command before the safe hold."""
         self.last_command_ns = 0
-        self.hold_pose: np.ndarray | None = None
-        self.safe_hold = GuardedControlStep(self.experiment)
-        """The controller's safe hold (its gains and ramp, core/loop/hold.py), latched at the
-        trip."""
-        here = np.zeros(config.joints)  # load its kernels now, not at a trip
-        self.safe_hold.hold_at(here)
-        self.safe_hold.hold(here, here)
-        self.state = JointStateWriter(config["joint_names"])
-        self.clock = Clock()
-        self.state_pub = self.create_publisher(JointState, topics.JOINT_STATES, SAMPLES_QOS,
-                                               publisher_class=CountingPublisher)
-        self.clock_pub = self.create_publisher(Clock, topics.CLOCK, CLOCK_QOS,
-                                               publisher_class=CountingPublisher)
-        self.command_sub = TrustedInput(  # the controller's commands only (wire.publishers)
-            self, Float64MultiArray, topics.EFFORT_COMMANDS, TRUSTED_READER_QOS, self.on_command,
-            self.rejections, max_bytes(topics.EFFORT_COMMANDS, config.joints, 0),
-            effort_classifier(self.rejections, config.joints))
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
-                                                     DIAGNOSTICS_QOS,
-                                                     publisher_class=CountingPublisher)
-        self.health = Health(self, NAME)
-        self.health.checks += [self._effort_check, rejections_check(self.rejections,
-                                                                    "effort commands"),
-                               self.command_sub.health]
-        self.create_timer(1.0, self.on_health_timer, clock=wall_clock())
+        """Lock-step: when the last command (or the first sample sent again) was."""
         wall_period = self.experiment.period / config["real_time_rate"]
         self.create_timer(wall_period if not self.lock_step else 0.05, self.on_tick,
                           clock=wall_clock())
@@ -126,22 +77,22 @@ class FreeRunningPlant(Node):
     def on_command(self, raw: bytes) -> None:
         """Lock-step: apply the command over one period and publish the next sample;
         real-time: hold it. A command that is not one finite value per joint is rejected."""
-        try:
-            effort = read_float64_array(raw)
-        except CdrError as exc:
-            self.rejections.reject(Rejection(Cause.NOT_NUMERIC, f"{topics.EFFORT_COMMANDS}: "
-                                             f"undecodable: {exc}"))
+        effort = self.command_of(raw)
+        if effort is None:
             return
         if effort.shape != self.held.shape or not np.isfinite(effort).all():
-            checked = validate_effort_command(effort.tolist(), [np.inf] * self.held.shape[0])
-            self.rejections.reject(checked if isinstance(checked, Rejection) else Rejection(
-                Cause.NOT_NUMERIC, f"{topics.EFFORT_COMMANDS}: not one finite value per joint"))
+            self.reject_effort(effort)
             return
         self.commands += 1
         if np.any(np.abs(effort) > self.limit):
             self.over_limit += 1
         self.held[:] = effort
-        self.last_command_ns = time.monotonic_ns()
+        now = time.monotonic_ns()
+        self.last_command_ns = now
+        if self.watchdog.tripped:  # a command again: the watchdog runs on, the hold ends
+            self.watchdog.arm(now)
+        else:
+            self.watchdog.feed(now)
         if self.hold_pose is not None:
             self.hold_pose = None
             self.get_logger().info("effort commands again; safe hold released")
@@ -152,7 +103,7 @@ class FreeRunningPlant(Node):
         """Both modes: start once a controller is linked. Lock-step: nothing moves without a
         command (simulated time stands still, as in plant_simulator); the first sample is sent
         again while no command ever came. Real time: one period with the held command, the
-        safe hold once no command came for the timeout."""
+        safe hold once the watchdog (core.loop.safety) saw no command for its timeout."""
         now = time.monotonic_ns()
         if not self.started:
             if self.state_pub.get_subscription_count() >= 1 and \
@@ -160,6 +111,7 @@ class FreeRunningPlant(Node):
                     self.command_sub.trusted_known():
                 self.started = True
                 self.last_command_ns = now
+                self.watchdog.arm(now)
                 self._publish()
             return
         if self.lock_step:
@@ -167,14 +119,9 @@ class FreeRunningPlant(Node):
                 self.last_command_ns = now
                 self._publish()
             return
-        if self.hold_pose is None and \
-                time.monotonic_ns() - self.last_command_ns > self.timeout_ns:
-            self.hold_pose = np.array(self.stepper.position)
-            self.safe_hold.hold_at(self.hold_pose)
-            self.get_logger().error(
-                f"no effort command for {self.timeout_ns / 1e6:g} ms: safe hold around the "
-                "current pose until commands come again")
-            self.on_health_timer()
+        if self.watchdog.check(now):
+            self.latch_safe_hold(self.stepper.position, "safe hold around the current pose "
+                                 "until commands come again")
         if self.hold_pose is not None:
             effort = self.safe_hold.hold(np.array(self.stepper.position),
                                          np.array(self.stepper.velocity))
@@ -195,29 +142,12 @@ class FreeRunningPlant(Node):
                                                 stepper.applied))
         if self.index % self.clock_every:
             return
-        self.clock.clock.sec, self.clock.clock.nanosec = divmod(self.now_ns, 1_000_000_000)
-        self.clock_pub.publish(self.clock)
+        self.publish_clock(self.now_ns)
 
-    def on_health_timer(self) -> None:
-        """Health on /diagnostics: rejections, saturation, the safe hold."""
-        self.diagnostics_pub.publish(diagnostic_array(self, [self.health.status()]))
-
-    def _effort_check(self) -> tuple[bytes, str, list[tuple[str, str]]]:
-        names = self.params.config["joint_names"]
-        values = [("engine", self.engine), ("scheduler", self.scheduler),
-                  ("commands", str(self.commands)),
-                  ("over_limit", str(self.over_limit)), ("stalls", str(self.stalls)),
-                  ("simulated_time_ns", str(self.now_ns)),
-                  *((f"saturated/{n}", str(int(c))) for n, c in zip(names, self.saturated,
-                                                                      strict=True))]
-        reasons = []
-        level = DiagnosticStatus.OK
-        if self.hold_pose is not None:
-            level = DiagnosticStatus.ERROR
-            reasons.append("no effort command; safe hold")
-        limit_level, limit_reasons = effort_limit_reasons(names, self.saturated,
-                                                          self.over_limit)
-        return max(level, limit_level), "; ".join(reasons + limit_reasons), values
+    def effort_values(self) -> list[tuple[str, str]]:
+        """The engine, the scheduler, the stalls and simulated time, on its health."""
+        return [("engine", self.engine), ("scheduler", self.scheduler),
+                ("stalls", str(self.stalls)), ("simulated_time_ns", str(self.now_ns))]
 
 
 class MujocoPlant(FreeRunningPlant):

@@ -21,93 +21,47 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.node import Node
 from rclpy.timer import Timer
-from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from ..core.loop.controller import GuardedControlStep
 from ..core.loop.plant import clamp_counted
-from ..core.loop.safety import LateCommands, watchdog_for
+from ..core.loop.safety import LateCommands
 from ..core.loop.stepper import PlantStepper
-from ..core.loop.trial import period_ns
-from ..core.params import schema
-from ..core.params.validation import Cause, Rejection, validate_effort_command
-from ..core.sim.experiment import Experiment
 from ..wire import topics
-from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
+from ..wire.cdr import JointStateWriter
 from ..wire.protocol import trial_of_frame
 from ..wire.publishers import max_bytes
-from .common import CLOCK_QOS, DIAGNOSTICS_QOS, SAMPLES_QOS, CountingPublisher, spin, wall_clock
+from .common import SAMPLES_QOS, CountingPublisher, spin, wall_clock
 from .diagnostics import diagnostic_array, stamp_ns, status
-from .guard import Health, Rejections, effort_limit_reasons, rejections_check
 from .identified import (
     FEEDFORWARD_READER_QOS,
-    TRUSTED_READER_QOS,
     TrustedInput,
     decoded,
     decodes,
-    effort_classifier,
 )
-from .parameters import SchemaParameters
+from .plant_base import NAME, PlantNode
 from .realtime import plant_scheduling
 
-NAME = schema.PLANT
 
-
-class PlantSimulator(Node):
+class PlantSimulator(PlantNode):
     """The simulated exoskeleton arm (true masses, ``mass_uncertainty``)."""
 
     def __init__(self) -> None:
-        super().__init__(NAME)
-        self.params = SchemaParameters(self, NAME)
+        super().__init__(self.on_command)
         config = self.params.config
-        self.experiment = Experiment(config)
         self.stepper = PlantStepper(self.experiment)
-        self.lock_step = config["mode"] == "lock_step"
-        self.clock_every = int(config["clock_every"])
-        self.step_ns = period_ns(self.experiment.period)
         self.last_index = self.experiment.reference.samples - 1
         self.now_ns = 0
         self.t0_ns = 0
         self.index = 0
         self.armed = False
         self.running = False
-        self.held = np.zeros(config.joints)
         self.unapplied = np.zeros(config.joints)
         """Lock-step: where a command received between trials is clamped (never applied)."""
         self.timer: Timer | None = None
-        self.limit = np.asarray(self.experiment.effort_limit, dtype=float)
-        self.unbounded = np.full(config.joints, np.inf)
-        self.rejections = Rejections(self)
-        self.saturated = np.zeros(config.joints, dtype=np.int64)
-        self.over_limit = 0
-        self.commands = 0
-        self.watchdog = watchdog_for(config)  # the controller's rule too (core.loop.safety)
         self.late = LateCommands()  # real time: periods run on a late (held) command
-        self.hold_pose: np.ndarray | None = None
-        """Real-time mode: the pose the plant's safe hold keeps after a watchdog trip."""
-        self.safe_hold = GuardedControlStep(self.experiment)
-        """The controller's safe hold (its gains and ramp, core/loop/hold.py), latched at the
-        trip."""
-        here = np.zeros(config.joints)  # load its kernels now, not at a trip
-        self.safe_hold.hold_at(here)
-        self.safe_hold.hold(here, here)
-
-        self.state = JointStateWriter(config["joint_names"])
-        self.clock = Clock()
-        self.state_pub = self.create_publisher(JointState, topics.JOINT_STATES, SAMPLES_QOS,
-                                               publisher_class=CountingPublisher)
-        self.clock_pub = self.create_publisher(Clock, topics.CLOCK, CLOCK_QOS,
-                                               publisher_class=CountingPublisher)
-        self.command_sub = TrustedInput(  # the controller's commands only (wire.publishers)
-            self, Float64MultiArray, topics.EFFORT_COMMANDS, TRUSTED_READER_QOS, self.on_command,
-            self.rejections, max_bytes(topics.EFFORT_COMMANDS, config.joints, 0),
-            effort_classifier(self.rejections, config.joints))
         self.patient = self.experiment.patient
         self.next_trial: tuple[int, int] | None = None
         """(trial k, t0) of the last /ilc/feedforward: the patient's draws are trial k's."""
@@ -122,14 +76,6 @@ class PlantSimulator(Node):
                                        self.experiment.reference.position.shape[0]),
             decodes(JointTrajectory, self.rejections, topics.FEEDFORWARD)) \
             if self.patient.enabled else None
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
-                                                     DIAGNOSTICS_QOS,
-                                                     publisher_class=CountingPublisher)
-        self.health = Health(self, NAME)
-        self.health.checks += [self._effort_check, rejections_check(self.rejections,
-                                                                    "effort commands"),
-                               self.command_sub.health]
-        self.create_timer(1.0, self.on_health_timer, clock=wall_clock())
         self.create_service(Trigger, topics.RESET_SERVICE, self.on_reset)
         self.create_service(Trigger, topics.START_SERVICE, self.on_start)
         if not self.lock_step:
@@ -208,14 +154,11 @@ class PlantSimulator(Node):
     def on_command(self, raw: bytes) -> None:
         """Lock-step: apply the command for the current sample and advance; real-time: hold.
         A command that is not one finite value per joint is rejected (never applied)."""
-        try:
-            effort = read_float64_array(raw)
-        except CdrError as exc:
-            self.rejections.reject(Rejection(Cause.NOT_NUMERIC, f"{topics.EFFORT_COMMANDS}: "
-                                             f"undecodable: {exc}"))
+        effort = self.command_of(raw)
+        if effort is None:
             return
         if effort.shape != self.held.shape:
-            self._reject(effort)
+            self.reject_effort(effort)
             return
         if self.lock_step and self.running:  # the hot path: check, count, clamp, step at once
             beyond = self.stepper.step(effort, self.saturated)
@@ -223,7 +166,7 @@ class PlantSimulator(Node):
             beyond = clamp_counted(effort, self.limit, self.saturated,
                                    self.unapplied if self.lock_step else self.held)
         if beyond < 0:
-            self._reject(effort)
+            self.reject_effort(effort)
             return
         self.commands += 1
         if beyond:
@@ -235,23 +178,14 @@ class PlantSimulator(Node):
             self.watchdog.feed(time.monotonic_ns())
             self.late.command()
 
-    def _reject(self, effort: np.ndarray) -> None:
-        checked = validate_effort_command(effort.tolist(), self.unbounded.tolist())
-        self.rejections.reject(checked if isinstance(checked, Rejection) else Rejection(
-            Cause.NOT_NUMERIC, f"{topics.EFFORT_COMMANDS}: not one finite value per joint"))
-
     def on_tick(self) -> None:
         """Real-time mode: one period with the held command (the safe hold after a trip)."""
         if not self.running:
             return
         if self.watchdog.check(time.monotonic_ns()) or \
                 (self.watchdog.tripped and self.hold_pose is None):
-            self.hold_pose = self.stepper.position.copy()
-            self.safe_hold.hold_at(self.hold_pose)
-            self.get_logger().error(
-                f"no effort command for {self.watchdog.timeout_ns / 1e6:g} ms: stopped holding "
-                "the last command; safe hold around the current pose until the next trial")
-            self.on_health_timer()
+            self.latch_safe_hold(self.stepper.position, "stopped holding the last command; "
+                                 "safe hold around the current pose until the next trial")
         if self.hold_pose is not None:
             self.held[:] = self.safe_hold.hold(self.stepper.position, self.stepper.velocity)
         self.late.tick()
@@ -264,25 +198,9 @@ class PlantSimulator(Node):
                                                      ("first_late", str(self.late.first))],
                 hardware_id=NAME)]))
 
-    def on_health_timer(self) -> None:
-        """Health on /diagnostics: rejections, saturation, watchdog."""
-        self.diagnostics_pub.publish(diagnostic_array(self, [self.health.status()]))
-
-    def _effort_check(self) -> tuple[bytes, str, list[tuple[str, str]]]:
-        names = self.params.config["joint_names"]
-        values = [("commands", str(self.commands)), ("over_limit", str(self.over_limit)),
-                  *((f"saturated/{n}", str(int(c))) for n, c in zip(names, self.saturated,
-                                                                      strict=True)),
-                  *(("watchdog/" + k, v) for k, v in self.watchdog.as_values()),
-                  *self.late.as_values(), ("scheduler", self.scheduler)]
-        reasons = []
-        level = DiagnosticStatus.OK
-        if self.hold_pose is not None:
-            level = DiagnosticStatus.ERROR
-            reasons.append("watchdog: no effort command; safe hold")
-        limit_level, limit_reasons = effort_limit_reasons(names, self.saturated,
-                                                          self.over_limit)
-        return max(level, limit_level), "; ".join(reasons + limit_reasons), values
+    def effort_values(self) -> list[tuple[str, str]]:
+        """The real-time plant's late commands and the scheduler, on its health."""
+        return [*self.late.as_values(), ("scheduler", self.scheduler)]
 
     def _advance(self, effort: np.ndarray) -> None:
         self.stepper.step(effort)
@@ -311,10 +229,7 @@ class PlantSimulator(Node):
                                                     stepper.velocity, stepper.applied))
         if self.index % self.clock_every and self.index < self.last_index:
             return  # /clock at every clock_every-th sample, the first and the last
-        sec, nanosec = divmod(self.now_ns, 1_000_000_000)
-        self.clock.clock.sec = sec
-        self.clock.clock.nanosec = nanosec
-        self.clock_pub.publish(self.clock)
+        self.publish_clock(self.now_ns)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -325,7 +325,9 @@ def test_metadata_from_cached_pieces_is_one_dump(tmp_path: Path) -> None:
     """metadata.yaml (and each file's own metadata) are assembled from pieces dumped once; the
     text equals one yaml.dump of the whole, split after split, with custom data that needs
     quoting and spans lines, and custom data that changes."""
-    from exo_ilc_ros.bag.writer import INFO_KEY, _dump, _MetadataYaml
+    from exo_ilc_ros.bag.metadata_yaml import INFO_KEY
+    from exo_ilc_ros.bag.metadata_yaml import MetadataYaml as _MetadataYaml
+    from exo_ilc_ros.bag.metadata_yaml import dump_yaml as _dump
 
     custom = {"config": "a: 1\nb: 'two'\n  c: \"3\"\n", "empty": "", "colon": "x: y # z"}
     with BagWriter(tmp_path / "b", custom_data=custom) as writer:

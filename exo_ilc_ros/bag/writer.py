@@ -8,9 +8,9 @@ moves it to ``<bag>/<name>_<i>.mcap`` (rosbag2's naming for split bags) and rewr
 ``metadata.yaml`` atomically to list every finished file. Readers (rosbags, ``ros2 bag``) see a
 valid multi-file bag at every moment; an interrupted split stays in ``.splits/``.
 
-MCAP files are written with ``mcap``'s writer (:class:`_McapFile`): chunk, data-section and
-summary CRCs, so a flipped byte is detected (:mod:`.integrity`); sqlite3 files with rosbags'
-public ``Writer``.
+MCAP files are written with ``mcap``'s writer: chunk, data-section and summary CRCs, so a
+flipped byte is detected (:mod:`.integrity`); sqlite3 files with rosbags' public ``Writer``
+(both behind :class:`.storage_files.StorageFile`).
 """
 
 from __future__ import annotations
@@ -23,237 +23,12 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
-import yaml
-
-from .. import __version__
 from .errors import BagWriteError
 from .messages import typestore
+from .metadata_yaml import INFO_KEY, MetadataYaml
+from .storage_files import McapFile, Sqlite3File, StorageFile, Topic
 
 SPLITS_DIR = ".splits"
-_Dumper: Any = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
-"""libyaml's dumper when PyYAML has it: metadata.yaml is rewritten after every split."""
-
-
-INFO_KEY = "rosbag2_bagfile_information"
-
-
-def _dump(data: Any) -> str:
-    return str(yaml.dump(data, Dumper=_Dumper, sort_keys=False, width=10**9))
-
-
-class _MetadataYaml:
-    """The YAML of a metadata dict (under ``wrapper``), the same text as one ``yaml.dump``
-    but made of pieces dumped once: every entry of a list (files, topics) and of
-    ``custom_data``, in its place. A split then dumps only what changed (times and counts)
-    instead of the whole, ever-growing file list: the dump was the largest part of a split,
-    which the supervisor waits for between trials."""
-
-    def __init__(self, wrapper: str | None) -> None:
-        self.wrapper = wrapper
-        self._pieces: dict[tuple[str, str], str] = {}
-
-    def dump(self, info: Mapping[str, Any]) -> str:
-        """``yaml.dump({wrapper: info})`` (or of ``info`` without a wrapper)."""
-        used: dict[tuple[str, str], str] = {}
-
-        def piece(key: str, value: Any, skip: int) -> str:
-            """``{key: value}`` in its place, without its first ``skip`` lines."""
-            cache_key = (key, repr(value))
-            text = used.get(cache_key) or self._pieces.get(cache_key)
-            if text is None:
-                data = {key: value} if self.wrapper is None else {self.wrapper: {key: value}}
-                lines = _dump(data).splitlines(keepends=True)
-                text = "".join(lines[skip + (self.wrapper is not None):])
-            used[cache_key] = text
-            return text
-
-        indent = "" if self.wrapper is None else "  "
-        parts = [] if self.wrapper is None else [f"{self.wrapper}:\n"]
-        for key, value in info.items():
-            if _counts(value):  # times and counts change with every split: formatted here
-                parts.append(f"{indent}{key}: {value}\n" if isinstance(value, int) else
-                             f"{indent}{key}:\n" + "".join(f"{indent}  {k}: {v}\n"
-                                                             for k, v in value.items()))
-            elif isinstance(value, list) and value:
-                parts.append(piece(key, [], 0).replace(" []", ""))
-                for item in value:
-                    last = list(item)[-1] if isinstance(item, dict) and len(item) > 1 else None
-                    if last is not None and _counts(item[last]):  # a topic's message count
-                        parts.append(piece(key, [{k: v for k, v in item.items() if k != last}],
-                                           1) + f"{indent}  {last}: {item[last]}\n")
-                    else:
-                        parts.append(piece(key, [item], 1))
-            elif isinstance(value, dict) and value and key == "custom_data":
-                parts.append(piece(key, {}, 0).replace(" {}", ""))
-                parts.extend(piece(key, {k: v}, 1) for k, v in value.items())
-            else:
-                parts.append(piece(key, value, 0))
-        self._pieces = used
-        return "".join(parts)
-
-
-def _counts(value: Any) -> bool:
-    """An int, or a dict of ints under plain keys (``{"nanoseconds": 5}``)."""
-    if isinstance(value, dict):
-        return bool(value) and all(isinstance(v, int) and not isinstance(v, bool) and
-                                   k.isidentifier() for k, v in value.items())
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-CHUNK_SIZE = 2**20
-"""An MCAP chunk is closed once it holds more than this many bytes (1 MiB, as before)."""
-
-
-def qos_yaml(profiles: Sequence[dict[str, Any]]) -> str:
-    """The ``offered_qos_profiles`` text of an MCAP channel, as rosbag2 Jazzy writes it
-    (``serialize_rclcpp_qos_vector``: the version-9 profiles as a YAML block sequence, keys in
-    ``rmw_qos_profile_t``'s order)."""
-    if not profiles:
-        return ""
-    return str(yaml.dump(list(profiles), Dumper=_Dumper, sort_keys=False,
-                         default_flow_style=False, width=10**9)).strip()
-
-
-class _McapFile:
-    """One storage file written with ``mcap``'s :class:`~mcap.writer.Writer` (the format's
-    reference implementation): chunked, uncompressed as before, with chunk, data-section and
-    summary CRCs, message and chunk indexes, statistics, and rosbag2's ``ros2`` profile (one
-    ``ros2msg`` schema per type; channels carry ``offered_qos_profiles`` and
-    ``topic_type_hash``; a ``rosbag2`` metadata record holds the file's metadata)."""
-
-    def __init__(self, path: Path) -> None:
-        from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
-
-
-        self.path = path
-        self._handle = open(path, "wb")  # noqa: SIM115  (closed by finish)
-        self._writer = Writer(self._handle, chunk_size=CHUNK_SIZE,
-                              compression=CompressionType.NONE, index_types=IndexType.ALL,
-                              enable_crcs=True, enable_data_crcs=True)
-        self._writer.start(profile="ros2",
-                           library=f"exo_ilc_ros-{__version__}; {LIBRARY_IDENTIFIER}")
-        self._schemas: dict[str, int] = {}
-        self.channels: dict[str, int] = {}
-        """Topic -> channel id, for the topics that have a message in this file."""
-
-    def connect(self, topic: _Topic) -> int:
-        """Register ``topic``'s channel (and its type's schema, once per file)."""
-        schema = self._schemas.get(topic.msgtype)
-        if schema is None:
-            schema = self._writer.register_schema(topic.msgtype, "ros2msg",
-                                                  topic.definition().encode())
-            self._schemas[topic.msgtype] = schema
-        channel = self._writer.register_channel(topic.name, "cdr", schema,
-                                                topic.channel_metadata())
-        self.channels[topic.name] = channel
-        return channel
-
-    def write(self, channel: int, timestamp: int, data: bytes | memoryview,
-              publish_time: int | None = None) -> None:
-        """One message: log time ``timestamp`` (ns), publish time ``publish_time`` (default:
-        the log time)."""
-        self._writer.add_message(channel, timestamp, data,
-                                 timestamp if publish_time is None else publish_time)
-
-    def write_batch(self, channels: Mapping[str, int],
-                    batch: Sequence[tuple[int, str, bytes] | tuple[int, str, bytes, int]]
-                    ) -> None:
-        """Messages of topics connected in this file, in order; a 4th item is the publish
-        time (else the log time)."""
-        add = self._writer.add_message
-        for item in batch:
-            add(channels[item[1]], item[0], item[2], item[3] if len(item) > 3 else item[0])
-
-    def finish(self, metadata: str) -> None:
-        """The ``rosbag2`` metadata record, the summary (indexes, statistics, CRC) and the
-        footer; closes the file."""
-        try:
-            self._writer.flush()  # the last chunk first: the metadata follows the messages
-            self._writer.add_metadata("rosbag2", {"serialized_metadata": metadata})
-            self._writer.finish()
-        finally:
-            self._handle.close()
-
-
-class _Sqlite3File:
-    """One sqlite3 storage file, written through rosbags' public ``Writer`` API in a staging
-    directory of its own (sqlite3 has no checksums; rosbags writes what rosbag2 does)."""
-
-    def __init__(self, staging: Path) -> None:
-        from rosbags.rosbag2 import StoragePlugin, Writer
-
-        self.staging = staging
-        self._writer = Writer(staging, version=Writer.VERSION_LATEST,
-                              storage_plugin=StoragePlugin.SQLITE3)
-        self._writer.open()
-        self._connections: dict[int, Any] = {}
-        self.channels: dict[str, int] = {}
-
-    @property
-    def path(self) -> Path:
-        return self.staging / f"{self.staging.name}.db3"
-
-    def connect(self, topic: _Topic) -> int:
-        connection = self._writer.add_connection(topic.name, topic.msgtype,
-                                                 typestore=typestore(),
-                                                 offered_qos_profiles=list(topic.qos))
-        self._connections[connection.id] = connection
-        self.channels[topic.name] = connection.id
-        return int(connection.id)
-
-    def write(self, channel: int, timestamp: int, data: bytes | memoryview,
-              publish_time: int | None = None) -> None:
-        del publish_time  # sqlite3 storage has one time per message
-        self._writer.write(self._connections[channel], timestamp, data)
-
-    def write_batch(self, channels: Mapping[str, int],
-                    batch: Sequence[tuple[int, str, bytes] | tuple[int, str, bytes, int]]
-                    ) -> None:
-        for item in batch:
-            self.write(channels[item[1]], item[0], item[2])
-
-    def finish(self, metadata: str) -> None:
-        """Close the database (rosbags also writes a ``metadata.yaml`` in the staging
-        directory, which the bag's own replaces)."""
-        del metadata
-        self._writer.close()
-
-
-@dataclass
-class _Topic:
-    name: str
-    msgtype: str
-    qos: Sequence[Any]
-    count: int = 0
-    _metadata: dict[str, Any] | None = None
-    _definition: str | None = None
-    _channel_metadata: dict[str, str] | None = None
-
-    def metadata(self) -> dict[str, Any]:
-        """Its ``topic_metadata`` entry (computed once: the hash and QoS do not change)."""
-        if self._metadata is None:
-            from rosbags.rosbag2.metadata import dump_qos_v9
-
-            self._metadata = {"name": self.name, "type": self.msgtype,
-                              "serialization_format": "cdr",
-                              "offered_qos_profiles": dump_qos_v9(list(self.qos)),
-                              "type_description_hash": typestore().hash_rihs01(self.msgtype)}
-        return self._metadata
-
-    def definition(self) -> str:
-        """The full ``ros2msg`` definition of its type (the MCAP schema's data)."""
-        if self._definition is None:
-            self._definition = str(typestore().generate_msgdef(self.msgtype, ros_version=2)[0])
-        return self._definition
-
-    def channel_metadata(self) -> dict[str, str]:
-        """The MCAP channel's metadata, as rosbag2's MCAP storage writes it."""
-        if self._channel_metadata is None:
-            info = self.metadata()
-            self._channel_metadata = {
-                "offered_qos_profiles": qos_yaml(info["offered_qos_profiles"]),
-                "topic_type_hash": info["type_description_hash"]}
-        return self._channel_metadata
 
 
 @dataclass
@@ -266,7 +41,7 @@ class _FileInfo:
 
 @dataclass
 class _Split:
-    file: _McapFile | _Sqlite3File
+    file: StorageFile
     start: int = 2**63 - 1
     end: int = 0
     counts: dict[str, int] = field(default_factory=dict)
@@ -286,11 +61,11 @@ class BagWriter:
             raise BagWriteError(self.path, f"unknown storage {storage!r}; use mcap or sqlite3")
         self.storage = storage
         self.custom_data: dict[str, str] = dict(custom_data or {})
-        self._topics: dict[str, _Topic] = {}
+        self._topics: dict[str, Topic] = {}
         self._files: list[_FileInfo] = []
         self._split: _Split | None = None
-        self._bag_yaml = _MetadataYaml(INFO_KEY)
-        self._split_yaml = _MetadataYaml(None)
+        self._bag_yaml = MetadataYaml(INFO_KEY)
+        self._split_yaml = MetadataYaml(None)
         self._opened = False
         self._closed = False
 
@@ -336,7 +111,7 @@ class BagWriter:
             return
         if msgtype not in typestore().types:
             raise BagWriteError(self.path, f"topic {topic}: unknown message type {msgtype}")
-        self._topics[topic] = _Topic(topic, msgtype, tuple(qos))
+        self._topics[topic] = Topic(topic, msgtype, tuple(qos))
 
     def set_custom_data(self, key: str, value: str) -> None:
         """Set a ``custom_data`` entry (written with the next split and at close)."""
@@ -406,7 +181,7 @@ class BagWriter:
         split.file.finish(self._split_yaml.dump(info).strip())
         target = self.path / produced.name
         os.replace(produced, target)
-        if isinstance(split.file, _Sqlite3File):
+        if isinstance(split.file, Sqlite3File):
             shutil.rmtree(split.file.staging, ignore_errors=True)
         for topic, count in split.counts.items():
             self._topics[topic].count += count
@@ -425,13 +200,13 @@ class BagWriter:
         """Start file ``<name>_<i>`` in ``.splits/`` (moved into the bag when finished)."""
         name = f"{self.path.name}_{len(self._files)}"
         staging = self.path / SPLITS_DIR
-        file: _McapFile | _Sqlite3File
+        file: StorageFile
         if self.storage == "mcap":
-            file = _McapFile(staging / f"{name}.mcap")
+            file = McapFile(staging / f"{name}.mcap")
         else:
             if (staging / name).exists():
                 shutil.rmtree(staging / name)
-            file = _Sqlite3File(staging / name)
+            file = Sqlite3File(staging / name)
         self._split = _Split(file)
         return self._split
 

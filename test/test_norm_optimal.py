@@ -156,13 +156,8 @@ def test_reaches_the_bound_before_the_linear_law() -> None:
 def test_tune_norm_optimal_weights(tmp_path: Path) -> None:
     """`tune --law norm_optimal` searches Wd and delta_m (and leaves the sign problem's digest
     alone); its baseline is the config's values; the best is written as a norm_optimal config."""
-    from exo_ilc_ros.analysis.tuning import (
-        TuningProblem,
-        best_result,
-        optimize,
-        weight_params,
-        weights_from_params,
-    )
+    from exo_ilc_ros.analysis.tuning import TuningProblem, best_result, optimize
+    from exo_ilc_ros.analysis.tuning_space import weight_params, weights_from_params
 
     config = _config()
     back = weights_from_params(weight_params(config), config.joints)

@@ -16,10 +16,12 @@ from exo_ilc_ros.analysis.tuning import (
     evaluate,
     open_study,
     optimize,
+    score_errors,
+)
+from exo_ilc_ros.analysis.tuning_space import (
     schedule_params,
     schedule_values,
     schedules_from_params,
-    score_errors,
     suggest_schedules,
 )
 from exo_ilc_ros.cli.main import main

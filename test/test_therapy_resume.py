@@ -353,8 +353,11 @@ def test_a_graph_session_killed_mid_session_resumes_exactly(tmp_path: Path) -> N
     assert killed["status"] == "in_progress" and killed["trials"] in (2, 3), killed
     assert killed["run_store"] == str(store.resolve())
     session = killed["session"]
-    line = next(x for x in err.splitlines() if x.startswith("  exo-ilc "))
+    # The command as typed here (issue 25): exo-ilc, .venv/bin/exo-ilc or python -m ...
+    line = next(x for x in err.splitlines() if x.startswith("  ") and " run " in x and
+                "--resume" in x)
     assert line.split()[-2:] == ["--resume", session] and "--store" in line, line
+    words = line.split()
 
     # Another session begun from v1 and left unfinished, in a store of its own.
     config = load_config(config_file)
@@ -363,7 +366,7 @@ def test_a_graph_session_killed_mid_session_resumes_exactly(tmp_path: Path) -> N
                build_reference(config), start, "other", run_store=str(tmp_path / "other"))
 
     out = tmp_path / "resumed.json"
-    command = [*exo_ilc, *line.split()[1:], "--json", str(out)]
+    command = [*exo_ilc, *words[words.index("run"):], "--json", str(out)]
     resumed = subprocess.run(command, capture_output=True, text=True, timeout=240,
                              stdin=subprocess.DEVNULL, check=False)
     assert resumed.returncode == 0, resumed.stderr[-3000:]

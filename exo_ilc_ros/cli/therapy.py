@@ -139,10 +139,32 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
     was stopped, so a killed session keeps what it learned; it then prints the command that
     resumes exactly this session. ``--resume [SESSION]`` continues it (its unfinished
     versions, the same session numbers, so the same store keys: cli/therapy_resume.py)."""
+    book = ProfileBook(profiles_root(args.profiles))
+    invocation = session_id()
+    session, steps = _graph_steps(args, config, book, store_root, invocation)
+    runs: list[RunSummary] = []
+    for order, step in enumerate(steps, start=1):
+        if step.done is not None:  # reported from its store, as the first run would have
+            print(f"patient {args.patient}, exercise {step.name}: session {session}'s "
+                  f"v{step.done.get('version')} is complete ({step.done.get('trials')} "
+                  "trials); not run again", file=sys.stderr, flush=True)
+            earlier = stored_summary(step, store_root)
+            if earlier is not None:
+                runs.append(earlier)
+            continue
+        summary = _exercise_through_graph(args, step, order, book, session, invocation,
+                                          store_root, run_one)
+        if summary is not None:
+            runs.append(summary)
+    return runs
 
+
+def _graph_steps(args: argparse.Namespace, config: Any, book: ProfileBook, store_root: Path,
+                 invocation: str) -> tuple[str, list[Step]]:
+    """The session's id and its exercises (a resumed session's own), every check made
+    before any node starts: one arm, no learning virtual patient, no store in the way."""
     if args.mass_uncertainty and len(args.mass_uncertainty) > 1:
         raise ConfigError("--mass-uncertainty", "one value with --patient (one patient's arm)")
-
     if args.mass_uncertainty:
         config = config.replace({"mass_uncertainty": args.mass_uncertainty[0]})
     if PatientModel(config).learns:
@@ -150,16 +172,14 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
                           "sessions run in-process (exo-ilc simulate --patient): in the graph "
                           "its adaptation lives in the plant node, which neither starts from "
                           "the state stored with the profile nor resumes it")
-    book = ProfileBook(profiles_root(args.profiles))
     plan = plan_of(args, config)
-    invocation = session_id()
     if args.resume:
         session, steps = resumed_steps(args, config, book, plan, store_root)
     else:
         session = invocation
         steps = [Step(name, trials, prepare(config, book, args.patient, name, args.new_patient))
                  for name, trials in plan]
-    for step in steps:  # before any node starts
+    for step in steps:
         if step.done is not None:
             continue
         item = step.prepared
@@ -167,66 +187,60 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
         stored_trials(item.config.replace({
             "max_trials": step.trials or item.config["max_trials"],
             "store.directory": str(store_root), "patient.session": version}), args.resume)
-    runs: list[RunSummary] = []
-    for order, step in enumerate(steps, start=1):
-        name = step.name
-        if step.done is not None:  # reported from its store, as the first run would have
-            print(f"patient {args.patient}, exercise {name}: session {session}'s "
-                  f"v{step.done.get('version')} is complete ({step.done.get('trials')} "
-                  "trials); not run again", file=sys.stderr, flush=True)
-            earlier = stored_summary(step, store_root)
-            if earlier is not None:
-                runs.append(earlier)
-            continue
-        item = step.prepared
-        count = step.trials or item.config["max_trials"]
-        cfg = item.config.replace({"max_trials": count, "store.directory": str(store_root),
-                                   "store.resume": bool(args.resume)})
-        reference = build_reference(cfg)
-        # The version (the patient's session: its own noise) first, under the profile's lock;
-        # a resume continues the very version the stopped run began (the store's key).
-        writer = book.begin(args.patient, name, cfg, reference, item.start,
-                            invocation if step.reopen else session,
-                            reopen=step.reopen or False, run_store=str(store_root))
-        cfg = writer.config
-        start = "from zero" if item.start is None else f"from profile v{item.start.version}"
-        again = f" (resuming v{writer.version})" if step.reopen else ""
-        print(f"patient {args.patient}, exercise {name}: {counted(count, 'trial')} through the "
-              f"graph, "
-              f"{start}, session {writer.version}{again}, session id {session}, store "
-              f"{store_root}",
-              file=sys.stderr, flush=True)
-        summary: RunSummary | None = None
-        try:
-            summary = run_one(args, cfg, cfg["mass_uncertainty"], count)
-        except (GraphError, KeyboardInterrupt) as exc:  # run.py prints it with the error
-            setattr(exc, "resume",  # noqa: B010 (an attribute GraphError does not declare)
-                    f"to continue this session exactly (v{writer.version} of {name}):\n  "
-                    + resume_command(list(args.argv), str(store_root), session,
-                                     shown_command()))
-            raise
-        finally:
-            stored = RunStore(store_root, cfg, reference).load()
-            done = _profile_from_store(writer, cfg, stored, count)
-            if done is not None and summary is not None:
-                summary.extra["therapy"] = {"patient": args.patient, "exercise": name,
-                                            "profile_started_from": None if item.start is None
-                                            else item.start.version,
-                                            "profile_version": writer.version,
-                                            "patient_session": writer.version,
-                                            "metrics": [m.to_json() for m in done]}
-                bag = summary.extra.get("bag")
-                if bag:
-                    _write_sidecar(Path(bag), args.patient, name, session,
-                                   item.start.version if item.start else None,
-                                   writer.version, order)
-            if done is not None:
-                print(f"profile: {writer.directory} v{writer.version} "
-                      f"({counted(len(done), 'trial')})",
-                      file=sys.stderr)
-        if summary is not None:
-            runs.append(summary)
-    return runs
+    return session, steps
+
+
+def _exercise_through_graph(args: argparse.Namespace, step: Step, order: int,
+                            book: ProfileBook, session: str, invocation: str,
+                            store_root: Path, run_one: Callable[..., RunSummary]
+                            ) -> RunSummary | None:
+    """One exercise of the session through the graph, its profile written from the store
+    when the graph ends (also when it was stopped: the resume command is attached then)."""
+    name = step.name
+    item = step.prepared
+    count = step.trials or item.config["max_trials"]
+    cfg = item.config.replace({"max_trials": count, "store.directory": str(store_root),
+                               "store.resume": bool(args.resume)})
+    reference = build_reference(cfg)
+    # The version (the patient's session: its own noise) first, under the profile's lock;
+    # a resume continues the very version the stopped run began (the store's key).
+    writer = book.begin(args.patient, name, cfg, reference, item.start,
+                        invocation if step.reopen else session,
+                        reopen=step.reopen or False, run_store=str(store_root))
+    cfg = writer.config
+    start = "from zero" if item.start is None else f"from profile v{item.start.version}"
+    again = f" (resuming v{writer.version})" if step.reopen else ""
+    print(f"patient {args.patient}, exercise {name}: {counted(count, 'trial')} through the "
+          f"graph, {start}, session {writer.version}{again}, session id {session}, store "
+          f"{store_root}", file=sys.stderr, flush=True)
+    summary: RunSummary | None = None
+    try:
+        summary = run_one(args, cfg, cfg["mass_uncertainty"], count)
+    except (GraphError, KeyboardInterrupt) as exc:  # run.py prints it with the error
+        setattr(exc, "resume",  # noqa: B010 (an attribute GraphError does not declare)
+                f"to continue this session exactly (v{writer.version} of {name}):\n  "
+                + resume_command(list(args.argv), str(store_root), session,
+                                 shown_command()))
+        raise
+    finally:
+        stored = RunStore(store_root, cfg, reference).load()
+        done = _profile_from_store(writer, cfg, stored, count)
+        if done is not None and summary is not None:
+            summary.extra["therapy"] = {"patient": args.patient, "exercise": name,
+                                        "profile_started_from": None if item.start is None
+                                        else item.start.version,
+                                        "profile_version": writer.version,
+                                        "patient_session": writer.version,
+                                        "metrics": [m.to_json() for m in done]}
+            bag = summary.extra.get("bag")
+            if bag:
+                _write_sidecar(Path(bag), args.patient, name, session,
+                               item.start.version if item.start else None,
+                               writer.version, order)
+        if done is not None:
+            print(f"profile: {writer.directory} v{writer.version} "
+                  f"({counted(len(done), 'trial')})", file=sys.stderr)
+    return summary
 
 
 def _profile_from_store(writer: Any, config: Any, stored: list[Any],

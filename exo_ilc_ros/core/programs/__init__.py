@@ -1,1 +1,2 @@
-"""programs."""
+"""What runs many sessions: therapy sessions and their metrics, the robustness study, the spread
+of iterations to the bound."""

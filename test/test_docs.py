@@ -20,7 +20,7 @@ MOVED_SECTIONS: dict[str, tuple[str, str]] = {
     # the README's sections before the site (issue 24) -> the page holding it now, and a phrase
     # of its text that must be there (the section moved whole, not rewritten away)
     "Results against the paper": (
-        "paper.md", "These counts depend on the last bits of the arithmetic"),
+        "paper.md", "it amplifies last-bit differences"),
     "Convergence and the Q-filter": (
         "convergence.md", "`exo-ilc analyze-loop` says before a run whether it will"),
     "Norm-optimal ILC (model-based)": (

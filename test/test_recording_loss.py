@@ -106,6 +106,8 @@ def test_the_bag_holds_every_message_published_under_load(tmp_path: Path) -> Non
 
 
 @pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("EXO_ILC_SOAK"), reason="the 20-run soak (~9 min): "
+                    "EXO_ILC_SOAK=1 runs it; the normal suite runs the 2-trial case above")
 def test_no_loss_in_20_runs_of_10_trials_under_load(tmp_path: Path) -> None:
     """The issue's figure, with the shipped 15 s trials (EXO_ILC_LOSS_RUNS overrides the 20
     runs)."""

@@ -404,7 +404,7 @@ def test_a_save_interrupted_before_its_index_loses_nothing(
     make the version refused as corrupt (every trial of the session lost). Now the listed files
     were kept as `.previous`: the version loads as the last completed save (trial 2 of 3, the
     same arrays as a 2-trial session), with its patient state, and the next session starts."""
-    from exo_ilc_ros.core.persistence import profiles
+    from exo_ilc_ros.core.persistence import profile_writer, profiles
 
     book = ProfileBook(tmp_path / "a")
     calls = {"index": 0}
@@ -416,10 +416,12 @@ def test_a_save_interrupted_before_its_index_loses_nothing(
             raise KeyboardInterrupt
         write(path, document)
 
-    monkeypatch.setattr(profiles, "write_json_atomic", interrupted)
+    for module in (profiles, profile_writer):  # the book begins a version, its writer saves
+        monkeypatch.setattr(module, "write_json_atomic", interrupted)
     with pytest.raises(KeyboardInterrupt):
         _session(book, trials=3, new=True)
-    monkeypatch.setattr(profiles, "write_json_atomic", write)
+    for module in (profiles, profile_writer):
+        monkeypatch.setattr(module, "write_json_atomic", write)
     directory = book.directory("p1", EXERCISE)
     assert (directory / "v0001.npz.previous").is_file()
     profile = book.load("p1", EXERCISE)

@@ -68,7 +68,10 @@ def test_live_change_shows_in_run_and_analyze_and_a_mistyped_node_fails_fast(
         _, typo_err = typo.communicate(timeout=150)
         assert typo.returncode == 2, typo_err
         assert "no node ilc_supervisr" in typo_err and "did you mean ilc_supervisor?" in typo_err
-        assert "Running nodes:" in typo_err and "plant_simulator" in typo_err
+        listed = typo_err.partition("Running nodes:")[2]
+        # the nodes DDS discovery had seen by then (which ones is a race on a loaded machine)
+        assert any(node in listed for node in ("plant_simulator", "computed_torque_controller",
+                                                "bag_recorder")), typo_err
         stdout, rest = run.communicate(timeout=600)
         assert run.returncode == 0, (err + rest)[-3000:]
     finally:

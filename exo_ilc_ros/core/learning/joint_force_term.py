@@ -8,8 +8,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .identification_settings import IdentificationSettings
-from .patient_estimate import PatientEstimate
+from .identification_settings import PASSIVE_PARAMETERS, IdentificationSettings
+from .patient_estimate import JointEstimate, PatientEstimate
+
+REFLEX_PARAMETERS = ("reflex_gain", "reflex_threshold", "reflex_delay")
+"""The stretch reflex's parameters: added only when detected and all three trustworthy."""
+
+
+def _reflex_usable(joint: JointEstimate) -> bool:
+    """The joint's reflex is detected and every parameter of it trustworthy."""
+    return joint.reflex_detected and all(joint[name].trustworthy for name in REFLEX_PARAMETERS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -33,8 +41,10 @@ def joint_force_term(estimate: PatientEstimate, position: np.ndarray, velocity: 
     v = qdot(t - tau_r) (the first value before the start), the term eq (6)'s Q^v, Q^f, Q^c
     and the reflex add to computed torque, eqs (9)/(16): Q = a_N(q) u + c_N(q, qdot) + tau_p,
     along the (samples, n) ``position`` and ``velocity`` (the reference's, so that no measured
-    velocity is fed back). Only a trustworthy joint's estimate is used (the reflex only when
-    detected), each parameter inside its plausible range, the term clamped to +-``limit``
+    velocity is fed back). A joint's passive forces are used when its passive parameters are
+    trustworthy and its checks (condition, chatter, the patient's own effort) pass, its reflex
+    only when detected and trustworthy too; each parameter inside its plausible range, the
+    term clamped to +-``limit``
     (N m, per joint); any other joint adds 0 and says why."""
     s = settings or IdentificationSettings()
     q = np.asarray(position, dtype=float)
@@ -50,12 +60,15 @@ def joint_force_term(estimate: PatientEstimate, position: np.ndarray, velocity: 
     reasons = []
     for j, joint in enumerate(estimate.joints):
         names = ["viscous", "coulomb", "stiffness", "rest_position"]
-        if joint.reflex_detected:
-            names += ["reflex_gain", "reflex_threshold", "reflex_delay"]
+        reflex = _reflex_usable(joint)
+        if reflex:
+            names += list(REFLEX_PARAMETERS)
         values = {name: joint.value(name) for name in names}
         why = ""
-        if not joint.trustworthy:
-            why = "; ".join(joint.reasons) or "not trustworthy"
+        passive = [r for r in joint.reasons
+                   if r.split(":", 1)[0] not in REFLEX_PARAMETERS]
+        if passive or not all(joint[name].trustworthy for name in PASSIVE_PARAMETERS):
+            why = "; ".join(passive) or "not trustworthy"
         elif not all(math.isfinite(v) for v in values.values()):
             why = "non-finite estimate"
         elif not (np.all(np.isfinite(q[:, j])) and np.all(np.isfinite(qd[:, j]))
@@ -72,7 +85,7 @@ def joint_force_term(estimate: PatientEstimate, position: np.ndarray, velocity: 
         term = (values["viscous"] * v
                 + values["coulomb"] * np.tanh(v / s.stribeck_velocity)
                 + values["stiffness"] * (q[:, j] - values["rest_position"]))
-        if joint.reflex_detected:
+        if reflex:
             delay = int(round(values["reflex_delay"] / s.period))
             delayed = np.concatenate([np.repeat(v[:1], delay), v[:v.shape[0] - delay]]) \
                 if delay > 0 else v

@@ -111,6 +111,9 @@ class FeedforwardUpdate:
     """M, M', M'' (rows) per joint for the sign law; None for laws without levels."""
     notes: tuple[str, ...] = ()
     """What the law reports about this update (e.g. the constraints that were active)."""
+    joint_force: np.ndarray | None = None
+    """The identified joint forces computed torque adds in the next trial, N m per sample (set
+    by the session, :mod:`.patient_model`, never by a law); None: none."""
 
 
 class LearningLaw(Protocol):

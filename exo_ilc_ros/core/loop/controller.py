@@ -45,12 +45,16 @@ def feedback_into(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np
 
 
 @njit(cache=True, error_model="numpy")
-def computed_torque_into(q: np.ndarray, qd: np.ndarray, u: np.ndarray, nominal: tuple,
-                         effort_limit: np.ndarray, ws: tuple, out: np.ndarray) -> None:
-    """Q^u = a_N(q) u + c_N(q, qdot), eqs (9)/(16), clamped to +-effort_limit, into ``out``."""
+def computed_torque_into(q: np.ndarray, qd: np.ndarray, u: np.ndarray, tau_p: np.ndarray,
+                         nominal: tuple, effort_limit: np.ndarray, ws: tuple,
+                         out: np.ndarray) -> None:
+    """Q^u = a_N(q) u + c_N(q, qdot) + tau_p, eqs (9)/(16) with eq (6)'s joint forces ``tau_p``
+    (the identified patient's, :mod:`exo_ilc_ros.core.learning.patient_model`; zeros: the
+    paper's law), clamped to +-effort_limit, into ``out``."""
     n = u.shape[0]
     an = inertia_and_bias_into(q, qd, *nominal, ws, out)
     for j in range(n):
+        out[j] += tau_p[j]
         for k in range(n):
             out[j] += an[j, k] * u[k]
     for j in range(n):
@@ -59,13 +63,13 @@ def computed_torque_into(q: np.ndarray, qd: np.ndarray, u: np.ndarray, nominal: 
 
 @njit(cache=True, error_model="numpy")
 def control_into(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
-                 qd: np.ndarray, kp: np.ndarray, kd: np.ndarray, nominal: tuple,
-                 effort_limit: np.ndarray, ws: tuple, u_out: np.ndarray,
+                 qd: np.ndarray, tau_p: np.ndarray, kp: np.ndarray, kd: np.ndarray,
+                 nominal: tuple, effort_limit: np.ndarray, ws: tuple, u_out: np.ndarray,
                  effort_out: np.ndarray) -> None:
     """One sample of the controller: u by eq (11) into ``u_out``, then the effort by eq (16)
-    (clamped) into ``effort_out``."""
+    with the joint forces ``tau_p`` (clamped) into ``effort_out``."""
     feedback_into(u_ff, q_ref, qd_ref, q, qd, kp, kd, u_out)
-    computed_torque_into(q, qd, u_out, nominal, effort_limit, ws, effort_out)
+    computed_torque_into(q, qd, u_out, tau_p, nominal, effort_limit, ws, effort_out)
 
 
 @njit(cache=True, error_model="numpy")
@@ -75,7 +79,7 @@ def safe_hold_into(q_hold: np.ndarray, q: np.ndarray, qd: np.ndarray, kp: np.nda
     """The safe hold around ``q_hold`` (module docstring): :func:`control_into` with the
     reference frozen at ``q_hold``, zero reference velocity and no feed-forward."""
     zero = np.zeros(q.shape[0])
-    control_into(zero, q_hold, zero, q, qd, kp, kd, nominal, effort_limit, ws, u_out,
+    control_into(zero, q_hold, zero, q, qd, zero, kp, kd, nominal, effort_limit, ws, u_out,
                  effort_out)
 
 
@@ -119,7 +123,7 @@ def hold_into(state: np.ndarray, q_hold: np.ndarray, q: np.ndarray, qd: np.ndarr
 @njit(cache=True, error_model="numpy")
 def guarded_control_into(i: int, state: np.ndarray, holding: bool, u_ff: np.ndarray,
                          q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray, qd: np.ndarray,
-                         kp: np.ndarray, kd: np.ndarray, nominal: tuple,
+                         tau_p: np.ndarray, kp: np.ndarray, kd: np.ndarray, nominal: tuple,
                          effort_limit: np.ndarray, envelope: np.ndarray, hold_kp: np.ndarray,
                          hold_kd: np.ndarray, hold_ramp: int, q_hold: np.ndarray,
                          gains: np.ndarray, ws: tuple, u_out: np.ndarray,
@@ -129,7 +133,8 @@ def guarded_control_into(i: int, state: np.ndarray, holding: bool, u_ff: np.ndar
     outside the error envelope (:func:`outside_envelope`) aborts the trial (``state[ABORT] =
     i``) and latches the hold pose there; from then on, and while ``holding`` (a watchdog trip,
     whose pose the caller latched), the safe hold (:func:`hold_into`); otherwise eq (11) and
-    the computed torque of eq (16) (:func:`control_into`). Returns True at the abort sample."""
+    the computed torque of eq (16) with the joint forces ``tau_p`` (:func:`control_into`; the
+    hold never adds them). Returns True at the abort sample."""
     aborted_now = False
     if state[ABORT] < 0 and not holding and outside_envelope(q_ref, q, envelope):
         state[ABORT] = i
@@ -141,8 +146,8 @@ def guarded_control_into(i: int, state: np.ndarray, holding: bool, u_ff: np.ndar
         hold_into(state, q_hold, q, qd, kp, kd, hold_kp, hold_kd, hold_ramp, nominal,
                   effort_limit, gains, ws, u_out, effort_out)
     else:
-        control_into(u_ff, q_ref, qd_ref, q, qd, kp, kd, nominal, effort_limit, ws, u_out,
-                     effort_out)
+        control_into(u_ff, q_ref, qd_ref, q, qd, tau_p, kp, kd, nominal, effort_limit, ws,
+                     u_out, effort_out)
     return aborted_now
 
 
@@ -152,7 +157,8 @@ def computed_torque_kernel(q: np.ndarray, qd: np.ndarray, u: np.ndarray, nominal
     """Q^u = a_N(q) u + c_N(q, qdot), eqs (9)/(16), clamped, as a new array: the allocating
     form of :func:`computed_torque_into`, for tests and interactive use."""
     out = np.empty(u.shape[0])
-    computed_torque_into(q, qd, u, nominal, effort_limit, workspace(u.shape[0]), out)
+    computed_torque_into(q, qd, u, np.zeros(u.shape[0]), nominal, effort_limit,
+                         workspace(u.shape[0]), out)
     return out
 
 
@@ -178,16 +184,19 @@ class ControlStep:
         self._kd = experiment.kd
         self._limit = experiment.effort_limit
         self._ws = workspace(n)
+        self._no_force = np.zeros(n)
         self.control_input = np.empty(n)
         """u of eq (11) at the last sample."""
         self.effort = np.empty(n)
         """The commanded effort at the last sample (eq (16), clamped)."""
 
     def __call__(self, u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
-                 qd: np.ndarray) -> np.ndarray:
-        """Effort for the measured (q, qdot) at a sample with these reference values."""
-        control_into(u_ff, q_ref, qd_ref, q, qd, self._kp, self._kd, self._nominal, self._limit,
-                     self._ws, self.control_input, self.effort)
+                 qd: np.ndarray, tau_p: np.ndarray | None = None) -> np.ndarray:
+        """Effort for the measured (q, qdot) at a sample with these reference values (and the
+        joint forces ``tau_p``, None: none)."""
+        control_into(u_ff, q_ref, qd_ref, q, qd, self._no_force if tau_p is None else tau_p,
+                     self._kp, self._kd, self._nominal, self._limit, self._ws,
+                     self.control_input, self.effort)
         return self.effort
 
 
@@ -223,11 +232,14 @@ class GuardedControlStep(ControlStep):
         self.state[ABORT] = -1
 
     def sample(self, i: int, u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray,
-               q: np.ndarray, qd: np.ndarray, holding: bool = False) -> bool:
+               q: np.ndarray, qd: np.ndarray, holding: bool = False,
+               tau_p: np.ndarray | None = None) -> bool:
         """The effort at trial sample ``i`` into :attr:`effort` by the rule of
-        :func:`guarded_control_into`; True if this sample aborted the trial."""
+        :func:`guarded_control_into` (``tau_p``: the joint forces at the sample, None: none);
+        True if this sample aborted the trial."""
         return bool(guarded_control_into(
-            i, self.state, holding, u_ff, q_ref, qd_ref, q, qd, self._kp, self._kd,
+            i, self.state, holding, u_ff, q_ref, qd_ref, q, qd,
+            self._no_force if tau_p is None else tau_p, self._kp, self._kd,
             self._nominal, self._limit, self.envelope, self._hold_kp, self._hold_kd,
             self._hold_ramp, self.q_hold, self._hold_gains, self._ws, self.control_input,
             self.effort))

@@ -36,6 +36,9 @@ class TrialRecord:
     ``position`` differ from it; None: the measured state is the true one."""
     true_velocity: np.ndarray | None = None
     """The plant's true qdot, as ``true_position``."""
+    joint_force: np.ndarray | None = None
+    """The identified patient's joint forces (N m per sample) computed torque added to the
+    effort (:mod:`exo_ilc_ros.core.learning.patient_model`); None: none."""
 
     @property
     def aborted(self) -> bool:

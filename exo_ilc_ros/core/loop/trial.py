@@ -30,13 +30,15 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
                            envelope: np.ndarray, hold_kp: np.ndarray, hold_kd: np.ndarray,
                            hold_ramp: int, patient_joint: np.ndarray,
                            patient_scalars: np.ndarray, noise: np.ndarray, initial: np.ndarray,
-                           trial_scalars: np.ndarray, learned: np.ndarray
+                           trial_scalars: np.ndarray, learned: np.ndarray,
+                           joint_force: np.ndarray
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int,
                                       np.ndarray, np.ndarray]:
     """One trial at the samples t_i = i * period, i = 0..N, guarded by the error envelope.
 
     Starts at x_d(0) (assumption (ii), eq (21)). At each sample the controller reads
-    (q, qdot), forms u_i by eq (11) and the effort by eq (16) (:func:`controller.control_into`);
+    (q, qdot), forms u_i by eq (11) and the effort by eq (16) (:func:`controller.control_into`)
+    with the identified joint forces ``joint_force[i]`` (N m; zeros: the paper's controller);
     the plant applies its own limit (a no-op after the controller's clamp) and holds the effort
     over [t_i, t_i+1) (eq (8), :func:`plant.rk4_period`). The command at t_N is recorded but
     never applied. At the first sample outside the envelope the trial is aborted: that sample
@@ -90,8 +92,8 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
         q_seen = q_log[i]
         qd_seen = qd_log[i]
         guarded_control_into(i, state, False, u_ff[i], q_ref[i], qd_ref[i], q_seen, qd_seen,
-                             kp, kd, nominal, effort_limit, envelope, hold_kp, hold_kd,
-                             hold_ramp, q_hold, gains, ws, u_log[i], effort_log[i])
+                             joint_force[i], kp, kd, nominal, effort_limit, envelope, hold_kp,
+                             hold_kd, hold_ramp, q_hold, gains, ws, u_log[i], effort_log[i])
         if i + 1 < n_samples:
             for j in range(n):
                 applied[j] = clamp(effort_log[i, j], effort_limit[j])
@@ -123,11 +125,12 @@ def simulate_trial(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, kp: 
     extra = np.empty(2 * n)
     q = q_ref[0].copy()
     qd = qd_ref[0].copy()
+    zero = np.zeros(n)
     for i in range(n_samples):
         q_log[i] = q
         qd_log[i] = qd
-        control_into(u_ff[i], q_ref[i], qd_ref[i], q, qd, kp, kd, nominal, effort_limit, ws,
-                     u_log[i], effort_log[i])
+        control_into(u_ff[i], q_ref[i], qd_ref[i], q, qd, zero, kp, kd, nominal, effort_limit,
+                     ws, u_log[i], effort_log[i])
         if i + 1 < n_samples:
             rk4_period(q, qd, effort_log[i], period, substeps, plant, nominal, mode, ws, stage,
                        extra)
@@ -138,9 +141,11 @@ def simulate_trial(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, kp: 
 def control_inputs(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
                    qd: np.ndarray, kp: np.ndarray, kd: np.ndarray, nominal: tuple,
                    effort_limit: np.ndarray, aborted_at: int, hold_kp: np.ndarray,
-                   hold_kd: np.ndarray, hold_ramp: int) -> tuple[np.ndarray, np.ndarray]:
+                   hold_kd: np.ndarray, hold_ramp: int, joint_force: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """u and effort at every sample of a trial from the sampled states, as the controller
-    formed them (one :func:`controller.control_into` per sample, in order); from sample
+    formed them (one :func:`controller.control_into` per sample, in order, with the joint
+    forces ``joint_force[i]``); from sample
     ``aborted_at`` on (-1: never) the safe hold around q[aborted_at] with its gains (ramped
     as :func:`simulate_trial_guarded` does)."""
     n_samples, n = q.shape
@@ -151,8 +156,8 @@ def control_inputs(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: n
     state = np.array([-1, 0], dtype=np.int64)  # controller.guard_state()
     for i in range(n_samples):
         if aborted_at < 0 or i < aborted_at:
-            control_into(u_ff[i], q_ref[i], qd_ref[i], q[i], qd[i], kp, kd, nominal,
-                         effort_limit, ws, u[i], effort[i])
+            control_into(u_ff[i], q_ref[i], qd_ref[i], q[i], qd[i], joint_force[i], kp, kd,
+                         nominal, effort_limit, ws, u[i], effort[i])
         else:
             hold_into(state, q[aborted_at], q[i], qd[i], kp, kd, hold_kp, hold_kd, hold_ramp,
                       nominal, effort_limit, gains, ws, u[i], effort[i])
@@ -165,26 +170,31 @@ def record_from_samples(experiment: LoopSetup, trial: int, feedforward: np.ndarr
                         reference: SampledReference | None = None,
                         aborted_at: int | None = None,
                         true_position: np.ndarray | None = None,
-                        true_velocity: np.ndarray | None = None) -> TrialRecord:
+                        true_velocity: np.ndarray | None = None,
+                        joint_force: np.ndarray | None = None) -> TrialRecord:
     """The :class:`TrialRecord` of a trial run elsewhere (the graph), from its sampled
     (measured) states: u and effort are formed again exactly as the controller did (the safe
-    hold from ``aborted_at`` on, for a trial the error envelope aborted); ``true_position``,
+    hold from ``aborted_at`` on, for a trial the error envelope aborted; ``joint_force``: the
+    identified joint forces it added, None: none); ``true_position``,
     ``true_velocity``: the plant's true state when the sensors differ from it. The record owns
     copies of the arrays (a caller's sample buffers may be reused for the next trial)."""
     ref = reference or experiment.reference
     u_ff = np.array(feedforward, dtype=float, order="C")
     q = np.array(position, dtype=float, order="C")
     qd = np.array(velocity, dtype=float, order="C")
+    force = np.zeros(q.shape) if joint_force is None else \
+        np.array(joint_force, dtype=float, order="C")
     u, effort = control_inputs(u_ff, ref.position, ref.velocity, q, qd, experiment.kp,
                                experiment.kd, experiment.nominal.kernel_args,
                                experiment.effort_limit, -1 if aborted_at is None
                                else int(aborted_at), experiment.hold_kp, experiment.hold_kd,
-                               experiment.hold_ramp)
+                               experiment.hold_ramp, force)
     return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels, aborted_at,
                        None if true_position is None
                        else np.array(true_position, dtype=float, order="C"),
                        None if true_velocity is None
-                       else np.array(true_velocity, dtype=float, order="C"))
+                       else np.array(true_velocity, dtype=float, order="C"),
+                       None if joint_force is None else force)
 
 
 def period_ns(period: float) -> int:

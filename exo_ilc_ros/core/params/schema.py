@@ -431,6 +431,38 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("assist_as_needed.transition_sigmas", SUPERVISOR, Kind.DOUBLE,
               "width of the tanh transition at the deadband's edge, in sigmas (Emken: 0.5)",
               strictly_positive=True, live=True),
+    Parameter("identification.enabled", SUPERVISOR, Kind.BOOL,
+              "identify the patient's joint forces between trials (viscous, Coulomb, stiffness, "
+              "reflex; core/learning/identification.py): reported per trial"),
+    Parameter("identification.forgetting", SUPERVISOR, Kind.DOUBLE,
+              "lambda per trial of the recursive least squares: memory ~1 / (1 - lambda) trials",
+              extra_rule=_forgetting_rule),
+    Parameter("identification.in_loop", SUPERVISOR, Kind.BOOL,
+              "computed torque adds the identified joint forces along the reference, eqs "
+              "(9)/(16) with eq (6)'s terms (core/learning/patient_model.py); needs "
+              "identification.enabled"),
+    Parameter("identification.first_trial", SUPERVISOR, Kind.INTEGER,
+              "the first trial that may run with identified joint forces (the estimate of the "
+              "trials before it)", strictly_positive=True),
+    Parameter("identification.trust_limit", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "N m per joint: bound on the identified joint forces computed torque adds",
+              per_joint=True, minimum=0.0),
+    Parameter("identification.max_change", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "N m per joint: the most the added joint forces may change at any sample from "
+              "one trial to the next (a trust region)", per_joint=True, minimum=0.0),
+    Parameter("identification.adoption", SUPERVISOR, Kind.STRING,
+              "what the learned feed-forward does when the added joint forces change: restart "
+              "(a joint adopted for the first time starts from the law's first feed-forward: "
+              "what it had learned of the patient would count twice), handover (it gives up "
+              "a_N(q_d)^-1 times the change: the total input never jumps) or keep",
+              choices=("restart", "handover", "keep")),
+    Parameter("identification.inverse_gain", SUPERVISOR, Kind.DOUBLE,
+              "g: after the law's update the feed-forward adds g a_N(q_d)^-1 (K e + B e_dot) "
+              "with the identified stiffness K and damping B (the update then inverts the arm "
+              "with the patient; 0: off)", minimum=0.0),
+    Parameter("identification.voluntary", SUPERVISOR, Kind.BOOL,
+              "fit the patient's own effort toward the reference too (for a patient known to "
+              "push; else its suspicion makes an estimate untrustworthy)"),
 )
 
 BY_NAME: Mapping[str, Parameter] = {p.name: p for p in PARAMETERS}

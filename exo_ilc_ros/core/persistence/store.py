@@ -162,7 +162,9 @@ class RunStore:
                  next_feedforward=np.asarray(next_update.feedforward, dtype=float),
                  next_levels=_optional(next_update.levels),
                  true_position=_optional(record.true_position),
-                 true_velocity=_optional(record.true_velocity))
+                 true_velocity=_optional(record.true_velocity),
+                 joint_force=_optional(record.joint_force),
+                 next_joint_force=_optional(next_update.joint_force))
         blob = buffer.getvalue()
         with _atomic(self.directory / name) as handle:
             handle.write(blob)
@@ -200,13 +202,17 @@ class RunStore:
             aborted = int(arrays["aborted_at"])
             true_q = arrays.get("true_position", np.empty(0))
             true_qd = arrays.get("true_velocity", np.empty(0))
+            force = arrays.get("joint_force", np.empty(0))
+            next_force = arrays.get("next_joint_force", np.empty(0))
             record = TrialRecord(entry["trial"], self.reference, arrays["position"],
                                  arrays["velocity"], arrays["feedforward"],
                                  arrays["control_input"], arrays["effort"], levels,
                                  None if aborted < 0 else aborted,
                                  true_q if true_q.size else None,
-                                 true_qd if true_qd.size else None)
+                                 true_qd if true_qd.size else None,
+                                 force if force.size else None)
             next_levels = arrays["next_levels"] if arrays["next_levels"].size else None
-            out.append(StoredTrial(record, FeedforwardUpdate(arrays["next_feedforward"],
-                                                             next_levels), dict(entry)))
+            out.append(StoredTrial(record, FeedforwardUpdate(
+                arrays["next_feedforward"], next_levels,
+                joint_force=next_force if next_force.size else None), dict(entry)))
         return out

@@ -23,6 +23,7 @@ feed-forward run again. A session resumes from the trials a :class:`RunStore` ho
 from __future__ import annotations
 
 import copy
+import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,9 +31,11 @@ from typing import Any
 
 import numpy as np
 
+from ..arm.build import build_arm
 from ..errors import SafetyError, StoreError
 from ..learning.factory import build_law
 from ..learning.laws import FeedforwardUpdate, LearningLaw
+from ..learning.patient_model import JointForceModel, JointForceStep
 from ..loop.patient import PatientLearning, true_error
 from ..loop.record import TrialRecord
 from ..loop.trial import record_from_samples
@@ -83,6 +86,9 @@ class TrialConclusion:
     """The configuration in effect after this boundary (what the store records)."""
     stop: StopReason | None
     """Set when this was the session's last trial."""
+    joint_forces: JointForceStep | None = None
+    """The identification of the trial and the joint forces the next trial adds
+    (``identification.enabled``; None: off)."""
 
 
 @dataclass
@@ -117,6 +123,14 @@ class LearningSession:
         else:
             first = self.active_law.initial_feedforward(self.reference)
             self.next_update = FeedforwardUpdate(first, None)
+        self.joint_forces: JointForceModel | None = None
+        """The identified patient (``identification.enabled``, :mod:`..learning.patient_model`)."""
+        if self.config["identification.enabled"]:
+            self.joint_forces = JointForceModel(self.config, build_arm(self.config),
+                                                self.reference)
+            if self.config["identification.in_loop"]:
+                self.next_update = dataclasses.replace(
+                    self.next_update, joint_force=self.joint_forces.joint_force.copy())
         self.stop = self._stop_reason()
 
     # --- what runs next ---------------------------------------------------------------------
@@ -124,6 +138,12 @@ class LearningSession:
     def feedforward(self) -> np.ndarray:
         """The feed-forward of the next trial."""
         return self.next_update.feedforward
+
+    @property
+    def joint_force(self) -> np.ndarray | None:
+        """The identified joint forces (N m per sample) computed torque adds in the next trial;
+        None: none (:mod:`..learning.patient_model`)."""
+        return self.next_update.joint_force
 
     @property
     def levels(self) -> np.ndarray | None:
@@ -181,6 +201,15 @@ class LearningSession:
             if isinstance(checked, Rejection):
                 raise SafetyError(f"trial {record.trial}: the learning law produced a bad "
                                   f"feed-forward ({checked}); it was not stored or used")
+        forces = None if self.joint_forces is None else self.joint_forces.conclude(record)
+        if forces is not None and forces.joint_force is not None:
+            feedforward = self._adopt(update, forces)
+            correction = self.joint_forces.learning_correction(record) \
+                if self.joint_forces is not None else None
+            if correction is not None:
+                feedforward = feedforward + correction
+            update = dataclasses.replace(update, feedforward=feedforward,
+                                         joint_force=forces.joint_force)
         within = self._within(record)
         self.within_streak = self.within_streak + 1 if within else 0
         self.completed = record.trial
@@ -188,7 +217,7 @@ class LearningSession:
         self.next_update = update
         self.stop = self._stop_reason()
         return TrialConclusion(record, update, not record.aborted, within, applied,
-                               self.config, self.stop)
+                               self.config, self.stop, forces)
 
     def rehearse(self, experiment: Experiment) -> None:
         """Run a conclusion's kernels once on a throwaway record (the reference tracked
@@ -218,6 +247,12 @@ class LearningSession:
             self.within_streak = self.within_streak + 1 if within else 0
             if item.record.aborted:
                 self.aborted_trials.append(item.record.trial)
+            if self.joint_forces is not None:  # the identification is replayed, exactly
+                self.joint_forces.conclude(item.record)
+        if stored and self.joint_forces is not None:
+            stored_force = stored[-1].next_update.joint_force
+            if stored_force is not None:
+                self.joint_forces.joint_force = np.array(stored_force, dtype=float)
         if stored:
             self.next_update = stored[-1].next_update
             self.completed = stored[-1].record.trial
@@ -235,6 +270,21 @@ class LearningSession:
         return store, restored
 
     # --- rules --------------------------------------------------------------------------------
+    def _adopt(self, update: FeedforwardUpdate, forces: JointForceStep) -> np.ndarray:
+        """The learned feed-forward once the identified forces changed
+        (``identification.adoption``): ``restart`` starts a joint whose forces are adopted for
+        the first time from the law's first feed-forward (what the law had learned of the
+        patient would count twice); ``handover`` gives up a_N(q_d)^-1 times the change;
+        ``keep`` leaves it."""
+        feedforward = update.feedforward
+        if forces.handover is not None:
+            return feedforward - forces.handover
+        mode = self.config["identification.adoption"]
+        if mode == "restart" and forces.adopted is not None and np.any(forces.adopted):
+            first = self.active_law.initial_feedforward(self.reference)
+            feedforward = np.where(forces.adopted[None, :], first, feedforward)
+        return feedforward
+
     def _within(self, record: TrialRecord) -> bool:
         return not record.aborted and \
             bool(np.all(record.max_abs_error <= self.config["error_bound"]))
@@ -307,7 +357,8 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
                 patient.learn(item.record.trial, true_error(item.record))
     while not session.finished:
         record = experiment.run_trial(session.feedforward, session.trial, session.levels,
-                                      None if patient is None else patient.torque)
+                                      None if patient is None else patient.torque,
+                                      session.joint_force)
         if patient is not None:
             patient.learn(record.trial, true_error(record))
         if session.trial + 1 in pending:

@@ -47,11 +47,14 @@ class Experiment:
 
     def run_trial(self, feedforward: np.ndarray, trial: int,
                   levels: np.ndarray | None = None,
-                  learned: np.ndarray | None = None) -> TrialRecord:
+                  learned: np.ndarray | None = None,
+                  joint_force: np.ndarray | None = None) -> TrialRecord:
         """One trial with the given feed-forward, from x_d(0), guarded by the error envelope
         (``record.aborted_at`` set if it left it: safe hold from that sample on), with the
         virtual patient's effects and trial ``trial``'s draws (:mod:`.patient`); ``learned``:
-        the torque a learning patient adds (:class:`.patient.PatientLearning`; None: none)."""
+        the torque a learning patient adds (:class:`.patient.PatientLearning`; None: none);
+        ``joint_force``: the identified joint forces computed torque adds, N m per sample
+        (:mod:`exo_ilc_ros.core.learning.patient_model`; None: none)."""
         ref = self.reference
         u_ff = np.ascontiguousarray(feedforward, dtype=float)
         if u_ff.shape != ref.position.shape:
@@ -60,6 +63,11 @@ class Experiment:
         if not np.all(np.isfinite(u_ff)):
             raise SafetyError(f"trial {trial}: the feed-forward holds non-finite values; "
                               "refusing to run it")
+        force = np.zeros(ref.position.shape) if joint_force is None else \
+            np.ascontiguousarray(joint_force, dtype=float)
+        if force.shape != ref.position.shape or not np.all(np.isfinite(force)):
+            raise SafetyError(f"trial {trial}: the joint forces must be finite and "
+                              f"{ref.position.shape}; refusing to run them")
         patient = self.patient
         draws = patient.draws(trial, ref.samples)
         q, qd, u, effort, abort, q_true, qd_true = simulate_trial_guarded(
@@ -68,8 +76,9 @@ class Experiment:
             self.error_envelope, self.hold_kp, self.hold_kd, self.hold_ramp, patient.joint,
             patient.scalars, draws.noise, draws.initial, draws.trial_scalars,
             learned if learned is not None
-            else np.zeros(ref.position.shape) if patient.learns else _NO_TORQUE)
+            else np.zeros(ref.position.shape) if patient.learns else _NO_TORQUE, force)
         measured = patient.measures
         return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels,
                            None if abort < 0 else int(abort), q_true if measured else None,
-                           qd_true if measured else None)
+                           qd_true if measured else None,
+                           None if joint_force is None else force)

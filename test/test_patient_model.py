@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import itertools
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +43,7 @@ def test_forces_phase_in_within_the_trust_limits() -> None:
     step = np.asarray(config["identification.max_change"])
     assert not np.any(records[0].joint_force)
     assert np.any(records[1].joint_force)
-    for before, after in zip(records, records[1:], strict=False):
+    for before, after in itertools.pairwise(records):
         assert np.all(np.abs(after.joint_force) <= limit)
         assert np.all(np.abs(after.joint_force - before.joint_force) <= step + 1e-12)
     # the friction scenario's elbow by hand: B qdot + F_c tanh(qdot / 0.1) + K (q - 0.3)

@@ -38,7 +38,6 @@ from .joint_force_term import joint_force_term
 from .patient_estimate import PatientEstimate
 from .qfilter import qfilter_of
 
-
 _UNBOUNDED = 1e12
 """N m: the limit of a joint-force term that is not clamped (a difference of two)."""
 

@@ -15,6 +15,7 @@ import pytest
 
 from exo_ilc_ros.core.arm.build import build_arm
 from exo_ilc_ros.core.errors import SafetyError
+from exo_ilc_ros.core.learning.norm_optimal_model import PatientLinearisation, build_lifted_model
 from exo_ilc_ros.core.learning.patient_model import JointForceModel
 from exo_ilc_ros.core.learning.qfilter import qfilter_of
 from exo_ilc_ros.core.params.config import Config, config_dir, load_config, scenario_path
@@ -80,8 +81,8 @@ def test_the_handover_keeps_the_total_input() -> None:
 
 def test_the_update_inverts_the_arm_with_the_identified_patient() -> None:
     """inverse_gain g: the update adds g Q[a_N(q_d)^-1 (tau_p(q_d, qdot_d) - tau_p(q, qdot))]
-    (Q the law's Q-filter; after the handover), for friction by hand: K e + B e_dot + F_c (tanh(qdot_d / v_s) -
-    tanh(qdot / v_s)) with the estimate's K, B and F_c."""
+    (Q the law's Q-filter; after the handover), for friction by hand:
+    K e + B e_dot + F_c (tanh(qdot_d / v_s) - tanh(qdot / v_s)) with the estimate's K, B, F_c."""
     config = _config("friction", **{"identification.voluntary": False})
     session = LearningSession(config)
     experiment = Experiment(config)
@@ -193,4 +194,42 @@ def test_patient_aware_learns_a_patient_within_ten_trials(scenario: str) -> None
     for spastic in 60: docs/patient-identification.md)."""
     result = run_trials(_config(scenario), trials=10)
     assert not any(r.aborted for r in result.records)
+    assert np.all(result.records[-1].true_max_abs_error <= 0.005)
+
+
+def test_norm_optimal_model_about_the_patient_predicts_the_patients_arm() -> None:
+    """The lifted model rebuilt about the friction scenario's patient (its true K, B, F_c
+    linearised along the reference) predicts how the patient's arm answers a small change of
+    the feed-forward at least five times better than the nominal model (plant without mass
+    error, model assuming none)."""
+    config = load_config(overlays=[scenario_path("friction")], overrides={
+        "law": "norm_optimal", "mass_uncertainty": 0.0,
+        "norm_optimal.model_mass_uncertainty": 0.0, "trajectory.duration": 2.0})
+    experiment = Experiment(config)
+    ref = experiment.reference
+    base = np.zeros(ref.position.shape)
+    rng = np.random.default_rng(0)
+    change = 1e-3 * np.cumsum(rng.standard_normal(ref.position.shape), axis=0) / 10.0
+    moved = (experiment.run_trial(base + change, 1).position
+             - experiment.run_trial(base, 1).position).ravel()
+    v = ref.velocity
+    patient = PatientLinearisation(np.full(v.shape, 1.0),
+                                   0.14 + 0.18 / 0.1 / np.cosh(v / 0.1) ** 2)
+    nominal = build_lifted_model(config).g @ change.ravel()
+    about = build_lifted_model(config, patient).g @ change.ravel()
+    assert np.linalg.norm(about - moved) * 5.0 < np.linalg.norm(nominal - moved)
+
+
+def test_norm_optimal_is_rebuilt_about_the_identified_patient_when_it_moves() -> None:
+    """With law: norm_optimal the session rebuilds the model when the forces are adopted and
+    again only when their linearisation moves by more than rebuild_threshold; each rebuild is
+    a note of the update."""
+    config = load_config(overlays=[scenario_path("friction")], overrides={
+        "law": "norm_optimal", "mass_uncertainty": 0.1, "identification.enabled": True,
+        "identification.in_loop": True, "identification.rebuild_threshold": 0.1})
+    result = run_trials(config, trials=6)
+    rebuilt = [k for k, notes in result.notes.items()
+               if any("rebuilt about the identified patient" in n for n in notes)]
+    assert rebuilt and rebuilt[0] <= 2
+    assert len(rebuilt) < 5  # not every trial: the estimate settles within 10 %
     assert np.all(result.records[-1].true_max_abs_error <= 0.005)

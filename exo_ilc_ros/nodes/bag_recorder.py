@@ -125,7 +125,11 @@ class BagRecorder(Node):
             custom[VERSION] = __version__
             self.get_logger().warning("no config_file given: the bag will not hold the run's "
                                       "config (its /robot_description is the shipped arm)")
-        self.view = ArmView(config)
+        self.view: ArmView | None = None
+        try:
+            self.view = ArmView(config)
+        except Exception as exc:  # the recording goes on: only the arm's view is missing
+            self.get_logger().error(f"no /robot_description or /tf in the bag: {exc}")
         self.view_pending: list[tuple[int, str, bytes]] = []
         """The samples and feed-forwards since the last file, for their /tf (:meth:`_split`)."""
         self.writer = BagWriter(path, storage=storage, custom_data=custom)
@@ -159,7 +163,7 @@ class BagRecorder(Node):
                 message_class(msgtype), topic, subscription_qos(topic))
         for topic, msgtype in topics.VIEW_TYPES.items():  # computed here, not subscribed to
             self.writer.add_topic(topic, msgtype, offered_qos(topic))
-        for topic, raw in self.view.descriptions().items():
+        for topic, raw in (self.view.descriptions() if self.view else {}).items():
             self.writer.write(topic, self.sim_clock.ns, raw, time.time_ns())
             self.messages += 1
         self.data_due = 0.0
@@ -205,7 +209,7 @@ class BagRecorder(Node):
                 self.on_message(topic, raw, received)
             else:
                 samples.append((log_time, topic, raw, received))
-                if topic in VIEWED:
+                if topic in VIEWED and self.view is not None:
                     self.view_pending.append((received, topic, raw))
         self.messages += self.writer.write_many(samples)
         return len(taken)
@@ -215,16 +219,19 @@ class BagRecorder(Node):
         sets the reference of the samples after it), each at its sample's stamp; returns how
         many."""
         pending, self.view_pending = self.view_pending, []
+        view = self.view
+        if view is None:
+            return 0
         batch: list[tuple[int, str, bytes, int]] = []
         for received, topic, raw in pending:
             if topic == topics.FEEDFORWARD:
                 try:
-                    self.view.load_reference(raw)
+                    view.load_reference(raw)
                 except ValueError as exc:
                     self.get_logger().warning(f"/tf without the reference arm: {exc}",
                                               once=True)
                 continue
-            tf = self.view.tf(raw)
+            tf = view.tf(raw)
             if tf is not None:
                 batch.append((tf[0], topics.TF, tf[1], received))
         written = self.writer.write_many(batch)

@@ -341,14 +341,19 @@ def identification_trends(history: Sequence[tuple[str, Identified]],
 
 def identification_figure(history: Sequence[tuple[str, Identified]],
                           joint_names: Sequence[str]) -> Figure:
-    """Per parameter the estimate of each session (the last trial's), one line per joint."""
+    """Per parameter the estimate of each session (the last trial's) with its 95 % interval,
+    one line per joint (not identifiable: left out)."""
     fig = Figure(figsize=(10.0, 2.2 * ((len(SHOWN) + 1) // 2)), layout="constrained")
     axes = fig.subplots((len(SHOWN) + 1) // 2, 2, squeeze=False).ravel()
     x = np.arange(1, len(history) + 1)
     for ax, p in zip(axes, SHOWN, strict=False):
         for j, name in enumerate(joint_names):
-            ax.plot(x, [v for _, v in _series(history, p, j)], marker="o", markersize=3,
-                    linewidth=1.0, label=name)
+            values = np.array([v for _, v in _series(history, p, j)])
+            low = np.array([item.joints[j][p].low for _, item in history])
+            high = np.array([item.joints[j][p].high for _, item in history])
+            spread = np.nan_to_num(np.vstack([values - low, high - values]), nan=0.0)
+            ax.errorbar(x, values, yerr=np.clip(spread, 0.0, None), marker="o", markersize=3,
+                        linewidth=1.0, capsize=2, label=name)
         ax.set_ylabel(f"{WORDS[p]} ({UNITS[p]})", fontsize=8)
         ax.set_xticks(x, [s for s, _ in history], fontsize=7)
         ax.grid(True, linewidth=0.3)

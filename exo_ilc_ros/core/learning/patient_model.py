@@ -35,6 +35,7 @@ from ..reference.trajectory import SampledReference
 from .identification import JointForceIdentifier
 from .identification_settings import IdentificationSettings
 from .joint_force_term import joint_force_term
+from .norm_optimal_model import PatientLinearisation
 from .patient_estimate import PatientEstimate
 from .qfilter import qfilter_of
 
@@ -108,6 +109,40 @@ class JointForceModel:
         self._qfilter = qfilter_of(config)
         self._inertia: np.ndarray | None = None
         self._nominal_torque: np.ndarray | None = None
+
+    def linearisation(self) -> PatientLinearisation | None:
+        """The forces in use linearised along the reference (norm-optimal's model is rebuilt
+        about it): per joint stiffness K (+ K_v, the patient's own pull, when fitted) and
+        damping B + F_c / v_s sech^2(qdot_d / v_s) (+ D_v) (+ G where |qdot_d| exceeds the
+        reflex threshold, its delay neglected). None before any joint is in use."""
+        estimate = self.identifier.estimate
+        if estimate is None or not np.any(self.used):
+            return None
+        s = self.settings.identification
+        v = self.reference.velocity
+        stiffness = np.zeros(v.shape)
+        damping = np.zeros(v.shape)
+        for j, joint in enumerate(estimate.joints):
+            if not self.used[j]:
+                continue
+            k = max(joint.value("stiffness"), 0.0)
+            b = max(joint.value("viscous"), 0.0)
+            f = max(joint.value("coulomb"), 0.0)
+            d = b + f / s.stribeck_velocity / np.cosh(v[:, j] / s.stribeck_velocity) ** 2
+            if s.voluntary:
+                for name in ("voluntary_stiffness", "voluntary_damping"):
+                    value = joint.value(name)
+                    if joint[name].trustworthy and np.isfinite(value) and value > 0.0:
+                        k, d = (k + value, d) if name == "voluntary_stiffness" else (k, d + value)
+            if joint.reflex_detected and all(joint[name].trustworthy for name in
+                                             ("reflex_gain", "reflex_threshold")):
+                d = d + np.where(np.abs(v[:, j]) > joint.value("reflex_threshold"),
+                                 max(joint.value("reflex_gain"), 0.0), 0.0)
+            stiffness[:, j] = k
+            damping[:, j] = d
+        if not (np.all(np.isfinite(stiffness)) and np.all(np.isfinite(damping))):
+            return None
+        return PatientLinearisation(stiffness, damping)
 
     def nominal_torque(self) -> np.ndarray:
         """a_N(q_d) qddot_d + c_N(q_d, qdot_d) at every sample of the reference, eq (16)'s

@@ -175,3 +175,46 @@ def test_therapy_report_shows_the_trend_across_sessions(
     text = page.read_text()
     assert "The identified patient" in text and "Across sessions" in text
     assert all(html.escape(x) in text for x in lines)
+
+
+def test_the_graph_files_the_identification_on_the_summary_and_diagnostics() -> None:
+    """Through the node graph (2 trials): the supervisor's summaries carry the same
+    ``identified/...`` values as the in-process run, and its health on /diagnostics names the
+    last estimate per joint."""
+    import os
+
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from exo_ilc_ros.nodes.common import DIAGNOSTICS_QOS
+    from exo_ilc_ros.orchestration.graph import GraphSession
+    from exo_ilc_ros.wire import topics
+
+    config = load_config(overlays=[AWARE, scenario_path("spastic")],
+                         overrides={"max_trials": 2})
+    names = list(config["joint_names"])
+    health: list[dict[str, str]] = []
+
+    def on_status(msg: Any) -> None:
+        health.extend({kv.key: kv.value for kv in s.values} for s in msg.status
+                      if any(kv.key == "identified/trial" for kv in s.values))
+
+    with GraphSession(config, int(os.environ["ROS_DOMAIN_ID"])) as session:
+        session.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_status,
+                                         DIAGNOSTICS_QOS)
+        session.spin_until(lambda: session.finished, 120.0, 90.0)
+        session.spin_until(lambda: bool(health) and health[-1]["identified/trial"] == "2",
+                           10.0)  # the health goes out at "finished"
+        summaries = list(session.summaries)
+    expected = run_trials(config)
+    assert [s.trial for s in summaries] == [1, 2]
+    for summary in summaries:
+        step = expected.joint_forces[summary.trial]
+        filed = {k: v for k, v in summary.values.items() if k.startswith("identified/")}
+        ours = dict(Identified.from_step(step, names).summary_values())
+        assert filed.keys() == ours.keys()
+        for key, value in ours.items():  # the graph's samples equal in-process to ~1e-9
+            if key.split("/")[1] in SHOWN and key.split("/")[2] != "identifiable":
+                assert float(filed[key]) == pytest.approx(float(value), rel=1e-6, abs=1e-9,
+                                                          nan_ok=True)
+    assert health[-1]["identified/trial"] == "2"
+    assert all(health[-1][f"identified/{n}"].startswith("B ") for n in names)

@@ -6,15 +6,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from ..core.programs.identified import SHOWN, SYMBOLS, UNITS, WORDS, Identified, IdentifiedParameter
+__all__ = ["format_final", "format_table", "format_value", "trend"]
 
-
-def format_value(p: str, x: IdentifiedParameter) -> str:
-    """``0.82 [0.79, 0.85]`` (``?`` for unknown; ``(n.i.)`` appended when not identifiable)."""
-    def g(v: float) -> str:
-        return f"{v:.3g}" if math.isfinite(v) else "?"
-    text = f"{g(x.value)} [{g(x.low)}, {g(x.high)}]"
-    return text if x.identifiable else text + " (n.i.)"
+from ..core.programs.identified import SHOWN, SYMBOLS, UNITS, WORDS, Identified, format_value
 
 
 def format_table(rows: Sequence[Identified], names: Sequence[str]) -> str:

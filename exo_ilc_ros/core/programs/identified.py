@@ -109,6 +109,20 @@ class Identified:
         out.append((f"{SUMMARY_PREFIX}rejected", self.rejected))
         return out
 
+    def status_values(self) -> list[tuple[str, str]]:
+        """``identified/trial`` and one readable ``identified/<joint>`` line each (B, F_c, K,
+        q0, G with intervals and units, trusted, in the loop): the supervisor's health on
+        ``/diagnostics``."""
+        out = [(f"{SUMMARY_PREFIX}trial", str(self.trial))]
+        for j in self.joints:
+            cells = "; ".join(f"{SYMBOLS[p]} {format_value(p, j[p])} {UNITS[p]}" for p in SHOWN)
+            out.append((f"{SUMMARY_PREFIX}{j.name}",
+                        f"{cells}; trusted {'yes' if j.trustworthy else 'no'}; in the loop "
+                        f"{'yes' if j.used else 'no'}" + (f" ({j.reason})" if j.reason else "")))
+        if self.rejected:
+            out.append((f"{SUMMARY_PREFIX}rejected", self.rejected))
+        return out
+
     @classmethod
     def from_summary(cls, trial: int, values: Mapping[str, str],
                      names: Sequence[str]) -> Identified | None:
@@ -166,3 +180,11 @@ def _plain(x: float) -> float | None:
 
 def _flag(x: bool) -> str:
     return "true" if x else "false"
+
+
+def format_value(p: str, x: IdentifiedParameter) -> str:
+    """``0.82 [0.79, 0.85]`` (``?`` for unknown; ``(n.i.)`` appended when not identifiable)."""
+    def g(v: float) -> str:
+        return f"{v:.3g}" if math.isfinite(v) else "?"
+    text = f"{g(x.value)} [{g(x.low)}, {g(x.high)}]"
+    return text if x.identifiable else text + " (n.i.)"

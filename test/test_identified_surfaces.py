@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import html
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -131,8 +132,11 @@ def test_analyze_prints_the_identification_of_a_simulated_bag(
     names = run.joint_names
     filed = [Identified.from_summary(k, run.summaries[k], names) for k in run.completed]
     assert [f.trial for f in filed if f is not None] == [1, 2, 3]
-    assert main(["analyze", str(aware), str(plain)]) == 0
+    exported = tmp_path / "runs.json"
+    assert main(["analyze", str(aware), str(plain), "--json", str(exported)]) == 0
     out = capsys.readouterr().out
+    runs = json.loads(exported.read_text())["runs"]
+    assert runs[0]["identified"]["trial"] == 3 and "identified" not in runs[1]
     assert out.count("the identified patient per trial") == 1  # the plain bag has none
     for name in names:
         assert f"identified {name} (95 % intervals" in out
@@ -218,3 +222,34 @@ def test_the_graph_files_the_identification_on_the_summary_and_diagnostics() -> 
                                                           nan_ok=True)
     assert health[-1]["identified/trial"] == "2"
     assert all(health[-1][f"identified/{n}"].startswith("B ") for n in names)
+
+
+def test_a_resumed_run_files_the_restored_trials_identification(tmp_path: Path) -> None:
+    """``RunResult.joint_forces`` holds every trial of a resumed run, the restored ones
+    replayed as the first run identified them (a bag of it has the keys in every trial)."""
+    config = load_config(overlays=[AWARE, scenario_path("spastic")])
+    names = list(config["joint_names"])
+    first = run_trials(config, trials=2, store=tmp_path)
+    resumed = run_trials(config, trials=3, store=tmp_path, resume=True)
+    assert resumed.resumed == 2 and sorted(resumed.joint_forces) == [1, 2, 3]
+    whole = run_trials(config, trials=3)
+    for k in (1, 2, 3):
+        got = Identified.from_step(resumed.joint_forces[k], names).summary_values()
+        assert got == Identified.from_step(whole.joint_forces[k], names).summary_values()
+        if k < 3:
+            assert got == Identified.from_step(first.joint_forces[k], names).summary_values()
+
+
+def test_a_graph_sessions_profile_keeps_the_replayed_estimate() -> None:
+    """What ``exo-ilc run --patient`` files with the profile (the stored trials replayed) is
+    the in-process session's last estimate."""
+    from exo_ilc_ros.core.programs.therapy import identified_of_records
+
+    result, _ = _spastic_run()
+    config = load_config(overlays=[AWARE, scenario_path("spastic")])
+    names = list(config["joint_names"])
+    replayed = identified_of_records(config, result.records)
+    assert replayed is not None
+    assert replayed.summary_values() == \
+        Identified.from_step(result.joint_forces[4], names).summary_values()
+    assert identified_of_records(load_config(), result.records) is None  # identification off

@@ -149,6 +149,10 @@ def analyze(args: argparse.Namespace) -> int:
         print(describe(run))
     labels = bag_labels(bag_runs)
     runs = [run.summary() for run in bag_runs]
+    for run, summary in zip(bag_runs, runs, strict=True):
+        found = identified(run)
+        if found:  # the last estimate, as simulate's JSON has it
+            summary.extra["identified"] = found[-1].to_json()
     usable = [(r, label) for r, label in zip(runs, labels, strict=True)
               if len(r.max_abs_error)]
     if not usable:

@@ -371,10 +371,10 @@ def _identification(run: ExerciseRun, book: ProfileBook | None) -> str:
     if not run.identified:
         return ""
     last = run.identified[-1]
-    head = "".join(f"<th>{_e(WORDS[p])} ({_e(UNITS[p])})</th>" for p in SHOWN)
+    head = "".join(f"<th>{_e(WORDS[p])}</th>" for p in SHOWN)
     rows = "".join(
         f"<tr><td class=l>{_e(j.name)}</td>"
-        + "".join(f"<td>{_e(format_value(p, j[p]))}</td>" for p in SHOWN)
+        + "".join(f"<td>{_e(format_value(p, j[p]))} {_e(UNITS[p])}</td>" for p in SHOWN)
         + f"<td>{'yes' if j.trustworthy else 'no'}</td><td>{'yes' if j.used else 'no'}</td>"
         + f"<td class=l><span class=note>{_e(j.reason)}</span></td></tr>"
         for j in last.joints)

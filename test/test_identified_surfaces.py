@@ -181,6 +181,7 @@ def test_therapy_report_shows_the_trend_across_sessions(
     assert all(html.escape(x) in text for x in lines)
 
 
+@pytest.mark.graph
 def test_the_graph_files_the_identification_on_the_summary_and_diagnostics() -> None:
     """Through the node graph (2 trials): the supervisor's summaries carry the same
     ``identified/...`` values as the in-process run, and its health on /diagnostics names the

@@ -160,7 +160,8 @@ def test_the_shipped_layout_draws_the_views_channels() -> None:
     panels = layout["configById"]
     names = list(load_config()["joint_names"])
     for panel, row in (("Plot!max_error", "max_abs_error"), ("Plot!rms_error", "rms_error"),
-                       ("Plot!level_M", "level/M")):
+                       ("Plot!level_M", "level/M"),
+                       ("Plot!identified_damping", "identified/viscous")):
         config = panels[panel]
         assert config["xAxisPath"]["value"] == f"{topics.TRIAL_METRICS}.data[0]"
         assert [p["value"] for p in config["paths"]] == \

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.params.config import Config
+from ..core.programs.identified import Identified
 from ..core.programs.metrics import TrialMetrics, metric_summary_values
 from ..core.session.result import RunResult
 from ..wire import protocol, topics
@@ -119,6 +120,9 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                 values += metrics[k - 1].summary_values(names)
             else:  # as the supervisor files them (core/programs/metrics.py)
                 values += metric_summary_values(record, measured, names)
+            step = result.joint_forces.get(k)
+            if step is not None:  # as the supervisor files it (core/programs/identified.py)
+                values += Identified.from_step(step, names).summary_values()
             within = bool(np.all(record.max_abs_error <= result.error_bound))
             aborted = -1 if record.aborted_at is None else int(record.aborted_at)
             writer.write(topics.DIAGNOSTICS, end, messages.controller_status(

@@ -1,8 +1,9 @@
 """A URDF's XML as plain records, with the standard library's parser: its links' inertials and
 its joints (type, origin, axis, limits, dynamics), every number checked, and ``package://``
-resolved the ROS way (``ament_index_python``) where the package is installed. The chain the
-kernels take is built from them by :mod:`exo_ilc_ros.core.arm.urdf_chain` (the moving joints' names and order here: the config needs them). Errors (:class:`UrdfError`) name the file
-and the element."""
+resolved the ROS way (``ament_index_python``) where the package is installed; the moving joints
+of a chain (:func:`chain_joints`: the config needs their names). The chain the kernels take is
+built from them by :mod:`exo_ilc_ros.core.arm.urdf_chain`. Errors (:class:`UrdfError`) name the
+file and the element."""
 
 from __future__ import annotations
 

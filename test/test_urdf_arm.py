@@ -17,6 +17,7 @@ from test_urdf_chain import TWO_JOINTS
 from exo_ilc_ros.cli.main import main as cli_main
 from exo_ilc_ros.core import run_trials
 from exo_ilc_ros.core.arm.build import build_arm
+from exo_ilc_ros.core.arm.dynamics import inertia_and_bias
 from exo_ilc_ros.core.errors import ConfigError
 from exo_ilc_ros.core.learning.norm_optimal_model import MODEL_KEYS, _key
 from exo_ilc_ros.core.params.config import load_config
@@ -24,6 +25,7 @@ from exo_ilc_ros.core.params.urdf_xml import UrdfError
 from exo_ilc_ros.core.persistence.profile_format import model_values
 from exo_ilc_ros.core.persistence.store import learning_key
 from exo_ilc_ros.core.reference.build import build_reference
+from exo_ilc_ros.core.sim.mujoco_arm import MujocoArm
 
 ROOT = Path(__file__).resolve().parents[1]
 ARMS = ROOT / "config" / "arms"
@@ -145,6 +147,25 @@ def test_shipped_arm_learns_within_10_trials_at_10_percent(arm: str) -> None:
     reached = result.iterations_to_bound()
     assert all(f is not None and f <= 10 for f in reached.first), reached
     assert np.all(result.max_abs_errors[-1] <= config["error_bound"])
+
+
+def test_mujoco_plant_of_a_urdf_arm_equals_our_dynamics(tmp_path: Path) -> None:
+    """MuJoCo's model of the arm (core/sim/mujoco_arm.py, from the kernels' arrays) of the
+    Panda: mass matrix and bias forces equal ours (measured: 1.4e-15); `exo-ilc urdf` gives the
+    arm's own URDF back."""
+    config = load_config(ARMS / "panda.yaml")
+    plant = MujocoArm.from_config(config, 0.0)
+    arm = build_arm(config)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        q, v = rng.uniform(-2.0, 2.0, 7), rng.uniform(-2.0, 2.0, 7)
+        mass, bias = plant.inertia_and_bias(q, v)
+        a, c = inertia_and_bias(q, v, *arm.kernel_args)
+        np.testing.assert_allclose(mass, a, rtol=0, atol=1e-9 * np.abs(a).max())
+        np.testing.assert_allclose(bias, c, rtol=0, atol=1e-9 * np.abs(c).max())
+    out = tmp_path / "panda.urdf"
+    assert cli_main(["urdf", "--config", str(ARMS / "panda.yaml"), "--out", str(out)]) == 0
+    assert out.read_text() == (ROOT / "urdf" / "panda.urdf").read_text()
 
 
 # --- a wrong URDF or reference through `exo-ilc simulate`: one line, exit code 2 -------------

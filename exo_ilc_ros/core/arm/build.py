@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..params import schema
-from ..params.config import Config
+from ..params.config import Config, urdf_path
 from .model import ArmModel
 from .urdf_chain import UrdfChain, read_urdf_chain
 
@@ -34,7 +34,7 @@ def urdf_chain(config: Config) -> UrdfChain:
            tuple(sorted(locked.items())), config["model.gravity"])
     chain = _CHAINS.get(key)
     if chain is None:
-        chain = read_urdf_chain(config["model.urdf"], config["model.base_link"],
+        chain = read_urdf_chain(urdf_path(config["model.urdf"]), config["model.base_link"],
                                 config["model.tip_link"], locked, config["model.gravity"])
         _CHAINS[key] = chain
     return chain

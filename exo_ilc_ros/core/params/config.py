@@ -157,8 +157,7 @@ def urdf_source(values: Mapping[str, Any]) -> tuple[str, str, str]:
     """(text, file, sha256 of the text) of the URDF ``model.urdf`` names (a path or
     ``package://``), read once per file version; :class:`~.urdf_xml.UrdfError` naming the file
     when it cannot be read."""
-    where = str(values["model.urdf"])
-    path = resolve_package_uri(where) if where.startswith("package://") else Path(where)
+    path = urdf_path(str(values["model.urdf"]))
     try:
         stat = path.stat()
     except OSError:
@@ -171,6 +170,25 @@ def urdf_source(values: Mapping[str, Any]) -> tuple[str, str, str]:
     if key is not None:
         _URDF_TEXTS[key] = entry
     return entry
+
+
+def urdf_path(where: str) -> Path:
+    """The file ``model.urdf`` names: a path, or ``package://`` the ROS way (``ament_index``);
+    ``package://exo_ilc_ros/...`` (the shipped URDFs) also where the shipped configs are
+    (:func:`config_dir`: a source checkout or a pip install)."""
+    if not where.startswith("package://"):
+        return Path(where)
+    uri = where
+    try:
+        return resolve_package_uri(uri)
+    except UrdfError:
+        package, _, relative = uri[len("package://"):].partition("/")
+        if package != PACKAGE:
+            raise
+        candidate = config_dir().parent / relative
+        if not candidate.is_file():
+            raise
+        return candidate
 
 
 def urdf_joints(values: Mapping[str, Any]) -> list[UrdfJoint]:

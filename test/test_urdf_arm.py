@@ -228,3 +228,18 @@ def test_panda_reference_beyond_a_limit(capsys: pytest.CaptureFixture[str]) -> N
     with pytest.raises(Exception, match=r"joint 'panda_joint4' at t = 0 s: q = 0 rad is above "
                                         r"its upper limit -0.0698 rad"):
         build_reference(panda)
+
+
+def test_ros2_control_for_the_config_arm(tmp_path: Path) -> None:
+    """`exo-ilc ros2-control`: the shipped controllers.yaml is its output for the shipped config;
+    for the Panda it lists the URDF's seven joints in chain order."""
+    out = tmp_path / "controllers.yaml"
+    assert cli_main(["ros2-control", "--out", str(out)]) == 0
+    assert out.read_text() == (ROOT / "config" / "ros2_control" / "controllers.yaml").read_text()
+    assert cli_main(["ros2-control", "--config", str(ARMS / "panda.yaml"), "--out",
+                     str(out)]) == 0
+    document = yaml.safe_load(out.read_text())
+    joints = [f"panda_joint{i}" for i in range(1, 8)]
+    assert document["joint_state_broadcaster"]["ros__parameters"]["joints"] == joints
+    assert document["effort_controller"]["ros__parameters"]["joints"] == joints
+    assert document["controller_manager"]["ros__parameters"]["update_rate"] == 100

@@ -243,3 +243,15 @@ def test_ros2_control_for_the_config_arm(tmp_path: Path) -> None:
     assert document["joint_state_broadcaster"]["ros__parameters"]["joints"] == joints
     assert document["effort_controller"]["ros__parameters"]["joints"] == joints
     assert document["controller_manager"]["ros__parameters"]["update_rate"] == 100
+
+
+def test_urdf_arm_config_through_the_graphs_parameters_file(tmp_path: Path) -> None:
+    """What `exo-ilc run` hands the nodes (to_ros_yaml, then each node's Config of its values)
+    is the same URDF arm: same values, same digest."""
+    panda = load_config(ARMS / "panda.yaml")
+    out = tmp_path / "params.yaml"
+    out.write_text(panda.to_ros_yaml("test"))
+    again = load_config(out)
+    assert again.values == panda.values and again.digest() == panda.digest()
+    node = type(panda)(panda.values, "parameters of node test")
+    assert node.digest() == panda.digest() and node.joints == 7

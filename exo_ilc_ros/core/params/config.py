@@ -178,11 +178,10 @@ def urdf_path(where: str) -> Path:
     (:func:`config_dir`: a source checkout or a pip install)."""
     if not where.startswith("package://"):
         return Path(where)
-    uri = where
     try:
-        return resolve_package_uri(uri)
+        return resolve_package_uri(where)
     except UrdfError:
-        package, _, relative = uri[len("package://"):].partition("/")
+        package, _, relative = where[len("package://"):].partition("/")
         if package != PACKAGE:
             raise
         candidate = config_dir().parent / relative

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import statistics
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,16 +28,17 @@ from exo_ilc_ros.core.learning.identification import JointForceIdentifier
 from exo_ilc_ros.core.learning.identification_settings import IdentificationSettings
 from exo_ilc_ros.core.learning.joint_force_term import joint_force_term
 from exo_ilc_ros.core.params import schema
-from exo_ilc_ros.core.params.config import Config, load_config, scenario_path
-from exo_ilc_ros.core.session.learning_session import run_trials
+from exo_ilc_ros.core.params.config import Config, config_dir, load_config, scenario_path
+from exo_ilc_ros.core.session.learning_session import LearningSession, run_trials
+from exo_ilc_ros.core.sim.experiment import Experiment
 
 TRIALS = 12
 
 
-def seven_joint_config(scenario: str) -> Config:
+def seven_joint_config(scenario: str, laid_under: tuple[Path, ...] = ()) -> Config:
     """A 7-joint arm (the paper's three links, then four lighter ones) under ``scenario`` with
-    the encoders."""
-    overlays = [scenario_path(scenario), scenario_path("sensor")]
+    the encoders (over the configs ``laid_under``)."""
+    overlays = [*laid_under, scenario_path(scenario), scenario_path("sensor")]
     base = load_config(overlays=overlays)
     n = 7
     overrides: dict[str, Any] = {}
@@ -77,6 +79,29 @@ def update_times(config: Config, reflex: bool) -> tuple[list[float], list[float]
     return updates, terms, refused
 
 
+def boundary_times(scenario: str, joints: int) -> tuple[list[float], list[float]]:
+    """Seconds per trial boundary of config/patient_aware.yaml's session (identification,
+    forces, handover and the update's inverse with the patient: ``LearningSession.conclude``)
+    and of the same boundary with identification off (the law alone), trials 2..TRIALS."""
+    overlays = [config_dir() / "patient_aware.yaml", scenario_path(scenario)]
+    config = load_config(overlays=overlays) if joints == 3 else \
+        seven_joint_config(scenario, (config_dir() / "patient_aware.yaml",))
+    out: list[list[float]] = []
+    for enabled in (True, False):
+        cfg = config.replace({"identification.enabled": enabled})
+        session = LearningSession(cfg)
+        experiment = Experiment(cfg)
+        times = []
+        for _ in range(TRIALS):
+            record = experiment.run_trial(session.feedforward, session.trial, session.levels,
+                                          None, session.joint_force)
+            start = time.perf_counter()
+            session.conclude(record)
+            times.append(time.perf_counter() - start)
+        out.append(times[1:])
+    return out[0], out[1]
+
+
 def main() -> None:
     """Print the medians and maxima."""
     cases = [(3, "spastic", load_config(overlays=[scenario_path("spastic"),
@@ -96,6 +121,16 @@ def main() -> None:
             print(f"{n:>6} {name:>9} {'on' if reflex else 'off':>11} {med:>14.1f} "
                   f"{max(updates) * 1e3:>7.1f} {statistics.median(terms) * 1e3:>12.2f} "
                   f"{max(terms) * 1e3:>7.2f} {med / n:>10.1f} {refused:>8}")
+    print(f"\nthe whole trial boundary of config/patient_aware.yaml (LearningSession.conclude: "
+          f"law, identification, forces, handover, inverse), trials 2-{TRIALS}, ms; a 100 Hz "
+          "graph waits for none of it if it ends within the pause between trials")
+    print(f"{'joints':>6} {'scenario':>9} {'boundary median':>16} {'max':>7} "
+          f"{'law alone median':>17} {'max':>7}")
+    for n, name in ((3, "friction"), (3, "spastic"), (3, "realistic"), (7, "friction")):
+        aware, alone = boundary_times(name, n)
+        print(f"{n:>6} {name:>9} {statistics.median(aware) * 1e3:>16.1f} "
+              f"{max(aware) * 1e3:>7.1f} {statistics.median(alone) * 1e3:>17.1f} "
+              f"{max(alone) * 1e3:>7.1f}")
 
 
 if __name__ == "__main__":

@@ -145,7 +145,8 @@ class ArmGraph:
     def start(self) -> None:
         raise AssertionError("homing: no start service is called")
 
-    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray) -> None:
+    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray,
+                         joint_force: np.ndarray | None = None) -> None:
         ref = self.experiment.reference
         self.pushed.append((trial, feedforward.copy()))
         self.token = t0_ns

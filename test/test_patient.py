@@ -408,7 +408,8 @@ class _Plant:
         self.t0 += 10_000_000_000
         self.protocol.on_reset(self.t0)
 
-    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray) -> None:
+    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray,
+                         joint_force: np.ndarray | None = None) -> None:
         self.pushed.append((trial, feedforward.copy()))
         self.protocol.on_acknowledged(trial, t0_ns)
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.core import Experiment, load_config, run_trials
+from exo_ilc_ros.core.params.config import config_dir, scenario_path
 from exo_ilc_ros.core.persistence.store import RunStore
 from exo_ilc_ros.core.protocol.graph import Phase, TrialProtocol
 from exo_ilc_ros.core.protocol.timing import STEP_TIMEOUT
@@ -31,6 +32,7 @@ class FakeGraph:
         self.protocol: TrialProtocol | None = None
         self.t0 = 1_000_000_000
         self.pushed: list[tuple[int, np.ndarray]] = []
+        self.pushed_forces: list[np.ndarray | None] = []
         self.conclusions: list[TrialConclusion] = []
         self.events: list[tuple[str, dict[str, str]]] = []
         self.errors: list[str] = []
@@ -47,8 +49,10 @@ class FakeGraph:
         assert self.protocol is not None
         self.protocol.on_reset(self.t0)
 
-    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray) -> None:
+    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray,
+                         joint_force: np.ndarray | None = None) -> None:
         self.pushed.append((trial, feedforward.copy()))
+        self.pushed_forces.append(None if joint_force is None else joint_force.copy())
         assert self.protocol is not None
         self.protocol.on_acknowledged(trial, t0_ns)
 
@@ -76,7 +80,8 @@ class FakeGraph:
         self.pending_start = False
         protocol.on_started(True)
         trial, ff = self.pushed[-1]
-        record = self.experiment.run_trial(ff, trial, protocol.session.levels)
+        record = self.experiment.run_trial(ff, trial, protocol.session.levels, None,
+                                           self.pushed_forces[-1])
         step = protocol.samples.step_ns
         for i in range(record.position.shape[0]):
             if i == self.drop_sample:
@@ -121,6 +126,30 @@ def test_protocol_gives_run_trials_numbers() -> None:
                                   local.max_abs_errors)
     assert [c.config["mass_uncertainty"] for c in graph.conclusions] == [0.1] * 5
     assert graph.events[-1] == ("finished", {"trials": "5"})
+
+
+def test_the_identified_joint_forces_reach_the_controller_as_in_process() -> None:
+    """With the patient in the loop (config/patient_aware.yaml over ``friction``) the protocol
+    pushes the session's joint forces with every feed-forward, rebuilds each record with them
+    (the effort the controller formed) and gives run_trials' numbers exactly."""
+    overlays = [config_dir() / "patient_aware.yaml", scenario_path("friction")]
+    config = load_config(overlays=overlays, overrides={"max_trials": 3})
+    graph = FakeGraph(config)
+    protocol = TrialProtocol(config, graph, clock=graph.clock)
+    graph.protocol = protocol
+    protocol.open(PLANT)
+    protocol.tick(graph_ready=True)
+    _run_to_end(graph, protocol)
+    local = run_trials(config, PLANT["mass_uncertainty"])
+    assert graph.pushed_forces[0] is not None and not np.any(graph.pushed_forces[0])
+    assert any(np.any(f) for f in graph.pushed_forces if f is not None)  # adopted on the way
+    for conclusion, record in zip(graph.conclusions, local.records, strict=True):
+        np.testing.assert_array_equal(conclusion.record.effort, record.effort)
+        np.testing.assert_array_equal(conclusion.record.joint_force, record.joint_force)
+    np.testing.assert_array_equal(graph.conclusions[-1].update.feedforward,
+                                  local.final.feedforward)
+    np.testing.assert_array_equal(graph.conclusions[-1].update.joint_force,
+                                  local.final.joint_force)
 
 
 @pytest.mark.parametrize("fault", ["watchdog", "lost"])
@@ -276,12 +305,14 @@ def test_a_lost_acknowledgement_is_asked_for_again_within_a_second() -> None:
     lost: list[int] = []
     real_push = graph.push_feedforward
 
-    def push_losing_the_first_ack(trial: int, t0_ns: int, feedforward: np.ndarray) -> None:
+    def push_losing_the_first_ack(trial: int, t0_ns: int, feedforward: np.ndarray,
+                                  joint_force: np.ndarray | None = None) -> None:
         if not lost:  # the first push reaches nobody
             lost.append(trial)
             graph.pushed.append((trial, feedforward.copy()))
+            graph.pushed_forces.append(joint_force)
             return
-        real_push(trial, t0_ns, feedforward)
+        real_push(trial, t0_ns, feedforward, joint_force)
 
     graph.push_feedforward = push_losing_the_first_ack  # type: ignore[method-assign]
     protocol = _protocol(graph, max_trials=2)

@@ -80,6 +80,9 @@ class ComputedTorqueController(Node):
         self.samples = 0
         self.step_count = experiment.reference.samples
         self.feedforward = np.zeros((0, config.joints))
+        self.joint_force: np.ndarray | None = None
+        """The identified joint forces of the loaded trial (the points' effort; None: none)."""
+        self.effort_limit = list(config["control.effort_limit"])
         self.q_ref = self.feedforward
         self.qd_ref = self.feedforward
         self.pending: bytes | None = None
@@ -150,11 +153,13 @@ class ComputedTorqueController(Node):
             [int(p.time_from_start.sec) * 1_000_000_000 + int(p.time_from_start.nanosec)
              for p in points],
             [p.positions for p in points], [p.velocities for p in points],
-            [p.accelerations for p in points], self.joint_names, samples, self.step_ns)
+            [p.accelerations for p in points], self.joint_names, samples, self.step_ns,
+            joint_force=[p.effort for p in points], effort_limit=self.effort_limit)
         if isinstance(profile, Rejection):
             self.rejections.reject(profile)
             return
         self.feedforward = profile.feedforward
+        self.joint_force = profile.joint_force
         self.q_ref = profile.position
         self.qd_ref = profile.velocity
         self.samples = samples
@@ -211,7 +216,8 @@ class ComputedTorqueController(Node):
             if self.watchdog.tripped and not self.holding:
                 self._trip()
         if self.step.sample(i, self.feedforward[i], self.q_ref[i], self.qd_ref[i], self.q,
-                            self.qd, self.holding):
+                            self.qd, self.holding,
+                            None if self.joint_force is None else self.joint_force[i]):
             self.aborted_at = i
             self.aborted_trials.append(self.trial)
             self.get_logger().error(

@@ -241,11 +241,12 @@ class IlcSupervisor(Node):
         """Ask the plant to start stepping."""
         self.start_client.call_async(Trigger.Request()).add_done_callback(self.on_start_done)
 
-    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray) -> None:
-        """The trial's profile on the latched /ilc/feedforward."""
+    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray,
+                         joint_force: np.ndarray | None = None) -> None:
+        """The trial's profile (and joint forces) on the latched /ilc/feedforward."""
         self.feedforward_pub.publish(feedforward_message(
             self.protocol.reference, feedforward, trial, t0_ns, self.protocol.samples.step_ns,
-            self.joint_names))
+            self.joint_names, joint_force))
 
     def publish_conclusion(self, conclusion: TrialConclusion, end_ns: int) -> None:
         """Summary and ``end`` event (``aborted`` first for an envelope abort)."""

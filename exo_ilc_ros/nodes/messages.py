@@ -22,9 +22,11 @@ from .diagnostics import doubles, status
 
 
 def feedforward_message(reference: SampledReference, feedforward: np.ndarray, trial: int,
-                        t0_ns: int, step_ns: int, joint_names: Sequence[str]) -> JointTrajectory:
+                        t0_ns: int, step_ns: int, joint_names: Sequence[str],
+                        joint_force: np.ndarray | None = None) -> JointTrajectory:
     """``/ilc/feedforward`` of trial ``trial`` starting at ``t0_ns``: frame ``trial:<k>``, one
-    point per sample (positions, velocities: the reference; accelerations: u_ff)."""
+    point per sample (positions, velocities: the reference; accelerations: u_ff; effort: the
+    identified joint forces computed torque adds, N m, empty when none)."""
     msg = JointTrajectory()
     msg.header.frame_id = feedforward_frame(trial)
     msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t0_ns, 1_000_000_000)
@@ -35,6 +37,7 @@ def feedforward_message(reference: SampledReference, feedforward: np.ndarray, tr
         points.append(JointTrajectoryPoint(
             positions=doubles(reference.position[i]), velocities=doubles(reference.velocity[i]),
             accelerations=doubles(feedforward[i]),
+            effort=[] if joint_force is None else doubles(joint_force[i]),
             time_from_start=Duration(sec=sec, nanosec=nanosec)))
     msg.points = points
     return msg

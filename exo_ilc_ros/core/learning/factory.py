@@ -18,6 +18,7 @@ from .laws import (
     StepSchedule,
 )
 from .norm_optimal import NormOptimalLaw
+from .norm_optimal_model import PatientLinearisation
 from .qfilter import QFilteredLaw, feedforward_limit_of, qfilter_of
 
 
@@ -28,12 +29,14 @@ def build_schedule(config: Config, term: str) -> StepSchedule:
         "threshold_low", "threshold_high", "level_low", "level_mid", "level_high")))
 
 
-def build_law(config: Config, law: str | None = None) -> LearningLaw:
-    """The learning law named by ``law`` (default: the config's ``law``) with its options,
+def build_law(config: Config, law: str | None = None,
+              patient: PatientLinearisation | None = None) -> LearningLaw:
+    """The learning law named by ``law`` (default: the config's ``law``) with its options
+    (norm-optimal's model about the identified ``patient`` when given),
     with assist-as-needed when the config enables it (:mod:`.assist`), wrapped in
     :class:`QFilteredLaw` when the config enables the Q-filter or a
     ``feedforward_limit``."""
-    inner = with_assist(_build_plain_law(config, law), config)
+    inner = with_assist(_build_plain_law(config, law, patient), config)
     qfilter = qfilter_of(config)
     limit = feedforward_limit_of(config)
     if qfilter is None and limit is None:
@@ -41,7 +44,8 @@ def build_law(config: Config, law: str | None = None) -> LearningLaw:
     return QFilteredLaw(inner, qfilter, limit)
 
 
-def _build_plain_law(config: Config, law: str | None) -> LearningLaw:
+def _build_plain_law(config: Config, law: str | None,
+                     patient: PatientLinearisation | None = None) -> LearningLaw:
     name = law or config["law"]
     memory = Memory(config["memory"])
     initial = InitialFeedforward(config["initial_feedforward"])
@@ -55,5 +59,5 @@ def _build_plain_law(config: Config, law: str | None) -> LearningLaw:
                          np.asarray(config["linear.gain_velocity"]),
                          np.asarray(config["linear.gain_acceleration"]), memory, initial)
     if name == "norm_optimal":
-        return NormOptimalLaw.from_config(config)
+        return NormOptimalLaw.from_config(config, patient)
     raise ValueError(f"unknown law {name!r}; use sign, linear or norm_optimal")

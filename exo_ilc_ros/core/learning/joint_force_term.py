@@ -37,7 +37,8 @@ class JointForceTerm:
 def joint_force_term(estimate: PatientEstimate, position: np.ndarray, velocity: np.ndarray,
                      limit: np.ndarray | float, settings: IdentificationSettings | None = None
                      ) -> JointForceTerm:
-    """tau_p = B qdot + F_c tanh(qdot / v_s) + K (q - q_0) + G sgn(v) max(0, abs(v) - v_th),
+    """tau_p = B qdot + F_c tanh(qdot / v_s) + K (q - q_0) + G sgn(v) max(0, abs(v) - v_th)
+    (K q + c where no rest position q_0 is defined: no significant stiffness),
     v = qdot(t - tau_r) (the first value before the start), the term eq (6)'s Q^v, Q^f, Q^c
     and the reflex add to computed torque, eqs (9)/(16): Q = a_N(q) u + c_N(q, qdot) + tau_p,
     along the (samples, n) ``position`` and ``velocity`` (the reference's, so that no measured
@@ -59,7 +60,8 @@ def joint_force_term(estimate: PatientEstimate, position: np.ndarray, velocity: 
     clamped = np.zeros(n, dtype=int)
     reasons = []
     for j, joint in enumerate(estimate.joints):
-        names = ["viscous", "coulomb", "stiffness", "rest_position"]
+        rest = joint["rest_position"].trustworthy and math.isfinite(joint.value("rest_position"))
+        names = ["viscous", "coulomb", "stiffness", "rest_position" if rest else "offset"]
         reflex = _reflex_usable(joint)
         if reflex:
             names += list(REFLEX_PARAMETERS)
@@ -82,9 +84,10 @@ def joint_force_term(estimate: PatientEstimate, position: np.ndarray, velocity: 
                 low, high = s.bounds[name]
                 values[name] = min(max(value, low), high)
         v = qd[:, j]
+        spring = values["stiffness"] * (q[:, j] - values["rest_position"]) if rest else \
+            values["stiffness"] * q[:, j] + values["offset"]  # K q + c: no rest without K
         term = (values["viscous"] * v
-                + values["coulomb"] * np.tanh(v / s.stribeck_velocity)
-                + values["stiffness"] * (q[:, j] - values["rest_position"]))
+                + values["coulomb"] * np.tanh(v / s.stribeck_velocity) + spring)
         if reflex:
             delay = int(round(values["reflex_delay"] / s.period))
             delayed = np.concatenate([np.repeat(v[:1], delay), v[:v.shape[0] - delay]]) \

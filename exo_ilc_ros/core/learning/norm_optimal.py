@@ -57,7 +57,7 @@ from ..loop.record import TrialRecord
 from ..params.config import Config
 from ..reference.trajectory import SampledReference
 from .laws import FeedforwardUpdate, InitialFeedforward, _initial
-from .norm_optimal_model import RecursiveMatrices, recursive_matrices
+from .norm_optimal_model import PatientLinearisation, RecursiveMatrices, recursive_matrices
 from .norm_optimal_qp import Constraints, constraint_notes, solve_constrained_recursive
 
 
@@ -73,9 +73,10 @@ class NormOptimalLaw:
     initial: InitialFeedforward = InitialFeedforward.ZERO
 
     @classmethod
-    def from_config(cls, config: Config) -> NormOptimalLaw:
-        """The config's weights and model (matrices from the cache), its limits when
-        ``norm_optimal.constrained``."""
+    def from_config(cls, config: Config, patient: PatientLinearisation | None = None
+                    ) -> NormOptimalLaw:
+        """The config's weights and model (matrices from the cache; about the identified
+        ``patient`` when given), its limits when ``norm_optimal.constrained``."""
         constraints = None
         if config["norm_optimal.constrained"]:
             ff = np.asarray(config["feedforward_limit"], dtype=float)
@@ -83,7 +84,7 @@ class NormOptimalLaw:
                                       np.where(ff > 0.0, ff, np.inf),
                                       build_arm(config).kernel_args,
                                       float(config["norm_optimal.effort_margin"]))
-        return cls(recursive_matrices(config), constraints,
+        return cls(recursive_matrices(config, patient), constraints,
                    InitialFeedforward(config["initial_feedforward"]))
 
     def initial_feedforward(self, reference: SampledReference) -> np.ndarray:

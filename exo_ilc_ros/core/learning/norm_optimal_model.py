@@ -6,6 +6,7 @@ once per configuration and cached."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from dataclasses import dataclass, field
@@ -46,6 +47,27 @@ WEIGHT_KEYS = ("norm_optimal.weight_error", "norm_optimal.weight_input_change",
 
 def _key(config: Config, names: tuple[str, ...]) -> str:
     return json.dumps(config.identity_values(names), sort_keys=True)
+
+
+@dataclass(frozen=True, eq=False)
+class PatientLinearisation:
+    """The identified patient's joint forces linearised along the reference, per sample and
+    joint: tau_p(q_d + dq, qdot_d + dqdot) ~ tau_p(q_d, qdot_d) + S dq + D dqdot with diagonal S
+    (N m/rad) and D (N m s/rad) (:meth:`..learning.patient_model.JointForceModel.
+    linearisation`): the plant norm-optimal's lifted model is rebuilt about."""
+
+    stiffness: np.ndarray
+    """(N+1, n) N m/rad."""
+    damping: np.ndarray
+    """(N+1, n) N m s/rad."""
+
+    @cached_property
+    def key(self) -> str:
+        """The cache key: a digest of both arrays rounded to 1e-9."""
+        digest = hashlib.sha256()
+        for array in (self.stiffness, self.damping):
+            digest.update(np.round(np.asarray(array, dtype=float), 9).tobytes())
+        return digest.hexdigest()
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,8 +163,13 @@ def _expm_batch(m: np.ndarray, order: int = 8) -> np.ndarray:
     return out
 
 
-def build_lifted_model(config: Config) -> LiftedModel:
-    """The lifted model of the config's ``norm_optimal.model_kind`` (module docstring, (NO4))."""
+def build_lifted_model(config: Config, patient: PatientLinearisation | None = None
+                       ) -> LiftedModel:
+    """The lifted model of the config's ``norm_optimal.model_kind`` (module docstring, (NO4));
+    with ``patient`` about the identified plant: its joint forces' stiffness S and damping D
+    along the reference enter the continuous model as -g a_N(q_d)^-1 S dq and
+    -g a_N(q_d)^-1 D dqdot (eq (8) with eq (6)'s terms, g = 1 / (1 + the model's mass
+    uncertainty))."""
 
     kind = ModelKind(config["norm_optimal.model_kind"])
     reference = build_reference(config)
@@ -157,6 +184,11 @@ def build_lifted_model(config: Config) -> LiftedModel:
         hq, hv = _bias_jacobians(config, reference)
         cont[:, n:2 * n, :n] = -(1.0 - gain) * hq
         cont[:, n:2 * n, n:2 * n] = -(1.0 - gain) * hv
+    if patient is not None:
+        arm = build_arm(config)
+        minv = np.array([np.linalg.inv(arm.metric_tensor(q)) for q in reference.position])
+        cont[:, n:2 * n, :n] -= gain * minv * patient.stiffness[:, None, :]
+        cont[:, n:2 * n, n:2 * n] -= gain * minv * patient.damping[:, None, :]
     disc = _expm_batch(cont * period)
     a, b = disc[:, :2 * n, :2 * n], disc[:, :2 * n, 2 * n:]
     k = np.hstack([np.diag(config["control.kp"]), np.diag(config["control.kd"])])
@@ -176,12 +208,13 @@ def _remember(cache: dict[Any, Any], key: Any, value: Any) -> None:
         del cache[next(iter(cache))]
 
 
-def lifted_model(config: Config) -> LiftedModel:
-    """:func:`build_lifted_model`, cached by the values it depends on (:data:`MODEL_KEYS`)."""
-    key = _key(config, MODEL_KEYS)
+def lifted_model(config: Config, patient: PatientLinearisation | None = None) -> LiftedModel:
+    """:func:`build_lifted_model`, cached by the values it depends on (:data:`MODEL_KEYS`, the
+    patient's linearisation)."""
+    key = _key(config, MODEL_KEYS) + ("" if patient is None else patient.key)
     model = _MODELS.get(key)
     if model is None:
-        model = build_lifted_model(config)
+        model = build_lifted_model(config, patient)
         _remember(_MODELS, key, model)
     return model
 
@@ -276,13 +309,16 @@ class RecursiveMatrices:
         return self.gains.next_feedforward(feedforward, error)
 
 
-def recursive_matrices(config: Config) -> RecursiveMatrices:
-    """:class:`RecursiveMatrices` for the config, cached as :func:`learning_matrices`."""
-    key = (_key(config, MODEL_KEYS), _key(config, WEIGHT_KEYS))
+def recursive_matrices(config: Config, patient: PatientLinearisation | None = None
+                       ) -> RecursiveMatrices:
+    """:class:`RecursiveMatrices` for the config (about the identified ``patient``), cached as
+    :func:`learning_matrices`."""
+    key = (_key(config, MODEL_KEYS) + ("" if patient is None else patient.key),
+           _key(config, WEIGHT_KEYS))
     matrices = _RECURSIVE.get(key)
     if matrices is None:
         start = time.perf_counter()
-        model, weights = lifted_model(config), Weights.of(config)
+        model, weights = lifted_model(config, patient), Weights.of(config)
         gains = riccati_gains(model.a, model.b, model.k, weights.error, weights.input_change,
                               weights.input_size)
         matrices = RecursiveMatrices(model, weights, gains, time.perf_counter() - start)

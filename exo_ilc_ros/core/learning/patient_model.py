@@ -35,7 +35,12 @@ from ..reference.trajectory import SampledReference
 from .identification import JointForceIdentifier
 from .identification_settings import IdentificationSettings
 from .joint_force_term import joint_force_term
+from .norm_optimal_model import PatientLinearisation
 from .patient_estimate import PatientEstimate
+from .qfilter import qfilter_of
+
+_UNBOUNDED = 1e12
+"""N m: the limit of a joint-force term that is not clamped (a difference of two)."""
 
 
 @dataclass(frozen=True)
@@ -48,6 +53,7 @@ class JointForceSettings:
     max_change: np.ndarray
     adoption: str
     inverse_gain: float
+    mass_error: bool
     identification: IdentificationSettings
 
     @classmethod
@@ -59,9 +65,11 @@ class JointForceSettings:
                    np.asarray(config["identification.max_change"], dtype=float),
                    str(config["identification.adoption"]),
                    float(config["identification.inverse_gain"]),
+                   bool(config["identification.mass_error"]),
                    IdentificationSettings.from_config(
                        config, forgetting=float(config["identification.forgetting"]),
-                       voluntary=bool(config["identification.voluntary"])))
+                       voluntary=bool(config["identification.voluntary"]),
+                       relative_precision=float(config["identification.relative_precision"])))
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,7 +106,53 @@ class JointForceModel:
         """The forces the next trial adds (zeros until a joint's estimate is trusted)."""
         self.used = np.zeros(n, dtype=bool)
         self._nominal = nominal
+        self._qfilter = qfilter_of(config)
         self._inertia: np.ndarray | None = None
+        self._nominal_torque: np.ndarray | None = None
+
+    def linearisation(self) -> PatientLinearisation | None:
+        """The forces in use linearised along the reference (norm-optimal's model is rebuilt
+        about it): per joint stiffness K (+ K_v, the patient's own pull, when fitted) and
+        damping B + F_c / v_s sech^2(qdot_d / v_s) (+ D_v) (+ G where |qdot_d| exceeds the
+        reflex threshold, its delay neglected). None before any joint is in use."""
+        estimate = self.identifier.estimate
+        if estimate is None or not np.any(self.used):
+            return None
+        s = self.settings.identification
+        v = self.reference.velocity
+        stiffness = np.zeros(v.shape)
+        damping = np.zeros(v.shape)
+        for j, joint in enumerate(estimate.joints):
+            if not self.used[j]:
+                continue
+            k = max(joint.value("stiffness"), 0.0)
+            b = max(joint.value("viscous"), 0.0)
+            f = max(joint.value("coulomb"), 0.0)
+            d = b + f / s.stribeck_velocity / np.cosh(v[:, j] / s.stribeck_velocity) ** 2
+            if s.voluntary:
+                for name in ("voluntary_stiffness", "voluntary_damping"):
+                    value = joint.value(name)
+                    if joint[name].trustworthy and np.isfinite(value) and value > 0.0:
+                        k, d = (k + value, d) if name == "voluntary_stiffness" else (k, d + value)
+            if joint.reflex_detected and all(joint[name].trustworthy for name in
+                                             ("reflex_gain", "reflex_threshold")):
+                d = d + np.where(np.abs(v[:, j]) > joint.value("reflex_threshold"),
+                                 max(joint.value("reflex_gain"), 0.0), 0.0)
+            stiffness[:, j] = k
+            damping[:, j] = d
+        if not (np.all(np.isfinite(stiffness)) and np.all(np.isfinite(damping))):
+            return None
+        return PatientLinearisation(stiffness, damping)
+
+    def nominal_torque(self) -> np.ndarray:
+        """a_N(q_d) qddot_d + c_N(q_d, qdot_d) at every sample of the reference, eq (16)'s
+        torque without feedback (cached)."""
+        if self._nominal_torque is None:
+            ref = self.reference
+            self._nominal_torque = np.array([
+                self._nominal.inverse_dynamics(q, qd, qdd) for q, qd, qdd
+                in zip(ref.position, ref.velocity, ref.acceleration, strict=True)])
+        return self._nominal_torque
 
     def acceleration(self, torque: np.ndarray) -> np.ndarray:
         """a_N(q_d)^-1 tau at every sample of the reference: a torque profile in the units of
@@ -114,22 +168,37 @@ class JointForceModel:
         return self.identifier.estimate
 
     def learning_correction(self, record: TrialRecord) -> np.ndarray | None:
-        """g a_N(q_d)^-1 (K e + B e_dot) along the reference, g = ``identification.
-        inverse_gain``, K and B the identified stiffness and damping of each joint in use (rule
-        4): what the law's update adds so that it inverts the arm *with* the patient (an update
-        that inverts only the nominal arm, like robust.yaml's u += PD e + e_ddot, leaves a
-        contraction of ~0.9 per trial when the patient's stiffness exceeds the controller's,
-        as the forearm's 1 N m/rad does K_P a_N ~ 0.5 N m/rad). None: nothing to add."""
+        """g a_N(q_d)^-1 [tau_p(q_d, qdot_d) - tau_p(q, qdot) + K_v e + D_v e_dot] along the
+        trial, Q-filtered as the law's update is (rule 4): the identified joint forces'
+        difference between the reference and the measured motion (the secant, bounded where
+        the Coulomb term saturates) and the patient's own pull toward the reference when it is
+        fitted, g = ``identification.inverse_gain``, on the joints in use. What the law's
+        update adds so that it inverts the arm *with* the patient: an update that inverts only
+        the nominal arm, like robust.yaml's u += PD e + e_ddot, leaves a contraction of ~0.9
+        per trial where the patient is stiffer than the controller (the forearm's 1 N m/rad
+        against K_P a_N ~ 0.5 N m/rad). None: nothing to add."""
         estimate = self.identifier.estimate
         g = self.settings.inverse_gain
         if g == 0.0 or estimate is None or record.aborted or not np.any(self.used):
             return None
-        stiffness = np.where(self.used, np.clip(estimate.values("stiffness"), 0.0, None), 0.0)
-        damping = np.where(self.used, np.clip(estimate.values("viscous"), 0.0, None), 0.0)
-        torque = g * (stiffness * record.error + damping * record.error_velocity)
+        ref = self.reference
+        s = self.settings.identification
+        at_reference = joint_force_term(estimate, ref.position, ref.velocity, _UNBOUNDED, s)
+        measured = joint_force_term(estimate, record.position, record.velocity, _UNBOUNDED, s)
+        use = self.used & at_reference.used & measured.used
+        torque = np.where(use[None, :], at_reference.torque - measured.torque, 0.0)
+        if s.voluntary:  # the patient's own pull toward q_d, a stiffness and damping on e
+            for name, signal in (("voluntary_stiffness", record.error),
+                                 ("voluntary_damping", record.error_velocity)):
+                gain = estimate.values(name)
+                ok = use & np.isfinite(gain) & np.array([j[name].trustworthy
+                                                         for j in estimate.joints])
+                torque = torque + np.where(ok, np.clip(gain, 0.0, None), 0.0) * signal
+        torque = g * torque
         if not np.all(np.isfinite(torque)):
             return None
-        return self.acceleration(torque)
+        correction = self.acceleration(torque)
+        return correction if self._qfilter is None else self._qfilter.apply(correction)
 
     def conclude(self, record: TrialRecord) -> JointForceStep:
         """Identify trial ``record`` and move the forces of the next trial (rules 1-3)."""
@@ -152,7 +221,14 @@ class JointForceModel:
         ref = self.reference
         term = joint_force_term(estimate, ref.position, ref.velocity, s.trust_limit,
                                 s.identification)
-        target = np.where(term.used[None, :], term.torque, self.joint_force)
+        torque = term.torque
+        if s.mass_error:  # eq (15): the plant's mass error along the nominal torque
+            scale = estimate.values("model_scale")
+            known = np.array([j["model_scale"].trustworthy for j in estimate.joints]) \
+                & np.isfinite(scale) & term.used
+            torque = np.clip(torque + np.where(known, scale, 0.0) * self.nominal_torque(),
+                             -s.trust_limit, s.trust_limit)
+        target = np.where(term.used[None, :], torque, self.joint_force)
         if not np.all(np.isfinite(target)):  # joint_force_term refuses these; never pass one
             bad = np.flatnonzero(~np.all(np.isfinite(target), axis=0))
             target[:, bad] = self.joint_force[:, bad]

@@ -514,6 +514,16 @@ PARAMETERS: tuple[Parameter, ...] = (
               "g: after the law's update the feed-forward adds g a_N(q_d)^-1 (K e + B e_dot) "
               "with the identified stiffness K and damping B (the update then inverts the arm "
               "with the patient; 0: off)", minimum=0.0),
+    Parameter("identification.rebuild_threshold", SUPERVISOR, Kind.DOUBLE,
+              "norm-optimal's model is rebuilt about the identified patient when its linearised "
+              "forces moved by more than this share since the last build", minimum=0.0),
+    Parameter("identification.mass_error", SUPERVISOR, Kind.BOOL,
+              "the added forces include the identified mass error times the nominal torque "
+              "along the reference (eq (15): a uniform mass error is exactly this term)"),
+    Parameter("identification.relative_precision", SUPERVISOR, Kind.DOUBLE,
+              "largest 95 % half-width over |value| of a parameter the loop may use (below "
+              "the identification's absolute floor it is always precise enough)",
+              strictly_positive=True),
     Parameter("identification.voluntary", SUPERVISOR, Kind.BOOL,
               "fit the patient's own effort toward the reference too (for a patient known to "
               "push; else its suspicion makes an estimate untrustworthy)"),

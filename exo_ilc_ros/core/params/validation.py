@@ -74,6 +74,9 @@ class FeedforwardProfile:
     position: np.ndarray
     velocity: np.ndarray
     feedforward: np.ndarray
+    joint_force: np.ndarray | None = None
+    """The identified joint forces computed torque adds (N m; the points' ``effort``), None:
+    the points carry none."""
 
 
 def _numbers(values: Any, what: str, where: str) -> np.ndarray | Rejection:
@@ -175,11 +178,14 @@ def validate_feedforward(names: Sequence[str], times_ns: Sequence[int],
                          position: Any, velocity: Any, feedforward: Any,
                          joint_names: Sequence[str], samples: int, period_ns: int,
                          feedforward_limit: Sequence[float] | None = None,
-                         where: str = "/ilc/feedforward") -> FeedforwardProfile | Rejection:
+                         where: str = "/ilc/feedforward", joint_force: Any = None,
+                         effort_limit: Sequence[float] | None = None
+                         ) -> FeedforwardProfile | Rejection:
     """A feed-forward profile (JointTrajectory points: positions, velocities, accelerations
-    = u_ff): ``samples`` points at times i * period_ns, one finite value per joint name in each
-    array (reordered to the configured order), |u_ff| within ``feedforward_limit`` (0 or None:
-    unbounded)."""
+    = u_ff, effort = the identified joint forces or empty in every point): ``samples`` points
+    at times i * period_ns, one finite value per joint name in each array (reordered to the
+    configured order), |u_ff| within ``feedforward_limit`` (0 or None: unbounded), |effort|
+    within ``effort_limit``."""
     order = joint_order(names, joint_names, where)
     if isinstance(order, Rejection):
         return order
@@ -193,8 +199,13 @@ def validate_feedforward(names: Sequence[str], times_ns: Sequence[int],
         return Rejection(Cause.WRONG_TIMES, f"{where}: point {i} at {times[i]!r} ns, expected "
                          f"{expected[i]} ns")
     out: list[np.ndarray] = []
-    for what, values in (("positions", position), ("velocities", velocity),
-                         ("accelerations", feedforward)):
+    arrays = [("positions", position), ("velocities", velocity), ("accelerations", feedforward)]
+    forces = None if joint_force is None else [list(row) for row in joint_force]
+    if forces is not None and all(len(row) == 0 for row in forces):
+        forces = None
+    if forces is not None:
+        arrays.append(("effort", forces))
+    for what, values in arrays:
         try:
             rows = [list(row) for row in values]
         except TypeError:
@@ -215,7 +226,15 @@ def validate_feedforward(names: Sequence[str], times_ns: Sequence[int],
             i, j = (int(x) for x in over[0])
             return Rejection(Cause.OUT_OF_LIMIT, f"{where}: u_ff of joint {j + 1} at point {i} "
                              f"is {out[2][i, j]!r}, beyond the limit {limit[j]!r}")
-    return FeedforwardProfile(out[0], out[1], out[2])
+    if forces is not None and effort_limit is not None:
+        bound = np.asarray(effort_limit, dtype=float)
+        over = np.argwhere(np.abs(out[3]) > bound)
+        if over.size:
+            i, j = (int(x) for x in over[0])
+            return Rejection(Cause.OUT_OF_LIMIT, f"{where}: the joint force of joint {j + 1} at "
+                             f"point {i} is {out[3][i, j]!r}, beyond the effort limit "
+                             f"{bound[j]!r}")
+    return FeedforwardProfile(out[0], out[1], out[2], out[3] if forces is not None else None)
 
 
 def check_feedforward_array(feedforward: np.ndarray, shape: tuple[int, ...],

@@ -56,8 +56,10 @@ class GraphPort(Protocol):
     def start(self) -> None:
         """Release the plant; answered by :meth:`TrialProtocol.on_started`."""
 
-    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray) -> None:
-        """Send the trial's feed-forward to the controller (it acknowledges it)."""
+    def push_feedforward(self, trial: int, t0_ns: int, feedforward: np.ndarray,
+                         joint_force: np.ndarray | None = None) -> None:
+        """Send the trial's feed-forward (and the identified joint forces computed torque adds,
+        None: none) to the controller (it acknowledges it)."""
 
     def publish_conclusion(self, conclusion: TrialConclusion, end_ns: int) -> None:
         """The trial summary and the ``end`` event (and ``aborted`` for an envelope abort)."""
@@ -293,7 +295,8 @@ class TrialProtocol:
     def _push(self) -> None:
         assert self.session is not None
         self.pushed_at = self.clock()
-        self.port.push_feedforward(self.trial, self.samples.t0_ns, self.session.feedforward)
+        self.port.push_feedforward(self.trial, self.samples.t0_ns, self.session.feedforward,
+                                   self.session.joint_force)
 
     def _begin_trial(self) -> None:
         self.port.event("start", [("trial", str(self.trial))], self.samples.t0_ns)
@@ -374,7 +377,8 @@ class TrialProtocol:
                                      session.levels, experiment.reference,
                                      aborted if aborted >= 0 else None,
                                      self.truth.position if truth else None,
-                                     self.truth.velocity if truth else None)
+                                     self.truth.velocity if truth else None,
+                                     session.joint_force)
         self._stage_live_changes()
         try:
             conclusion = session.conclude(record)

@@ -35,6 +35,7 @@ from ..arm.build import build_arm
 from ..errors import SafetyError, StoreError
 from ..learning.factory import build_law
 from ..learning.laws import FeedforwardUpdate, LearningLaw
+from ..learning.norm_optimal_model import PatientLinearisation
 from ..learning.patient_model import JointForceModel, JointForceStep
 from ..loop.patient import PatientLearning, true_error
 from ..loop.record import TrialRecord
@@ -111,6 +112,7 @@ class LearningSession:
     stop: StopReason | None = None
     _custom_law: bool = field(default=False, init=False, repr=False)
     _staged: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
+    _patient: PatientLinearisation | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self._custom_law = self.law is not None
@@ -205,11 +207,15 @@ class LearningSession:
         if forces is not None and forces.joint_force is not None:
             feedforward = self._adopt(update, forces)
             correction = self.joint_forces.learning_correction(record) \
-                if self.joint_forces is not None else None
+                if self.joint_forces is not None and self.config["law"] != "norm_optimal" \
+                else None
             if correction is not None:
                 feedforward = feedforward + correction
             update = dataclasses.replace(update, feedforward=feedforward,
                                          joint_force=forces.joint_force)
+            rebuilt = self._rebuild_about_patient()
+            if rebuilt:
+                update = dataclasses.replace(update, notes=(*update.notes, rebuilt))
         within = self._within(record)
         self.within_streak = self.within_streak + 1 if within else 0
         self.completed = record.trial
@@ -270,6 +276,27 @@ class LearningSession:
         return store, restored
 
     # --- rules --------------------------------------------------------------------------------
+    def _rebuild_about_patient(self) -> str:
+        """Norm-optimal's model rebuilt about the identified plant once the linearised forces
+        moved by more than ``identification.rebuild_threshold`` (relative, any joint and
+        sample, against the last model's) since it was built (cached as every model is); the
+        note says so ("": not rebuilt)."""
+        if self.joint_forces is None or self._custom_law or self.config["law"] != "norm_optimal":
+            return ""
+        patient = self.joint_forces.linearisation()
+        if patient is None:
+            return ""
+        last = self._patient
+        if last is not None:
+            scale = np.maximum(np.abs(last.stiffness) + np.abs(last.damping), 1e-9)
+            moved = np.max(np.maximum(np.abs(patient.stiffness - last.stiffness),
+                                      np.abs(patient.damping - last.damping)) / scale)
+            if moved <= self.config["identification.rebuild_threshold"]:
+                return ""
+        self._patient = patient
+        self.active_law = build_law(self.config, patient=patient)
+        return "norm-optimal model rebuilt about the identified patient"
+
     def _adopt(self, update: FeedforwardUpdate, forces: JointForceStep) -> np.ndarray:
         """The learned feed-forward once the identified forces changed
         (``identification.adoption``): ``restart`` starts a joint whose forces are adopted for
@@ -296,7 +323,7 @@ class LearningSession:
             return {}
         self.config = self.config.replace(changed)
         if not self._custom_law:
-            self.active_law = build_law(self.config)
+            self.active_law = build_law(self.config, patient=self._patient)
         return changed
 
 

@@ -141,8 +141,9 @@ def test_locked_joints_and_joint_names_rules() -> None:
 
 @pytest.mark.parametrize("arm", ["panda", "ur5"])
 def test_shipped_arm_learns_within_10_trials_at_10_percent(arm: str) -> None:
-    """The linear law over computed torque, plant masses +10 %: every joint within 0.005 rad by
-    trial 10 and still there at the last (measured: 3 trials on both)."""
+    """The linear law (with robust.yaml's Q-filter) over computed torque, plant masses +10 %:
+    every joint within 0.005 rad by trial 10 and still there at the last (measured: 3 trials on
+    both)."""
     config = load_config(ARMS / f"{arm}.yaml")
     result = run_trials(config, 0.10, 12)
     reached = result.iterations_to_bound()
@@ -261,7 +262,8 @@ def test_urdf_arm_config_through_the_graphs_parameters_file(tmp_path: Path) -> N
 @pytest.mark.slow
 @pytest.mark.parametrize("arm", ["panda", "ur5"])
 def test_robust_settings_stay_bounded_for_300_trials(arm: str) -> None:
-    """config/robust.yaml over the arm file, plant masses +15 %, 300 trials (~10 s): within the
+    """config/robust.yaml over the arm file (whose learning settings it already holds), plant
+    masses +15 %, 300 trials (~10 s): within the
     bound from trial 10 on, the learned input settled and not growing (measured: max error
     6.4e-5 rad on the Panda, 2.2e-5 on the UR5; u_ff constant to 1e-13 of its size)."""
     config = load_config(ARMS / f"{arm}.yaml", overlays=[ROOT / "config" / "robust.yaml"])

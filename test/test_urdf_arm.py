@@ -14,6 +14,7 @@ import pytest
 import yaml
 from test_urdf_chain import TWO_JOINTS
 
+from exo_ilc_ros.analysis.figures import convergence_figure
 from exo_ilc_ros.cli.main import main as cli_main
 from exo_ilc_ros.core import run_trials
 from exo_ilc_ros.core.arm.build import build_arm
@@ -26,6 +27,7 @@ from exo_ilc_ros.core.params.urdf_xml import UrdfError
 from exo_ilc_ros.core.persistence.profile_format import model_values
 from exo_ilc_ros.core.persistence.store import learning_key
 from exo_ilc_ros.core.reference.build import build_reference
+from exo_ilc_ros.core.session.summary import RunSummary
 from exo_ilc_ros.core.sim.mujoco_arm import MujocoArm
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -275,3 +277,14 @@ def test_robust_settings_stay_bounded_for_300_trials(arm: str) -> None:
     fit = fit_growth(uff, window=150)
     assert fit is not None and not fit.any_growing
     assert np.all(uff < 0.5 * np.asarray(config["feedforward_limit"]))
+
+
+def test_convergence_figure_has_one_panel_per_joint_of_any_arm() -> None:
+    """Seven joints: seven panels, no paper's iterations in their titles (the paper's arm has
+    three joints)."""
+    config = load_config(ARMS / "panda.yaml")
+    result = run_trials(config, 0.1, 3)
+    figure = convergence_figure([RunSummary.from_result(result)], config["joint_names"])
+    titles = [ax.get_title() for ax in figure.axes]
+    assert len(titles) == 7 and all("paper" not in t for t in titles)
+    assert titles[3].startswith("Joint 4 (panda_joint4)")

@@ -17,8 +17,10 @@ from test_urdf_chain import TWO_JOINTS
 from exo_ilc_ros.analysis.figures import convergence_figure
 from exo_ilc_ros.cli.main import main as cli_main
 from exo_ilc_ros.core import run_trials
-from exo_ilc_ros.core.arm.build import build_arm
+from exo_ilc_ros.core.arm.build import build_arm, view_urdf
 from exo_ilc_ros.core.arm.dynamics import inertia_and_bias
+from exo_ilc_ros.core.arm.forward_kinematics import UrdfKinematics
+from exo_ilc_ros.core.arm.urdf import arm_urdf
 from exo_ilc_ros.core.convergence.growth import fit_growth
 from exo_ilc_ros.core.errors import ConfigError
 from exo_ilc_ros.core.learning.norm_optimal_model import MODEL_KEYS, _key
@@ -288,3 +290,22 @@ def test_convergence_figure_has_one_panel_per_joint_of_any_arm() -> None:
     titles = [ax.get_title() for ax in figure.axes]
     assert len(titles) == 7 and all("paper" not in t for t in titles)
     assert titles[3].startswith("Joint 4 (panda_joint4)")
+
+
+def test_live_view_draws_the_urdf_arm() -> None:
+    """The live view's arm (view_urdf): the cone arm's generated URDF as before; a URDF arm's own
+    file, its root link and its locked joints at their values (the fingers' transforms move)."""
+    cones = load_config()
+    text, fixed, root = view_urdf(cones)
+    assert text == arm_urdf(build_arm(cones), cones["joint_names"], cones["control.effort_limit"])
+    assert fixed == {} and root == "base_link"
+    panda = load_config(ARMS / "panda.yaml")
+    text, fixed, root = view_urdf(panda)
+    assert text == (ROOT / "urdf" / "panda.urdf").read_text() and root == "panda_link0"
+    assert fixed == {"panda_finger_joint1": 0.02, "panda_finger_joint2": 0.02}
+    kinematics = UrdfKinematics(text)
+    q = dict(zip(panda["joint_names"], [0.1] * 7, strict=True))
+    finger = {child: xyz for _, child, xyz, _ in kinematics.transforms({**fixed, **q})}
+    closed = {child: xyz for _, child, xyz, _ in kinematics.transforms(q)}
+    assert finger["panda_leftfinger"] != closed["panda_leftfinger"]
+    assert set(kinematics.moving) >= set(panda["joint_names"])

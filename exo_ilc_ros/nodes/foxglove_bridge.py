@@ -51,9 +51,8 @@ from rclpy.serialization import deserialize_message
 from trajectory_msgs.msg import JointTrajectory
 
 from ..bag.messages import serialize, typestore
-from ..core.arm.build import build_arm
+from ..core.arm.build import view_urdf
 from ..core.arm.forward_kinematics import UrdfKinematics
-from ..core.arm.urdf import arm_urdf
 from ..core.errors import ConfigError
 from ..core.params.config import load_config
 from ..wire import topics
@@ -79,7 +78,8 @@ ROBOT_DESCRIPTION = "/robot_description"
 REFERENCE_DESCRIPTION = "/reference/robot_description"
 REFERENCE_PREFIX = "reference/"
 REFERENCE_OFFSET = (0.0, 0.6, 0.0)
-"""m: where the reference arm's base stands in the measured arm's ``base_link`` frame."""
+"""m: where the reference arm's base stands in the measured arm's root link frame
+(``base_link`` for the paper's arm)."""
 READER_DEPTH = 10000
 SCHEDULING = ("idle", "batch", "normal")
 DEFAULT_SCHEDULING = "idle"
@@ -164,8 +164,7 @@ class FoxgloveBridge(Node):
         config = load_config(config_file or None)
         self.joint_names: list[str] = list(config["joint_names"])
         self.period_ns = int(round(float(config["control.period"]) * 1e9))
-        self.urdf = arm_urdf(build_arm(config), self.joint_names,
-                             config["control.effort_limit"])
+        self.urdf, self.fixed_positions, self.root_link = view_urdf(config)
         self.kinematics = UrdfKinematics(self.urdf)
         self.reference_kinematics = UrdfKinematics(prefixed_urdf(self.urdf, REFERENCE_PREFIX))
         self.reference_names = [REFERENCE_PREFIX + n for n in self.joint_names]
@@ -264,16 +263,18 @@ class FoxgloveBridge(Node):
             return
         if position.shape[0] != len(self.joint_names):
             return
-        transforms = self.kinematics.transforms(dict(zip(self.joint_names, position.tolist(),
-                                                         strict=True)))
-        transforms.append(("base_link", REFERENCE_PREFIX + "base_link", REFERENCE_OFFSET,
+        transforms = self.kinematics.transforms(
+            {**self.fixed_positions, **dict(zip(self.joint_names, position.tolist(),
+                                                strict=True))})
+        transforms.append((self.root_link, REFERENCE_PREFIX + self.root_link, REFERENCE_OFFSET,
                            (0.0, 0.0, 0.0, 1.0)))
         if self.reference is not None:
             t0, q_d = self.reference
             i = int(round((stamp - t0) / self.period_ns))
             if 0 <= i < q_d.shape[0]:
                 transforms += self.reference_kinematics.transforms(
-                    dict(zip(self.reference_names, q_d[i].tolist(), strict=True)))
+                    {**{REFERENCE_PREFIX + k: v for k, v in self.fixed_positions.items()},
+                     **dict(zip(self.reference_names, q_d[i].tolist(), strict=True))})
         channel.log(tf_message(stamp, transforms), log_time=stamp)
 
     def destroy_node(self) -> None:

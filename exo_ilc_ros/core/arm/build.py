@@ -5,13 +5,15 @@ says where it comes from: the paper's truncated cones (``cones``) or a URDF's ch
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from typing import Any
 
 import numpy as np
 
 from ..params import schema
-from ..params.config import Config, urdf_path
+from ..params.config import Config, urdf_path, urdf_source
 from .model import ArmModel
+from .urdf import arm_urdf
 from .urdf_chain import UrdfChain, read_urdf_chain
 
 _CHAINS: dict[tuple[Any, ...], UrdfChain] = {}
@@ -51,3 +53,18 @@ def arm_from_chain(chain: UrdfChain) -> ArmModel:
                     chain.gravity.copy(), chain.position_lower.copy(),
                     chain.position_upper.copy(), chain.velocity_limit.copy(),
                     chain.effort_limit.copy())
+
+
+def view_urdf(config: Config) -> tuple[str, dict[str, float], str]:
+    """What a viewer draws of the config's arm: its URDF (the cone arm's from :func:`arm_urdf`,
+    a URDF arm's own file), the positions of the joints that do not move (a URDF arm's locked
+    joints) and the URDF's root link."""
+    if config["model.source"] != "urdf":
+        return (arm_urdf(build_arm(config), config["joint_names"],
+                         config["control.effort_limit"]), {}, "base_link")
+    text, _, _ = urdf_source(config.values)
+    root = ET.fromstring(text)
+    children = {c.get("link") for c in root.iter("child")}
+    roots = [link.get("name", "") for link in root.findall("link")
+             if link.get("name") not in children]
+    return text, schema.parse_locked_joints(config["model.locked_joints"]), roots[0]

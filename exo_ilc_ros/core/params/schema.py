@@ -92,7 +92,7 @@ class Parameter:
     kind: Kind
     description: str
     per_joint: bool = False
-    """An array with one entry per joint."""
+    """An array with one entry per joint (or one value for every joint: validation repeats it)."""
     minimum: float | None = None
     strictly_positive: bool = False
     choices: tuple[str, ...] = ()

@@ -154,10 +154,11 @@ class GivenValue(NamedTuple):
 
 
 def other_sections(argv: Sequence[str], own: Mapping[str, Any]) -> dict[str, Any]:
-    """The schema's parameters that the ``--params-file`` files in ``argv`` give in any section,
-    except the node's ``own``: what the node validates its configuration with besides its own
-    values (a URDF arm's joint count holds for every section; the shipped defaults are the
-    paper's three joints)."""
+    """The per-joint parameters that the ``--params-file`` files in ``argv`` give in any
+    section, except the node's ``own``: what the node validates its configuration with besides
+    its own values (a URDF arm's joint count holds for every section; the shipped defaults are
+    the paper's three joints). Other sections' other values stay the shipped ones (a supervisor
+    without a plant_simulator to ask keeps the shipped plant values)."""
     out: dict[str, Any] = {}
     args = list(argv)
     for i, arg in enumerate(args[:-1]):
@@ -169,7 +170,8 @@ def other_sections(argv: Sequence[str], own: Mapping[str, Any]) -> dict[str, Any
             continue  # command_line_parameters names the file
         for _, body in _params_file_sections(document):
             out.update((name, value) for name, value in flatten_tree(body)
-                       if name in schema.BY_NAME and name not in own)
+                       if name in schema.BY_NAME and schema.BY_NAME[name].per_joint
+                       and name not in own)
     return out
 
 

@@ -153,7 +153,7 @@ def test_independent_mcap_reader_reads_every_message(mcap_bag: Path, config: Con
     info = yaml.safe_load((mcap_bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     expected = {t["topic_metadata"]["name"]: t["message_count"]
                 for t in info["topics_with_message_count"]}
-    assert set(expected) == set(topics.TYPES)  # every recorded topic listed, as rosbag2 does
+    assert set(expected) == set(topics.BAG_TYPES)  # every recorded topic listed, as rosbag2 does
     assert expected.pop(topics.PARAMETER_EVENTS) == 0  # the graph's own: none in-process
     files = info["relative_file_paths"]
     assert len(files) == TRIALS // 2 + 1  # split every 2 trials, the rest in the last file
@@ -169,6 +169,8 @@ def test_independent_mcap_reader_reads_every_message(mcap_bag: Path, config: Con
                     assert len(decoded.position) == config.joints
     assert counts == expected
     assert counts[topics.JOINT_STATES] == TRIALS * 101
+    assert counts[topics.TF] == TRIALS * 101  # the arm's view: one /tf per sample
+    assert counts[topics.ROBOT_DESCRIPTION] == counts[topics.REFERENCE_DESCRIPTION] == 1
     assert sum(counts.values()) == info["message_count"]
 
 
@@ -176,13 +178,15 @@ def _old_layout_bag(bag: Path, out: Path) -> Path:
     """``bag`` rewritten as the recorder wrote bags before issue 26: one file, wall-clock log
     times (DDS receipt: a run of 5 s sim time logged within about 1.5 s, topics interleaved
     with jitter), /clock at every sample, no /diagnostics, no /ilc/trial_metrics, trial 1's
-    summary without the ``level/`` keys, and only topics with messages listed."""
+    summary without the ``level/`` keys, no /robot_description or /tf, and only topics with
+    messages listed."""
     info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     kept: list[tuple[int, str, bytes]] = []
     for file in sorted(glob.glob(str(bag / "*.mcap"))):
         with open(file, "rb") as handle:
             for _, channel, message in make_reader(handle).iter_messages():
-                if channel.topic in (topics.DIAGNOSTICS, topics.TRIAL_METRICS, topics.CLOCK):
+                if channel.topic in (topics.DIAGNOSTICS, topics.TRIAL_METRICS, topics.CLOCK,
+                                     *topics.VIEW_TYPES):
                     continue
                 data = message.data
                 if channel.topic in (topics.TRIAL_SUMMARY, topics.TRIAL_EVENTS):

@@ -252,7 +252,7 @@ def test_qos_recorded_as_published(bag: Path) -> None:
     info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     recorded = {t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"]
                 for t in info["topics_with_message_count"]}
-    assert set(recorded) == set(topics.TYPES)  # every topic, with or without messages
+    assert set(recorded) == set(topics.BAG_TYPES)  # every topic, with or without messages
     for topic, profiles in recorded.items():
         assert [(p["durability"], p["depth"]) for p in profiles] == list(OFFERED[topic])
         assert all(p["reliability"] == "reliable" and p["history"] == "keep_last"
@@ -310,8 +310,10 @@ def test_recorder_bag_is_verifiable_and_offers_the_graphs_qos(tmp_path: Path) ->
     info = yaml.safe_load((recording.path / "metadata.yaml").read_text())
     for entry in info["rosbag2_bagfile_information"]["topics_with_message_count"]:
         metadata = entry["topic_metadata"]
-        assert {p["durability"] for p in metadata["offered_qos_profiles"]} == \
-            offered[metadata["name"]]
+        name = metadata["name"]  # the view's topics: written by the recorder, as ROS offers
+        expected = {kind for kind, _ in OFFERED[name]} if name in topics.VIEW_TYPES \
+            else offered[name]
+        assert {p["durability"] for p in metadata["offered_qos_profiles"]} == expected
         assert all(p["reliability"] == "reliable" for p in metadata["offered_qos_profiles"])
     assert read_bag(recording.path).completed == [1, 2]
 
@@ -326,7 +328,7 @@ def test_mcap_walk_reads_what_rosbags_reads(tmp_path: Path, bag: Path) -> None:
 
     from exo_ilc_ros.bag.mcap_messages import read_mcap_topics
 
-    wanted = list(topics.TYPES)
+    wanted = list(topics.BAG_TYPES)
     walked: dict[str, list[tuple[int, bytes]]] = {}
     for file in sorted(bag.glob("*.mcap")):
         found = read_mcap_topics(file, wanted)
@@ -337,11 +339,11 @@ def test_mcap_walk_reads_what_rosbags_reads(tmp_path: Path, bag: Path) -> None:
     with AnyReader([bag]) as reader:
         for conn, stamp, raw in reader.messages():
             reference.setdefault(conn.topic, []).append((stamp, bytes(raw)))
-    # per trial: 101 samples and commands, 11 /clock (every 10th sample, the first and the
-    # last), feed-forward, start, end, summary, metrics, the controller's loaded and done;
-    # then finished
-    per_trial = 2 * 101 + 11 + 7
-    assert walked == reference and sum(map(len, walked.values())) == TRIALS * per_trial + 1
+    # per trial: 101 samples, commands and /tf, 11 /clock (every 10th sample, the first and
+    # the last), feed-forward, start, end, summary, metrics, the controller's loaded and done;
+    # then finished; and the two URDFs at the start
+    per_trial = 3 * 101 + 11 + 7
+    assert walked == reference and sum(map(len, walked.values())) == TRIALS * per_trial + 3
 
     plain = bag / f"{bag.name}_1.mcap"
     for compression in (CompressionType.ZSTD, CompressionType.LZ4):

@@ -186,3 +186,54 @@ def test_run_nodes_polls_stops_on_exit_code_and_drains_last() -> None:
     assert log[:2] == ["plain destroyed", "failing destroyed after 3 polls"]
     assert log[2].startswith("draining destroyed") and int(log[2].split()[3]) >= 3
     assert int(log[2].split()[5]) > 1  # drained on after the stop, not polled
+
+
+
+def test_run_nodes_prints_the_counts_once_nothing_more_is_published(
+        capfd: pytest.CaptureFixture[str]) -> None:
+    """The published counts (what the recording-loss test holds against the bag) are printed
+    only once a stopping node can publish no more. Messages that arrived while the process was
+    stopping (here while the node's last poll sleeps) still have their callbacks run when the
+    node leaves the executor; a count printed before that missed what they published (the
+    soak once found one supervisor /diagnostics message more in the bag than counted)."""
+    import json
+
+    from rclpy.node import Node
+    from std_msgs.msg import Float64MultiArray
+
+    from exo_ilc_ros.nodes import common
+
+    final: dict[str, int] = {}
+
+    class Echo(Node):
+        """Echoes /run_nodes_src on /run_nodes_echo (counted), from a subscription."""
+
+        def __init__(self) -> None:
+            super().__init__("run_nodes_echo")
+            self.exit_code: int | None = None
+            self.source = self.create_publisher(Float64MultiArray, "/run_nodes_src", 100)
+            self.echo = self.create_publisher(Float64MultiArray, "/run_nodes_echo", 100,
+                                              publisher_class=common.CountingPublisher)
+            self.create_subscription(Float64MultiArray, "/run_nodes_src",
+                                     self.echo.publish, 100)
+            self.polls = 0
+
+        def poll(self) -> None:
+            self.polls += 1
+            if self.source.get_subscription_count() and self.polls > 20:
+                for _ in range(20):
+                    self.source.publish(Float64MultiArray())
+                time.sleep(0.1)  # they arrive meanwhile: their callbacks wait in the executor
+                self.exit_code = 3
+
+        def destroy_node(self) -> None:
+            final["echoed"] = self.echo.published
+            super().destroy_node()
+
+    assert common.run_nodes([Echo], ["run_nodes"]) == 3
+    lines = [line for line in capfd.readouterr().err.splitlines()
+             if line.startswith(f"{common.PUBLISHED_PREFIX}run_nodes_echo ")]
+    assert len(lines) == 1
+    printed = json.loads(lines[0].split(" ", 3)[3])
+    assert final["echoed"] == 20  # the callbacks did run after the stop
+    assert printed == {"/run_nodes_echo": 20}

@@ -27,19 +27,14 @@ from mcap_ros2._dynamic import generate_dynamic
 from mcap_ros2.decoder import DecoderFactory
 
 from exo_ilc_ros.bag.messages import typestore
+from exo_ilc_ros.bag.view import REFERENCE_OFFSET, REFERENCE_PREFIX, prefixed_urdf
 from exo_ilc_ros.core.arm.build import build_arm
 from exo_ilc_ros.core.arm.forward_kinematics import UrdfKinematics, quaternion
 from exo_ilc_ros.core.arm.urdf import arm_urdf
 from exo_ilc_ros.core.params.config import load_config
-from exo_ilc_ros.nodes.foxglove_bridge import (
-    REFERENCE_DESCRIPTION,
-    REFERENCE_OFFSET,
-    REFERENCE_PREFIX,
-    ROBOT_DESCRIPTION,
-    prefixed_urdf,
-)
 from exo_ilc_ros.wire import topics
 from exo_ilc_ros.wire.tf import TF, TF_TYPE, tf_message
+from exo_ilc_ros.wire.topics import REFERENCE_DESCRIPTION, ROBOT_DESCRIPTION
 from exo_ilc_ros.wire.trial_metrics import ROW_NAMES, decode, index, trial_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -165,7 +160,8 @@ def test_the_shipped_layout_draws_the_views_channels() -> None:
     panels = layout["configById"]
     names = list(load_config()["joint_names"])
     for panel, row in (("Plot!max_error", "max_abs_error"), ("Plot!rms_error", "rms_error"),
-                       ("Plot!level_M", "level/M")):
+                       ("Plot!level_M", "level/M"),
+                       ("Plot!identified_damping", "identified/viscous")):
         config = panels[panel]
         assert config["xAxisPath"]["value"] == f"{topics.TRIAL_METRICS}.data[0]"
         assert [p["value"] for p in config["paths"]] == \
@@ -181,6 +177,87 @@ def test_the_shipped_layout_draws_the_views_channels() -> None:
     reference = three_d["layers"]["reference"]
     assert (reference["topic"], reference["framePrefix"]) == (ROBOT_DESCRIPTION, REFERENCE_PREFIX)
     assert panels["DiagnosticSummary!diagnostics"]["topicToRender"] == topics.DIAGNOSTICS
+
+
+def _transform_values(msg: Any) -> tuple[Any, ...]:
+    """A decoded TFMessage as plain values (for equality between decoders)."""
+    return tuple((_stamp(t), t.header.frame_id, t.child_frame_id,
+                  t.transform.translation.x, t.transform.translation.y,
+                  t.transform.translation.z, t.transform.rotation.x, t.transform.rotation.y,
+                  t.transform.rotation.z, t.transform.rotation.w) for t in msg.transforms)
+
+
+def _assert_tf_is_forward_kinematics(tf: list[tuple[int, Any]], states: dict[int, Any],
+                                     profiles: dict[int, Any]) -> None:
+    """``tf`` ((log time, decoded TFMessage)) holds one message per sample of ``states`` (by
+    stamp), logged and stamped at the sample's stamp: the arm's transforms = Pinocchio's
+    forward kinematics of the sample's q, the reference arm's base at its offset and its
+    transforms = Pinocchio's of q_d at that sample of the latest feed-forward (``profiles``
+    by t0), each to 1e-9."""
+    config = load_config()
+    names = list(config["joint_names"])
+    urdf = _urdf()
+    reference_urdf = prefixed_urdf(urdf, REFERENCE_PREFIX)
+    period = int(config["control.period"] * 1e9)
+    stamps = []
+    reference_checked = 0
+    for log, msg in tf:
+        stamp = _stamp(msg.transforms[0])
+        assert log == stamp and all(_stamp(t) == stamp for t in msg.transforms)
+        stamps.append(stamp)
+        transforms = [(t.header.frame_id, t.child_frame_id,
+                       np.array([t.transform.translation.x, t.transform.translation.y,
+                                 t.transform.translation.z]),
+                       np.array([t.transform.rotation.x, t.transform.rotation.y,
+                                 t.transform.rotation.z, t.transform.rotation.w]))
+                      for t in msg.transforms]
+        sample = states[stamp]
+        q = np.array([sample.position[list(sample.name).index(n)] for n in names])
+        assert _check_transforms(transforms, urdf, q) == len(names)
+        base = [t for t in transforms if t[1] == REFERENCE_PREFIX + "base_link"]
+        assert len(base) == 1 and list(base[0][2]) == list(REFERENCE_OFFSET)
+        t0 = max((t for t in profiles if t <= stamp), default=None)
+        if t0 is not None and (stamp - t0) // period < len(profiles[t0].points):
+            point = profiles[t0].points[(stamp - t0) // period]
+            q_d = np.array([point.positions[list(profiles[t0].joint_names).index(n)]
+                            for n in names])
+            reference_checked += _check_transforms(transforms, reference_urdf, q_d,
+                                                   "reference ")
+    assert sorted(stamps) == sorted(states)
+    assert reference_checked == len(names) * len(states)
+
+
+def _assert_descriptions(recorded: dict[str, list[tuple[int, int, Any]]]) -> None:
+    """A bag's /robot_description and /reference/robot_description: once each, the run's URDF
+    (and the reference arm's), well-formed XML (xml.etree)."""
+    urdf = _urdf()
+    for topic, expected in ((ROBOT_DESCRIPTION, urdf),
+                            (REFERENCE_DESCRIPTION, prefixed_urdf(urdf, REFERENCE_PREFIX))):
+        ((_, _, msg),) = recorded[topic]
+        assert msg.data == expected
+        assert ET.fromstring(msg.data).tag == "robot"
+
+
+def test_simulate_bag_shows_the_arm_as_the_live_view(tmp_path: Path) -> None:
+    """``exo-ilc simulate --bag``'s bag read back: /tf per sample at its stamp equal to
+    Pinocchio's forward kinematics of the recorded q (and of the feed-forward's q_d on the
+    reference tree) to 1e-9; the URDFs once, well-formed; ``exo-ilc analyze`` reads it."""
+    from exo_ilc_ros.bag import read_bag, write_run
+    from exo_ilc_ros.core.session.learning_session import run_trials
+
+    config = load_config(overrides={"trajectory.duration": 0.5, "max_trials": 2})
+    result = run_trials(config, 0.10)
+    bag = write_run(tmp_path / "sim", config, result)
+    recorded = _bag_messages(bag)
+    states = {_stamp(m): m for _, _, m in recorded[topics.JOINT_STATES]}
+    profiles = {_stamp(m): m for _, _, m in recorded[topics.FEEDFORWARD]}
+    assert len(states) == 2 * 51 and len(profiles) == 2
+    _assert_tf_is_forward_kinematics([(log, m) for log, _, m in recorded[TF]], states,
+                                     profiles)
+    _assert_descriptions(recorded)
+    run = read_bag(bag)
+    assert sorted(run.trials) == [1, 2]
+    np.testing.assert_array_equal(run.trials[2].position, result.records[1].position)
 
 
 def _free_port() -> int:
@@ -323,36 +400,15 @@ def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
     assert {m.data for _, m in live[REFERENCE_DESCRIPTION]} == {reference_urdf}
 
     # /tf: one message per sample at its stamp, the arm = Pinocchio's FK of the sample's q,
-    # the reference = Pinocchio's FK of q_d at that sample of the trial's feed-forward.
-    names = list(load_config()["joint_names"])
+    # the reference = Pinocchio's FK of q_d at that sample of the trial's feed-forward; the
+    # bag holds the same /tf as the view showed, and the same URDFs, once.
     profiles = {_stamp(m): m for _, _, m in recorded[topics.FEEDFORWARD]}
-    period = int(load_config()["control.period"] * 1e9)
-    tf_stamps = []
-    reference_checked = 0
-    for log, msg in live[TF]:
-        stamp = _stamp(msg.transforms[0])
-        assert log == stamp and all(_stamp(t) == stamp for t in msg.transforms)
-        tf_stamps.append(stamp)
-        transforms = [(t.header.frame_id, t.child_frame_id,
-                       np.array([t.transform.translation.x, t.transform.translation.y,
-                                 t.transform.translation.z]),
-                       np.array([t.transform.rotation.x, t.transform.rotation.y,
-                                 t.transform.rotation.z, t.transform.rotation.w]))
-                      for t in msg.transforms]
-        sample = bag_states[stamp]
-        q = np.array([sample.position[list(sample.name).index(n)] for n in names])
-        assert _check_transforms(transforms, urdf, q) == len(names)
-        base = [t for t in transforms if t[1] == REFERENCE_PREFIX + "base_link"]
-        assert len(base) == 1 and list(base[0][2]) == list(REFERENCE_OFFSET)
-        t0 = max((t for t in profiles if t <= stamp), default=None)
-        if t0 is not None and (stamp - t0) // period < len(profiles[t0].points):
-            point = profiles[t0].points[(stamp - t0) // period]
-            q_d = np.array([point.positions[list(profiles[t0].joint_names).index(n)]
-                            for n in names])
-            reference_checked += _check_transforms(transforms, reference_urdf, q_d,
-                                                   "reference ")
-    assert sorted(tf_stamps) == sorted(bag_states)
-    assert reference_checked == len(names) * len(bag_states)
+    _assert_tf_is_forward_kinematics(live[TF], bag_states, profiles)
+    bag_tf = [(log, m) for log, _, m in recorded[TF]]
+    _assert_tf_is_forward_kinematics(bag_tf, bag_states, profiles)
+    assert sorted(_transform_values(m) for _, m in bag_tf) == \
+        sorted(_transform_values(m) for _, m in live[TF])
+    _assert_descriptions(recorded)
 
     # simulate --bag writes the same topics and types as the graph's recorder.
     sim = subprocess.run([sys.executable, "-m", "exo_ilc_ros.cli.main", "simulate", "--config",
@@ -360,7 +416,7 @@ def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
                          text=True, capture_output=True, timeout=120, check=False)
     assert sim.returncode == 0, sim.stderr[-3000:]
     (sim_bag,) = list((tmp_path / "sim").iterdir())
-    assert _topic_types(sim_bag) == _topic_types(bag) == dict(topics.TYPES)
+    assert _topic_types(sim_bag) == _topic_types(bag) == dict(topics.BAG_TYPES)
     sim_messages = _bag_messages(sim_bag)
     for topic in (topics.JOINT_STATES, topics.CLOCK):  # simulate logs at the stamps too
         assert all(log == _stamp(m) for log, _, m in sim_messages[topic])

@@ -15,6 +15,7 @@ import yaml
 from test_urdf_chain import TWO_JOINTS
 
 from exo_ilc_ros.analysis.figures import convergence_figure
+from exo_ilc_ros.bag.view import ArmView
 from exo_ilc_ros.cli.main import main as cli_main
 from exo_ilc_ros.core import run_trials
 from exo_ilc_ros.core.arm.build import build_arm, view_urdf
@@ -309,3 +310,5 @@ def test_live_view_draws_the_urdf_arm() -> None:
     closed = {child: xyz for _, child, xyz, _ in kinematics.transforms(q)}
     assert finger["panda_leftfinger"] != closed["panda_leftfinger"]
     assert set(kinematics.moving) >= set(panda["joint_names"])
+    view = ArmView(panda)  # the live view's and the bag view's arm
+    assert view.urdf == text and view.root_link == "panda_link0" and view.fixed_positions == fixed

@@ -29,9 +29,12 @@ from ..bag.storage import read_metadata
 from ..core.loop.record import TrialRecord
 from ..core.params.config import Config
 from ..core.persistence.profiles import ProfileBook
+from ..core.programs.identified import SHOWN, UNITS, WORDS, Identified
 from ..core.programs.metrics import TrialMetrics, config_metrics
+from ..core.programs.therapy import IDENTIFICATION
 from ..core.reference.build import build_reference
 from ..core.reference.exercise import PAPER_EXERCISE
+from .identified import format_value, trend
 from .therapy import DEGREES, DISPLAY, share_note, shown
 from .wording import counted
 
@@ -69,6 +72,8 @@ class ExerciseRun:
     started_from: str = ""
     order: int = 0
     """Place in the session (1, 2, ...); 0: unknown (a bag of an earlier version)."""
+    identified: list[Identified] = field(default_factory=list)
+    """The identified patient after each trial (its summaries'; empty: none)."""
 
 
 def _record_of(run: BagRun, k: int, config: Config) -> TrialRecord | None:
@@ -114,6 +119,9 @@ def exercise_run(run: BagRun) -> ExerciseRun:
                 record, config.replace({"mass_uncertainty": run.mass_uncertainty}))
         if found is not None:
             metrics.append(found)
+    identified = [found for found in (Identified.from_summary(k, run.summaries.get(k, {}),
+                                                             names) for k in run.completed)
+                  if found is not None]
     aborts = [(k, t.aborted_at if t.aborted_at is not None else -1)
               for k, t in sorted(run.trials.items()) if t.aborted_at is not None]
     reruns = [(k, reason) for k, t in sorted(run.trials.items()) for reason in t.reruns]
@@ -126,7 +134,7 @@ def exercise_run(run: BagRun) -> ExerciseRun:
         int(values.get("safety.watchdog_periods", 0)), aborts, reruns, list(run.notes),
         custom.get(PROFILE_VERSION, ""), custom.get(PROFILE_STARTED_FROM, ""),
         int(custom.get(EXERCISE_ORDER) or 0) if str(custom.get(EXERCISE_ORDER) or "").isdigit()
-        else 0)
+        else 0, identified)
 
 
 def group_by_session(runs: Sequence[ExerciseRun]) -> dict[tuple[str, str], list[ExerciseRun]]:
@@ -290,6 +298,99 @@ def _history(run: ExerciseRun, book: ProfileBook | None) -> str:
             "<th class=l>status</th></tr>" + "".join(rows) + "</table>")
 
 
+def identified_history(run: ExerciseRun,
+                       book: ProfileBook | None) -> list[tuple[str, Identified]]:
+    """(``v<version>``, the identified patient after its last trial) of every session of the
+    exercise up to this one that kept one (the profile versions' ``metrics.identification``),
+    in order; empty without profiles."""
+    if book is None or run.patient == "(no patient)" or run.patient not in book.patients():
+        return []
+    index = book.index(run.patient, run.exercise)
+    if index is None:
+        return []
+    out = []
+    for entry in _earlier_versions(index["versions"], run.profile_version):
+        data = (entry.get("metrics") or {}).get(IDENTIFICATION)
+        if not data:
+            continue
+        try:
+            out.append((f"v{entry['version']}", Identified.from_json(data)))
+        except (KeyError, TypeError, ValueError):
+            continue
+    return out
+
+
+def _series(history: Sequence[tuple[str, Identified]], p: str,
+            j: int) -> list[tuple[str, float]]:
+    return [(session, item.joints[j][p].value if item.joints[j][p].identifiable
+             else float("nan")) for session, item in history if j < len(item.joints)]
+
+
+def identification_trends(history: Sequence[tuple[str, Identified]],
+                          joint_names: Sequence[str]) -> list[str]:
+    """One line per joint and parameter with an estimate in two sessions or more:
+    ``elbow_flexion damping 0.82 -> 0.61 N m s/rad over 6 sessions``."""
+    lines = []
+    for j, name in enumerate(joint_names):
+        for p in SHOWN:
+            line = trend(_series(history, p, j), p, name)
+            if line:
+                lines.append(line)
+    return lines
+
+
+def identification_figure(history: Sequence[tuple[str, Identified]],
+                          joint_names: Sequence[str]) -> Figure:
+    """Per parameter the estimate of each session (the last trial's) with its 95 % interval,
+    one line per joint (not identifiable: left out)."""
+    fig = Figure(figsize=(10.0, 2.2 * ((len(SHOWN) + 1) // 2)), layout="constrained")
+    axes = fig.subplots((len(SHOWN) + 1) // 2, 2, squeeze=False).ravel()
+    x = np.arange(1, len(history) + 1)
+    for ax, p in zip(axes, SHOWN, strict=False):
+        for j, name in enumerate(joint_names):
+            values = np.array([v for _, v in _series(history, p, j)])
+            low = np.array([item.joints[j][p].low for _, item in history])
+            high = np.array([item.joints[j][p].high for _, item in history])
+            spread = np.nan_to_num(np.vstack([values - low, high - values]), nan=0.0)
+            ax.errorbar(x, values, yerr=np.clip(spread, 0.0, None), marker="o", markersize=3,
+                        linewidth=1.0, capsize=2, label=name)
+        ax.set_ylabel(f"{WORDS[p]} ({UNITS[p]})", fontsize=8)
+        ax.set_xticks(x, [s for s, _ in history], fontsize=7)
+        ax.grid(True, linewidth=0.3)
+        ax.legend(fontsize=7)
+    for ax in axes[len(SHOWN):]:
+        ax.set_visible(False)
+    fig.suptitle("the identified patient per session (after each session's last trial)",
+                 fontsize=10)
+    return fig
+
+
+def _identification(run: ExerciseRun, book: ProfileBook | None) -> str:
+    """The identified patient after the session's last trial and its trend across sessions
+    ("" when the run identified nothing)."""
+    if not run.identified:
+        return ""
+    last = run.identified[-1]
+    head = "".join(f"<th>{_e(WORDS[p])}</th>" for p in SHOWN)
+    rows = "".join(
+        f"<tr><td class=l>{_e(j.name)}</td>"
+        + "".join(f"<td>{_e(format_value(p, j[p]))} {_e(UNITS[p])}</td>" for p in SHOWN)
+        + f"<td>{'yes' if j.trustworthy else 'no'}</td><td>{'yes' if j.used else 'no'}</td>"
+        + f"<td class=l><span class=note>{_e(j.reason)}</span></td></tr>"
+        for j in last.joints)
+    out = (f"<h3>The identified patient</h3><p>After trial {last.trial} (95 % intervals; "
+           "n.i.: the movement did not determine it):</p><table><tr><th class=l>joint</th>"
+           f"{head}<th>trusted</th><th>used by the robot</th><th class=l>why not</th></tr>"
+           f"{rows}</table>")
+    history = identified_history(run, book)
+    lines = identification_trends(history, run.joint_names)
+    if lines:
+        out += ("<p>Across sessions:</p><ul>" + "".join(f"<li>{_e(line)}</li>" for line in lines)
+                + "</ul><img alt='the identified patient per session' src='data:image/png;"
+                f"base64,{_png(identification_figure(history, run.joint_names))}'>")
+    return out
+
+
 def _earlier_versions(versions: Sequence[dict[str, Any]],
                       this: str) -> list[dict[str, Any]]:
     """The profile versions up to this session's (a later session is not an earlier one);
@@ -322,6 +423,7 @@ def render_session(runs: Sequence[ExerciseRun], book: ProfileBook | None = None)
             f"<img alt='error, assistance, feed-forward and patient share over the trials of "
             f"{_e(run.exercise)}' src='data:image/png;base64,{_png(exercise_figure(run))}'>"
             + _joint_rows(run) + "<h3>Safety events</h3>" + _events(run)
+            + _identification(run, book)
             + "<h3>Compared with earlier sessions</h3>" + _history(run, book))
     glossary = (
         "<h2>How to read this page</h2><ul class=note>"

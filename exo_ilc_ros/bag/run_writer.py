@@ -6,11 +6,14 @@ Simulated time is the plant simulator's: trial k's sample i is stamped
 sample). The order per trial is the graph's: feed-forward, the controller's ``loaded`` and
 ``start`` at t0, the samples (``/clock`` as the plant sends it: every ``clock_every``-th sample
 and the first and last), the controller's ``done``, the summary, the trial metrics and ``end``
-at the last sample; ``finished`` after the last trial. The same topics and types as the
-recorder's bag, one storage file per trial (``split_every``), each file's metadata with the
-run's configuration. Log and publish times equal the sim stamps (the recorder's rule, see
-``nodes/bag_recorder.py``). Not written (the graph's, not the run's): the nodes' once-a-second
-health on ``/diagnostics`` and ``/parameter_events``, declared with no message.
+at the last sample; ``finished`` after the last trial. The arm's view
+(:class:`~.view.ArmView`, as the live view shows it): ``/robot_description`` and
+``/reference/robot_description`` once, at the start (log time 0), and per sample a ``/tf`` at
+its stamp. The same topics and types as the recorder's bag, one storage file per trial
+(``split_every``), each file's metadata with the run's configuration. Log and publish times
+equal the sim stamps (the recorder's rule, see ``nodes/bag_recorder.py``). Not written (the
+graph's, not the run's): the nodes' once-a-second health on ``/diagnostics`` and
+``/parameter_events``, declared with no message.
 """
 
 from __future__ import annotations
@@ -23,12 +26,14 @@ from pathlib import Path
 import numpy as np
 
 from ..core.params.config import Config
+from ..core.programs.identified import Identified
 from ..core.programs.metrics import TrialMetrics, metric_summary_values
 from ..core.session.result import RunResult
 from ..wire import protocol, topics
 from ..wire.qos import offered_qos
 from . import messages
 from .provenance import TRIALS_COMPLETED, provenance_data
+from .view import ArmView
 from .writer import BagWriter
 
 NS = 1_000_000_000
@@ -53,9 +58,9 @@ def unique_path(parent: Path | str, name: str) -> Path:
 
 
 def declare_topics(writer: BagWriter) -> None:
-    """Every topic of :data:`topics.TYPES`, with the QoS the graph's publishers offer."""
+    """Every topic of :data:`topics.BAG_TYPES`, with the QoS their publishers offer."""
 
-    for topic, msgtype in topics.TYPES.items():
+    for topic, msgtype in topics.BAG_TYPES.items():
         writer.add_topic(topic, msgtype, offered_qos(topic))
 
 
@@ -75,8 +80,11 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
     period_ns = int(round(float(config["control.period"]) * NS))
     clock_every = max(1, int(config["clock_every"]))
     measured = config.replace({"mass_uncertainty": result.mass_uncertainty})
+    view = ArmView(config)
     with BagWriter(path, storage=storage, custom_data=custom) as writer:
         declare_topics(writer)
+        for topic, raw in view.descriptions().items():
+            writer.write(topic, 0, raw)
         for k, record in enumerate(result.records, start=1):
             ref = record.reference
             samples = ref.samples
@@ -84,6 +92,7 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
             ff = messages.feedforward(t0, k, names, ref.time, ref.position, ref.velocity,
                                       record.feedforward)
             writer.write(topics.FEEDFORWARD, t0, ff)
+            view.load_reference(ff)
             writer.write(topics.DIAGNOSTICS, t0, messages.controller_status(
                 t0, "loaded", [("trial", str(k)), ("t0_ns", str(t0))]))
             writer.write(topics.TRIAL_EVENTS, t0, messages.trial_event(t0, "start", k))
@@ -92,8 +101,12 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                 ns = t0 + i * period_ns
                 if i % clock_every == 0 or i == samples - 1:  # as plant_simulator sends it
                     writer.write(topics.CLOCK, ns, messages.clock(ns))
-                writer.write(topics.JOINT_STATES, ns, messages.joint_state(
-                    ns, names, record.position[i], record.velocity[i], applied[i]))
+                state = messages.joint_state(ns, names, record.position[i],
+                                             record.velocity[i], applied[i])
+                writer.write(topics.JOINT_STATES, ns, state)
+                tf = view.tf(state)
+                if tf is not None:
+                    writer.write(topics.TF, ns, tf[1])
                 writer.write(topics.EFFORT_COMMANDS, ns,
                              messages.effort_command(record.effort[i]))
             end = t0 + (samples - 1) * period_ns
@@ -107,6 +120,9 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                 values += metrics[k - 1].summary_values(names)
             else:  # as the supervisor files them (core/programs/metrics.py)
                 values += metric_summary_values(record, measured, names)
+            step = result.joint_forces.get(k)
+            if step is not None:  # as the supervisor files it (core/programs/identified.py)
+                values += Identified.from_step(step, names).summary_values()
             within = bool(np.all(record.max_abs_error <= result.error_bound))
             aborted = -1 if record.aborted_at is None else int(record.aborted_at)
             writer.write(topics.DIAGNOSTICS, end, messages.controller_status(

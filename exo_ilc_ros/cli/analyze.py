@@ -11,9 +11,11 @@ from pathlib import Path
 from typing import Any
 
 from ..analysis import figures
+from ..analysis.identified import format_table
 from ..analysis.report import format_iterations, format_run_events, format_trial_table, write_json
 from ..analysis.wording import counted
 from ..bag import BagReadError, BagRun, read_bag
+from ..core.programs.identified import Identified
 from ..core.session.summary import RunSummary
 from .arguments import figure_path, integer, json_file
 
@@ -69,6 +71,14 @@ def describe(run: BagRun) -> str:
                      f"{json.dumps(change['value'])} from trial {change['trial']}")
     lines += [f"  note: {note}" for note in run.notes]
     return "\n".join(lines)
+
+
+def identified(run: BagRun) -> list[Identified]:
+    """The identification each completed trial's summary carries (empty: none, a run
+    without ``identification.enabled`` or a bag of an earlier version)."""
+    found = (Identified.from_summary(k, run.summaries.get(k, {}), run.joint_names)
+             for k in run.completed)
+    return [item for item in found if item is not None]
 
 
 def write_csv(path: Path | str, runs: Sequence[RunSummary], joint_names: Sequence[str]) -> None:
@@ -139,6 +149,10 @@ def analyze(args: argparse.Namespace) -> int:
         print(describe(run))
     labels = bag_labels(bag_runs)
     runs = [run.summary() for run in bag_runs]
+    for run, summary in zip(bag_runs, runs, strict=True):
+        found = identified(run)
+        if found:  # the last estimate, as simulate's JSON has it
+            summary.extra["identified"] = found[-1].to_json()
     usable = [(r, label) for r, label in zip(runs, labels, strict=True)
               if len(r.max_abs_error)]
     if not usable:
@@ -167,6 +181,11 @@ def analyze(args: argparse.Namespace) -> int:
         print(events)
         print()
     print(format_iterations(summaries, names, labels=usable_labels))
+    if not args.quiet:
+        for run, label in zip(bag_runs, labels, strict=True):
+            table = format_table(identified(run), run.joint_names)
+            if table:
+                print(f"\n{label}: the identified patient per trial\n{table}")
     if args.csv:
         write_csv(args.csv, summaries, names)
         print(f"wrote {args.csv}")

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 from ..analysis.loop import format_analysis, format_robustness, plot_analysis
 from ..core.convergence.factors import analyze_loop
 from ..core.convergence.norm_optimal_robustness import robustness
+from ..core.convergence.patient_load import patient_load
+from ..core.params.config import Config, load_config
 from .arguments import (
     config_with_flags,
     figure_file,
@@ -15,6 +18,7 @@ from .arguments import (
     integer,
     mass_uncertainty,
     parameter,
+    scenario,
 )
 
 
@@ -40,6 +44,12 @@ def register(sub: Any) -> None:
     parser.add_argument("--lifted", type=integer(0), metavar="K", default=0,
                         help="also check the finite trial exactly: spectral radius and growth "
                         "over K trials of the lifted (N+1)x(N+1) map (slower)")
+    parser.add_argument("--scenarios", type=scenario, nargs="+", metavar="NAME|FILE",
+                        help="also analyse against these virtual patients' arms (their linear "
+                        "joint forces: stiffness and damping, passive, spastic and their own "
+                        "pull; shipped names or files) and say which the law is robust to; "
+                        "with the config's identification in the loop its update inverts them "
+                        "(taken as identified exactly)")
     parser.add_argument("--plot", metavar="OUT.png", type=figure_file, help="plot |F| against "
                         "frequency (PNG); with several uncertainties, one file each "
                         "(OUT_d0.05.png, ...)")
@@ -79,4 +89,33 @@ def run(args: argparse.Namespace) -> int:
         report = robustness(config)
         print()
         print(format_robustness(report))
+    if args.scenarios:
+        print()
+        print(_patients(args, config, deltas))
     return 0
+
+
+def _patients(args: argparse.Namespace, config: Config, deltas: list[float]) -> str:
+    """One line per scenario and delta: the worst factor against that patient's arm."""
+    inverted = config["identification.enabled"] and config["identification.in_loop"]
+    how = (", the model rebuilt about them" if (args.law or config["law"]) == "norm_optimal"
+           else ", the update inverting them") if inverted else ""
+    lines = ["against the patients' arms (their linear joint forces; Coulomb friction and the "
+             f"reflex left out: `exo-ilc study` has the nonlinear answer){how}:"]
+    robust: list[str] = []
+    not_robust: list[str] = []
+    for path in args.scenarios:
+        label = Path(path).stem
+        load = patient_load(load_config(args.config, overlays=[path]), label)
+        worst = 0.0
+        for delta in deltas:
+            analysis = analyze_loop(config, args.law, delta, patient=load,
+                                    lifted_trials=args.lifted)
+            factor = analysis.worst(filtered=analysis.qfilter is not None)
+            worst = max(worst, factor)
+            lines.append(f"  {label:<12} delta {delta:<5g} worst |F| {factor:.5f}"
+                         + ("" if factor <= 1.0 + 1e-9 else "  the learned input can grow"))
+        (robust if worst <= 1.0 + 1e-9 else not_robust).append(label)
+    lines.append("bounded for: " + (", ".join(robust) or "none") + "; can grow for: "
+                 + (", ".join(not_robust) or "none"))
+    return "\n".join(lines)

@@ -7,7 +7,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..analysis.session_report import exercise_run, group_by_session, render_session
+from ..analysis.session_report import (
+    exercise_run,
+    group_by_session,
+    identification_trends,
+    identified_history,
+    render_session,
+)
 from ..bag import BagError, read_bag
 from ..core.persistence.files import write_bytes_atomic
 from ..core.persistence.profiles import ProfileBook
@@ -56,4 +62,7 @@ def run(args: argparse.Namespace) -> int:
         target.chmod(0o644)  # a page to share (the atomic temp file is private)
         print(f"wrote {target} (patient {patient}, session {session}, "
               f"{len(members)} exercise(s))")
+        for run in members:  # the identified patient's trend across sessions
+            for line in identification_trends(identified_history(run, book), run.joint_names):
+                print(f"  {run.exercise}: {line}")
     return 0

@@ -8,6 +8,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from ..analysis.identified import format_final
 from ..analysis.report import (
     format_iterations,
     format_long_run,
@@ -20,9 +21,11 @@ from ..bag import BagError, read_bag, run_name, unique_path, write_run
 from ..bag.replay import replay
 from ..core.errors import ConfigError
 from ..core.params.config import Config
+from ..core.programs.identified import Identified
 from ..core.programs.metrics import config_metrics
 from ..core.programs.spread import iteration_spread
 from ..core.session.learning_session import run_trials
+from ..core.session.result import RunResult
 from ..core.session.summary import RunSummary
 from .arguments import (
     add_scenario_argument,
@@ -169,6 +172,7 @@ def simulate(args: argparse.Namespace) -> int:
             result = run_trials(config, delta, trials, on_trial=progress, store=args.store,
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
+        add_identified(runs[-1], result, config["joint_names"])
         if args.spread:
             runs[-1].extra["spread"] = _spread(config, delta, trials, args.spread)
         if args.json:  # the therapy metrics of every trial (core/programs/metrics.py)
@@ -184,6 +188,14 @@ def simulate(args: argparse.Namespace) -> int:
             print(f"bag: {write_run(path, config, result)}", file=sys.stderr)
     print_report(args, config, runs)
     return aborted_exit(runs, "simulate")
+
+
+def add_identified(summary: RunSummary, result: RunResult, names: list[str]) -> None:
+    """The identification after the run's last trial as ``summary.extra["identified"]`` (the
+    JSON's and the report's; nothing without ``identification.enabled``)."""
+    if result.joint_forces:
+        last = result.joint_forces[max(result.joint_forces)]
+        summary.extra["identified"] = Identified.from_step(last, names).to_json()
 
 
 def _spread(config: Config, delta: float, trials: int, count: int) -> dict[str, Any]:
@@ -254,6 +266,10 @@ def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary
     print(format_iterations(runs, names))
     print()
     print(format_long_run(runs, names))
+    for run in runs:
+        if run.extra.get("identified"):
+            print()
+            print(format_final(Identified.from_json(run.extra["identified"]), run_title(run)))
     if args.json:
         write_json(args.json, config.values, runs)
         print(f"wrote {args.json}")

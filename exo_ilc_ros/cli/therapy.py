@@ -21,7 +21,15 @@ from ..core.persistence.files import write_json_atomic
 from ..core.persistence.profiles import ProfileBook
 from ..core.persistence.store import RunStore
 from ..core.programs.metrics import config_metrics
-from ..core.programs.therapy import ExerciseResult, prepare, profiles_root, run_exercise, session_id
+from ..core.programs.therapy import (
+    IDENTIFICATION,
+    ExerciseResult,
+    identified_of_records,
+    prepare,
+    profiles_root,
+    run_exercise,
+    session_id,
+)
 from ..core.reference.build import build_reference
 from ..core.reference.exercise import exercises_path, load_book
 from ..core.session.learning_session import stored_trials
@@ -108,6 +116,8 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
         results.append(done)
         summary = RunSummary.from_result(done.result)
         summary.extra["therapy"] = done.to_json()
+        if done.identified:
+            summary.extra["identified"] = done.identified[-1].to_json()
         runs.append(summary)
         print(f"profile: {book.directory(args.patient, name)} v{done.version} (the patient's "
               f"session {done.config['patient.session']} of {name})", file=sys.stderr)
@@ -252,9 +262,13 @@ def _profile_from_store(writer: Any, config: Any, stored: list[Any],
         return None
     metrics = [config_metrics(s.record, config) for s in stored]
     last = stored[-1]
+    filed = metrics[-1].to_json()
+    identified = identified_of_records(config, [s.record for s in stored])
+    if identified is not None:  # the version keeps the last estimate, as in-process
+        filed[IDENTIFICATION] = identified.to_json()
     true_error = getattr(last.record, "true_max_abs_error", last.record.max_abs_error)
     writer.save(last.record.trial, last.next_update, true_error,
-                complete=len(stored) >= count, metrics=metrics[-1].to_json())
+                complete=len(stored) >= count, metrics=filed)
     return metrics
 
 

@@ -12,6 +12,11 @@ stays out of the loop's way: it reads only the trial events every ``INBOX_PERIOD
 and writes the other topics (the samples, commands, /clock) at the next trial event, or after
 :data:`DATA_PERIOD` at the latest; DDS holds them meanwhile (``RECORDER_DEPTH``). The samples
 between two trial events go to the bag as one batch (``BagWriter.write_many``).
+The bag also holds the arm as the live view shows it (:class:`~exo_ilc_ros.bag.view.ArmView`,
+the view's own code): ``/robot_description`` and ``/reference/robot_description`` once, at the
+start, and a ``/tf`` per recorded JointState at its stamp (publish time: the JointState's).
+The transforms are computed when a trial's file is finished (:meth:`BagRecorder._split`),
+between trials, never within one.
 ``exo-ilc run`` starts it in the supervisor's process (``container ilc_supervisor
 bag_recorder``), where it shares the supervisor's /joint_states subscription.
 A new storage file starts after each trial (``split_every`` trials), so a SIGKILL loses at most
@@ -50,6 +55,7 @@ from ..bag.provenance import (
     parameter_changes_data,
     provenance_data,
 )
+from ..bag.view import ArmView
 from ..bag.writer import BagWriter
 from ..core.params.config import load_config
 from ..wire import topics
@@ -67,6 +73,8 @@ READY_TOPICS = (topics.JOINT_STATES, topics.CLOCK, topics.EFFORT_COMMANDS, topic
 each reader-writer pair is discovered on its own, and a volatile topic published before its
 pair matched is lost to the recorder (/clock was not waited for, and once its first 26
 messages of trial 1 were missing)."""
+VIEWED = frozenset({topics.JOINT_STATES, topics.FEEDFORWARD})
+"""Topics the arm's view (/tf) is computed from."""
 PROTOCOL_TOPICS = frozenset({topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.PARAMETER_EVENTS})
 """Topics the recorder reads as well as writes (trial boundaries, parameter changes); the rest
 are written in batches."""
@@ -113,9 +121,17 @@ class BagRecorder(Node):
             config = load_config(config_file)
             custom = provenance_data(config, recorded_by=NAME, run_name=self.run_name)
         else:
+            config = load_config()
             custom[VERSION] = __version__
             self.get_logger().warning("no config_file given: the bag will not hold the run's "
-                                      "config")
+                                      "config (its /robot_description is the shipped arm)")
+        self.view: ArmView | None = None
+        try:
+            self.view = ArmView(config)
+        except Exception as exc:  # the recording goes on: only the arm's view is missing
+            self.get_logger().error(f"no /robot_description or /tf in the bag: {exc}")
+        self.view_pending: list[tuple[int, str, bytes]] = []
+        """The samples and feed-forwards since the last file, for their /tf (:meth:`_split`)."""
         self.writer = BagWriter(path, storage=storage, custom_data=custom)
         self.writer.open()
         self.started = 0
@@ -145,6 +161,11 @@ class BagRecorder(Node):
             inbox = self.events if topic in PROTOCOL_TOPICS else self.inbox
             self.subscriptions_by_topic[topic] = inbox.subscribe(
                 message_class(msgtype), topic, subscription_qos(topic))
+        for topic, msgtype in topics.VIEW_TYPES.items():  # computed here, not subscribed to
+            self.writer.add_topic(topic, msgtype, offered_qos(topic))
+        for topic, raw in (self.view.descriptions() if self.view else {}).items():
+            self.writer.write(topic, self.sim_clock.ns, raw, time.time_ns())
+            self.messages += 1
         self.data_due = 0.0
         """Monotonic time by which the other topics are taken again (:data:`DATA_PERIOD`)."""
         self.status_pub = self.create_publisher(
@@ -188,8 +209,34 @@ class BagRecorder(Node):
                 self.on_message(topic, raw, received)
             else:
                 samples.append((log_time, topic, raw, received))
+                if topic in VIEWED and self.view is not None:
+                    self.view_pending.append((received, topic, raw))
         self.messages += self.writer.write_many(samples)
         return len(taken)
+
+    def write_view(self) -> int:
+        """The /tf of every sample taken since the last call, in receive order (a feed-forward
+        sets the reference of the samples after it), each at its sample's stamp; returns how
+        many."""
+        pending, self.view_pending = self.view_pending, []
+        view = self.view
+        if view is None:
+            return 0
+        batch: list[tuple[int, str, bytes, int]] = []
+        for received, topic, raw in pending:
+            if topic == topics.FEEDFORWARD:
+                try:
+                    view.load_reference(raw)
+                except ValueError as exc:
+                    self.get_logger().warning(f"/tf without the reference arm: {exc}",
+                                              once=True)
+                continue
+            tf = view.tf(raw)
+            if tf is not None:
+                batch.append((tf[0], topics.TF, tf[1], received))
+        written = self.writer.write_many(batch)
+        self.messages += written
+        return written
 
     def drain(self) -> int:
         """Write everything waiting (after a stop; see :class:`~.common.DrainingNode`)."""
@@ -264,7 +311,9 @@ class BagRecorder(Node):
                 self.writer.set_custom_data(key, text)
 
     def _split(self) -> None:
+        """The trial's /tf (:meth:`write_view`), then its file is finished and filed."""
         trial, self.ended = self.ended, None
+        self.write_view()
         self.writer.set_custom_data(TRIALS_COMPLETED, str(self.completed))
         for key, text in parameter_changes_data(self.changes).items():
             self.writer.set_custom_data(key, text)
@@ -279,6 +328,7 @@ class BagRecorder(Node):
     def destroy_node(self) -> None:
         """Close the bag (writes the last file and metadata.yaml), then the node."""
         self.poll(everything=True)
+        self.write_view()
         self.events.destroy()
         self.inbox.destroy()
         self.writer.set_custom_data(TRIALS_COMPLETED, str(self.completed))

@@ -280,7 +280,9 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     the process boundary once (ROS 2 composition). A :class:`PollingNode` has its ``poll()``
     called after every event and at least every :data:`INBOX_PERIOD`. On stop, every node but
     the :class:`DrainingNode` ones is destroyed first, those are drained (:data:`DRAIN_IDLE`)
-    and then destroyed (the recorder closes its bag). Returns the exit code: 0, 2 for a
+    and then destroyed (the recorder closes its bag). Each node's published counts
+    (:data:`PUBLISHED_PREFIX`) are printed once the others can publish no more: out of the
+    executor, the callbacks still queued for them run. Returns the exit code: 0, 2 for a
     configuration or bag error, or the first ``exit_code`` a polling node sets.
     """
     with realtime.node_process():  # the nodes' SCHED_FIFO requests apply while they run
@@ -318,19 +320,22 @@ def _run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None) 
             if codes:  # a node that must stop (fatal error)
                 code = int(codes[0])
                 break
-        _deliver(nodes)
-        for node in nodes:  # (a draining node's own status goes on while it drains)
-            print(f"{PUBLISHED_PREFIX}{node.get_name()} "
-                  f"{json.dumps(published_counts(node), sort_keys=True)}",
-                  file=sys.stderr, flush=True)
         draining = [node for node in polling
                     if isinstance(node, DrainingNode) and node.DRAINS_ON_STOP]
         leaving = [n for n in nodes if n not in draining]
         for node in leaving:
             executor.remove_node(node)
-            nodes.remove(node)
-        _settle(executor)  # the executor lets go of their entities before they are destroyed
+        # The executor lets go of their entities before they are destroyed, and runs the
+        # callbacks already queued for them (a message that arrived while stopping): those
+        # may publish, so only now is what they published final.
+        _settle(executor)
+        _deliver(nodes)
+        for node in nodes:  # (a draining node's own status goes on while it drains)
+            print(f"{PUBLISHED_PREFIX}{node.get_name()} "
+                  f"{json.dumps(published_counts(node), sort_keys=True)}",
+                  file=sys.stderr, flush=True)
         for node in leaving:
+            nodes.remove(node)
             destroy(node)
         _drain(executor, [node.drain for node in draining])
     except ExoIlcError as exc:

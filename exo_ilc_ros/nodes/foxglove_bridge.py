@@ -9,12 +9,12 @@ forwards the bytes untouched, each logged at its sim time
 their ``ros2msg`` schema:
 ``/joint_states``, ``/effort_controller/commands``, ``/ilc/feedforward``, ``/clock``,
 ``/ilc/trial_events``, ``/ilc/trial_summary``, ``/ilc/trial_metrics``, ``/diagnostics``. It
-adds ``/robot_description`` (``std_msgs/String``, the arm's URDF from the run's config),
+adds the arm's view (:class:`~exo_ilc_ros.bag.view.ArmView`, the same messages every bag
+holds): ``/robot_description`` (``std_msgs/String``, the arm's URDF from the run's config),
 ``/reference/robot_description`` (the same arm, links prefixed ``reference/``) and ``/tf``
 (``tf2_msgs/TFMessage``: per sample one transform per joint of the measured arm, stamped with
-the JointState stamp, by :class:`~exo_ilc_ros.core.forward_kinematics.UrdfKinematics`, and
-the reference pose q_d(t_i) of the trial's feed-forward on the ``reference/`` tree, placed
-:data:`REFERENCE_OFFSET` beside the arm). ``/clock`` drives the app's clock
+the JointState stamp, and the reference pose q_d(t_i) of the trial's feed-forward on the
+``reference/`` tree, placed beside the arm). ``/clock`` drives the app's clock
 (``Capability.Time``). The protocol has no latching: what was logged before a client
 subscribed (the URDFs, the last feed-forward, every trial's summary, metrics and events) is
 logged again when a channel gets a subscriber (its other subscribers then get a copy too).
@@ -38,27 +38,21 @@ import os
 import sys
 import threading
 import time
-import xml.etree.ElementTree as ET
 from typing import Any
 
 import foxglove
-import numpy as np
 from foxglove import Channel, Schema
 from foxglove.websocket import Capability, ServerListener
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
-from trajectory_msgs.msg import JointTrajectory
 
-from ..bag.messages import serialize, typestore
-from ..core.arm.build import view_urdf
-from ..core.arm.forward_kinematics import UrdfKinematics
+from ..bag.messages import typestore
+from ..bag.view import ArmView
 from ..core.errors import ConfigError
 from ..core.params.config import load_config
 from ..wire import topics
-from ..wire.cdr import read_joint_state
 from ..wire.sim_time import SimClock
-from ..wire.tf import TF, TF_TYPE, tf_message
+from ..wire.tf import TF
 from .bag_recorder import message_class
 from .common import Inbox, run_nodes
 from .parameters import command_line_parameters
@@ -74,12 +68,6 @@ LATCHED = frozenset({topics.FEEDFORWARD, topics.TRIAL_EVENTS, topics.TRIAL_SUMMA
 REPLAYED = {topics.FEEDFORWARD: 1, topics.TRIAL_EVENTS: None, topics.TRIAL_SUMMARY: None,
             topics.TRIAL_METRICS: None}
 """Topic -> how many of its last messages a new subscriber gets again (None: all)."""
-ROBOT_DESCRIPTION = "/robot_description"
-REFERENCE_DESCRIPTION = "/reference/robot_description"
-REFERENCE_PREFIX = "reference/"
-REFERENCE_OFFSET = (0.0, 0.6, 0.0)
-"""m: where the reference arm's base stands in the measured arm's root link frame
-(``base_link`` for the paper's arm)."""
 READER_DEPTH = 10000
 SCHEDULING = ("idle", "batch", "normal")
 DEFAULT_SCHEDULING = "idle"
@@ -114,23 +102,6 @@ def ros2_channel(topic: str, msgtype: str) -> Channel:
                    schema=Schema(name=msgtype, encoding="ros2msg", data=text.encode()))
 
 
-def prefixed_urdf(urdf: str, prefix: str) -> str:
-    """The URDF with every link (and joint) name prefixed: a second arm on its own TF tree."""
-    root = ET.fromstring(urdf)
-    root.set("name", prefix + str(root.get("name", "")))
-    for element in root.iter():
-        if element.tag in ("link", "joint") and element.get("name"):
-            element.set("name", prefix + str(element.get("name")))
-        if element.tag in ("parent", "child") and element.get("link"):
-            element.set("link", prefix + str(element.get("link")))
-    return ET.tostring(root, encoding="unicode")
-
-
-def string_message(text: str) -> bytes:
-    """``std_msgs/msg/String`` CDR."""
-    return serialize(typestore().types["std_msgs/msg/String"](data=text), "std_msgs/msg/String")
-
-
 class _Listener(ServerListener):
     """Re-logs the messages a channel had before its new subscriber came (on an SDK thread)."""
 
@@ -162,27 +133,15 @@ class FoxgloveBridge(Node):
                               NAME)
         self.declare_parameter("scheduling", DEFAULT_SCHEDULING)  # applied by main(), first
         config = load_config(config_file or None)
-        self.joint_names: list[str] = list(config["joint_names"])
-        self.period_ns = int(round(float(config["control.period"]) * 1e9))
-        self.urdf, self.fixed_positions, self.root_link = view_urdf(config)
-        self.kinematics = UrdfKinematics(self.urdf)
-        self.reference_kinematics = UrdfKinematics(prefixed_urdf(self.urdf, REFERENCE_PREFIX))
-        self.reference_names = [REFERENCE_PREFIX + n for n in self.joint_names]
+        self.view = ArmView(config)
         self.exit_code: int | None = None
         self.sim_clock = SimClock()
-        self.reference: tuple[int, np.ndarray] | None = None
-        """(t0 ns, q_d per sample) of the last feed-forward."""
         self._lock = threading.Lock()
         self._kept: dict[str, list[tuple[int, bytes]]] = {
-            ROBOT_DESCRIPTION: [(0, string_message(self.urdf))],
-            REFERENCE_DESCRIPTION: [(0, string_message(
-                prefixed_urdf(self.urdf, REFERENCE_PREFIX)))]}
+            topic: [(0, raw)] for topic, raw in self.view.descriptions().items()}
         self.channels: dict[str, Channel] = {
-            topic: ros2_channel(topic, topics.TYPES[topic]) for topic in FORWARDED}
-        self.channels[ROBOT_DESCRIPTION] = ros2_channel(ROBOT_DESCRIPTION, "std_msgs/msg/String")
-        self.channels[REFERENCE_DESCRIPTION] = ros2_channel(REFERENCE_DESCRIPTION,
-                                                            "std_msgs/msg/String")
-        self.channels[TF] = ros2_channel(TF, TF_TYPE)
+            topic: ros2_channel(topic, topics.BAG_TYPES[topic])
+            for topic in (*FORWARDED, *topics.VIEW_TYPES)}
         try:
             self.server = foxglove.start_server(
                 name="exo_ilc_ros", host=host, port=port, capabilities=[Capability.Time],
@@ -242,40 +201,18 @@ class FoxgloveBridge(Node):
 
     def _load_reference(self, raw: bytes) -> None:
         try:
-            msg = deserialize_message(raw, JointTrajectory)
-            order = [list(msg.joint_names).index(n) for n in self.joint_names]
-            q = np.array([np.asarray(p.positions)[order] for p in msg.points], dtype=float)
-        except Exception as exc:  # a foreign profile: no reference pose, the rest goes on
+            self.view.load_reference(raw)
+        except ValueError as exc:  # a foreign profile: no reference pose, the rest goes on
             self.get_logger().warning(f"feed-forward not shown as the reference: {exc}")
-            return
-        stamp = msg.header.stamp
-        self.reference = (int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec), q)
 
     def _transforms(self, raw: bytes) -> None:
-        """/tf of one sample: the measured arm's joints and, on the ``reference/`` tree, q_d
-        at the same sample of the trial (by the stamp: t0 + i period)."""
+        """/tf of one sample (:meth:`ArmView.tf`), while someone subscribes to it."""
         channel = self.channels[TF]
         if not channel.has_sinks():
             return
-        try:
-            stamp, position, _ = read_joint_state(raw)
-        except ValueError:
-            return
-        if position.shape[0] != len(self.joint_names):
-            return
-        transforms = self.kinematics.transforms(
-            {**self.fixed_positions, **dict(zip(self.joint_names, position.tolist(),
-                                                strict=True))})
-        transforms.append((self.root_link, REFERENCE_PREFIX + self.root_link, REFERENCE_OFFSET,
-                           (0.0, 0.0, 0.0, 1.0)))
-        if self.reference is not None:
-            t0, q_d = self.reference
-            i = int(round((stamp - t0) / self.period_ns))
-            if 0 <= i < q_d.shape[0]:
-                transforms += self.reference_kinematics.transforms(
-                    {**{REFERENCE_PREFIX + k: v for k, v in self.fixed_positions.items()},
-                     **dict(zip(self.reference_names, q_d[i].tolist(), strict=True))})
-        channel.log(tf_message(stamp, transforms), log_time=stamp)
+        out = self.view.tf(raw)
+        if out is not None:
+            channel.log(out[1], log_time=out[0])
 
     def destroy_node(self) -> None:
         """Stop the server (after :data:`FLUSH`), leave the subscriptions, then the node."""

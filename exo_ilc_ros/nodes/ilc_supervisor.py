@@ -27,6 +27,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from ..core.params import schema
+from ..core.programs.identified import Identified
 from ..core.protocol.graph import TrialProtocol
 from ..core.protocol.homing_protocol import HomingProtocol
 from ..core.session.learning_session import TrialConclusion
@@ -98,7 +99,9 @@ class IlcSupervisor(Node):
                              admit=self.truth_from.admit_raw)
         self.truth_gate = JointStateGate(self.joint_names, self.rejections)
         self.health = Health(self, NAME)
-        self.health.checks += [self._run_check,
+        self.identified: Identified | None = None
+        """The identified patient after the last trial (``identification.enabled``)."""
+        self.health.checks += [self._run_check, self._identification_check,
                                rejections_check(self.rejections, "inputs"),
                                self.samples_from.health, self.truth_from.health]
         self.create_timer(0.1, self.on_timer, clock=wall_clock())
@@ -256,6 +259,8 @@ class IlcSupervisor(Node):
                                    ("reason", topics.ENVELOPE_REASON),
                                    ("aborted_at", str(record.aborted_at))], end_ns)
         summary = trial_summary(conclusion, self.joint_names)
+        if conclusion.joint_forces is not None:  # on /diagnostics too (the health)
+            self.identified = Identified.from_step(conclusion.joint_forces, self.joint_names)
         if isinstance(self.protocol, HomingProtocol):
             summary.values.extend(KeyValue(key=k, value=v) for k, v in
                                   self.protocol.summary_values(record, self.joint_names))
@@ -286,6 +291,11 @@ class IlcSupervisor(Node):
     def on_health_timer(self) -> None:
         """Health on /diagnostics."""
         self.health_pub.publish(diagnostic_array(self, [self.health.status()]))
+
+    def _identification_check(self) -> tuple[bytes, str, list[tuple[str, str]]]:
+        """The identified patient after the last trial (nothing before one, or when off)."""
+        values = [] if self.identified is None else self.identified.status_values()
+        return DiagnosticStatus.OK, "", values
 
     def _run_check(self) -> tuple[bytes, str, list[tuple[str, str]]]:
         protocol, session = self.protocol, self.protocol.session

@@ -12,6 +12,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..core.params.schema import SUPERVISOR
+from ..core.programs.identified import Identified
 from ..core.programs.metrics import metric_summary_values
 from ..core.reference.trajectory import SampledReference
 from ..core.session.learning_session import TrialConclusion
@@ -44,7 +45,8 @@ def feedforward_message(reference: SampledReference, feedforward: np.ndarray, tr
 
 
 def trial_summary(conclusion: TrialConclusion, joint_names: Sequence[str]) -> DiagnosticStatus:
-    """``/ilc/trial_summary`` of a concluded trial: OK within the bound, else WARN."""
+    """``/ilc/trial_summary`` of a concluded trial: OK within the bound, else WARN; with the
+    identified patient (``identified/...``) when the session identifies it."""
     record, config = conclusion.record, conclusion.config
     values = summary_values(record.trial, config["mass_uncertainty"], config["law"],
                             joint_names, record.max_abs_error,
@@ -55,6 +57,8 @@ def trial_summary(conclusion: TrialConclusion, joint_names: Sequence[str]) -> Di
                             else record.true_max_abs_error,
                             conclusion.update.notes if conclusion.learned else ())
     values += metric_summary_values(record, config, joint_names)  # core/programs/metrics.py
+    if conclusion.joint_forces is not None:  # core/programs/identified.py
+        values += Identified.from_step(conclusion.joint_forces, joint_names).summary_values()
     level = DiagnosticStatus.OK if conclusion.within_bound else DiagnosticStatus.WARN
     return status(topics.SUMMARY_STATUS, f"trial {record.trial}", values, level, SUPERVISOR)
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..core.params.config import Config
 from ..core.persistence.store import RunStore
+from ..core.programs.identified import Identified
 from ..core.reference.build import build_reference
 from ..core.session.summary import RunSummary, live_changes
 from ..nodes.common import EVENTS_QOS
@@ -78,6 +79,10 @@ def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSu
     aborted = [s.trial for s in summaries if "aborted_at" in s.values]
     if aborted:
         summary.extra["aborted_trials"] = aborted
+    identified = Identified.from_summary(summaries[-1].trial, summaries[-1].values, joints) \
+        if summaries else None
+    if identified is not None:  # the last estimate, as simulate reports it
+        summary.extra["identified"] = identified.to_json()
     return summary
 
 

@@ -17,6 +17,9 @@ from . import topics
 OFFERED_DEPTH = 1000
 """History depth of the graph's sample and event publishers (``SAMPLES_QOS``, ``EVENTS_QOS``)."""
 
+TF_DEPTH = 100
+"""History depth of /tf as tf2's TransformBroadcaster offers it."""
+
 DIAGNOSTICS_DEPTH = 10
 """History depth of the nodes' /diagnostics publishers (``DIAGNOSTICS_QOS``)."""
 
@@ -45,10 +48,16 @@ OFFERED: dict[str, tuple[tuple[str, int], ...]] = {
     topics.TRIAL_METRICS: ((TRANSIENT_LOCAL, OFFERED_DEPTH),),
     topics.DIAGNOSTICS: ((TRANSIENT_LOCAL, DIAGNOSTICS_DEPTH), (TRANSIENT_LOCAL, OFFERED_DEPTH)),
     topics.PARAMETER_EVENTS: ((VOLATILE, OFFERED_DEPTH),),
+    topics.ROBOT_DESCRIPTION: ((TRANSIENT_LOCAL, 1),),
+    topics.REFERENCE_DESCRIPTION: ((TRANSIENT_LOCAL, 1),),
+    topics.TF: ((VOLATILE, TF_DEPTH),),
 }
 """Per topic, the (durability, depth) of each distinct publisher profile, all reliable and
 keep-last: /diagnostics has the nodes' health (depth 10) and bag_recorder's status (depth
-1000, ``EVENTS_QOS``); /parameter_events is rclpy's default profile for it."""
+1000, ``EVENTS_QOS``); /parameter_events is rclpy's default profile for it. The view's topics
+(:data:`topics.VIEW_TYPES`, written by the bag writers, no node publishes them) as ROS
+publishes them: the URDFs as robot_state_publisher (transient local, depth 1), /tf as tf2's
+TransformBroadcaster (volatile, depth 100), so ``ros2 bag play`` offers them so too."""
 
 
 def offered_qos(topic: str) -> list[Any]:

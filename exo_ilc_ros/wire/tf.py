@@ -8,9 +8,9 @@ import struct
 from collections.abc import Sequence
 
 from .cdr import HEADER
+from .topics import TF, VIEW_TYPES
 
-TF = "/tf"
-TF_TYPE = "tf2_msgs/msg/TFMessage"
+TF_TYPE = VIEW_TYPES[TF]
 _U32 = struct.Struct("<I")
 _STAMP = struct.Struct("<iI")
 _SEVEN = struct.Struct("<7d")

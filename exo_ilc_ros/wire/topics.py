@@ -99,7 +99,23 @@ TYPES: dict[str, str] = {
     DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray",
     PARAMETER_EVENTS: "rcl_interfaces/msg/ParameterEvent",
 }
-"""Every recorded topic and its ROS 2 type name."""
+"""Every recorded topic of the graph and its ROS 2 type name (what the recorder subscribes to)."""
+
+ROBOT_DESCRIPTION = "/robot_description"
+REFERENCE_DESCRIPTION = "/reference/robot_description"
+TF = "/tf"
+VIEW_TYPES: dict[str, str] = {
+    ROBOT_DESCRIPTION: "std_msgs/msg/String",
+    REFERENCE_DESCRIPTION: "std_msgs/msg/String",
+    TF: "tf2_msgs/msg/TFMessage",
+}
+"""The arm as the live view shows it (``bag/view.py``): its URDF and the reference arm's, as
+robot_state_publisher publishes ``/robot_description``, and per sample the arm's and the
+reference's joint transforms on ``/tf``. No node of the graph publishes them: the live view
+and the bag writers compute them from the recorded samples and feed-forward."""
+
+BAG_TYPES: dict[str, str] = {**TYPES, **VIEW_TYPES}
+"""Every topic a bag lists (the graph's recorder and ``exo-ilc simulate --bag`` alike)."""
 
 RESET_SERVICE = "/plant_simulator/reset"
 START_SERVICE = "/plant_simulator/start"

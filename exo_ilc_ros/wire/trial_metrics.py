@@ -9,15 +9,18 @@ generates none), and its layout names the entries, so the message explains itsel
 * ``data[0]`` = trial k, ``data[1]`` = the summary's level (0 OK: every joint within the
   error bound, 1 WARN), so ``layout.data_offset`` = :data:`HEADER_SIZE` = 2;
 * then a metrics x joints matrix, row-major: ``layout.dim[0]`` (label ``metric=`` and the
-  comma-separated names of :data:`ROWS`, size 7, stride 7 J), ``layout.dim[1]`` (label
+  comma-separated names of :data:`ROWS`, size 10, stride 10 J), ``layout.dim[1]`` (label
   ``joint=`` and the joint names, size J, stride J). Entry (metric r, joint j) is
   ``data[2 + r J + j]``; NaN where the trial has none (the levels of trial 1, which no
   update formed, and of laws without levels).
 
 Rows: ``max |e|`` (rad), RMS e (rad, the summary's ``metric/rms_error``: of the true error),
-``max |u_ff|`` (rad/s^2), ``max |effort|`` (N m), and the step gains M, M', M'' of eq. (11)
-that formed the trial's feed-forward. With 3 joints: ``max |e|`` of joint 1 is ``data[2]``, RMS
-e ``data[5]``, M ``data[14]`` (:func:`index`).
+``max |u_ff|`` (rad/s^2), ``max |effort|`` (N m), the step gains M, M', M'' of eq. (11)
+that formed the trial's feed-forward, and the identified patient's damping B (N m s/rad),
+Coulomb friction F_c (N m) and stiffness K (N m/rad) after the trial (``identified/viscous``,
+``identified/coulomb``, ``identified/stiffness``; NaN without identification or where not
+identifiable). With 3 joints: ``max |e|`` of joint 1 is ``data[2]``, RMS e ``data[5]``, M
+``data[14]``, B ``data[23]``, F_c ``data[26]``, K ``data[29]`` (:func:`index`).
 """
 
 from __future__ import annotations
@@ -27,6 +30,9 @@ from typing import NamedTuple
 
 from . import topics
 
+IDENTIFIED_ROWS = ("viscous", "coulomb", "stiffness")
+"""The identified parameters drawn per trial (``identified/<name>/<joint>`` of the summary,
+core/programs/identified.py): NaN where the summary has none or calls it not identifiable."""
 HEADER = ("trial", "level")
 HEADER_SIZE = len(HEADER)
 ROWS: tuple[tuple[str, str], ...] = (
@@ -35,6 +41,7 @@ ROWS: tuple[tuple[str, str], ...] = (
     ("max_abs_feedforward", "max_abs_feedforward"),
     ("max_abs_effort", "max_abs_effort"),
     *((f"level/{symbol}", f"level/{symbol}") for symbol in topics.LEVEL_SYMBOLS),
+    *((f"identified/{name}", f"identified/{name}") for name in IDENTIFIED_ROWS),
 )
 """(row name, summary key prefix ``<prefix>/<joint>``) of the matrix, in order."""
 ROW_NAMES = tuple(name for name, _ in ROWS)
@@ -77,6 +84,11 @@ def trial_metrics(values: Mapping[str, str], names: Sequence[str],
     j = len(names)
     data = [_number(values.get("trial")), 1.0 if warn else 0.0]
     for _, prefix in ROWS:
+        if prefix.startswith("identified/"):  # only what the trials determine
+            data += [_number(values.get(f"{prefix}/{n}"))
+                     if values.get(f"{prefix}/identifiable/{n}") == "true" else float("nan")
+                     for n in names]
+            continue
         data += [_number(values.get(f"{prefix}/{n}")) for n in names]
     dims = (Dimension(METRIC_LABEL + ",".join(ROW_NAMES), len(ROWS), len(ROWS) * j),
             Dimension(JOINT_LABEL + ",".join(names), j, j))

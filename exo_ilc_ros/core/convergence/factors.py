@@ -47,6 +47,7 @@ from ..params.config import Config
 from ..reference.exercise import exercise_duration
 from .joint_loop import JointLoop
 from .norm_optimal_robustness import frequency_factor, lifted_factor
+from .patient_load import PatientLoad
 
 
 def lifted_map(loop: JointLoop, samples: int, memory: Memory,
@@ -62,7 +63,7 @@ def lifted_map(loop: JointLoop, samples: int, memory: Memory,
     T, g = loop.period, loop.gain
     a = np.array([[1.0, T], [0.0, 1.0]])
     b = g * np.array([T * T / 2.0, T])
-    a_cl = a - np.outer(b, [loop.kp, loop.kd])
+    a_cl = a - np.outer(b, [loop.kp + loop.stiffness, loop.kd + loop.damping])
     markov = np.zeros((samples, 2))
     x = b.copy()
     for m in range(1, samples):
@@ -163,6 +164,8 @@ class LoopAnalysis:
     qfilter: QFilter | None
     forgetting: float | None = None
     """Assist-as-needed's forgetting factor when it is on (factors: worst over its gate)."""
+    patient: PatientLoad | None = None
+    """The patient whose linear joint forces the plant carries (None: the arm alone)."""
 
     @property
     def nyquist_hz(self) -> float:
@@ -188,11 +191,13 @@ def learning_gains(config: Config, law: str) -> list[tuple[float, float, float]]
 
 def analyze_loop(config: Config, law: str | None = None, mass_uncertainty: float | None = None,
                  points: int = 2001, qfilter: QFilter | None = None,
-                 lifted_trials: int = 0) -> LoopAnalysis:
+                 lifted_trials: int = 0, patient: PatientLoad | None = None) -> LoopAnalysis:
     """The factor (*) per joint of ``law`` (default: the config's) on ``points`` frequencies
     from 0 to Nyquist, without and with the Q-filter (``qfilter``, default: the config's).
     ``lifted_trials`` > 0 adds the finite-trial check (:func:`lifted_check`) over that many
-    trials."""
+    trials. ``patient``: the plant carries that patient's linear joint forces; a config whose
+    identification is in the loop inverts them in its update (``identification.inverse_gain``,
+    taken as identified exactly), or rebuilds norm-optimal's model about them."""
     name = law or config["law"]
     delta = float(config["mass_uncertainty"] if mass_uncertainty is None else mass_uncertainty)
     period = float(config["control.period"])
@@ -201,14 +206,20 @@ def analyze_loop(config: Config, law: str | None = None, mass_uncertainty: float
     frequency = np.linspace(0.0, 0.5 / period, points)
     q = q_filter.response(frequency) if q_filter is not None else None
     if name == "norm_optimal":
-        return _analyze_norm_optimal(config, delta, frequency, q_filter, q, lifted_trials)
+        return _analyze_norm_optimal(config, delta, frequency, q_filter, q, lifted_trials,
+                                     patient)
+    inverse = float(config["identification.inverse_gain"]) if patient is not None and \
+        config["identification.enabled"] and config["identification.in_loop"] else 0.0
     forgetting = config["assist_as_needed.forgetting"] \
         if config["assist_as_needed.enabled"] else None
     joints = []
-    for name_j, kp, kd, gains in zip(config["joint_names"], config["control.kp"],
-                                     config["control.kd"], learning_gains(config, name),
-                                     strict=True):
-        loop = JointLoop(1.0 / (1.0 + delta), kp, kd, period)
+    for j, (name_j, kp, kd, gains) in enumerate(zip(
+            config["joint_names"], config["control.kp"], config["control.kd"],
+            learning_gains(config, name), strict=True)):
+        stiffness, damping = (0.0, 0.0) if patient is None else \
+            (float(patient.stiffness[j]), float(patient.damping[j]))
+        loop = JointLoop(1.0 / (1.0 + delta), kp, kd, period, stiffness, damping)
+        gains = (gains[0] + inverse * stiffness, gains[1] + inverse * damping, gains[2])
         raw = loop.factor(frequency, memory, gains, forgetting=forgetting)
         plain = with_q = None
         if lifted_trials > 0:
@@ -222,26 +233,34 @@ def analyze_loop(config: Config, law: str | None = None, mass_uncertainty: float
                                                       forgetting, g), lifted_trials)
                               for g in gates), key=lambda c: c.spectral_radius)
         joints.append(JointFactor(name_j, raw, None if q is None else q * raw, plain, with_q))
-    return LoopAnalysis(name, memory, delta, period, frequency, joints, q_filter, forgetting)
+    return LoopAnalysis(name, memory, delta, period, frequency, joints, q_filter, forgetting,
+                        patient)
 
 
 def _analyze_norm_optimal(config: Config, delta: float, frequency: np.ndarray,
                           q_filter: QFilter | None, q: np.ndarray | None,
-                          lifted_trials: int) -> LoopAnalysis:
+                          lifted_trials: int, patient: PatientLoad | None = None
+                          ) -> LoopAnalysis:
     """The factor of (NO2) (:func:`.norm_optimal_robustness.frequency_factor`) per joint; its
     memory is the feed-forward. ``lifted_trials`` > 0 adds the whole-arm lifted map's check
-    (joints are coupled in the ``linearised`` model: the same check on every joint)."""
+    (joints are coupled in the ``linearised`` model: the same check on every joint), against
+    the ``patient``'s arm when given (the model about it too when identification is in the
+    loop)."""
 
     plain = None
     if lifted_trials > 0:
-        check = lifted_factor(config, delta, radius=True)
+        about = patient is not None and config["identification.enabled"] and \
+            config["identification.in_loop"]
+        check = lifted_factor(config, delta, radius=True,
+                              patient=None if patient is None else patient.along(config),
+                              model_about_patient=about)
         plain = LiftedCheck(float(check.radius or 0.0), float(np.log(check.norm)), 1)
     joints = [JointFactor(name_j, raw, None if q is None else q * raw, plain, None)
               for name_j, raw in zip(config["joint_names"],
-                                     frequency_factor(config, delta, frequency),
+                                     frequency_factor(config, delta, frequency, patient),
                                      strict=True)]
     return LoopAnalysis("norm_optimal", Memory.FEEDFORWARD, delta, float(config["control.period"]),
-                        frequency, joints, q_filter)
+                        frequency, joints, q_filter, None, patient)
 
 
 def packet_growth_rate(worst_factor: float, trial: float) -> float:

@@ -14,12 +14,17 @@ from ..learning.laws import Memory
 
 @dataclass(frozen=True)
 class JointLoop:
-    """The sampled loop of one joint: plant gain g = 1/(1+delta), PD gains, period."""
+    """The sampled loop of one joint: plant gain g = 1/(1+delta), PD gains, period, and the
+    patient's linear joint forces per unit of the joint's nominal inertia (eq (6)'s Q^c and
+    Q^v: K / a_N,jj in s^-2, B / a_N,jj in s^-1), which act through the same gain g as the
+    controller's PD: qdd = g (u - stiffness q - damping qdot)."""
 
     gain: float
     kp: float
     kd: float
     period: float
+    stiffness: float = 0.0
+    damping: float = 0.0
 
     def closed_loop(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """P_q(z), P_v(z): u_ff -> q and u_ff -> qdot of x_{i+1} = (A - B K) x_i + B u_ff,i.
@@ -28,9 +33,10 @@ class JointLoop:
         """
         T, g = self.period, self.gain
         b1, b2 = g * T * T / 2.0, g * T
+        kp, kd = self.kp + self.stiffness, self.kd + self.damping  # the patient's add to the PD
         # A - B K = [[1 - b1 kp, T - b1 kd], [-b2 kp, 1 - b2 kd]]
-        a11, a12 = 1.0 - b1 * self.kp, T - b1 * self.kd
-        a21, a22 = -b2 * self.kp, 1.0 - b2 * self.kd
+        a11, a12 = 1.0 - b1 * kp, T - b1 * kd
+        a21, a22 = -b2 * kp, 1.0 - b2 * kd
         det = (z - a11) * (z - a22) - a12 * a21
         pq = ((z - a22) * b1 + a12 * b2) / det
         pv = (a21 * b1 + (z - a11) * b2) / det

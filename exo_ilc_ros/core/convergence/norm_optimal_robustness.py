@@ -10,29 +10,41 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..learning.norm_optimal_model import Weights, learning_matrices, lifted_model
+from ..learning.norm_optimal_model import (
+    PatientLinearisation,
+    Weights,
+    learning_matrices,
+    lifted_model,
+)
 from ..params.config import Config
 from .joint_loop import JointLoop
+from .patient_load import PatientLoad
 
 
-def frequency_factor(config: Config, delta: float, frequency_hz: np.ndarray
-                     ) -> list[np.ndarray]:
+def frequency_factor(config: Config, delta: float, frequency_hz: np.ndarray,
+                     patient: PatientLoad | None = None) -> list[np.ndarray]:
     """|F(e^jw)| per joint of (NO2) for long trials, per-joint model of gain g_m against the plant
     of gain 1 / (1 + delta):
 
         F = (We |P_m|^2 + Wd - We conj(P_m) P) / (We |P_m|^2 + Wd + Wu),
 
     P_m, P the sampled closed loops u_ff -> q (:class:`.convergence.JointLoop`) of the model and
-    the plant. The ``linearised`` model's gravity terms are not in this per-joint picture; the
-    lifted check (:func:`lifted_factor`) has them."""
+    the plant (with the ``patient``'s linear joint forces, in the model too when the config's
+    identification is in the loop). The ``linearised`` model's gravity terms are not in this
+    per-joint picture; the lifted check (:func:`lifted_factor`) has them."""
+    about = patient is not None and config["identification.enabled"] and \
+        config["identification.in_loop"]
     period = float(config["control.period"])
     z = np.exp(2j * np.pi * np.asarray(frequency_hz, dtype=float) * period)
     model_gain = 1.0 / (1.0 + float(config["norm_optimal.model_mass_uncertainty"]))
     weights = Weights.of(config)
     out = []
     for j, (kp, kd) in enumerate(zip(config["control.kp"], config["control.kd"], strict=True)):
-        pm, _ = JointLoop(model_gain, kp, kd, period).closed_loop(z)
-        pt, _ = JointLoop(1.0 / (1.0 + delta), kp, kd, period).closed_loop(z)
+        s, d = (0.0, 0.0) if patient is None else \
+            (float(patient.stiffness[j]), float(patient.damping[j]))
+        pm, _ = JointLoop(model_gain, kp, kd, period, *((s, d) if about else (0.0, 0.0))
+                          ).closed_loop(z)
+        pt, _ = JointLoop(1.0 / (1.0 + delta), kp, kd, period, s, d).closed_loop(z)
         we, wd, wu = weights.error[j], weights.input_change[j], weights.input_size[j]
         den = we * np.abs(pm) ** 2 + wd + wu
         out.append(np.asarray(np.abs((we * np.abs(pm) ** 2 + wd - we * np.conj(pm) * pt) / den)))
@@ -52,12 +64,17 @@ class LiftedRobustness:
     """Spectral radius of F (None: not computed)."""
 
 
-def lifted_factor(config: Config, delta: float, radius: bool = False) -> LiftedRobustness:
+def lifted_factor(config: Config, delta: float, radius: bool = False,
+                  patient: PatientLinearisation | None = None,
+                  model_about_patient: bool = False) -> LiftedRobustness:
     """:class:`LiftedRobustness` of the config's weights against a plant with masses
-    (1 + delta) (its closed loop linearised along the reference, (NO4) with delta)."""
-    matrices = learning_matrices(config)
+    (1 + delta) (its closed loop linearised along the reference, (NO4) with delta) and the
+    ``patient``'s joint forces; ``model_about_patient``: the law's model rebuilt about them
+    (the identification in the loop, taken as exact)."""
+    matrices = learning_matrices(config, patient if model_about_patient else None)
     plant = lifted_model(config.replace({"norm_optimal.model_kind": "linearised",
-                                         "norm_optimal.model_mass_uncertainty": float(delta)}))
+                                         "norm_optimal.model_mass_uncertainty": float(delta)}),
+                         patient)
     f = matrices.phi - matrices.learning @ plant.g
     rho = float(np.max(np.abs(np.linalg.eigvals(f)))) if radius else None
     return LiftedRobustness(float(delta), float(np.linalg.norm(f, 2)), rho)

@@ -277,14 +277,17 @@ def _build_matrices(model: LiftedModel, weights: Weights) -> LearningMatrices:
     return LearningMatrices(model, weights, learning, memory)
 
 
-def learning_matrices(config: Config) -> LearningMatrices:
-    """L and Phi of (NO2) for the config, computed once per configuration (cached by the model's
-    values and the weights; a change of any other parameter reuses them)."""
-    key = (_key(config, MODEL_KEYS), _key(config, WEIGHT_KEYS))
+def learning_matrices(config: Config, patient: PatientLinearisation | None = None
+                      ) -> LearningMatrices:
+    """L and Phi of (NO2) for the config (about the identified ``patient``), computed once per
+    configuration (cached by the model's values and the weights; a change of any other
+    parameter reuses them)."""
+    key = (_key(config, MODEL_KEYS) + ("" if patient is None else patient.key),
+           _key(config, WEIGHT_KEYS))
     matrices = _MATRICES.get(key)
     if matrices is None:
         start = time.perf_counter()
-        built = _build_matrices(lifted_model(config), Weights.of(config))
+        built = _build_matrices(lifted_model(config, patient), Weights.of(config))
         matrices = LearningMatrices(built.model, built.weights, built.learning, built.memory,
                                     time.perf_counter() - start)
         _remember(_MATRICES, key, matrices)

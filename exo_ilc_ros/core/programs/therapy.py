@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..arm.build import build_arm
 from ..errors import ProfileError
+from ..learning.patient_model import JointForceModel
 from ..loop.patient import PatientLearning, PatientModel
 from ..loop.record import TrialRecord
 from ..params.config import Config
@@ -27,7 +29,12 @@ from ..persistence.profiles import ProfileBook, check_name, default_root
 from ..reference.build import build_reference
 from ..session.learning_session import TrialConclusion, run_trials
 from ..session.result import RunResult
+from .identified import Identified
 from .metrics import SessionMetrics, TrialMetrics, config_metrics, session_metrics
+
+IDENTIFICATION = "identification"
+"""The key of a trial's metrics (a profile version's ``metrics``) holding the identified
+patient after it (:meth:`.identified.Identified.to_json`; absent without identification)."""
 
 
 def session_id() -> str:
@@ -59,6 +66,8 @@ class ExerciseResult:
     """The profile version the session started from (None: no profile yet)."""
     version: int | None = None
     """The profile version this session wrote."""
+    identified: list[Identified] = field(default_factory=list)
+    """The identified patient after each trial (``identification.enabled``; empty: off)."""
 
     @property
     def session(self) -> SessionMetrics | None:
@@ -72,7 +81,8 @@ class ExerciseResult:
                 "profile_started_from": self.started_from, "profile_version": self.version,
                 "patient_session": self.config["patient.session"],
                 "metrics": [m.to_json() for m in self.metrics],
-                "session": None if summary is None else summary.to_json()}
+                "session": None if summary is None else summary.to_json(),
+                IDENTIFICATION: self.identified[-1].to_json() if self.identified else None}
 
 
 def prepare(config: Config, book: ProfileBook, patient: str, exercise: str,
@@ -116,21 +126,39 @@ def run_exercise(prepared: PreparedExercise, book: ProfileBook, trials: int | No
         patient_start=None if patient is None else PatientState(patient.fast, patient.slow))
     cfg = writer.config
     metrics: list[TrialMetrics] = []
+    identified: list[Identified] = []
 
     def conclude(conclusion: TrialConclusion) -> None:
         record = conclusion.record
         measured = config_metrics(record, cfg)
         metrics.append(measured)
+        filed = measured.to_json()
+        if conclusion.joint_forces is not None:  # the version keeps the last estimate
+            identified.append(Identified.from_step(conclusion.joint_forces,
+                                                   cfg["joint_names"]))
+            filed[IDENTIFICATION] = identified[-1].to_json()
         true_error = getattr(record, "true_max_abs_error", record.max_abs_error)
         writer.save(record.trial, conclusion.update, true_error,
-                    complete=conclusion.stop is not None, metrics=measured.to_json(),
+                    complete=conclusion.stop is not None, metrics=filed,
                     patient_state=None if patient is None else
                     PatientState(patient.fast, patient.slow))
 
     result = run_trials(cfg, on_trial=on_trial, on_conclusion=conclude, patient=patient)
     return ExerciseResult(prepared.patient, prepared.exercise, cfg, result, metrics,
                           None if prepared.start is None else prepared.start.version,
-                          writer.version if metrics else None)
+                          writer.version if metrics else None, identified)
+
+
+def identified_of_records(config: Config,
+                          records: Sequence[TrialRecord]) -> Identified | None:
+    """The identified patient after ``records`` (a graph run's stored trials, in order),
+    replayed as the session identified them (None: ``identification.enabled`` is off or no
+    record)."""
+    if not config["identification.enabled"] or not records:
+        return None
+    model = JointForceModel(config, build_arm(config), build_reference(config))
+    steps = [model.conclude(record) for record in records]
+    return Identified.from_step(steps[-1], config["joint_names"])
 
 
 def patient_start_state(prepared: PreparedExercise, patient: PatientLearning) -> PatientState:

@@ -127,6 +127,8 @@ class LearningSession:
             self.next_update = FeedforwardUpdate(first, None)
         self.joint_forces: JointForceModel | None = None
         """The identified patient (``identification.enabled``, :mod:`..learning.patient_model`)."""
+        self.replayed: dict[int, JointForceStep] = {}
+        """The identification of each trial :meth:`resume` restored, by trial."""
         if self.config["identification.enabled"]:
             self.joint_forces = JointForceModel(self.config, build_arm(self.config),
                                                 self.reference)
@@ -254,7 +256,7 @@ class LearningSession:
             if item.record.aborted:
                 self.aborted_trials.append(item.record.trial)
             if self.joint_forces is not None:  # the identification is replayed, exactly
-                self.joint_forces.conclude(item.record)
+                self.replayed[k] = self.joint_forces.conclude(item.record)
         if stored and self.joint_forces is not None:
             stored_force = stored[-1].next_update.joint_force
             if stored_force is not None:
@@ -379,6 +381,7 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
         run_store, restored = session.open_store(store, resume)
         result.records.extend(item.record for item in restored)
         result.resumed = len(restored)
+        result.joint_forces.update(session.replayed)
         for item in restored:
             if patient is not None:
                 patient.learn(item.record.trial, true_error(item.record))
@@ -402,6 +405,8 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
         result.records.append(record)
         if conclusion.learned and conclusion.update.notes:
             result.notes[record.trial] = conclusion.update.notes
+        if conclusion.joint_forces is not None:
+            result.joint_forces[record.trial] = conclusion.joint_forces
         if on_trial is not None:
             on_trial(record)
     result.final = session.next_update

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..convergence.bound import IterationsToBound, iterations_to_bound
 from ..learning.laws import FeedforwardUpdate
+from ..learning.patient_model import JointForceStep
 from ..loop.record import TrialRecord
 
 
@@ -40,6 +41,9 @@ class RunResult:
     """Live changes per effective trial (the first trial run with them)."""
     notes: dict[int, tuple[str, ...]] = field(default_factory=dict)
     """What the law reported when it learned from a trial (e.g. active constraints), by trial."""
+    joint_forces: dict[int, JointForceStep] = field(default_factory=dict)
+    """The identification of the patient's joint forces after each trial, by trial
+    (``identification.enabled``; empty: off)."""
 
     @property
     def aborted(self) -> list[int]:

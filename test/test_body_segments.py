@@ -15,7 +15,7 @@ from exo_ilc_ros.core.arm.body_segments import (
     with_segments,
 )
 from exo_ilc_ros.core.arm.urdf_chain import read_urdf_chain
-from exo_ilc_ros.core.arm.urdf_xml import UrdfError
+from exo_ilc_ros.core.params.urdf_xml import UrdfError
 
 ARM = """<robot name="exo2">
   <link name="base"/>

@@ -72,7 +72,7 @@ BAD_VALUES: list[tuple[dict[str, Any], str, str]] = [
      ">= 0"),
     ({"control.kp": [16.0, -1.0, 10.0]}, "control.kp", ">= 0"),
     ({"model.link_masses": [0.0, -1.4, 1.1]}, "model.link_masses", ">= 0"),
-    ({"control.kd": [8.0, 5.0]}, "control.kd", "one entry per joint (3), got 2"),
+    ({"control.kd": [8.0, 5.0]}, "control.kd", "one entry per joint (3: shoulder_flexion"),
     ({"model.joint_axes": ["x", "w", "x"]}, "model.joint_axes", "unknown joint axis 'w'"),
     ({"law": "magic"}, "law", "must be one of sign, linear"),
     ({"error_bound": 0.0}, "error_bound", "> 0"),

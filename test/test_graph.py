@@ -407,3 +407,23 @@ def test_run_reports_the_mass_uncertainty_it_ran(tmp_path: Path, store: bool,
                           timeout=60)
         assert report.returncode == 0, report.stderr
         assert json.loads(analyzed.read_text())["runs"][0]["mass_uncertainty"] == 0.15
+
+
+def test_urdf_arm_through_the_graph_equals_in_process(tmp_path: Path) -> None:
+    """The Panda (config/arms/panda.yaml, 7 joints from its URDF) through the graph: every node
+    validates the 7-joint config (the other nodes' per-joint keys from the parameters file, not
+    the shipped 3-joint defaults) and the trials are simulate's to 1e-9."""
+    arm = ROOT / "config" / "arms" / "panda.yaml"
+    graph_json, local_json = tmp_path / "graph.json", tmp_path / "local.json"
+    common = ["--config", str(arm), "--trials", "2", "--mass-uncertainty", "0.1"]
+    result = _exo_ilc("run", "--no-bag", "--no-store", *common, "--json", str(graph_json),
+                      timeout=200, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-3000:]
+    local = _exo_ilc("simulate", *common, "--json", str(local_json), timeout=120)
+    assert local.returncode == 0, local.stderr[-3000:]
+    (g,), (r,) = json.loads(graph_json.read_text())["runs"], json.loads(
+        local_json.read_text())["runs"]
+    for key in ("max_abs_error", "max_abs_feedforward", "max_abs_effort"):
+        np.testing.assert_allclose([t[key] for t in g["trials"]], [t[key] for t in r["trials"]],
+                                   rtol=0.0, atol=1e-9, err_msg=key)
+    assert len(g["trials"][0]["max_abs_error"]) == 7

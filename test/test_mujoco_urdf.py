@@ -14,8 +14,8 @@ from test_urdf_chain import TWO_JOINTS, TWO_LOCKED
 from exo_ilc_ros.core.arm.dynamics import inertia_and_bias
 from exo_ilc_ros.core.arm.mujoco_urdf import MujocoUrdfArm, chain_urdf
 from exo_ilc_ros.core.arm.urdf_chain import read_urdf_chain
-from exo_ilc_ros.core.arm.urdf_xml import UrdfError
 from exo_ilc_ros.core.loop.plant import PlantDynamics, integrate_period
+from exo_ilc_ros.core.params.urdf_xml import UrdfError
 
 ARMS = [("ur5", "base_link", "tool0", {}),
         ("panda", "panda_link0", "panda_hand",

@@ -16,8 +16,8 @@ from exo_ilc_ros.cli.main import main as cli_main
 from exo_ilc_ros.core.arm.build import build_arm
 from exo_ilc_ros.core.arm.dynamics import inertia_and_bias, solve_spd
 from exo_ilc_ros.core.arm.urdf_chain import LimitError, check_reference_limits, read_urdf_chain
-from exo_ilc_ros.core.arm.urdf_xml import UrdfError, resolve_package_uri
 from exo_ilc_ros.core.params.config import load_config
+from exo_ilc_ros.core.params.urdf_xml import UrdfError, resolve_package_uri
 
 TWO_JOINTS = """<?xml version="1.0"?>
 <robot name="two">

@@ -18,9 +18,8 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from ..core.arm.build import build_arm
+from ..core.arm.build import view_urdf
 from ..core.arm.forward_kinematics import UrdfKinematics
-from ..core.arm.urdf import arm_urdf
 from ..core.params.config import Config
 from ..wire import topics
 from ..wire.cdr import read_joint_state
@@ -29,7 +28,8 @@ from .messages import serialize, time_ns, typestore
 
 REFERENCE_PREFIX = "reference/"
 REFERENCE_OFFSET = (0.0, 0.6, 0.0)
-"""m: where the reference arm's base stands in the measured arm's ``base_link`` frame."""
+"""m: where the reference arm's base stands in the measured arm's root link frame
+(``base_link`` for the paper's arm)."""
 
 
 def prefixed_urdf(urdf: str, prefix: str) -> str:
@@ -55,7 +55,8 @@ class ArmView:
     def __init__(self, config: Config) -> None:
         self.joint_names: list[str] = list(config["joint_names"])
         self.period_ns = int(round(float(config["control.period"]) * 1e9))
-        self.urdf = arm_urdf(build_arm(config), self.joint_names, config["control.effort_limit"])
+        self.urdf, self.fixed_positions, self.root_link = view_urdf(config)
+        """The arm's URDF (a URDF arm's own), its locked joints' values and its root link."""
         self.reference_urdf = prefixed_urdf(self.urdf, REFERENCE_PREFIX)
         self.kinematics = UrdfKinematics(self.urdf)
         self.reference_kinematics = UrdfKinematics(self.reference_urdf)
@@ -92,14 +93,16 @@ class ArmView:
             return None
         if position.shape[0] != len(self.joint_names):
             return None
-        transforms = self.kinematics.transforms(dict(zip(self.joint_names, position.tolist(),
-                                                         strict=True)))
-        transforms.append(("base_link", REFERENCE_PREFIX + "base_link", REFERENCE_OFFSET,
+        transforms = self.kinematics.transforms(
+            {**self.fixed_positions, **dict(zip(self.joint_names, position.tolist(),
+                                                strict=True))})
+        transforms.append((self.root_link, REFERENCE_PREFIX + self.root_link, REFERENCE_OFFSET,
                            (0.0, 0.0, 0.0, 1.0)))
         if self.reference is not None:
             t0, q_d = self.reference
             i = int(round((stamp - t0) / self.period_ns))
             if 0 <= i < q_d.shape[0]:
                 transforms += self.reference_kinematics.transforms(
-                    dict(zip(self.reference_names, q_d[i].tolist(), strict=True)))
+                    {**{REFERENCE_PREFIX + k: v for k, v in self.fixed_positions.items()},
+                     **dict(zip(self.reference_names, q_d[i].tolist(), strict=True))})
         return stamp, tf_message(stamp, transforms)

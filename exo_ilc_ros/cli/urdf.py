@@ -8,7 +8,7 @@ from typing import Any
 
 from ..core.arm.build import build_arm
 from ..core.arm.urdf import arm_urdf
-from ..core.params.config import load_config
+from ..core.params.config import load_config, urdf_source
 from .arguments import input_file, json_file
 
 
@@ -22,9 +22,12 @@ def register(sub: Any) -> None:
 
 
 def write_urdf(args: argparse.Namespace) -> int:
-    """Generate and write."""
+    """Generate and write (a URDF arm: its own URDF, as read)."""
     config = load_config(args.config)
-    text = arm_urdf(build_arm(config), config["joint_names"], config["control.effort_limit"])
+    if config["model.source"] == "urdf":  # the arm's own URDF, unchanged
+        text, _, _ = urdf_source(config.values)
+    else:
+        text = arm_urdf(build_arm(config), config["joint_names"], config["control.effort_limit"])
     if args.out:
         Path(args.out).write_text(text)
         print(f"wrote {args.out}")

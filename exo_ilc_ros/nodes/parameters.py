@@ -62,6 +62,7 @@ class SchemaParameters:
             else:
                 node.declare_parameter(p.name, defaults[p.name], descriptor)
         values = defaults.values
+        values.update(other_sections(_command_line(), self._params))  # e.g. a 7-joint arm's
         values.update({name: node.get_parameter(name).value for name in self._params})
         self.config: Config = Config(values, f"parameters of node {node.get_name()}")
         """The configuration the node started with (validated)."""
@@ -150,6 +151,28 @@ class GivenValue(NamedTuple):
     value: Any
     origin: str
     wildcard: bool = False
+
+
+def other_sections(argv: Sequence[str], own: Mapping[str, Any]) -> dict[str, Any]:
+    """The per-joint parameters that the ``--params-file`` files in ``argv`` give in any
+    section, except the node's ``own``: what the node validates its configuration with besides
+    its own values (a URDF arm's joint count holds for every section; the shipped defaults are
+    the paper's three joints). Other sections' other values stay the shipped ones (a supervisor
+    without a plant_simulator to ask keeps the shipped plant values)."""
+    out: dict[str, Any] = {}
+    args = list(argv)
+    for i, arg in enumerate(args[:-1]):
+        if arg != "--params-file":
+            continue
+        try:
+            document = load_ros_yaml(Path(args[i + 1]).read_text())
+        except (OSError, yaml.YAMLError):
+            continue  # command_line_parameters names the file
+        for _, body in _params_file_sections(document):
+            out.update((name, value) for name, value in flatten_tree(body)
+                       if name in schema.BY_NAME and schema.BY_NAME[name].per_joint
+                       and name not in own)
+    return out
 
 
 def command_line_parameters(argv: Sequence[str], node_fqn: str) -> dict[str, GivenValue]:

@@ -30,8 +30,8 @@ from enum import Enum
 
 import numpy as np
 
+from ..params.urdf_xml import UrdfError
 from .urdf_chain import UrdfChain
-from .urdf_xml import UrdfError
 
 
 class Sex(Enum):

@@ -1,14 +1,70 @@
 """The arm a config describes (its ``model.*`` keys): the nominal model the computed torque
-uses; the plant scales its masses (:meth:`.model.ArmModel.with_mass_scale`)."""
+uses; the plant scales its masses (:meth:`.model.ArmModel.with_mass_scale`). ``model.source``
+says where it comes from: the paper's truncated cones (``cones``) or a URDF's chain (``urdf``,
+:mod:`.urdf_chain`)."""
 
 from __future__ import annotations
 
-from ..params.config import Config
+import xml.etree.ElementTree as ET
+from typing import Any
+
+import numpy as np
+
+from ..params import schema
+from ..params.config import Config, urdf_path, urdf_source
 from .model import ArmModel
+from .urdf import arm_urdf
+from .urdf_chain import UrdfChain, read_urdf_chain
+
+_CHAINS: dict[tuple[Any, ...], UrdfChain] = {}
 
 
 def build_arm(config: Config) -> ArmModel:
     """The nominal arm of the config (the model the computed torque uses)."""
+    if config["model.source"] == "urdf":
+        return arm_from_chain(urdf_chain(config))
     return ArmModel.from_links(config["model.link_masses"], config["model.link_lengths"],
                                config["model.radius_proximal"], config["model.radius_distal"],
                                config["model.joint_axes"], config["model.gravity"])
+
+
+def urdf_chain(config: Config) -> UrdfChain:
+    """The URDF chain of a ``model.source: urdf`` config (read once per file contents, links and
+    locks)."""
+    locked = schema.parse_locked_joints(config["model.locked_joints"])
+    key = (config.urdf_digest, config["model.base_link"], config["model.tip_link"],
+           tuple(sorted(locked.items())), config["model.gravity"])
+    chain = _CHAINS.get(key)
+    if chain is None:
+        chain = read_urdf_chain(urdf_path(config["model.urdf"]), config["model.base_link"],
+                                config["model.tip_link"], locked, config["model.gravity"])
+        _CHAINS[key] = chain
+    return chain
+
+
+def arm_from_chain(chain: UrdfChain) -> ArmModel:
+    """An :class:`ArmModel` of a URDF chain: its kernels' arrays and limits; each link's length
+    is the distance to the next joint (the last: 0), its radii 0 (a URDF gives no cones)."""
+    lengths = np.zeros(chain.dof)
+    lengths[:-1] = np.linalg.norm(chain.offsets[1:], axis=1)
+    zeros = np.zeros(chain.dof)
+    return ArmModel(chain.masses.copy(), lengths, zeros, zeros.copy(), chain.axes.copy(),
+                    chain.offsets.copy(), chain.coms.copy(), chain.inertias.copy(),
+                    chain.gravity.copy(), chain.position_lower.copy(),
+                    chain.position_upper.copy(), chain.velocity_limit.copy(),
+                    chain.effort_limit.copy())
+
+
+def view_urdf(config: Config) -> tuple[str, dict[str, float], str]:
+    """What a viewer draws of the config's arm: its URDF (the cone arm's from :func:`arm_urdf`,
+    a URDF arm's own file), the positions of the joints that do not move (a URDF arm's locked
+    joints) and the URDF's root link."""
+    if config["model.source"] != "urdf":
+        return (arm_urdf(build_arm(config), config["joint_names"],
+                         config["control.effort_limit"]), {}, "base_link")
+    text, _, _ = urdf_source(config.values)
+    root = ET.fromstring(text)
+    children = {c.get("link") for c in root.iter("child")}
+    roots = [link.get("name", "") for link in root.findall("link")
+             if link.get("name") not in children]
+    return text, schema.parse_locked_joints(config["model.locked_joints"]), roots[0]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -34,6 +35,13 @@ class ArmModel:
     coms: np.ndarray
     inertias: np.ndarray
     gravity: np.ndarray
+    position_lower: np.ndarray | None = None
+    """rad per joint, from a URDF's ``<limit lower>`` (-inf: none); None: a cone arm (no limits)."""
+    position_upper: np.ndarray | None = None
+    velocity_limit: np.ndarray | None = None
+    """rad/s per joint, from a URDF's ``<limit velocity>`` (inf: none)."""
+    effort_limit: np.ndarray | None = None
+    """N m per joint, from a URDF's ``<limit effort>`` (inf: none)."""
 
     @classmethod
     def from_links(cls, masses: Sequence[float], lengths: Sequence[float],
@@ -71,9 +79,8 @@ class ArmModel:
         scale = 1.0 + float(mass_uncertainty)
         if scale <= 0.0:
             raise ModelError("mass uncertainty must be greater than -1")
-        return ArmModel(self.masses * scale, self.lengths, self.radius_proximal,
-                        self.radius_distal, self.axes, self.offsets, self.coms,
-                        self.inertias * scale, self.gravity)
+        return dataclasses.replace(self, masses=self.masses * scale,
+                                   inertias=self.inertias * scale)
 
     # --- the model's arrays in the order the kernels take them ---
     @property

@@ -35,8 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from ..params.urdf_xml import UrdfError, axis_rotation, read_urdf_text, rpy_rotation
 from .urdf_chain import UrdfChain, read_urdf_chain
-from .urdf_xml import UrdfError, axis_rotation, read_urdf_text, rpy_rotation
 
 STRIPPED = ("visual", "collision")
 """Link elements removed before MuJoCo parses the URDF."""

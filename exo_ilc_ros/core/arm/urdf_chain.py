@@ -40,17 +40,19 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ModelError
-from .dynamics import inertia_and_bias
-from .urdf_xml import (
-    LOCKABLE_TYPES,
-    MOVING_TYPES,
+from ..params.urdf_xml import (
     Inertial,
     UrdfError,
     UrdfJoint,
     axis_rotation,
+    chain_path,
+    checked_locks,
+    joint_tree,
+    moving_joints,
     parse_urdf,
     read_urdf_text,
 )
+from .dynamics import inertia_and_bias
 
 SINGULAR_TOLERANCE = 1e-10
 """A Cholesky pivot of the mass matrix below this share of its largest diagonal entry counts as
@@ -195,9 +197,9 @@ def read_urdf_chain(source: str | Path, base_link: str, tip_link: str,
     (module docstring)."""
     text, where = read_urdf_text(source)
     robot, links, joints = parse_urdf(text, where)
-    locked = _checked_locks(dict(locked or {}), joints, where)
-    parent_joint, children = _tree(links, joints, where)
-    moving = _moving_joints(_path(base_link, tip_link, links, parent_joint, where), locked,
+    locked = checked_locks(dict(locked or {}), joints, where)
+    parent_joint, children = joint_tree(links, joints, where)
+    moving = moving_joints(chain_path(base_link, tip_link, links, parent_joint, where), locked,
                             base_link, tip_link, where)
     bodies, frame_of, dropped = _bodies(base_link, tip_link, moving, links, children, locked,
                                         where)
@@ -222,80 +224,6 @@ def read_urdf_chain(source: str | Path, base_link: str, tip_link: str,
         tuple(dropped), poses, where)
     _check_mass_matrix(chain, where)
     return chain
-
-
-def _checked_locks(locked: dict[str, float], joints: Mapping[str, UrdfJoint],
-                   where: str) -> dict[str, float]:
-    """``locked`` if every name is a lockable joint of the URDF at a finite value."""
-    for name, value in locked.items():
-        if name not in joints:
-            raise UrdfError(f"{where}: locked joint {name!r} is not in the URDF")
-        if joints[name].type not in LOCKABLE_TYPES:
-            raise UrdfError(f"{where}: locked joint {name!r} is {joints[name].type}; only "
-                            f"{', '.join(LOCKABLE_TYPES)} joints can be locked")
-        if not math.isfinite(value):
-            raise UrdfError(f"{where}: locked joint {name!r}: value {value} is not finite")
-    return locked
-
-
-def _tree(links: Mapping[str, Inertial | None], joints: Mapping[str, UrdfJoint], where: str
-          ) -> tuple[dict[str, UrdfJoint], dict[str, list[UrdfJoint]]]:
-    """Each link's parent joint and each link's child joints (an error if a link has two
-    parents: not a tree)."""
-    parent_joint: dict[str, UrdfJoint] = {}
-    for joint in joints.values():
-        if joint.child in parent_joint:
-            raise UrdfError(f"{where}: link {joint.child!r} has two parent joints "
-                            f"({parent_joint[joint.child].name!r}, {joint.name!r}): not a tree")
-        parent_joint[joint.child] = joint
-    children: dict[str, list[UrdfJoint]] = {name: [] for name in links}
-    for joint in joints.values():
-        children[joint.parent].append(joint)
-    return parent_joint, children
-
-
-def _path(base_link: str, tip_link: str, links: Mapping[str, Inertial | None],
-          parent_joint: Mapping[str, UrdfJoint], where: str) -> list[UrdfJoint]:
-    """The joints from ``base_link`` down to ``tip_link``, in order."""
-    for end, role in ((base_link, "base"), (tip_link, "tip")):
-        if end not in links:
-            raise UrdfError(f"{where}: {role} link {end!r} is not a link of the URDF")
-    path: list[UrdfJoint] = []
-    link = tip_link
-    while link != base_link:
-        above = parent_joint.get(link)
-        if above is None:
-            raise UrdfError(f"{where}: tip link {tip_link!r} is not in the chain below base "
-                            f"link {base_link!r} (walking up from the tip reached the root "
-                            f"{link!r})")
-        path.append(above)
-        link = above.parent
-    path.reverse()
-    return path
-
-
-def _moving_joints(path: list[UrdfJoint], locked: Mapping[str, float], base_link: str,
-                   tip_link: str, where: str) -> list[UrdfJoint]:
-    """The path's revolute and continuous joints that are not locked (an error for a
-    prismatic, floating or planar joint on it, or for none at all)."""
-    moving = []
-    for joint in path:
-        if joint.name in locked or joint.type == "fixed":
-            continue
-        if joint.type in MOVING_TYPES:
-            moving.append(joint)
-        elif joint.type == "prismatic":
-            raise UrdfError(f"{where}: joint {joint.name!r} between {base_link!r} and "
-                            f"{tip_link!r} is prismatic; only revolute and continuous joints "
-                            "are supported (lock it at a value)")
-        else:
-            raise UrdfError(f"{where}: joint {joint.name!r} between {base_link!r} and "
-                            f"{tip_link!r} is {joint.type}: a floating or planar base is not "
-                            "a fixed-base arm (choose a base link below it)")
-    if not moving:
-        raise UrdfError(f"{where}: no revolute or continuous joint between {base_link!r} and "
-                        f"{tip_link!r}")
-    return moving
 
 
 _Frame = tuple[int, np.ndarray, np.ndarray]

@@ -21,6 +21,7 @@ from scipy.linalg import cho_factor, cho_solve
 from .. import _numba_cache  # noqa: F401  (sets numba's cache directory before any kernel)
 from ..arm.build import build_arm
 from ..arm.dynamics import inertia_and_bias
+from ..params import schema
 from ..params.config import Config
 from ..reference.build import build_reference
 from ..reference.trajectory import SampledReference
@@ -38,14 +39,14 @@ MODEL_KEYS = ("norm_optimal.model_kind", "norm_optimal.model_mass_uncertainty", 
               "control.kp", "control.kd", "trajectory.start", "trajectory.goal",
               "trajectory.duration", "model.link_masses", "model.link_lengths",
               "model.radius_proximal", "model.radius_distal", "model.joint_axes",
-              "model.gravity", "exercise.name", "exercise.file")
-"""Every config value the lifted model depends on (its cache key)."""
+              "model.gravity", "exercise.name", "exercise.file", *schema.URDF_KEYS)
+"""Every config value the lifted model depends on (its cache key; a URDF by its contents)."""
 WEIGHT_KEYS = ("norm_optimal.weight_error", "norm_optimal.weight_input_change",
                "norm_optimal.weight_input_size")
 
 
 def _key(config: Config, names: tuple[str, ...]) -> str:
-    return json.dumps({k: config[k] for k in names}, sort_keys=True)
+    return json.dumps(config.identity_values(names), sort_keys=True)
 
 
 @dataclass(frozen=True, eq=False)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import re
 import sys
@@ -20,6 +21,7 @@ import yaml
 
 from ..errors import ConfigError
 from . import schema
+from .urdf_xml import UrdfError, UrdfJoint, chain_joints, read_urdf_text, resolve_package_uri
 
 PACKAGE = "exo_ilc_ros"
 DEFAULT_CONFIG_NAME = "exo_ilc.yaml"
@@ -127,17 +129,115 @@ def validate(values: Mapping[str, Any], source: str | None = None) -> dict[str, 
     try:
         for param in schema.PARAMETERS:
             out[param.name] = schema.coerce(param, values[param.name])
-        joints = len(out["joint_names"])
+        names = out["joint_names"]
+        joints = len(names)
         if joints < 1:
             raise ConfigError("joint_names", "at least one joint is needed")
+        urdf = out["model.source"] == "urdf"
         for param in schema.PARAMETERS:
-            schema.check_value(param, out[param.name], joints)
+            if urdf and param.name in schema.CONE_KEYS:
+                continue  # a cone arm's keys: unused
+            if param.per_joint and not isinstance(out[param.name], list):
+                out[param.name] = [out[param.name]] * joints  # one value for every joint
+            schema.check_value(param, out[param.name], joints, names)
         schema.check_consistency(out)
+        if urdf:
+            _check_urdf_joints(out)
     except ConfigError as exc:
         if source and not exc.source:
             raise ConfigError(exc.key, exc.rule, source) from None
         raise
     return out
+
+
+_URDF_TEXTS: dict[tuple[str, int, int], tuple[str, str, str]] = {}
+
+
+def urdf_source(values: Mapping[str, Any]) -> tuple[str, str, str]:
+    """(text, file, sha256 of the text) of the URDF ``model.urdf`` names (a path or
+    ``package://``), read once per file version; :class:`~.urdf_xml.UrdfError` naming the file
+    when it cannot be read."""
+    path = urdf_path(str(values["model.urdf"]))
+    try:
+        stat = path.stat()
+    except OSError:
+        stat = None
+    key = (str(path), stat.st_mtime_ns, stat.st_size) if stat is not None else None
+    if key is not None and key in _URDF_TEXTS:
+        return _URDF_TEXTS[key]
+    text, file = read_urdf_text(path)
+    entry = (text, file, hashlib.sha256(text.encode("utf-8")).hexdigest())
+    if key is not None:
+        _URDF_TEXTS[key] = entry
+    return entry
+
+
+def urdf_path(where: str) -> Path:
+    """The file ``model.urdf`` names: a path, or ``package://`` the ROS way (``ament_index``);
+    ``package://exo_ilc_ros/...`` (the shipped URDFs) also where the shipped configs are
+    (:func:`config_dir`: a source checkout or a pip install)."""
+    if not where.startswith("package://"):
+        return Path(where)
+    try:
+        return resolve_package_uri(where)
+    except UrdfError:
+        package, _, relative = where[len("package://"):].partition("/")
+        if package != PACKAGE:
+            raise
+        candidate = config_dir().parent / relative
+        if not candidate.is_file():
+            raise
+        return candidate
+
+
+def urdf_joints(values: Mapping[str, Any]) -> list[UrdfJoint]:
+    """The moving joints of the URDF arm ``values`` describe, in chain order."""
+    text, file, _ = urdf_source(values)
+    return chain_joints(text, file, values["model.base_link"], values["model.tip_link"],
+                        schema.parse_locked_joints(values["model.locked_joints"]))
+
+
+def _check_urdf_joints(values: Mapping[str, Any]) -> None:
+    """``joint_names`` must be the URDF's moving joints (ConfigError naming the URDF's error)."""
+    try:
+        names = [j.name for j in urdf_joints(values)]
+    except UrdfError as exc:
+        raise ConfigError("model.urdf", str(exc)) from None
+    if names != list(values["joint_names"]):
+        raise ConfigError("joint_names", f"must be the moving joints of the URDF's chain "
+                          f"{values['model.base_link']!r} -> {values['model.tip_link']!r}, "
+                          f"[{', '.join(names)}]; got [{', '.join(values['joint_names'])}]")
+
+
+def _arm_file(file_values: dict[str, Any], values: dict[str, Any], file: Path) -> None:
+    """A file that describes a URDF arm: its relative ``model.urdf`` made absolute (relative to
+    the file), and the ``joint_names`` and ``control.effort_limit`` it does not give taken from
+    the URDF (its moving joints and their ``<limit effort>``)."""
+    urdf = file_values.get("model.urdf")
+    if isinstance(urdf, str) and urdf and not urdf.startswith("package://") \
+            and not Path(urdf).is_absolute():
+        file_values["model.urdf"] = str((file.parent / urdf).resolve())
+    values.update(file_values)
+    if values.get("model.source") != "urdf" or not any(k in file_values
+                                                       for k in schema.URDF_KEYS):
+        return
+    try:
+        locked = schema.parse_locked_joints(str(values.get("model.locked_joints", "")))
+        text, where, _ = urdf_source(values)
+        joints = chain_joints(text, where, str(values.get("model.base_link", "")),
+                              str(values.get("model.tip_link", "")), locked)
+    except ConfigError as exc:
+        raise ConfigError(exc.key, exc.rule, str(file)) from None
+    except UrdfError as exc:
+        raise ConfigError("model.urdf", str(exc), str(file)) from None
+    if "joint_names" not in file_values:
+        values["joint_names"] = [j.name for j in joints]
+    if "control.effort_limit" not in file_values:
+        missing = [j.name for j in joints if not math.isfinite(j.effort) or j.effort <= 0.0]
+        if missing:
+            raise ConfigError("control.effort_limit", f"joint {missing[0]!r} has no <limit "
+                              "effort> in the URDF: give control.effort_limit", str(file))
+        values["control.effort_limit"] = [j.effort for j in joints]
 
 
 def read_yaml(path: Path | str) -> dict[str, Any]:
@@ -199,9 +299,30 @@ class Config:
         return Config(merged, self.source)
 
     def digest(self) -> str:
-        """A stable hash of every value (keys stores of learned data)."""
-        blob = json.dumps(self._values, sort_keys=True).encode()
+        """A stable hash of every value (keys stores of learned data; a URDF by its contents,
+        :meth:`identity_values`)."""
+        blob = json.dumps(self.identity_values(), sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
+
+    def identity_values(self, names: Iterable[str] | None = None) -> dict[str, Any]:
+        """The values of ``names`` (default: all) as digests and keys take them: a cone arm
+        without the URDF keys (its digests stay as they were before they existed), a URDF arm
+        without the cone keys and with ``model.urdf`` as the sha256 of the file's contents (not
+        its path)."""
+        urdf = self._values["model.source"] == "urdf"
+        left_out = schema.CONE_KEYS if urdf else schema.URDF_KEYS
+        out = {k: self[k] for k in (self._values if names is None else names)
+               if k not in left_out}
+        if urdf and "model.urdf" in out:
+            out["model.urdf"] = "sha256:" + self.urdf_digest
+        return out
+
+    @property
+    def urdf_digest(self) -> str:
+        """sha256 of the URDF's text ("" for a cone arm)."""
+        if self._values["model.source"] != "urdf":
+            return ""
+        return urdf_source(self._values)[2]
 
     def section(self, node: str) -> dict[str, Any]:
         """The values one node declares: the shared parameters and its own."""
@@ -298,7 +419,7 @@ def load_config(path: Path | str | None = None,
     for file in files:
         if file.resolve() == default.resolve():
             continue
-        values.update(read_yaml(file))
+        _arm_file(read_yaml(file), values, file)
         source = str(file)
         config = Config(values, source)  # the files are checked whole, whatever overrides them
     return config.replace(overrides) if overrides else config

@@ -10,7 +10,7 @@ YAML loading, ROS declaration, validation and the bags' provenance all read).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Any
@@ -23,6 +23,45 @@ AXIS_VECTORS: dict[str, tuple[float, float, float]] = {
     "-x": (-1.0, 0.0, 0.0), "-y": (0.0, -1.0, 0.0), "-z": (0.0, 0.0, -1.0),
 }
 """Joint axis names accepted in the config, as unit vectors of the link frame."""
+
+MODEL_SOURCES = ("cones", "urdf")
+CONE_KEYS = ("model.link_masses", "model.link_lengths", "model.radius_proximal",
+             "model.radius_distal", "model.joint_axes")
+"""The arm of ``model.source: cones`` (unused, and not checked per joint, for a URDF arm)."""
+URDF_KEYS = ("model.source", "model.urdf", "model.base_link", "model.tip_link",
+             "model.locked_joints")
+"""What names a URDF arm (left out of every digest of a cone arm: its keys stay as they were)."""
+
+
+def parse_locked_joints(text: str) -> dict[str, float]:
+    """``model.locked_joints`` ('name: value, name: value'; '=' works too) as a dict, or
+    ConfigError naming the entry."""
+    out: dict[str, float] = {}
+    for entry in (e.strip() for e in text.strip().strip("{}").split(",")):
+        if not entry:
+            continue
+        name, sep, value = entry.replace("=", ":").rpartition(":")
+        name = name.strip().strip("'\"")
+        try:
+            number = float(value)
+        except ValueError:
+            number = math.nan
+        if not sep or not name or not math.isfinite(number):
+            raise ConfigError("model.locked_joints", f"entry {entry!r} is not 'joint_name: "
+                              "value' (a finite number)")
+        if name in out:
+            raise ConfigError("model.locked_joints", f"joint {name!r} is given twice")
+        out[name] = number
+    return out
+
+
+def _locks_problem(value: Any) -> str | None:
+    try:
+        parse_locked_joints(value)
+    except ConfigError as exc:
+        return exc.rule
+    return None
+
 
 SHARED = "/**"
 PLANT = "plant_simulator"
@@ -53,7 +92,7 @@ class Parameter:
     kind: Kind
     description: str
     per_joint: bool = False
-    """An array with one entry per joint."""
+    """An array with one entry per joint (or one value for every joint: validation repeats it)."""
     minimum: float | None = None
     strictly_positive: bool = False
     choices: tuple[str, ...] = ()
@@ -230,6 +269,21 @@ PARAMETERS: tuple[Parameter, ...] = (
               extra_rule=_axes_rule),
     Parameter("model.gravity", SHARED, Kind.DOUBLE, "gravity acceleration along -z (m/s^2)",
               minimum=0.0),
+    Parameter("model.source", SHARED, Kind.STRING,
+              "where the arm comes from: cones (the paper's truncated cones, the model.link_*, "
+              "radius_* and joint_axes keys) or urdf (the chain of model.urdf from base_link to "
+              "tip_link; joint_names are its moving joints)", choices=MODEL_SOURCES),
+    Parameter("model.urdf", SHARED, Kind.STRING,
+              "model.source urdf: the URDF file: a path (relative: to the YAML file that gives "
+              "it) or package://name/path (resolved through ament_index)"),
+    Parameter("model.base_link", SHARED, Kind.STRING,
+              "model.source urdf: the link the chain starts from (fixed to the ground)"),
+    Parameter("model.tip_link", SHARED, Kind.STRING,
+              "model.source urdf: the link the chain ends at (links beyond it must be fixed or "
+              "locked)"),
+    Parameter("model.locked_joints", SHARED, Kind.STRING,
+              "model.source urdf: joints held at a value, as 'name: value, name: value' (rad, "
+              "m for a prismatic joint); empty: none", extra_rule=_locks_problem),
     Parameter("trajectory.start", SHARED, Kind.DOUBLE_ARRAY, "q_d(0) of eq (14) (rad)",
               per_joint=True),
     Parameter("trajectory.goal", SHARED, Kind.DOUBLE_ARRAY, "q_d(T) of eq (14) (rad)",
@@ -507,6 +561,11 @@ def coerce(param: Parameter, value: Any) -> Any:
         if not isinstance(value, str):
             raise ConfigError(param.name, f"must be a string, got {value!r}")
         return value
+    if param.per_joint and kind is Kind.DOUBLE_ARRAY and isinstance(value, (int, float)) \
+            and not isinstance(value, bool):
+        return float(value)  # one value for every joint: validate() repeats it per joint
+    if param.per_joint and kind is Kind.STRING_ARRAY and isinstance(value, str):
+        return value
     if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
         raise ConfigError(param.name, f"must be a list, got {value!r}")
     items = list(value)
@@ -519,21 +578,35 @@ def coerce(param: Parameter, value: Any) -> Any:
     return items
 
 
-def check_value(param: Parameter, value: Any, joints: int) -> None:
-    """Raise ConfigError if an already coerced ``value`` breaks ``param``'s own rule."""
+def check_value(param: Parameter, value: Any, joints: int,
+                joint_names: Sequence[str] = ()) -> None:
+    """Raise ConfigError if an already coerced ``value`` breaks ``param``'s own rule (a
+    per-joint value's error names the joint, from ``joint_names`` where given)."""
     numbers: list[float] = []
     if param.kind in (Kind.DOUBLE, Kind.INTEGER):
         numbers = [float(value)]
     elif param.kind is Kind.DOUBLE_ARRAY:
-        numbers = list(value)
-    if any(not math.isfinite(x) for x in numbers):
-        raise ConfigError(param.name, "must be finite (no NaN or inf)")
-    if param.per_joint and len(value) != joints:
-        raise ConfigError(param.name, f"must have one entry per joint ({joints}), got {len(value)}")
-    if param.minimum is not None and any(x < param.minimum for x in numbers):
-        raise ConfigError(param.name, f"must be >= {param.minimum:g}, got {value!r}")
-    if param.strictly_positive and any(x <= 0.0 for x in numbers):
-        raise ConfigError(param.name, f"must be > 0, got {value!r}")
+        numbers = list(value) if isinstance(value, list) else [float(value)]
+
+    def fail(bad: Callable[[float], bool], rule: str) -> None:
+        index = next((i for i, x in enumerate(numbers) if bad(x)), None)
+        if index is None:
+            return
+        if param.per_joint and isinstance(value, list):
+            name = joint_names[index] if index < len(joint_names) else str(index + 1)
+            raise ConfigError(param.name, f"joint {name!r}: {rule}, got {numbers[index]!r}")
+        raise ConfigError(param.name, f"{rule}, got {value!r}")
+
+    fail(lambda x: not math.isfinite(x), "must be finite (no NaN or inf)")
+    if param.per_joint and isinstance(value, list) and len(value) != joints:
+        names = f": {', '.join(joint_names)}" if joint_names else ""
+        raise ConfigError(param.name, f"must have one entry per joint ({joints}{names}) or one "
+                          f"value for every joint, got {len(value)} entries")
+    if param.minimum is not None:
+        minimum = param.minimum
+        fail(lambda x: x < minimum, f"must be >= {minimum:g}")
+    if param.strictly_positive:
+        fail(lambda x: x <= 0.0, "must be > 0")
     if param.choices and value not in param.choices:
         raise ConfigError(param.name, f"must be one of {', '.join(param.choices)}; got {value!r}")
     if param.extra_rule is not None:
@@ -544,14 +617,15 @@ def check_value(param: Parameter, value: Any, joints: int) -> None:
 
 def check_consistency(values: Mapping[str, Any]) -> None:
     """Rules between parameters: monotonic thresholds, a whole number of sub-steps, ..."""
+    names = values["joint_names"]
     for term in ("position", "velocity", "acceleration"):
         low = values[f"schedule.{term}.threshold_low"]
         high = values[f"schedule.{term}.threshold_high"]
         for j, (lo, hi) in enumerate(zip(low, high, strict=True)):
             if not lo < hi:
                 raise ConfigError(f"schedule.{term}.threshold_low",
-                                  f"thresholds must increase: joint {j + 1} has threshold_low "
-                                  f"{lo:g} >= threshold_high {hi:g}")
+                                  f"thresholds must increase: joint {names[j]!r} has "
+                                  f"threshold_low {lo:g} >= threshold_high {hi:g}")
     period = values["control.period"]
     step = values["integration_step"]
     ratio = period / step
@@ -562,15 +636,14 @@ def check_consistency(values: Mapping[str, Any]) -> None:
     if abs(steps - round(steps)) > 1e-9 * max(steps, 1.0):
         raise ConfigError("trajectory.duration",
                           f"must be a whole number of control periods ({period:g} s)")
-    masses = values["model.link_masses"]
-    lengths = values["model.link_lengths"]
-    radii = zip(values["model.radius_proximal"], values["model.radius_distal"], strict=True)
-    for j, (m, length, (r1, r2)) in enumerate(zip(masses, lengths, radii, strict=True)):
-        if m > 0.0 and length > 0.0 and r1 == 0.0 and r2 == 0.0:
-            raise ConfigError("model.radius_proximal",
-                              f"link {j + 1} has mass and length, so it needs a positive radius")
-    if all(m == 0.0 for m in masses):
-        raise ConfigError("model.link_masses", "at least one link must have mass")
+    if values["model.source"] == "cones":
+        _check_cones(values)
+    elif not values["model.urdf"] or not values["model.base_link"] or \
+            not values["model.tip_link"]:
+        empty = next(k for k in ("model.urdf", "model.base_link", "model.tip_link")
+                     if not values[k])
+        raise ConfigError(empty, "model.source urdf needs the URDF file, its base link and its "
+                          "tip link")
     nyquist = 0.5 / period
     if values["q_filter.cutoff_hz"] >= nyquist:
         raise ConfigError("q_filter.cutoff_hz",
@@ -590,3 +663,17 @@ def check_consistency(values: Mapping[str, Any]) -> None:
         raise ConfigError("joint_names", "joint names must be unique")
     if any(not name for name in values["joint_names"]):
         raise ConfigError("joint_names", "joint names must not be empty")
+
+
+def _check_cones(values: Mapping[str, Any]) -> None:
+    """The cone arm's rules (model.source: cones)."""
+    masses = values["model.link_masses"]
+    lengths = values["model.link_lengths"]
+    radii = zip(values["model.radius_proximal"], values["model.radius_distal"], strict=True)
+    for j, (m, length, (r1, r2)) in enumerate(zip(masses, lengths, radii, strict=True)):
+        if m > 0.0 and length > 0.0 and r1 == 0.0 and r2 == 0.0:
+            raise ConfigError("model.radius_proximal",
+                              f"link {j + 1} ({values['joint_names'][j]!r}) has mass and "
+                              "length, so it needs a positive radius")
+    if all(m == 0.0 for m in masses):
+        raise ConfigError("model.link_masses", "at least one link must have mass")

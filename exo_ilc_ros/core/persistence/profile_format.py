@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import ProfileError
 from ..learning.laws import FeedforwardUpdate
+from ..params import schema
 from ..params.config import Config
 from ..reference.trajectory import SampledReference
 from .listed_files import read_listed
@@ -25,8 +26,9 @@ PROFILE_FORMAT = 1
 
 MODEL_KEYS = ("joint_names", "model.link_masses", "model.link_lengths", "model.radius_proximal",
               "model.radius_distal", "model.joint_axes", "model.gravity", "control.period",
-              "control.kp", "control.kd")
-"""What a feed-forward was learned *for*: the controller's nominal model and loop."""
+              "control.kp", "control.kd", *schema.URDF_KEYS)
+"""What a feed-forward was learned *for*: the controller's nominal model and loop (a URDF arm by
+its file's contents, :meth:`~exo_ilc_ros.core.params.config.Config.identity_values`)."""
 
 
 SESSION_KEY = "patient.session"
@@ -34,8 +36,8 @@ SESSION_KEY = "patient.session"
 
 
 def model_values(config: Config) -> dict[str, Any]:
-    """The :data:`MODEL_KEYS` values of ``config``."""
-    return {k: config[k] for k in MODEL_KEYS}
+    """The :data:`MODEL_KEYS` values of ``config`` (as identities: a URDF by its contents)."""
+    return config.identity_values(MODEL_KEYS)
 
 
 def reference_digest(reference: SampledReference) -> str:
@@ -73,9 +75,10 @@ class Profile:
         what = f"profile v{self.version} of patient {self.patient!r}, exercise {self.exercise!r}"
         stored = self.provenance.get("model", {})
         now = model_values(config)
-        differ = [k for k in MODEL_KEYS if stored.get(k) != now[k]]
+        differ = [k for k in MODEL_KEYS if stored.get(k) != now.get(k)]
         if differ:
-            detail = "; ".join(f"{k} {stored.get(k)!r} there, {now[k]!r} now" for k in differ)
+            detail = "; ".join(f"{k} {stored.get(k)!r} there, {now.get(k)!r} now"
+                               for k in differ)
             raise ProfileError(f"{what} was learned with another model: {detail}")
         if self.provenance.get("reference_digest") != reference_digest(reference) or \
                 self.feedforward.shape != reference.position.shape:

@@ -58,12 +58,13 @@ _ARRAYS = ("position", "velocity", "feedforward", "control_input", "effort")
 def keyed_values(config: Config) -> dict[str, Any]:
     """The parameter values the learning key covers (module docstring). The virtual patient's
     ``patient.*`` values only when one of its effects is on: a run without them keeps the key
-    it had before they existed."""
+    it had before they existed (so does a cone arm without the URDF keys; a URDF arm is keyed by
+    its file's contents, not its path)."""
 
     patient = PatientModel(config).enabled
-    return {p.name: config[p.name] for p in schema.PARAMETERS
-            if not p.live and p.name not in NOT_KEYED
-            and (patient or not p.name.startswith("patient."))}
+    return config.identity_values(p.name for p in schema.PARAMETERS
+                                  if not p.live and p.name not in NOT_KEYED
+                                  and (patient or not p.name.startswith("patient.")))
 
 
 def live_values(config: Config) -> dict[str, Any]:

@@ -97,8 +97,8 @@ def arm_mjcf(model: ArmModel, joint_names: Sequence[str], timestep: float,
                      f'mass="{_num(model.masses[i])}" fullinertia="'
                      f'{_num(inertia[0, 0])} {_num(inertia[1, 1])} {_num(inertia[2, 2])} '
                      f'{_num(inertia[0, 1])} {_num(inertia[0, 2])} {_num(inertia[1, 2])}"/>')
-        if model.lengths[i] > 0.0:
-            radius = 0.5 * (model.radius_proximal[i] + model.radius_distal[i])
+        radius = 0.5 * (model.radius_proximal[i] + model.radius_distal[i])
+        if model.lengths[i] > 0.0 and radius > 0.0:  # a URDF arm's links have no cone: no geom
             end = model.lengths[i] * np.array([0.0, 0.0, -1.0])
             lines.append(f'{pad}  <geom type="capsule" fromto="0 0 0 {_xyz(end)}" '
                          f'size="{_num(radius)}" contype="0" conaffinity="0" mass="0"/>')

@@ -1,13 +1,15 @@
 """A URDF's XML as plain records, with the standard library's parser: its links' inertials and
 its joints (type, origin, axis, limits, dynamics), every number checked, and ``package://``
-resolved the ROS way (``ament_index_python``) where the package is installed. The chain the
-kernels take is built from them by :mod:`.urdf_chain`. Errors (:class:`UrdfError`) name the file
-and the element."""
+resolved the ROS way (``ament_index_python``) where the package is installed; the moving joints
+of a chain (:func:`chain_joints`: the config needs their names). The chain the kernels take is
+built from them by :mod:`exo_ilc_ros.core.arm.urdf_chain`. Errors (:class:`UrdfError`) name the
+file and the element."""
 
 from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -205,3 +207,85 @@ def parse_urdf(text: str, where: str
             _number(dynamics, "damping", 0.0, f"{at} <dynamics>"),
             _number(dynamics, "friction", 0.0, f"{at} <dynamics>"))
     return root.get("name", ""), links, joints
+
+
+def checked_locks(locked: dict[str, float], joints: Mapping[str, UrdfJoint],
+                   where: str) -> dict[str, float]:
+    """``locked`` if every name is a lockable joint of the URDF at a finite value."""
+    for name, value in locked.items():
+        if name not in joints:
+            raise UrdfError(f"{where}: locked joint {name!r} is not in the URDF")
+        if joints[name].type not in LOCKABLE_TYPES:
+            raise UrdfError(f"{where}: locked joint {name!r} is {joints[name].type}; only "
+                            f"{', '.join(LOCKABLE_TYPES)} joints can be locked")
+        if not math.isfinite(value):
+            raise UrdfError(f"{where}: locked joint {name!r}: value {value} is not finite")
+    return locked
+
+def joint_tree(links: Mapping[str, Inertial | None], joints: Mapping[str, UrdfJoint], where: str
+          ) -> tuple[dict[str, UrdfJoint], dict[str, list[UrdfJoint]]]:
+    """Each link's parent joint and each link's child joints (an error if a link has two
+    parents: not a tree)."""
+    parent_joint: dict[str, UrdfJoint] = {}
+    for joint in joints.values():
+        if joint.child in parent_joint:
+            raise UrdfError(f"{where}: link {joint.child!r} has two parent joints "
+                            f"({parent_joint[joint.child].name!r}, {joint.name!r}): not a tree")
+        parent_joint[joint.child] = joint
+    children: dict[str, list[UrdfJoint]] = {name: [] for name in links}
+    for joint in joints.values():
+        children[joint.parent].append(joint)
+    return parent_joint, children
+
+def chain_path(base_link: str, tip_link: str, links: Mapping[str, Inertial | None],
+          parent_joint: Mapping[str, UrdfJoint], where: str) -> list[UrdfJoint]:
+    """The joints from ``base_link`` down to ``tip_link``, in order."""
+    for end, role in ((base_link, "base"), (tip_link, "tip")):
+        if end not in links:
+            raise UrdfError(f"{where}: {role} link {end!r} is not a link of the URDF")
+    path: list[UrdfJoint] = []
+    link = tip_link
+    while link != base_link:
+        above = parent_joint.get(link)
+        if above is None:
+            raise UrdfError(f"{where}: tip link {tip_link!r} is not in the chain below base "
+                            f"link {base_link!r} (walking up from the tip reached the root "
+                            f"{link!r})")
+        path.append(above)
+        link = above.parent
+    path.reverse()
+    return path
+
+def moving_joints(path: list[UrdfJoint], locked: Mapping[str, float], base_link: str,
+                   tip_link: str, where: str) -> list[UrdfJoint]:
+    """The path's revolute and continuous joints that are not locked (an error for a
+    prismatic, floating or planar joint on it, or for none at all)."""
+    moving = []
+    for joint in path:
+        if joint.name in locked or joint.type == "fixed":
+            continue
+        if joint.type in MOVING_TYPES:
+            moving.append(joint)
+        elif joint.type == "prismatic":
+            raise UrdfError(f"{where}: joint {joint.name!r} between {base_link!r} and "
+                            f"{tip_link!r} is prismatic; only revolute and continuous joints "
+                            "are supported (lock it at a value)")
+        else:
+            raise UrdfError(f"{where}: joint {joint.name!r} between {base_link!r} and "
+                            f"{tip_link!r} is {joint.type}: a floating or planar base is not "
+                            "a fixed-base arm (choose a base link below it)")
+    if not moving:
+        raise UrdfError(f"{where}: no revolute or continuous joint between {base_link!r} and "
+                        f"{tip_link!r}")
+    return moving
+
+
+def chain_joints(text: str, where: str, base_link: str, tip_link: str,
+                 locked: Mapping[str, float]) -> list[UrdfJoint]:
+    """The moving joints (revolute, continuous, not locked) from ``base_link`` to ``tip_link`` of
+    the URDF ``text`` read from ``where``, in chain order (the errors of :func:`moving_joints`)."""
+    _, links, joints = parse_urdf(text, where)
+    locks = checked_locks(dict(locked), joints, where)
+    parent_joint, _ = joint_tree(links, joints, where)
+    return moving_joints(chain_path(base_link, tip_link, links, parent_joint, where), locks,
+                         base_link, tip_link, where)

@@ -1,0 +1,314 @@
+"""A config's arm from its URDF (model.source: urdf): the paper's arm through `exo-ilc urdf` gives
+the cone arm's trials, digests and keys take the URDF's contents (not its path), a per-joint key
+takes one value for every joint, the shipped Panda learns within 10 trials at 10 %, and a wrong
+URDF or reference is one clear error line through `exo-ilc simulate`."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from test_urdf_chain import TWO_JOINTS
+
+from exo_ilc_ros.analysis.figures import convergence_figure
+from exo_ilc_ros.bag.view import ArmView
+from exo_ilc_ros.cli.main import main as cli_main
+from exo_ilc_ros.core import run_trials
+from exo_ilc_ros.core.arm.build import build_arm, view_urdf
+from exo_ilc_ros.core.arm.dynamics import inertia_and_bias
+from exo_ilc_ros.core.arm.forward_kinematics import UrdfKinematics
+from exo_ilc_ros.core.arm.urdf import arm_urdf
+from exo_ilc_ros.core.convergence.growth import fit_growth
+from exo_ilc_ros.core.errors import ConfigError
+from exo_ilc_ros.core.learning.norm_optimal_model import MODEL_KEYS, _key
+from exo_ilc_ros.core.params.config import load_config
+from exo_ilc_ros.core.params.urdf_xml import UrdfError
+from exo_ilc_ros.core.persistence.profile_format import model_values
+from exo_ilc_ros.core.persistence.store import learning_key
+from exo_ilc_ros.core.reference.build import build_reference
+from exo_ilc_ros.core.session.summary import RunSummary
+from exo_ilc_ros.core.sim.mujoco_arm import MujocoArm
+
+ROOT = Path(__file__).resolve().parents[1]
+ARMS = ROOT / "config" / "arms"
+
+
+def _arm_yaml(path: Path, model: dict[str, Any], shared: dict[str, Any] | None = None) -> Path:
+    """An arm file: ``model.*`` and shared keys over the gains every arm file sets."""
+    params: dict[str, Any] = {"model": model, "control": {"kp": 16.0, "kd": 8.0},
+                              "safety": {"hold_kp": 225.0, "hold_kd": 30.0}}
+    params.update(shared or {})
+    schedule = {"position": {"threshold_low": 1.5, "threshold_high": 20.0, "level_mid": 0.03,
+                             "level_high": 0.9},
+                "velocity": {"threshold_low": 0.1, "threshold_high": 0.2, "level_high": 0.01},
+                "acceleration": {"threshold_low": 0.1, "level_high": 0.01}}
+    path.write_text(yaml.safe_dump({
+        "/**": {"ros__parameters": params},
+        "ilc_supervisor": {"ros__parameters": {"law": "linear", "schedule": schedule}}}))
+    return path
+
+
+def _paper_arm_as_urdf(directory: Path) -> Path:
+    """The shipped arm through `exo-ilc urdf`, and a config naming that file."""
+    urdf = directory / "exo_arm.urdf"
+    assert cli_main(["urdf", "--out", str(urdf)]) == 0
+    config = directory / "arm.yaml"
+    config.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"model": {
+        "source": "urdf", "urdf": urdf.name, "base_link": "base_link",
+        "tip_link": "forearm_link"}}}}))
+    return config
+
+
+def test_paper_arm_from_its_urdf_gives_the_same_trials(tmp_path: Path) -> None:
+    """joint_names and effort limits come from the URDF (the writer wrote the config's), the
+    trials equal the cone arm's to 1e-12 (sign law, 5 %, and the linear law, 15 %)."""
+    cones = load_config()
+    urdf = load_config(_paper_arm_as_urdf(tmp_path))
+    assert urdf["model.source"] == "urdf" and Path(urdf["model.urdf"]).is_absolute()
+    assert urdf["joint_names"] == cones["joint_names"]
+    assert urdf["control.effort_limit"] == cones["control.effort_limit"]
+    arm = build_arm(urdf)
+    assert arm.position_upper is not None and arm.velocity_limit is not None
+    for law, delta in (("sign", 0.05), ("linear", 0.15)):
+        a = run_trials(cones, delta, 4, law=law)
+        b = run_trials(urdf, delta, 4, law=law)
+        for ra, rb in zip(a.records, b.records, strict=True):
+            np.testing.assert_allclose(rb.position, ra.position, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(rb.feedforward, ra.feedforward, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(rb.effort, ra.effort, rtol=0, atol=1e-12)
+
+
+def test_keys_take_the_urdf_contents_not_its_path(tmp_path: Path) -> None:
+    first = load_config(_paper_arm_as_urdf(tmp_path))
+    moved = tmp_path / "elsewhere"
+    moved.mkdir()
+    shutil.copy(tmp_path / "exo_arm.urdf", moved / "exo_arm.urdf")
+    shutil.copy(tmp_path / "arm.yaml", moved / "arm.yaml")
+    second = load_config(moved / "arm.yaml")
+    assert first["model.urdf"] != second["model.urdf"]
+    reference = build_reference(first)
+    assert first.digest() == second.digest()
+    assert learning_key(first, reference) == learning_key(second, reference)
+    assert _key(first, MODEL_KEYS) == _key(second, MODEL_KEYS)
+    assert model_values(first) == model_values(second)
+    assert model_values(first)["model.urdf"] == "sha256:" + first.urdf_digest
+    cones = load_config()
+    assert first.digest() != cones.digest()
+    assert "model.urdf" not in model_values(cones)  # a cone arm's keys are as they were
+    assert "model.link_masses" not in model_values(first)  # a URDF arm's cones are unused
+    text = (moved / "exo_arm.urdf").read_text()
+    (moved / "exo_arm.urdf").write_text(text.replace('<mass value="1.4"/>',
+                                                     '<mass value="1.5"/>'))
+    changed = load_config(moved / "arm.yaml")
+    assert changed.digest() != first.digest()
+    assert learning_key(changed, reference) != learning_key(first, reference)
+    assert model_values(changed) != model_values(first)
+
+
+def test_one_value_for_every_joint() -> None:
+    config = load_config(overrides={"control.kp": 12.0, "patient.friction.viscous": 0.5})
+    assert config["control.kp"] == [12.0] * 3
+    assert config["patient.friction.viscous"] == [0.5] * 3
+    with pytest.raises(ConfigError) as info:
+        config.replace({"control.kd": [1.0, -1.0, 2.0]})
+    assert "control.kd: joint 'shoulder_abduction': must be >= 0, got -1.0" in str(info.value)
+    with pytest.raises(ConfigError) as info:
+        config.replace({"control.kd": [1.0, 2.0]})
+    assert "one entry per joint (3: shoulder_flexion" in str(info.value)
+    assert "or one value for every joint" in str(info.value)
+    panda = load_config(ARMS / "panda.yaml")
+    assert panda.joints == 7 and panda["control.kp"] == [16.0] * 7
+    assert panda["patient.friction.viscous"] == [0.0] * 7  # the shipped scalar, broadcast
+    assert panda["control.effort_limit"] == [87.0] * 4 + [12.0] * 3  # the URDF's <limit effort>
+    with pytest.raises(ConfigError) as info:
+        panda.replace({"control.kd": [8.0] * 6 + [-1.0]})
+    assert "joint 'panda_joint7'" in str(info.value)
+
+
+def test_locked_joints_and_joint_names_rules() -> None:
+    panda = load_config(ARMS / "panda.yaml")
+    with pytest.raises(ConfigError) as info:
+        panda.replace({"model.locked_joints": "panda_finger_joint1 0.02"})
+    assert "model.locked_joints" in str(info.value) and "'panda_finger_joint1 0.02'" in str(
+        info.value)
+    with pytest.raises(UrdfError) as urdf_info:  # found when the arm is built
+        build_arm(panda.replace({"model.locked_joints": "panda_finger_joint1: 0.02"}))
+    assert "panda_finger_joint2" in str(urdf_info.value) and "lock it" in str(urdf_info.value)
+    with pytest.raises(ConfigError) as info:
+        panda.replace({"joint_names": [f"j{i}" for i in range(7)]})
+    assert "joint_names: must be the moving joints" in str(info.value)
+    assert "panda_joint1" in str(info.value)
+
+
+@pytest.mark.parametrize("arm", ["panda", "ur5"])
+def test_shipped_arm_learns_within_10_trials_at_10_percent(arm: str) -> None:
+    """The linear law (with robust.yaml's Q-filter) over computed torque, plant masses +10 %:
+    every joint within 0.005 rad by trial 10 and still there at the last (measured: 3 trials on
+    both)."""
+    config = load_config(ARMS / f"{arm}.yaml")
+    result = run_trials(config, 0.10, 12)
+    reached = result.iterations_to_bound()
+    assert all(f is not None and f <= 10 for f in reached.first), reached
+    assert np.all(result.max_abs_errors[-1] <= config["error_bound"])
+
+
+def test_mujoco_plant_of_a_urdf_arm_equals_our_dynamics(tmp_path: Path) -> None:
+    """MuJoCo's model of the arm (core/sim/mujoco_arm.py, from the kernels' arrays) of the
+    Panda: mass matrix and bias forces equal ours (measured: 1.4e-15); `exo-ilc urdf` gives the
+    arm's own URDF back."""
+    config = load_config(ARMS / "panda.yaml")
+    plant = MujocoArm.from_config(config, 0.0)
+    arm = build_arm(config)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        q, v = rng.uniform(-2.0, 2.0, 7), rng.uniform(-2.0, 2.0, 7)
+        mass, bias = plant.inertia_and_bias(q, v)
+        a, c = inertia_and_bias(q, v, *arm.kernel_args)
+        np.testing.assert_allclose(mass, a, rtol=0, atol=1e-9 * np.abs(a).max())
+        np.testing.assert_allclose(bias, c, rtol=0, atol=1e-9 * np.abs(c).max())
+    out = tmp_path / "panda.urdf"
+    assert cli_main(["urdf", "--config", str(ARMS / "panda.yaml"), "--out", str(out)]) == 0
+    assert out.read_text() == (ROOT / "urdf" / "panda.urdf").read_text()
+
+
+# --- a wrong URDF or reference through `exo-ilc simulate`: one line, exit code 2 -------------
+
+def _two_joint_arm(tmp_path: Path, text: str = TWO_JOINTS, **model: Any) -> Path:
+    urdf = tmp_path / "two.urdf"
+    urdf.write_text(text)
+    fields = {"source": "urdf", "urdf": "two.urdf", "base_link": "base", "tip_link": "tool",
+              "locked_joints": "finger_joint: 0.3", **model}
+    goal = model.pop("goal", [0.5, 0.5])
+    return _arm_yaml(tmp_path / "two.yaml", {k: v for k, v in fields.items() if k != "goal"},
+                     {"trajectory": {"start": 0.0, "goal": goal}})
+
+
+def _simulate_error(config: Path, capsys: pytest.CaptureFixture[str]) -> str:
+    code = cli_main(["simulate", "--config", str(config), "--trials", "1", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_hand_written_arm_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = cli_main(["simulate", "--config", str(_two_joint_arm(tmp_path)), "--trials", "3",
+                     "--quiet"])
+    out = capsys.readouterr().out
+    assert code == 0 and "shoulder" in out and "elbow" in out
+
+
+def test_wrong_urdf_is_one_clear_error(tmp_path: Path,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    line = _simulate_error(_two_joint_arm(tmp_path, urdf="nowhere.urdf"), capsys)
+    assert "model.urdf" in line and "nowhere.urdf: no such URDF file" in line
+    line = _simulate_error(_two_joint_arm(tmp_path, TWO_JOINTS.replace("</robot>", "")), capsys)
+    assert "two.urdf: not well-formed XML" in line and "line" in line
+    prismatic = TWO_JOINTS.replace('<joint name="elbow" type="revolute">',
+                                   '<joint name="elbow" type="prismatic">')
+    line = _simulate_error(_two_joint_arm(tmp_path, prismatic), capsys)
+    assert "joint 'elbow'" in line and "prismatic" in line
+    line = _simulate_error(_two_joint_arm(tmp_path, base_link="upper", tip_link="antenna"),
+                           capsys)
+    assert "tip link 'antenna' is not in the chain below base link 'upper'" in line
+    massless = TWO_JOINTS.replace('<mass value="1.1"/>', '<mass value="0.0"/>').replace(
+        'ixx="0.01" ixy="0" ixz="0.0005" iyy="0.011" iyz="0" izz="0.002"',
+        'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"').replace(
+        '<mass value="0.2"/>', '<mass value="0.0"/>').replace(
+        'ixx="0.0002" ixy="0" ixz="0" iyy="0.0002" iyz="0" izz="0.0001"',
+        'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"')
+    line = _simulate_error(_two_joint_arm(tmp_path, massless), capsys)
+    assert "singular at joint 'elbow'" in line
+    line = _simulate_error(_two_joint_arm(tmp_path, goal=[0.5, 3.0]), capsys)
+    assert "joint 'elbow' at t = " in line and "above its upper limit 2.5 rad" in line
+    assert "<limit upper>" in line
+
+
+def test_panda_reference_beyond_a_limit(capsys: pytest.CaptureFixture[str]) -> None:
+    """The shipped start 0 on every joint is outside the Panda's joint 4 ([-3.07, -0.07])."""
+    panda = load_config(ARMS / "panda.yaml", {"trajectory.start": 0.0})
+    with pytest.raises(Exception, match=r"joint 'panda_joint4' at t = 0 s: q = 0 rad is above "
+                                        r"its upper limit -0.0698 rad"):
+        build_reference(panda)
+
+
+def test_ros2_control_for_the_config_arm(tmp_path: Path) -> None:
+    """`exo-ilc ros2-control`: the shipped controllers.yaml is its output for the shipped config;
+    for the Panda it lists the URDF's seven joints in chain order."""
+    out = tmp_path / "controllers.yaml"
+    assert cli_main(["ros2-control", "--out", str(out)]) == 0
+    assert out.read_text() == (ROOT / "config" / "ros2_control" / "controllers.yaml").read_text()
+    assert cli_main(["ros2-control", "--config", str(ARMS / "panda.yaml"), "--out",
+                     str(out)]) == 0
+    document = yaml.safe_load(out.read_text())
+    joints = [f"panda_joint{i}" for i in range(1, 8)]
+    assert document["joint_state_broadcaster"]["ros__parameters"]["joints"] == joints
+    assert document["effort_controller"]["ros__parameters"]["joints"] == joints
+    assert document["controller_manager"]["ros__parameters"]["update_rate"] == 100
+
+
+def test_urdf_arm_config_through_the_graphs_parameters_file(tmp_path: Path) -> None:
+    """What `exo-ilc run` hands the nodes (to_ros_yaml, then each node's Config of its values)
+    is the same URDF arm: same values, same digest."""
+    panda = load_config(ARMS / "panda.yaml")
+    out = tmp_path / "params.yaml"
+    out.write_text(panda.to_ros_yaml("test"))
+    again = load_config(out)
+    assert again.values == panda.values and again.digest() == panda.digest()
+    node = type(panda)(panda.values, "parameters of node test")
+    assert node.digest() == panda.digest() and node.joints == 7
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("arm", ["panda", "ur5"])
+def test_robust_settings_stay_bounded_for_300_trials(arm: str) -> None:
+    """config/robust.yaml over the arm file (whose learning settings it already holds), plant
+    masses +15 %, 300 trials (~10 s): within the
+    bound from trial 10 on, the learned input settled and not growing (measured: max error
+    6.4e-5 rad on the Panda, 2.2e-5 on the UR5; u_ff constant to 1e-13 of its size)."""
+    config = load_config(ARMS / f"{arm}.yaml", overlays=[ROOT / "config" / "robust.yaml"])
+    result = run_trials(config, 0.15, 300)
+    assert np.all(result.max_abs_errors[10:] <= config["error_bound"])
+    uff = result.max_abs_feedforward
+    last = uff[150:]
+    assert np.all(last.max(axis=0) - last.min(axis=0) <= 1e-6 * last.max(axis=0))
+    fit = fit_growth(uff, window=150)
+    assert fit is not None and not fit.any_growing
+    assert np.all(uff < 0.5 * np.asarray(config["feedforward_limit"]))
+
+
+def test_convergence_figure_has_one_panel_per_joint_of_any_arm() -> None:
+    """Seven joints: seven panels, no paper's iterations in their titles (the paper's arm has
+    three joints)."""
+    config = load_config(ARMS / "panda.yaml")
+    result = run_trials(config, 0.1, 3)
+    figure = convergence_figure([RunSummary.from_result(result)], config["joint_names"])
+    titles = [ax.get_title() for ax in figure.axes]
+    assert len(titles) == 7 and all("paper" not in t for t in titles)
+    assert titles[3].startswith("Joint 4 (panda_joint4)")
+
+
+def test_live_view_draws_the_urdf_arm() -> None:
+    """The live view's arm (view_urdf): the cone arm's generated URDF as before; a URDF arm's own
+    file, its root link and its locked joints at their values (the fingers' transforms move)."""
+    cones = load_config()
+    text, fixed, root = view_urdf(cones)
+    assert text == arm_urdf(build_arm(cones), cones["joint_names"], cones["control.effort_limit"])
+    assert fixed == {} and root == "base_link"
+    panda = load_config(ARMS / "panda.yaml")
+    text, fixed, root = view_urdf(panda)
+    assert text == (ROOT / "urdf" / "panda.urdf").read_text() and root == "panda_link0"
+    assert fixed == {"panda_finger_joint1": 0.02, "panda_finger_joint2": 0.02}
+    kinematics = UrdfKinematics(text)
+    q = dict(zip(panda["joint_names"], [0.1] * 7, strict=True))
+    finger = {child: xyz for _, child, xyz, _ in kinematics.transforms({**fixed, **q})}
+    closed = {child: xyz for _, child, xyz, _ in kinematics.transforms(q)}
+    assert finger["panda_leftfinger"] != closed["panda_leftfinger"]
+    assert set(kinematics.moving) >= set(panda["joint_names"])
+    view = ArmView(panda)  # the live view's and the bag view's arm
+    assert view.urdf == text and view.root_link == "panda_link0" and view.fixed_positions == fixed

@@ -16,6 +16,13 @@ The rules, per joint, at every trial boundary (:meth:`JointForceModel.conclude`)
    toward the new estimate's by at most ``identification.max_change`` (N m) at any sample from
    one trial to the next: the patient never feels a jump.
 3. After an envelope abort the forces are kept (the trial is still identified).
+4. The learned feed-forward follows (``identification.adoption``, the session applies it):
+   ``handover`` gives up a_N(q_d)^-1 times the forces' change, so the total input never
+   jumps; ``restart`` starts a newly adopted joint from the law's first feed-forward; ``keep``
+   leaves it.
+5. The law's update inverts the arm with the patient (:meth:`JointForceModel.
+   learning_correction`, ``identification.inverse_gain``); with norm-optimal its model is
+   rebuilt about the forces' linearisation instead (:meth:`JointForceModel.linearisation`).
 
 The forces are evaluated on the reference, not the measured state: no quantised velocity and no
 delayed reflex is fed back (docs/patient-identification.md). The learning law then learns only
@@ -169,7 +176,7 @@ class JointForceModel:
 
     def learning_correction(self, record: TrialRecord) -> np.ndarray | None:
         """g a_N(q_d)^-1 [tau_p(q_d, qdot_d) - tau_p(q, qdot) + K_v e + D_v e_dot] along the
-        trial, Q-filtered as the law's update is (rule 4): the identified joint forces'
+        trial, Q-filtered as the law's update is (rule 5): the identified joint forces'
         difference between the reference and the measured motion (the secant, bounded where
         the Coulomb term saturates) and the patient's own pull toward the reference when it is
         fitted, g = ``identification.inverse_gain``, on the joints in use. What the law's

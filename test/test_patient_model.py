@@ -173,10 +173,13 @@ def test_a_non_finite_or_absurd_estimate_never_reaches_the_controller() -> None:
         Experiment(config).run_trial(records[0].feedforward, 1, None, None, bad)
 
 
-def test_resume_gives_the_same_trials_with_the_patient_in_the_loop(tmp_path: Path) -> None:
+@pytest.mark.parametrize("law", ["linear", "norm_optimal"])
+def test_resume_gives_the_same_trials_with_the_patient_in_the_loop(tmp_path: Path,
+                                                                   law: str) -> None:
     """A run stored after 2 trials and resumed equals the run in one go: the identification is
-    replayed from the stored trials and the stored forces are used exactly."""
-    config = _config("friction")
+    replayed from the stored trials (norm-optimal's model rebuilt as it was) and the stored
+    forces are used exactly."""
+    config = _config("friction", law=law)
     whole = run_trials(config, trials=4)
     run_trials(config, trials=2, store=tmp_path)
     resumed = run_trials(config, trials=4, store=tmp_path, resume=True)

@@ -256,7 +256,9 @@ class LearningSession:
             if item.record.aborted:
                 self.aborted_trials.append(item.record.trial)
             if self.joint_forces is not None:  # the identification is replayed, exactly
-                self.replayed[k] = self.joint_forces.conclude(item.record)
+                self.replayed[k] = step = self.joint_forces.conclude(item.record)
+                if step.joint_force is not None:  # and norm-optimal's model with it
+                    self._rebuild_about_patient()
         if stored and self.joint_forces is not None:
             stored_force = stored[-1].next_update.joint_force
             if stored_force is not None:

@@ -7,8 +7,10 @@ in (:func:`.joint_force_term.joint_force_term`)::
 
 The rules, per joint, at every trial boundary (:meth:`JointForceModel.conclude`):
 
-1. Only from ``identification.first_trial`` on, and only a joint whose estimate is
-   trustworthy (excited, precise, plausible: :attr:`JointEstimate.trustworthy`) and finite.
+1. Only from ``identification.first_trial`` on, and only a joint whose passive parameters
+   are trustworthy (excited, not collinear, within ``identification.relative_precision``,
+   plausible) and finite, with its reflex only when that is trustworthy too
+   (:func:`.joint_force_term.joint_force_term`).
    A refused trial (chatter, non-finite samples) or an estimate that is not trustworthy
    changes nothing: the joint keeps the forces it had (none before its first trustworthy
    estimate), and the step says why.

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..arm.build import build_arm
 from ..learning.norm_optimal_model import PatientLinearisation
-from ..loop.patient import MAS_PRESETS
+from ..loop.patient import spasticity_values
 from ..params.config import Config
 from ..reference.build import build_reference
 
@@ -39,17 +39,12 @@ class PatientLoad:
 
 def patient_load(config: Config, label: str = "") -> PatientLoad:
     """The linear joint forces of the patient ``config`` describes (``patient.*`` keys)."""
-    n = config.joints
+    spastic_stiffness, spastic_damping, *_ = spasticity_values(config)
     stiffness = np.asarray(config["patient.passive.stiffness"], dtype=float) \
-        + np.asarray(config["patient.voluntary.stiffness"], dtype=float)
+        + np.asarray(config["patient.voluntary.stiffness"], dtype=float) \
+        + np.asarray(spastic_stiffness, dtype=float)
     damping = np.asarray(config["patient.friction.viscous"], dtype=float) \
-        + np.asarray(config["patient.voluntary.damping"], dtype=float)
-    grade = config["patient.spasticity.mas_grade"]
-    if grade == "custom":
-        stiffness = stiffness + np.asarray(config["patient.spasticity.stiffness"], dtype=float)
-        damping = damping + np.asarray(config["patient.spasticity.damping"], dtype=float)
-    else:
-        k, b, _, _, _ = MAS_PRESETS[grade]
-        stiffness, damping = stiffness + np.full(n, k), damping + np.full(n, b)
+        + np.asarray(config["patient.voluntary.damping"], dtype=float) \
+        + np.asarray(spastic_damping, dtype=float)
     inertia = np.diag(build_arm(config).metric_tensor(build_reference(config).position[0]))
     return PatientLoad(label, stiffness, damping, stiffness / inertia, damping / inertia)

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from test_urdf_chain import TWO_JOINTS
+from test_urdf_chain import MASSLESS_FOREARM, TWO_JOINTS
 
 from exo_ilc_ros.analysis.figures import convergence_figure
 from exo_ilc_ros.bag.view import ArmView
@@ -216,13 +216,7 @@ def test_wrong_urdf_is_one_clear_error(tmp_path: Path,
     line = _simulate_error(_two_joint_arm(tmp_path, base_link="upper", tip_link="antenna"),
                            capsys)
     assert "tip link 'antenna' is not in the chain below base link 'upper'" in line
-    massless = TWO_JOINTS.replace('<mass value="1.1"/>', '<mass value="0.0"/>').replace(
-        'ixx="0.01" ixy="0" ixz="0.0005" iyy="0.011" iyz="0" izz="0.002"',
-        'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"').replace(
-        '<mass value="0.2"/>', '<mass value="0.0"/>').replace(
-        'ixx="0.0002" ixy="0" ixz="0" iyy="0.0002" iyz="0" izz="0.0001"',
-        'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"')
-    line = _simulate_error(_two_joint_arm(tmp_path, massless), capsys)
+    line = _simulate_error(_two_joint_arm(tmp_path, MASSLESS_FOREARM), capsys)
     assert "singular at joint 'elbow'" in line
     line = _simulate_error(_two_joint_arm(tmp_path, goal=[0.5, 3.0]), capsys)
     assert "joint 'elbow' at t = " in line and "above its upper limit 2.5 rad" in line

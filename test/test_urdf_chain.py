@@ -87,6 +87,13 @@ TWO_JOINTS = """<?xml version="1.0"?>
   </link>
 </robot>
 """
+MASSLESS_FOREARM = TWO_JOINTS.replace('<mass value="1.1"/>', '<mass value="0.0"/>').replace(
+    'ixx="0.01" ixy="0" ixz="0.0005" iyy="0.011" iyz="0" izz="0.002"',
+    'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"').replace(
+    '<mass value="0.2"/>', '<mass value="0.0"/>').replace(
+    'ixx="0.0002" ixy="0" ixz="0" iyy="0.0002" iyz="0" izz="0.0001"',
+    'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"')
+"""TWO_JOINTS with nothing of mass beyond the elbow: a singular mass matrix at the elbow."""
 TWO_LOCKED = {"finger_joint": 0.3}
 
 
@@ -296,13 +303,7 @@ def test_tip_not_in_the_chain() -> None:
 def test_singular_mass_matrix() -> None:
     """A massless forearm (nothing beyond the elbow), and two collocated joints about the same
     axis with a massless link between them: the error names the joint."""
-    massless = TWO_JOINTS.replace('<mass value="1.1"/>', '<mass value="0.0"/>').replace(
-        'ixx="0.01" ixy="0" ixz="0.0005" iyy="0.011" iyz="0" izz="0.002"',
-        'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"').replace(
-        '<mass value="0.2"/>', '<mass value="0.0"/>').replace(
-        'ixx="0.0002" ixy="0" ixz="0" iyy="0.0002" iyz="0" izz="0.0001"',
-        'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"')
-    message = _error(massless, locked={"finger_joint": 0.3})
+    message = _error(MASSLESS_FOREARM, locked={"finger_joint": 0.3})
     assert "singular at joint 'elbow'" in message
     twin = TWO_JOINTS.replace(
         '<origin xyz="0 0 0.3" rpy="-0.5 0.2 0.3"/><axis xyz="1 0 0"/>',

@@ -232,6 +232,15 @@ def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
                         "config/scenarios/) or a ROS parameter YAML of the same layout")
 
 
+def write_output(text: str, out: str | None) -> None:
+    """``text`` into the file ``out`` (``--out``; says so), or to standard output."""
+    if out:
+        Path(out).write_text(text)
+        print(f"wrote {out}")
+    else:
+        print(text, end="")
+
+
 def config_with_flags(path: str | None, flags: Mapping[str, tuple[str, Any]],
                       overlays: Sequence[str] = ()) -> Config:
     """The shipped config, ``path`` (``--config``) and ``overlays`` (``--scenario``) each

@@ -5,11 +5,10 @@ joints, in ``joint_names`` order, and the update rate of ``control.period``); th
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import Any
 
 from ..core.params.config import Config, load_config
-from .arguments import input_file, json_file
+from .arguments import input_file, json_file, write_output
 
 
 def register(sub: Any) -> None:
@@ -63,9 +62,5 @@ effort_controller:
 def write_controllers(args: argparse.Namespace) -> int:
     """Generate and write."""
     text = controllers_yaml(load_config(args.config))
-    if args.out:
-        Path(args.out).write_text(text)
-        print(f"wrote {args.out}")
-    else:
-        print(text, end="")
+    write_output(text, args.out)
     return 0

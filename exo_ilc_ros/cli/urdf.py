@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import Any
 
 from ..core.arm.build import build_arm
 from ..core.arm.urdf import arm_urdf
 from ..core.params.config import load_config, urdf_source
-from .arguments import input_file, json_file
+from .arguments import input_file, json_file, write_output
 
 
 def register(sub: Any) -> None:
@@ -28,9 +27,5 @@ def write_urdf(args: argparse.Namespace) -> int:
         text, _, _ = urdf_source(config.values)
     else:
         text = arm_urdf(build_arm(config), config["joint_names"], config["control.effort_limit"])
-    if args.out:
-        Path(args.out).write_text(text)
-        print(f"wrote {args.out}")
-    else:
-        print(text, end="")
+    write_output(text, args.out)
     return 0

@@ -205,19 +205,11 @@ class LearningSession:
             if isinstance(checked, Rejection):
                 raise SafetyError(f"trial {record.trial}: the learning law produced a bad "
                                   f"feed-forward ({checked}); it was not stored or used")
-        forces = None if self.joint_forces is None else self.joint_forces.conclude(record)
-        if forces is not None and forces.joint_force is not None:
-            feedforward = self._adopt(update, forces)
-            correction = self.joint_forces.learning_correction(record) \
-                if self.joint_forces is not None and self.config["law"] != "norm_optimal" \
-                else None
-            if correction is not None:
-                feedforward = feedforward + correction
-            update = dataclasses.replace(update, feedforward=feedforward,
-                                         joint_force=forces.joint_force)
-            rebuilt = self._rebuild_about_patient()
-            if rebuilt:
-                update = dataclasses.replace(update, notes=(*update.notes, rebuilt))
+        forces = None
+        if self.joint_forces is not None:
+            forces = self.joint_forces.conclude(record)
+            if forces.joint_force is not None:
+                update = self._with_patient(update, record, forces, self.joint_forces)
         within = self._within(record)
         self.within_streak = self.within_streak + 1 if within else 0
         self.completed = record.trial
@@ -300,6 +292,21 @@ class LearningSession:
         self._patient = patient
         self.active_law = build_law(self.config, patient=patient)
         return "norm-optimal model rebuilt about the identified patient"
+
+    def _with_patient(self, update: FeedforwardUpdate, record: TrialRecord,
+                      forces: JointForceStep, model: JointForceModel) -> FeedforwardUpdate:
+        """The law's update with the identified forces in the loop: the learned feed-forward
+        after the adoption rule, plus the inverse with the patient (not for norm-optimal, whose
+        model is rebuilt about the patient instead, with a note), and the forces."""
+        feedforward = self._adopt(update, forces)
+        correction = None if self.config["law"] == "norm_optimal" else \
+            model.learning_correction(record)
+        if correction is not None:
+            feedforward = feedforward + correction
+        update = dataclasses.replace(update, feedforward=feedforward,
+                                     joint_force=forces.joint_force)
+        rebuilt = self._rebuild_about_patient()
+        return dataclasses.replace(update, notes=(*update.notes, rebuilt)) if rebuilt else update
 
     def _adopt(self, update: FeedforwardUpdate, forces: JointForceStep) -> np.ndarray:
         """The learned feed-forward once the identified forces changed

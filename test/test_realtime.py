@@ -23,7 +23,7 @@ import contextlib
 context = node_process() if {node} else contextlib.nullcontext()
 context.__enter__()
 gate = threading.Event()
-before = [threading.Thread(target=gate.wait) for _ in range(3)]
+before = [threading.Thread(target=gate.wait, daemon=True) for _ in range(3)]
 for t in before:
     t.start()
 applied, scheduler = fifo_scheduling({priority})

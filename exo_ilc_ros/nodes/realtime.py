@@ -101,8 +101,13 @@ def policy_of(tid: int) -> int:
 
 
 def thread_policies(pid: int | str = "self") -> dict[int, int]:
-    """Thread id -> scheduling policy of every thread of process ``pid``."""
-    return {int(tid): policy_of(int(tid)) for tid in os.listdir(f"/proc/{pid}/task")}
+    """Thread id -> scheduling policy of every thread of process ``pid`` (a thread that ends
+    between the listing and the query is left out: a joined thread can still be listed)."""
+    policies = {}
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        with contextlib.suppress(ProcessLookupError):
+            policies[int(tid)] = policy_of(int(tid))
+    return policies
 
 
 class LoopPriority:

@@ -8,11 +8,14 @@ The graph's lock-step control steps per second within trials (graph_bench's meas
 end events, trials 4 on, median), recorded as ``exo-ilc run`` records it (the recorder in the
 supervisor's process), without ``--live`` and with it (foxglove_bridge, its own process, and
 a headless WebSocket client in a process of its own, subscribed to every channel:
-test/live_client.py), in turn (ABBA) in one run. Also, from trial 4's start to the end, the
-CPU time per control step of the loop's processes (plant and controller: what one more reader
-of their topics costs them), of the bridge and of the client (steadier than a rate on a shared
-machine; the bridge's start-up, about 2 s of imports, left out); what the client received; and
-the other tenants' load per round. Target: the view costs at most 10 % within trials.
+test/live_client.py), in turn (ABBA) in one run. ``--feed relay`` (default, as ``exo-ilc run``):
+the recorder hands the view its messages; ``--feed dds``: the view reads DDS itself (as
+``ros2 run exo_ilc_ros foxglove_bridge`` beside a recorder of its own does). Also, from trial
+4's start to the end, the CPU time per control step of the loop's processes (plant and
+controller: what one more reader of their topics costs them), of the bridge and of the
+client (steadier than a rate on a shared machine; the bridge's start-up, about 2 s of imports,
+left out); what the client received; and the other tenants' load per round. Target: the view
+costs at most 10 % within trials.
 """
 
 from __future__ import annotations
@@ -51,7 +54,7 @@ def _free_port() -> int:
 
 
 def run_once(config: Config, bag_dir: Path, live: bool,
-             bridge: dict[str, str] | None = None) -> dict[str, float]:
+             bridge: dict[str, str] | None = None, relayed: bool = True) -> dict[str, float]:
     """One recorded run (as ``exo-ilc run`` records), with the live view and a client
     subscribed to everything or without: the in-trial rates (graph_bench's), the CPU time per
     control step of each process from trial 4's start to the end (``cpu_<name>``; the client
@@ -65,11 +68,13 @@ def run_once(config: Config, bag_dir: Path, live: bool,
     marks: list[dict[str, float]] = []
     try:
         with contextlib.ExitStack() as stack:
-            recording = stack.enter_context(Recording(recorded, bag_dir))
+            view = stack.enter_context(LiveView(recorded, port, parameters=bridge,
+                                                relayed=relayed)) if live else None
+            recording = stack.enter_context(Recording(
+                recorded, bag_dir, relay=view.relay if view is not None else None))
             nodes = list(recording.graph_nodes())
-            if live:
-                nodes.append(stack.enter_context(LiveView(recorded, port,
-                                                          parameters=bridge)).spec)
+            if view is not None:
+                nodes.append(view.spec)
             session = stack.enter_context(GraphSession(recorded, nodes=nodes))
             pids = {name: p.pid for name, p in session.processes.processes.items()}
             if client is not None:
@@ -109,14 +114,16 @@ def _loop_cpu(run: dict[str, float]) -> float:
 
 
 def bench_live(trials: int, repeats: int, bag_dir: Path,
-               bridge: dict[str, str] | None = None, quiet: float = 0.15) -> None:
+               bridge: dict[str, str] | None = None, quiet: float = 0.15,
+               relayed: bool = True) -> None:
     """The two modes in turn, ``repeats`` rounds; the cost from the medians and per round."""
     config = load_config(overrides={"max_trials": trials})
     without: list[dict[str, float]] = []
     live: list[dict[str, float]] = []
     for round_ in range(repeats):
         for mode in (False, True) if round_ % 2 == 0 else (True, False):
-            (live if mode else without).append(run_once(config, bag_dir, mode, bridge))
+            (live if mode else without).append(run_once(config, bag_dir, mode, bridge,
+                                                        relayed))
         a, b = without[-1], live[-1]
         print(f"  round {round_ + 1}: steps/s within trials without --live "
               f"{a['steps_per_s_in_trial']:.0f} [other tenants {a['others']:.2f} cores], with "
@@ -162,11 +169,14 @@ def main() -> None:
     parser.add_argument("--bridge", nargs="*", default=[], metavar="NAME:=VALUE",
                         help="foxglove_bridge parameters, e.g. scheduling:=normal "
                         "sample_reliability:=reliable")
+    parser.add_argument("--feed", choices=("relay", "dds"), default="relay",
+                        help="how the view gets the graph's topics: from the recorder (relay, "
+                        "as exo-ilc run does) or as one more DDS reader (as ros2 run does)")
     args = parser.parse_args()
     bridge = dict(item.split(":=", 1) for item in args.bridge)
-    print(f"foxglove_bridge parameters: {bridge or 'defaults'}", flush=True)
+    print(f"foxglove_bridge parameters: {bridge or 'defaults'}; feed: {args.feed}", flush=True)
     with tempfile.TemporaryDirectory(prefix="live_bench_") as tmp:
-        bench_live(args.trials, args.repeats, Path(tmp), bridge)
+        bench_live(args.trials, args.repeats, Path(tmp), bridge, relayed=args.feed == "relay")
 
 
 if __name__ == "__main__":

@@ -54,13 +54,18 @@ def _nodes(context: LaunchContext) -> list[Node]:
                 node_params.append({"mass_uncertainty": float(delta)})
         nodes.append(Node(package=PACKAGE, executable=executable, name=entry.name,
                           parameters=node_params, output="screen", emulate_tty=True))
-    if LaunchConfiguration("record").perform(context).lower() in ("true", "1", "yes"):
+    record = LaunchConfiguration("record").perform(context).lower() in ("true", "1", "yes")
+    live = LaunchConfiguration("live").perform(context).lower() in ("true", "1", "yes")
+    # With both, the recorder feeds the view (no extra DDS reader of the loop's topics).
+    relay = os.path.join(tempfile.mkdtemp(prefix="exo_ilc_live_"), "relay.sock") \
+        if record and live else ""
+    if record:
         nodes.append(_recorder(user, delta, LaunchConfiguration("bag_path").perform(context),
-                               plant))
-    if LaunchConfiguration("live").perform(context).lower() in ("true", "1", "yes"):
+                               plant, relay))
+    if live:
         nodes.append(_live_view(user, delta, plant,
                                 LaunchConfiguration("live_host").perform(context),
-                                LaunchConfiguration("live_port").perform(context)))
+                                LaunchConfiguration("live_port").perform(context), relay))
     return nodes
 
 
@@ -77,19 +82,22 @@ def _effective_config_file(user: str, delta: str, plant: str, header: str) -> st
     return config_file
 
 
-def _live_view(user: str, delta: str, plant: str, host: str, port: str) -> Node:
-    """foxglove_bridge, a process of its own, with the run's config (for the arm's URDF)."""
+def _live_view(user: str, delta: str, plant: str, host: str, port: str,
+               relay: str = "") -> Node:
+    """foxglove_bridge, a process of its own, with the run's config (for the arm's URDF),
+    fed by the recorder over ``relay`` if given."""
     params: dict[str, object] = {
         "config_file": _effective_config_file(user, delta, plant, "shown by foxglove_bridge"),
-        "host": host or "127.0.0.1", "port": int(port or 8765)}
+        "host": host or "127.0.0.1", "port": int(port or 8765), "relay": relay}
     return Node(package=PACKAGE, executable=registry.BRIDGE.name, name=registry.BRIDGE.name,
                 parameters=[params], output="screen", emulate_tty=True)
 
 
-def _recorder(user: str, delta: str, bag_path: str, plant: str = "simulator") -> Node:
+def _recorder(user: str, delta: str, bag_path: str, plant: str = "simulator",
+              relay: str = "") -> Node:
     config_file = _effective_config_file(user, delta, plant,
                                          "effective config of ros2 launch exo_ilc_ros")
-    params: dict[str, object] = {"config_file": config_file}
+    params: dict[str, object] = {"config_file": config_file, "relay": relay}
     if bag_path:
         params["bag_path"] = bag_path
     return Node(package=PACKAGE, executable=registry.RECORDER.name, name=registry.RECORDER.name,

@@ -257,3 +257,7 @@ def test_launch_file_starts_the_graph_and_the_recorder(monkeypatch: pytest.Monke
     (bridge,) = live[4]["parameters"]
     assert (bridge["host"], bridge["port"]) == ("127.0.0.1", 9001)  # this machine only
     assert load_config(bridge["config_file"])["mass_uncertainty"] == 0.1
+    # the recorder feeds the view (one socket for both); without a recorder the view reads DDS
+    assert bridge["relay"] and live[3]["parameters"][0]["relay"] == bridge["relay"]
+    (alone,) = _launched(monkeypatch, live="true", record="false")[3]["parameters"]
+    assert alone["relay"] == "" and recorder["relay"] == ""

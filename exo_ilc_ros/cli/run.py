@@ -260,18 +260,21 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
     nodes = graph_nodes(args.plant, config["protocol"])
     with contextlib.ExitStack() as stack:
         extra: list[Any] = []
+        relay = None
         if getattr(args, "live", False):
             live = stack.enter_context(LiveView(
                 run_config, DEFAULT_PORT if args.live_port is None else args.live_port,
-                args.live_host or DEFAULT_HOST, dict(args.live_param)))
+                args.live_host or DEFAULT_HOST, dict(args.live_param),
+                relayed=not args.no_bag))  # the recorder feeds it
             print(f"live view: {live.url} (Foxglove app: Open connection, Foxglove WebSocket; "
                   "layout config/layouts/foxglove.json)", file=sys.stderr, flush=True)
             extra.append(live.spec)
-        return _run_graph_once(args, run_config, delta, trials, nodes, extra)
+            relay = live.relay
+        return _run_graph_once(args, run_config, delta, trials, nodes, extra, relay)
 
 
 def _run_graph_once(args: argparse.Namespace, run_config: Config, delta: float, trials: int,
-                    nodes: Any, extra: list[Any]) -> RunSummary:
+                    nodes: Any, extra: list[Any], relay: Path | None = None) -> RunSummary:
     config = run_config
     with tqdm(total=trials, desc=f"graph {config['law']} delta={delta:g}", unit="trial",
               file=sys.stderr, disable=None) as bar:
@@ -289,8 +292,8 @@ def _run_graph_once(args: argparse.Namespace, run_config: Config, delta: float, 
                                on_start=announce_graph(bar, None), nodes=nodes, extra=extra)
         else:
             run_config = run_config.replace({"wait_for_recorder": True})
-            with Recording(run_config, args.bag_dir, name=bag_name(args, run_config)) \
-                    as recording:
+            with Recording(run_config, args.bag_dir, name=bag_name(args, run_config),
+                           relay=relay) as recording:
                 result = run_graph(run_config, domain, on_summary=progress,
                                    nodes=recording.graph_nodes(args.isolated_recorder, nodes),
                                    on_start=announce_graph(bar, recording.path), extra=extra)

@@ -26,7 +26,10 @@ run's provenance and every parameter change with the trial it took effect at.
 Parameters (the recorder's own, not part of the experiment's schema):
 ``bag_path`` (default ``bags/<run_name>``), ``run_name`` (default ``run_<date>-<time>``),
 ``config_file`` (the run's effective parameter YAML, for the provenance), ``split_every``
-(trials per storage file, default 1; 0: one file) and ``storage`` (``mcap`` or ``sqlite3``).
+(trials per storage file, default 1; 0: one file), ``storage`` (``mcap`` or ``sqlite3``) and
+``relay`` (a Unix socket path: hand every message of ``topics.LIVE_TOPICS`` it takes to the
+live view listening there, :mod:`~exo_ilc_ros.wire.relay`; then the other topics are taken
+every :data:`RELAY_PERIOD`; default none).
 """
 
 from __future__ import annotations
@@ -61,6 +64,7 @@ from ..core.params.config import load_config
 from ..wire import topics
 from ..wire.protocol import int_value, key_values
 from ..wire.qos import RECORDER_DEPTH, TRANSIENT_LOCAL_TOPICS, offered_qos
+from ..wire.relay import RelaySender
 from ..wire.sim_time import SimClock
 from .common import EVENTS_QOS, CountingPublisher, Inbox, receive_time, run_nodes, wall_clock
 from .diagnostics import diagnostic_array, status
@@ -73,11 +77,16 @@ READY_TOPICS = (topics.JOINT_STATES, topics.CLOCK, topics.EFFORT_COMMANDS, topic
 each reader-writer pair is discovered on its own, and a volatile topic published before its
 pair matched is lost to the recorder (/clock was not waited for, and once its first 26
 messages of trial 1 were missing)."""
+LIVE = frozenset(topics.LIVE_TOPICS)
+"""Topics relayed to the live view (``relay``)."""
 VIEWED = frozenset({topics.JOINT_STATES, topics.FEEDFORWARD})
 """Topics the arm's view (/tf) is computed from."""
 PROTOCOL_TOPICS = frozenset({topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.PARAMETER_EVENTS})
 """Topics the recorder reads as well as writes (trial boundaries, parameter changes); the rest
 are written in batches."""
+RELAY_PERIOD = 0.05
+"""s: with a relay to the live view, the other topics are taken this often instead (what the
+view shows is at most this late)."""
 DATA_PERIOD = 1.0
 """s: the other topics are taken and written at least this often (and at every trial event).
 Within it DDS holds them: at most ``RECORDER_DEPTH`` (10 000) messages per topic, 10 000 / s,
@@ -114,6 +123,10 @@ class BagRecorder(Node):
         config_file = str(self.declare_parameter("config_file", "").value)
         self.split_every = int(self.declare_parameter("split_every", 1).value)
         storage = str(self.declare_parameter("storage", "mcap").value)
+        relay = str(self.declare_parameter("relay", "").value)
+        self.relay = RelaySender(relay, topics.PER_SAMPLE) if relay else None
+        """The live view's feed (:mod:`~exo_ilc_ros.wire.relay`), when it runs beside us."""
+        self.data_period = RELAY_PERIOD if relay else DATA_PERIOD
         path = Path(bag_path) if bag_path else Path("bags") / self.run_name
 
         custom = {VERSION: "", RECORDED_BY: NAME, RUN_NAME: self.run_name}
@@ -198,8 +211,10 @@ class BagRecorder(Node):
         taken = self.events.take()
         now = time.monotonic()
         if taken or everything or now >= self.data_due:
-            self.data_due = now + DATA_PERIOD
+            self.data_due = now + self.data_period
             taken = sorted([*taken, *self.inbox.take()], key=receive_time)
+        if self.relay is not None:
+            self.relay.send(m for m in taken if m[1] in LIVE)
         samples: list[tuple[int, str, bytes, int]] = []  # one batch up to an event
         for received, topic, raw in taken:
             log_time = self.sim_clock.advance(topic, raw)
@@ -331,6 +346,11 @@ class BagRecorder(Node):
         self.write_view()
         self.events.destroy()
         self.inbox.destroy()
+        if self.relay is not None:
+            self.relay.close()
+            if self.relay.dropped:
+                print(f"[{NAME}] the live view did not keep up: {self.relay.dropped} samples "
+                      "not shown (the bag has them)", file=sys.stderr, flush=True)
         self.writer.set_custom_data(TRIALS_COMPLETED, str(self.completed))
         for key, text in parameter_changes_data(self.changes).items():
             self.writer.set_custom_data(key, text)

@@ -19,6 +19,11 @@ the JointState stamp, and the reference pose q_d(t_i) of the trial's feed-forwar
 subscribed (the URDFs, the last feed-forward, every trial's summary, metrics and events) is
 logged again when a channel gets a subscriber (its other subscribers then get a copy too).
 
+Beside ``exo-ilc run``'s recorder it is no DDS reader at all (parameter ``relay``): the
+recorder, which takes every topic for the bag anyway, hands it the messages over a local socket
+(:mod:`~exo_ilc_ros.wire.relay`), in the bag's order, so the loop's writers serve no extra
+reader and the view's log times are the bag's.
+
 It never slows the control loop: its own process; ``log()`` never blocks; a client that
 reads too slowly loses its oldest messages (``message_backlog_size`` per client, the SDK's
 rule), not the graph its rate; /tf is computed only while someone subscribes to it.
@@ -27,8 +32,9 @@ Parameters: ``host`` (default 127.0.0.1: this machine only), ``port`` (8765; 0 =
 port), ``config_file`` (the run's parameter YAML, for the arm; default the shipped one),
 ``message_backlog`` (per client, default 4096), ``sample_reliability`` (``best_effort``, the
 default, or ``reliable``: how the per-sample topics are read, :func:`reader_qos`),
-``scheduling`` (``idle``, the default: the process runs at ``SCHED_IDLE``, on CPU the loop
-leaves free; ``batch``; ``normal``).
+``relay`` (a Unix socket path to listen at for the recorder's feed instead of reading DDS;
+default none), ``scheduling`` (``idle``, the default: the process runs at ``SCHED_IDLE``, on
+CPU the loop leaves free; ``batch``; ``normal``).
 """
 
 from __future__ import annotations
@@ -51,6 +57,7 @@ from ..bag.view import ArmView
 from ..core.errors import ConfigError
 from ..core.params.config import load_config
 from ..wire import topics
+from ..wire.relay import RelayReceiver
 from ..wire.sim_time import SimClock
 from ..wire.tf import TF
 from .bag_recorder import message_class
@@ -58,9 +65,7 @@ from .common import Inbox, run_nodes
 from .parameters import command_line_parameters
 
 NAME = "foxglove_bridge"
-FORWARDED = (topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD, topics.CLOCK,
-             topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.TRIAL_METRICS,
-             topics.DIAGNOSTICS)
+FORWARDED = topics.LIVE_TOPICS
 """The graph's topics the view forwards as they are."""
 LATCHED = frozenset({topics.FEEDFORWARD, topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY,
                      topics.TRIAL_METRICS, topics.DIAGNOSTICS})
@@ -76,7 +81,7 @@ behind (its readers hold 10 000 messages per topic; a client then sees the run l
 the oldest), never the loop."""
 
 
-SAMPLED = frozenset({topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.CLOCK})
+SAMPLED = topics.PER_SAMPLE
 """The control loop's per-sample topics."""
 SAMPLE_RELIABILITY = ("best_effort", "reliable")
 
@@ -150,13 +155,17 @@ class FoxgloveBridge(Node):
             raise ConfigError("port", f"cannot serve on {host}:{port}: {exc} (another "
                               "program on that port? choose another with --live-port)",
                               NAME) from None
+        relay = str(self.declare_parameter("relay", "").value)
+        self.relay = RelayReceiver(relay) if relay else None
         self.inbox = Inbox(self)
-        for topic in FORWARDED:
+        for topic in FORWARDED if self.relay is None else ():
             self.inbox.subscribe(message_class(topics.TYPES[topic]), topic,
                                  reader_qos(topic, samples))
         self.forwarded = 0
+        feed = f"fed by the recorder at {relay}" if relay else "reading the graph's topics"
         self.get_logger().info(f"Foxglove WebSocket server on ws://{host}:{self.server.port} "
-                               "(subprotocol foxglove.sdk.v1): open it in the Foxglove app")
+                               f"(subprotocol foxglove.sdk.v1; {feed}): open it in the "
+                               "Foxglove app")
         print(json.dumps({"foxglove_port": self.server.port}), flush=True)
 
     def replay(self, topic: str) -> None:
@@ -170,7 +179,7 @@ class FoxgloveBridge(Node):
 
     def poll(self) -> int:
         """Forward what waits, in receive order; returns how many messages."""
-        taken = self.inbox.take()
+        taken = self.inbox.take() if self.relay is None else self.relay.take()
         for _, topic, raw in taken:
             log_time = self.sim_clock.advance(topic, raw)
             channel = self.channels[topic]
@@ -220,6 +229,8 @@ class FoxgloveBridge(Node):
         time.sleep(self.FLUSH)
         self.server.stop()
         self.inbox.destroy()
+        if self.relay is not None:
+            self.relay.close()
         print(f"[{NAME}] stopped: {self.forwarded} messages forwarded", file=sys.stderr,
               flush=True)
         super().destroy_node()

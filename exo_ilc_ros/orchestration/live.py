@@ -1,5 +1,6 @@
 """The live view of ``exo-ilc run --live``: ``foxglove_bridge`` as a process of its own beside
-the graph (it must never share the control loop's processes), with the run's config."""
+the graph (it must never share the control loop's processes), with the run's config, fed by
+the run's recorder where there is one (``relayed``: no extra DDS reader of the loop's topics)."""
 
 from __future__ import annotations
 
@@ -21,19 +22,27 @@ class LiveView:
     arm's URDF); a context manager that keeps that file while the graph runs."""
 
     def __init__(self, config: Config, port: int = DEFAULT_PORT,
-                 host: str = DEFAULT_HOST, parameters: Mapping[str, str] | None = None) -> None:
+                 host: str = DEFAULT_HOST, parameters: Mapping[str, str] | None = None,
+                 relayed: bool = False) -> None:
         self.config = config
         self.port = port
         self.host = host
         self.parameters = dict(parameters or {})
         """More of the bridge's parameters (``sample_reliability``, ``scheduling``, ...)."""
+        self.relayed = relayed
+        """Fed by the run's recorder (:attr:`relay`) instead of reading DDS: give
+        :attr:`relay` to the :class:`~.recording.Recording`."""
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
         self.config_file: Path | None = None
+        self.relay: Path | None = None
+        """The socket the bridge listens at for the recorder's feed (when :attr:`relayed`)."""
 
     def __enter__(self) -> LiveView:
         self._tmp = tempfile.TemporaryDirectory(prefix="exo_ilc_live_")
         self.config_file = Path(self._tmp.name) / "effective.yaml"
         self.config_file.write_text(self.config.to_ros_yaml("run shown by foxglove_bridge"))
+        if self.relayed:
+            self.relay = Path(self._tmp.name) / "relay.sock"
         return self
 
     def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
@@ -52,7 +61,8 @@ class LiveView:
         """``foxglove_bridge`` as one more process of the graph."""
         if self.config_file is None:
             raise RuntimeError("LiveView.spec outside its with-block")
-        more = tuple(arg for name, value in self.parameters.items()
+        parameters = {**self.parameters, **({"relay": str(self.relay)} if self.relay else {})}
+        more = tuple(arg for name, value in parameters.items()
                      for arg in ("-p", f"{name}:={value}"))
         return NodeSpec(BRIDGE.name, BRIDGE.module,
                         ("-p", f"host:={self.host}", "-p", f"port:={self.port}",

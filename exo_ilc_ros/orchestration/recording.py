@@ -29,8 +29,10 @@ class Recording:
     keeps the run's effective config in a file the recorder copies into the bag."""
 
     def __init__(self, config: Config, bag_dir: Path | str = "bags", name: str = "",
-                 split_every: int = 1) -> None:
+                 split_every: int = 1, relay: Path | None = None) -> None:
         self.config = config
+        self.relay = relay
+        """Where the live view listens for the recorder's feed (:attr:`.live.LiveView.relay`)."""
         self.name = name or run_name("graph", config["law"], config["mass_uncertainty"])
         self.path = unique_path(bag_dir, self.name).resolve()
         self.split_every = split_every
@@ -47,7 +49,8 @@ class Recording:
         self.params_file = Path(self._tmp.name) / f"{RECORDER.name}.yaml"
         self.params_file.write_text(yaml.safe_dump({RECORDER.name: {"ros__parameters": {
             "bag_path": str(self.path), "run_name": self.name,
-            "config_file": str(self.config_file), "split_every": self.split_every}}}))
+            "config_file": str(self.config_file), "split_every": self.split_every,
+            **({"relay": str(self.relay)} if self.relay else {})}}}))
         self.path.parent.mkdir(parents=True, exist_ok=True)
         return self
 

@@ -114,6 +114,12 @@ robot_state_publisher publishes ``/robot_description``, and per sample the arm's
 reference's joint transforms on ``/tf``. No node of the graph publishes them: the live view
 and the bag writers compute them from the recorded samples and feed-forward."""
 
+LIVE_TOPICS = (JOINT_STATES, EFFORT_COMMANDS, FEEDFORWARD, CLOCK, TRIAL_EVENTS, TRIAL_SUMMARY,
+               TRIAL_METRICS, DIAGNOSTICS)
+"""The graph's topics the live view forwards as they are (besides :data:`VIEW_TYPES`)."""
+PER_SAMPLE = frozenset({JOINT_STATES, EFFORT_COMMANDS, CLOCK})
+"""The control loop's per-sample topics (a view that falls behind may lose these, only)."""
+
 BAG_TYPES: dict[str, str] = {**TYPES, **VIEW_TYPES}
 """Every topic a bag lists (the graph's recorder and ``exo-ilc simulate --bag`` alike)."""
 

@@ -310,7 +310,7 @@ class Config:
         without the cone keys and with ``model.urdf`` as the sha256 of the file's contents (not
         its path)."""
         urdf = self._values["model.source"] == "urdf"
-        left_out = schema.CONE_KEYS if urdf else schema.URDF_KEYS
+        left_out = schema.CONE_KEYS if urdf else schema.URDF_KEYS + schema.URDF_PLANT_KEYS
         out = {k: self[k] for k in (self._values if names is None else names)
                if k not in left_out}
         if urdf and "model.urdf" in out:

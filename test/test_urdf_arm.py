@@ -180,6 +180,19 @@ def test_mujoco_plant_of_a_urdf_arm_equals_our_dynamics(tmp_path: Path) -> None:
     assert out.read_text() == (ROOT / "urdf" / "panda.urdf").read_text()
 
 
+ONE_KHZ = {"law": "norm_optimal", "control.period": 0.001, "integration_step": 0.001,
+           "safety.watchdog_periods": 100, "clock_every": 100}
+"""What config/arms/panda_1khz_norm_optimal.yaml changes of panda.yaml (its "1 kHz" keys)."""
+
+
+def test_panda_1khz_is_panda_but_its_1khz_keys() -> None:
+    """The shipped 1 kHz norm-optimal Panda is panda.yaml with ONE_KHZ: the copy cannot drift."""
+    fast = load_config(ARMS / "panda_1khz_norm_optimal.yaml")
+    panda = load_config(ARMS / "panda.yaml")
+    assert fast.values == panda.replace(ONE_KHZ).values
+    assert panda.values != fast.values and build_reference(fast).samples == 5001
+
+
 def _panda_with_joint_dynamics(tmp_path: Path, apply: str) -> Any:
     """The shipped Panda config over a copy of its URDF whose arm joints have damping 0.8
     N m s/rad and friction 0.6 N m (the shipped file: 0.003 and 0), with

@@ -211,7 +211,8 @@ def _panda_with_joint_dynamics(tmp_path: Path, apply: str) -> Any:
 def test_urdf_joint_dynamics_applied_equal_in_our_plant_and_mujoco(tmp_path: Path,
                                                                    plant: str) -> None:
     """model.urdf_joint_dynamics: apply: our plant's period (core/loop/stepper.py, the graph's
-    and the trial's kernels) with the URDF's -b qdot - F tanh(qdot / v_s) equals MuJoCo's,
+    and the trial's kernels; within a trial and between trials) with the URDF's -b qdot
+    - F tanh(qdot / v_s) equals MuJoCo's,
     from the URDF by MuJoCo's parser (damping native, friction explicit: core/arm/
     mujoco_urdf.py) and from our arrays (core/sim/mujoco_arm.py); ignore: they differ by the
     joint forces. The nominal model (the controller's) never has them."""
@@ -234,12 +235,15 @@ def test_urdf_joint_dynamics_applied_equal_in_our_plant_and_mujoco(tmp_path: Pat
     rigid = PlantStepper(Experiment(ignored))
     rng = np.random.default_rng(11)
     worst = largest = 0.0
-    for _ in range(5):
+    for i in range(6):
         q, v = rng.uniform(-1.0, 1.0, 7), rng.uniform(-0.5, 0.5, 7)
         effort = rng.uniform(-5.0, 5.0, 7)
         results = []
         for stepper in (ours, rigid):
-            stepper.begin_trial(1)
+            if i % 2:
+                stepper.begin_trial(1)  # within a trial: the patient's kernel
+            else:
+                stepper.reset()  # between trials (homing): the arm's forces alone
             stepper.position[:], stepper.velocity[:] = q, v
             assert stepper.step(effort) == 0
             results.append((stepper.position.copy(), stepper.velocity.copy()))

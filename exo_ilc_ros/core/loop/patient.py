@@ -150,6 +150,17 @@ class PatientModel:
         joint[VOLUNTARY_STIFFNESS] = config["patient.voluntary.stiffness"]
         joint[VOLUNTARY_DAMPING] = config["patient.voluntary.damping"]
         self.joint = joint
+        arm_joint = np.zeros((_JOINT_ROWS, n))
+        arm_joint[VISCOUS] = arm_damping
+        arm_joint[COULOMB] = arm_friction
+        self.arm_joint = arm_joint
+        """The arm's own joint forces alone (a URDF arm's applied ``<dynamics>``): what the
+        plant integrates between trials, where the patient is not (:class:`.stepper.
+        PlantStepper`)."""
+        self.arm_forces = bool(np.any(arm_joint != 0.0))
+        """The arm has joint forces of its own."""
+        self.inverse_stribeck = 1.0 / float(config["patient.friction.stribeck_velocity"])
+        """1 / v_s of every smooth Coulomb term (s/rad)."""
         self.position_noise = float(config["patient.sensor.position_noise"])
         self.velocity_noise = float(config["patient.sensor.velocity_noise"])
         self.initial_position = float(config["patient.initial.position_sd"])

@@ -224,6 +224,7 @@ def test_urdf_joint_dynamics_applied_equal_in_our_plant_and_mujoco(tmp_path: Pat
     assert not np.any(urdf_joint_dynamics(ignored)[0]) and not np.any(PatientModel(
         ignored).joint) and not PatientModel(ignored).enabled
     assert config.digest() != ignored.digest()
+    assert "model.urdf_joint_dynamics" not in ignored.identity_values()  # keys as before
     if plant == "urdf":
         mujoco_arm: Any = MujocoUrdfArm(
             tmp_path / "panda.urdf", "panda_link0", "panda_hand", dict(chain.locked),

@@ -3,10 +3,16 @@ norm-optimal learning matrix) and a full 150-trial run.
 
 Run with ``.venv/bin/python -m bench.core_bench``. Prints medians; asserts nothing (wall-clock
 timing is noisy on a shared 2-core machine). Target: one trial <= 35 ms.
+
+``--trials-only [--arm FILE ...] [--repeats R]``: only the 5 s trial in-process at the config's
+rate (100 Hz control, RK4 at 1 ms), min and median of R repeats, for the paper's 3-joint arm
+(``--arm default``) and each arm file (default: ``default config/arms/panda.yaml``; issue 27's
+targets: 3 joints <= 6 ms, 7 joints <= 20 ms), and one plant period called from Python.
 """
 
 from __future__ import annotations
 
+import argparse
 import statistics
 import time
 from typing import Any
@@ -26,7 +32,8 @@ def plant_step_times(experiment: Experiment, repeats: int = 2000) -> list[float]
     ref = experiment.reference
     n = ref.position.shape[1]
     ws, stage, extra = workspace(n), np.empty((10, n)), np.empty(2 * n)
-    q, qd, effort = np.empty(n), np.empty(n), np.array([0.5, -1.0, 0.2])[:n]
+    q, qd = np.empty(n), np.empty(n)
+    effort = np.resize([0.5, -1.0, 0.2], n)  # any number of joints
     args = (experiment.period, experiment.substeps, experiment.plant.kernel_args,
             experiment.nominal.kernel_args, int(experiment.dynamics), ws, stage, extra)
     times = []
@@ -79,8 +86,54 @@ def between_trials(config: Config) -> None:
               f"(min {min(times) * 1e3:.2f} ms, {len(times)} runs)")
 
 
+def trial_times(config: Config, repeats: int) -> tuple[float, list[float]]:
+    """(seconds of the first trial: numba's compile or cache load, seconds of each of
+    ``repeats`` further 5 s trials) of the in-process trial at delta 0.10, zero feed-forward."""
+    experiment = Experiment(config, 0.10)
+    feedforward = np.zeros_like(experiment.reference.position)
+    start = time.perf_counter()
+    experiment.run_trial(feedforward, 1)
+    warmup = time.perf_counter() - start
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        experiment.run_trial(feedforward, 1)
+        times.append(time.perf_counter() - start)
+    return warmup, times
+
+
+TRIAL_TARGET_MS = {3: 6.0, 7: 20.0}
+"""Issue 27's targets for the 5 s trial at 100 Hz control, by joints."""
+
+
+def trials_only(arms: list[str], repeats: int) -> None:
+    """The 5 s trial per arm (module docstring)."""
+    for arm in arms:
+        config = load_config(None if arm == "default" else arm)
+        warmup, times = trial_times(config, repeats)
+        experiment = Experiment(config, 0.10)
+        step = statistics.median(plant_step_times(experiment, 500))
+        target = TRIAL_TARGET_MS.get(config.joints)
+        print(f"{arm}: {config.joints} joints, control {1 / config['control.period']:g} Hz, RK4 "
+              f"{config['integration_step'] * 1e3:g} ms: one 5 s trial min "
+              f"{min(times) * 1e3:.2f} ms, median {statistics.median(times) * 1e3:.2f} ms "
+              f"({repeats} repeats"
+              + ("" if target is None else f"; target <= {target:g} ms") + f"; first "
+              f"{warmup:.2f} s); one plant period from Python median {step * 1e6:.1f} us")
+
+
 def main() -> None:
     """Measure and print."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--trials-only", action="store_true",
+                        help="only the 5 s trial of each --arm")
+    parser.add_argument("--arm", nargs="+", default=["default", "config/arms/panda.yaml"],
+                        help="with --trials-only: 'default' (the paper's arm) or arm files")
+    parser.add_argument("--repeats", type=int, default=21)
+    args = parser.parse_args()
+    if args.trials_only:
+        trials_only(args.arm, args.repeats)
+        return
     config = load_config()
     experiment = Experiment(config, 0.10)
     feedforward = np.zeros_like(experiment.reference.position)

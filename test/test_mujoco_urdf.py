@@ -68,7 +68,8 @@ def test_rk4_period_equals_our_plant(name: str, base: str, tip: str,
 
 def test_model_options_and_joint_effects() -> None:
     """One motor per joint, RK4, contacts and joint limits off; the URDF's damping and friction
-    not in MuJoCo's rigid body, damping=True puts -b qdot back as MuJoCo's passive torque."""
+    not in MuJoCo's rigid body, damping=True puts -b qdot back as MuJoCo's passive torque,
+    friction=True adds -F tanh(qdot / v_s) to it."""
     arm = _arm("two", "base", "tool", TWO_LOCKED, timestep=0.002, period=0.01)
     model = arm.model
     assert model.nu == 2 and model.njnt == 2
@@ -87,6 +88,12 @@ def test_model_options_and_joint_effects() -> None:
     damped.set_state([0.3, -0.2], [1.5, -2.0])
     np.testing.assert_allclose(damped.passive_force(), [-0.5 * 1.5, 0.0], atol=1e-15)
     assert not np.any(damped.model.dof_frictionloss)
+    rubbing = _arm("two", "base", "tool", TWO_LOCKED, damping=True, friction=True,
+                   friction_velocity=0.5)  # -F tanh(qdot / v_s) explicit, not frictionloss
+    rubbing.set_state([0.3, -0.2], [1.5, -2.0])
+    np.testing.assert_allclose(rubbing.passive_force(),
+                               [-0.5 * 1.5 - 0.2 * np.tanh(1.5 / 0.5), 0.0], atol=1e-15)
+    assert not np.any(rubbing.model.dof_frictionloss) and mujoco.get_mjcb_passive() is None
     xarm = _arm("xarm7", "world", "link_eef", {}, damping=True)  # damping 10/10/5/5/5/2/2
     velocity = np.linspace(-1.0, 1.0, 7)
     xarm.set_state(np.zeros(7), velocity)

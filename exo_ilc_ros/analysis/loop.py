@@ -87,15 +87,21 @@ def format_robustness(report: Robustness) -> str:
     lines = [f"norm-optimal weights against norm_optimal.uncertainty_range "
              f"[{report.low:g}, {report.high:g}] (delta: max |F| over joints and frequencies; "
              "||F||_2 of the lifted map, plant linearised along the reference):"]
-    for f, r in zip(report.frequency_worst, report.lifted, strict=True):
-        lines.append(f"  delta {r.delta:6.3f}: max |F| {f:.6f}, lifted ||F||_2 {r.norm:.6f} "
-                     f"(1 {r.norm - 1.0:+.1e})")
+    deltas = report.deltas
+    for i, (d, f) in enumerate(zip(deltas, report.frequency_worst, strict=True)):
+        lifted = "" if not report.lifted else \
+            (f", lifted ||F||_2 {report.lifted[i].norm:.6f} "
+             f"(1 {report.lifted[i].norm - 1.0:+.1e})")
+        lines.append(f"  delta {d:6.3f}: max |F| {f:.6f}{lifted}")
+    if report.lifted_skipped:
+        lines.append(f"  ({report.lifted_skipped})")
     if report.robust:
         lines.append("  robust: no factor above 1 in the range (learning is monotone in norm, "
                      "the unlearned directions stay as they are)")
     else:
-        bad = [r.delta for f, r in zip(report.frequency_worst, report.lifted, strict=True)
-               if f > 1.0 + ROBUST_TOLERANCE or r.norm > 1.0 + ROBUST_TOLERANCE]
+        norms = [r.norm for r in report.lifted] or [0.0] * len(deltas)
+        bad = [d for d, f, n in zip(deltas, report.frequency_worst, norms, strict=True)
+               if f > 1.0 + ROBUST_TOLERANCE or n > 1.0 + ROBUST_TOLERANCE]
         lines.append("  WARNING: the weights are not robust to the configured uncertainty "
                      "range: a factor exceeds 1 at delta = " + ", ".join(f"{d:g}" for d in bad)
                      + " (raise norm_optimal.weight_input_change, or move "

@@ -42,6 +42,18 @@ def urdf_chain(config: Config) -> UrdfChain:
     return chain
 
 
+def urdf_joint_dynamics(config: Config) -> tuple[np.ndarray, np.ndarray]:
+    """The viscous damping b (N m s/rad) and Coulomb friction F (N m) per joint the plant adds
+    to the rigid body: the URDF's ``<dynamics damping friction>`` with
+    ``model.urdf_joint_dynamics: apply``, zeros otherwise (``ignore``, a cone arm). The nominal
+    model never holds them."""
+    zeros = np.zeros(config.joints)
+    if config["model.source"] != "urdf" or config["model.urdf_joint_dynamics"] != "apply":
+        return zeros, zeros.copy()
+    chain = urdf_chain(config)
+    return chain.damping.astype(float), chain.friction.astype(float)
+
+
 def arm_from_chain(chain: UrdfChain) -> ArmModel:
     """An :class:`ArmModel` of a URDF chain: its kernels' arrays and limits; each link's length
     is the distance to the next joint (the last: 0), its radii 0 (a URDF gives no cones)."""

@@ -14,19 +14,22 @@ locked joints made fixed at their locked value. Then, on the spec:
   before a run);
 * joint effects handled explicitly, as our model handles them: the rigid-body dynamics only.
   MuJoCo's URDF parser turns ``<dynamics damping friction>`` into joint ``damping`` and
-  ``frictionloss``; both are reset here, and ``armature`` is zero, so that MuJoCo's mass matrix
-  and bias are exactly what our kernels compute (tested). With ``damping=True`` the URDF's
-  viscous damping b is put back as MuJoCo's joint damping, the torque -b qdot, which is the
-  torque the plant must add to our kernels for the same arm; the URDF's ``friction`` (Coulomb)
-  is never applied natively (MuJoCo's ``frictionloss`` is a constraint, not our plant's smooth
-  F_c tanh(qdot / v_s)), it stays in :attr:`UrdfChain.friction` for the plant to apply as an
-  explicit torque on both.
+  ``frictionloss``; both are reset here, and ``armature`` is zero (a URDF has none; our
+  kernels neither), so that MuJoCo's mass matrix and bias are exactly what our kernels compute
+  (tested). With ``damping=True`` the URDF's viscous damping b is put back as MuJoCo's joint
+  damping, the torque -b qdot; with ``friction=True`` the URDF's Coulomb friction F is applied
+  as the explicit smooth torque -F tanh(qdot / v_s) (``friction_velocity`` v_s), added to
+  MuJoCo's passive force at every RK4 stage (:class:`SmoothFriction`), never as
+  ``frictionloss`` (a constraint, not a smooth torque). Both are what our plant adds with
+  ``model.urdf_joint_dynamics: apply`` (core/loop/patient.py's passive forces), so one period
+  equals ours to rounding (tested on the Panda).
 
 ``mujoco`` is imported only when a model is built.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
@@ -147,13 +150,45 @@ def mujoco_model(source: str | Path, base_link: str, tip_link: str,
     return model, chain
 
 
+class SmoothFriction:
+    """The explicit Coulomb torque -F tanh(qdot / v_s) per joint, added to MuJoCo's passive
+    force (``qfrc_passive``) through ``mjcb_passive`` at every evaluation of the dynamics (each
+    RK4 stage), the form of our plant's (:func:`..arm.joint_forces.passive_effort_into`).
+    MuJoCo's callback is global: it is installed only inside ``with`` (one model's steps) and
+    the previous one put back."""
+
+    def __init__(self, friction: np.ndarray, velocity: float) -> None:
+        self.friction = np.asarray(friction, dtype=float)
+        self.inverse_velocity = 1.0 / float(velocity)
+        self._previous: Any = None
+
+    def __call__(self, model: Any, data: Any) -> None:
+        data.qfrc_passive[:] -= self.friction * np.tanh(data.qvel * self.inverse_velocity)
+
+    def __enter__(self) -> SmoothFriction:
+        import mujoco
+
+        self._previous = mujoco.get_mjcb_passive()
+        mujoco.set_mjcb_passive(self)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        import mujoco
+
+        mujoco.set_mjcb_passive(self._previous)
+        self._previous = None
+
+
 class MujocoUrdfArm:
     """The URDF's chain in MuJoCo (:func:`mujoco_model`), stepped one control period at a time
-    with the effort held, and MuJoCo's joint-space inertia and bias for checks."""
+    with the effort held, and MuJoCo's joint-space inertia and bias for checks. ``damping``,
+    ``friction``: the URDF's viscous damping and Coulomb friction applied (module docstring;
+    ``friction_velocity`` v_s of the smooth Coulomb torque)."""
 
     def __init__(self, source: str | Path, base_link: str, tip_link: str,
                  locked: Mapping[str, float] | None = None, timestep: float = 0.001,
-                 period: float = 0.01, damping: bool = False, gravity: float = 9.81) -> None:
+                 period: float = 0.01, damping: bool = False, gravity: float = 9.81,
+                 friction: bool = False, friction_velocity: float = 0.1) -> None:
         import mujoco
 
         self._mujoco = mujoco
@@ -166,20 +201,29 @@ class MujocoUrdfArm:
                                               damping, gravity)
         self.data: Any = mujoco.MjData(self.model)
         self._mass = np.zeros((self.chain.dof, self.chain.dof))
+        self.friction: SmoothFriction | None = \
+            SmoothFriction(self.chain.friction, friction_velocity) \
+            if friction and np.any(self.chain.friction != 0.0) else None
+        """The explicit Coulomb torque (None: not applied)."""
 
     def set_state(self, q: Sequence[float], qd: Sequence[float]) -> None:
         """Put the arm at (q, qdot), no effort applied."""
         self.data.qpos[:] = q
         self.data.qvel[:] = qd
         self.data.ctrl[:] = 0.0
-        self._mujoco.mj_forward(self.model, self.data)
+        with self._passive():
+            self._mujoco.mj_forward(self.model, self.data)
 
     def step(self, effort: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
         """Hold ``effort`` over one control period; (q, qdot) after it."""
         self.data.ctrl[:] = effort
-        for _ in range(self.substeps):
-            self._mujoco.mj_step(self.model, self.data)
+        with self._passive():
+            for _ in range(self.substeps):
+                self._mujoco.mj_step(self.model, self.data)
         return np.array(self.data.qpos), np.array(self.data.qvel)
+
+    def _passive(self) -> contextlib.AbstractContextManager[object]:
+        return contextlib.nullcontext() if self.friction is None else self.friction
 
     def inertia_and_bias(self, q: Sequence[float], qd: Sequence[float]
                          ) -> tuple[np.ndarray, np.ndarray]:
@@ -191,5 +235,5 @@ class MujocoUrdfArm:
 
     def passive_force(self) -> np.ndarray:
         """MuJoCo's passive joint torque at the current state (``qfrc_passive``: -b qdot with
-        ``damping``)."""
+        ``damping``, -F tanh(qdot / v_s) with ``friction``)."""
         return np.array(self.data.qfrc_passive)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ModelError
 from ..learning.norm_optimal_model import (
     PatientLinearisation,
     Weights,
@@ -17,6 +18,7 @@ from ..learning.norm_optimal_model import (
     lifted_model,
 )
 from ..params.config import Config
+from ..reference.build import build_reference
 from .joint_loop import JointLoop
 from .patient_load import PatientLoad
 
@@ -64,13 +66,38 @@ class LiftedRobustness:
     """Spectral radius of F (None: not computed)."""
 
 
+LIFTED_LIMIT_BYTES = 500e6
+"""The largest dense lifted matrix the check builds (it holds several and takes their 2-norm):
+7 joints at 100 Hz (5 s: 98 MB) are checked, 3 joints at 1 kHz (1.8 GB) are not."""
+
+
+def lifted_bytes(config: Config) -> int:
+    """Bytes of one dense lifted matrix of the config ((joints (N+1))^2 doubles)."""
+    size = config.joints * build_reference(config).samples
+    return size * size * 8
+
+
+def lifted_too_large(config: Config) -> str:
+    """Why the lifted check is not run for the config ("": it is)."""
+    size = lifted_bytes(config)
+    if size <= LIFTED_LIMIT_BYTES:
+        return ""
+    return (f"the lifted check is not run: one dense lifted matrix of {config.joints} joints at "
+            f"{1 / float(config['control.period']):g} Hz would take {size / 1e9:.1f} GB (limit "
+            f"{LIFTED_LIMIT_BYTES / 1e9:g} GB); the per-frequency factor stands alone")
+
+
 def lifted_factor(config: Config, delta: float, radius: bool = False,
                   patient: PatientLinearisation | None = None,
                   model_about_patient: bool = False) -> LiftedRobustness:
     """:class:`LiftedRobustness` of the config's weights against a plant with masses
     (1 + delta) (its closed loop linearised along the reference, (NO4) with delta) and the
     ``patient``'s joint forces; ``model_about_patient``: the law's model rebuilt about them
-    (the identification in the loop, taken as exact)."""
+    (the identification in the loop, taken as exact). ModelError when the matrices would be
+    too large (:func:`lifted_too_large`)."""
+    too_large = lifted_too_large(config)
+    if too_large:
+        raise ModelError(too_large)
     matrices = learning_matrices(config, patient if model_about_patient else None)
     plant = lifted_model(config.replace({"norm_optimal.model_kind": "linearised",
                                          "norm_optimal.model_mass_uncertainty": float(delta)}),
@@ -103,6 +130,11 @@ class Robustness:
     frequency_worst: list[float]
     """max over joints and frequencies of |F| (:func:`frequency_factor`) per delta."""
     lifted: list[LiftedRobustness]
+    """Per delta; empty when the lifted check is not run (:attr:`lifted_skipped`)."""
+    lifted_skipped: str = ""
+    """Why the lifted check was not run ("": it was)."""
+    deltas: tuple[float, ...] = ()
+    """The deltas checked (those of :attr:`frequency_worst`)."""
 
     @property
     def robust(self) -> bool:
@@ -117,10 +149,13 @@ ROBUST_TOLERANCE = 1e-6
 
 def robustness(config: Config, points: int = 3, frequencies: int = 2001) -> Robustness:
     """Check the config's norm-optimal weights and model over ``norm_optimal.uncertainty_range``
-    (``points`` deltas): the per-joint factor per frequency and the lifted map's 2-norm."""
+    (``points`` deltas): the per-joint factor per frequency and the lifted map's 2-norm (not
+    for a lifted matrix above :data:`LIFTED_LIMIT_BYTES`)."""
     low, high = robustness_range(config)
     frequency = np.linspace(0.0, 0.5 / float(config["control.period"]), frequencies)
     deltas = robust_deltas(config, points)
     worst = [max(float(np.max(f)) for f in frequency_factor(config, d, frequency))
              for d in deltas]
-    return Robustness(low, high, worst, [lifted_factor(config, d) for d in deltas])
+    skipped = lifted_too_large(config)
+    lifted = [] if skipped else [lifted_factor(config, d) for d in deltas]
+    return Robustness(low, high, worst, lifted, skipped, tuple(deltas))

@@ -25,7 +25,9 @@ Per sample i of a trial (true state x_i = (q_i, qdot_i) of the plant):
 3. **Passive joint forces** at every RK4 stage (:func:`joint_forces.passive_effort_into`,
    in :func:`plant.rk4_period_with_joint_forces`): -B qdot
    - F_c tanh(qdot / v_s) - K (q - q_0), with B = viscous friction + spastic damping and K =
-   passive + spastic stiffness.
+   passive + spastic stiffness. A URDF arm's own ``<dynamics damping friction>``
+   (``model.urdf_joint_dynamics: apply``, :func:`..arm.build.urdf_joint_dynamics`) is added to
+   B and F_c: the arm's joint forces and the patient's share this one integrator and v_s.
 
 Each trial k starts at x_d(0) plus a Gaussian offset. All randomness of trial k (noise per
 sample, the initial offset, the jitters) is drawn before the trial from
@@ -44,6 +46,7 @@ import numpy as np
 from numba import njit
 
 from .. import _numba_cache  # noqa: F401  (sets numba's cache directory before any kernel)
+from ..arm.build import urdf_joint_dynamics
 from ..arm.joint_forces import COULOMB, REST, STIFFNESS, VISCOUS
 from ..params.config import Config
 from .plant import clamp_counted, rk4_period_with_joint_forces
@@ -124,7 +127,8 @@ class TrialDraws:
 
 
 class PatientModel:
-    """The ``patient.*`` parameters of a config as kernel arguments (module docstring)."""
+    """The ``patient.*`` parameters of a config as kernel arguments (module docstring), with a
+    URDF arm's applied joint dynamics in the passive forces' rows."""
 
     def __init__(self, config: Config) -> None:
         n = config.joints
@@ -135,8 +139,9 @@ class PatientModel:
         self.period = period
         stiff, damp, gain, threshold, reflex_max = spasticity_values(config)
         joint = np.zeros((_JOINT_ROWS, n))
-        joint[VISCOUS] = np.add(config["patient.friction.viscous"], damp)
-        joint[COULOMB] = config["patient.friction.coulomb"]
+        arm_damping, arm_friction = urdf_joint_dynamics(config)
+        joint[VISCOUS] = np.add(config["patient.friction.viscous"], damp) + arm_damping
+        joint[COULOMB] = np.add(config["patient.friction.coulomb"], arm_friction)
         joint[STIFFNESS] = np.add(config["patient.passive.stiffness"], stiff)
         joint[REST] = config["patient.passive.rest_position"]
         joint[REFLEX_GAIN] = gain
@@ -145,6 +150,17 @@ class PatientModel:
         joint[VOLUNTARY_STIFFNESS] = config["patient.voluntary.stiffness"]
         joint[VOLUNTARY_DAMPING] = config["patient.voluntary.damping"]
         self.joint = joint
+        arm_joint = np.zeros((_JOINT_ROWS, n))
+        arm_joint[VISCOUS] = arm_damping
+        arm_joint[COULOMB] = arm_friction
+        self.arm_joint = arm_joint
+        """The arm's own joint forces alone (a URDF arm's applied ``<dynamics>``): what the
+        plant integrates between trials, where the patient is not (:class:`.stepper.
+        PlantStepper`)."""
+        self.arm_forces = bool(np.any(arm_joint != 0.0))
+        """The arm has joint forces of its own."""
+        self.inverse_stribeck = 1.0 / float(config["patient.friction.stribeck_velocity"])
+        """1 / v_s of every smooth Coulomb term (s/rad)."""
         self.position_noise = float(config["patient.sensor.position_noise"])
         self.velocity_noise = float(config["patient.sensor.velocity_noise"])
         self.initial_position = float(config["patient.initial.position_sd"])

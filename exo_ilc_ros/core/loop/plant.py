@@ -198,6 +198,23 @@ def plant_period(effort: np.ndarray, limit: np.ndarray, saturated: np.ndarray, q
 
 
 @njit(cache=True, error_model="numpy")
+def plant_period_with_joint_forces(effort: np.ndarray, limit: np.ndarray,
+                                   saturated: np.ndarray, q: np.ndarray, qd: np.ndarray,
+                                   applied: np.ndarray, period: float, substeps: int,
+                                   plant: tuple, nominal: tuple, mode: int, ws: tuple,
+                                   stage: np.ndarray, extra: np.ndarray, joint: np.ndarray,
+                                   inverse_stribeck: float, total: np.ndarray) -> int:
+    """:func:`plant_period` with the passive joint forces of ``joint`` at every RK4 stage
+    (:func:`rk4_period_with_joint_forces`; a URDF arm's own damping and friction between
+    trials). Returns the number of joints beyond the limit (-1: a non-finite effort refused)."""
+    beyond = clamp_counted(effort, limit, saturated, applied)
+    if beyond >= 0:
+        rk4_period_with_joint_forces(q, qd, applied, period, substeps, plant, nominal, mode, ws,
+                                     stage, extra, True, joint, inverse_stribeck, total)
+    return beyond
+
+
+@njit(cache=True, error_model="numpy")
 def integrate_period(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, period: float,
                      substeps: int, plant: tuple, nominal: tuple,
                      mode: int) -> tuple[np.ndarray, np.ndarray]:

@@ -15,7 +15,7 @@ from .patient import (
     patient_plant_period,
     start_state_into,
 )
-from .plant import plant_period
+from .plant import plant_period, plant_period_with_joint_forces
 from .setup import LoopSetup
 
 
@@ -113,7 +113,8 @@ class PlantStepper:
 
     def step(self, effort: np.ndarray, saturated: np.ndarray | None = None) -> int:
         """Hold ``effort`` (clamped to +-effort_limit) over one period: RK4 on the sub-steps,
-        with the patient once a trial has begun (:meth:`begin_trial`).
+        with the patient once a trial has begun (:meth:`begin_trial`), with a URDF arm's own
+        joint forces (``model.urdf_joint_dynamics: apply``) always.
 
         ``saturated`` (int64 per joint), if given, counts the joints at or beyond the limit.
         Returns how many joints were beyond it (clamped), or -1, without stepping, for an
@@ -133,6 +134,13 @@ class PlantStepper:
                 self._stage, self._extra, self.patient.joint, self.patient.scalars,
                 self._draws.trial_scalars, self._learned(), self._history, self._memory,
                 self._held))
+        elif self.patient.arm_forces:  # a URDF arm's own joint forces act between trials too
+            beyond = int(plant_period_with_joint_forces(
+                effort, self._limit, counts, self.position, self.velocity, self.applied,
+                e.period, e.substeps, e.plant.kernel_args, e.nominal.kernel_args,
+                int(e.dynamics), self._ws, self._stage, self._extra[:2 * len(self.applied)],
+                self.patient.arm_joint, self.patient.inverse_stribeck,
+                self._extra[2 * len(self.applied):]))
         else:
             beyond = int(plant_period(effort, self._limit, counts, self.position,
                                       self.velocity, self.applied, e.period, e.substeps,

@@ -308,9 +308,12 @@ class Config:
         """The values of ``names`` (default: all) as digests and keys take them: a cone arm
         without the URDF keys (its digests stay as they were before they existed), a URDF arm
         without the cone keys and with ``model.urdf`` as the sha256 of the file's contents (not
-        its path)."""
+        its path); ``model.urdf_joint_dynamics`` only when it applies them."""
         urdf = self._values["model.source"] == "urdf"
-        left_out = schema.CONE_KEYS if urdf else schema.URDF_KEYS
+        left_out: tuple[str, ...] = schema.CONE_KEYS if urdf else \
+            schema.URDF_KEYS + schema.URDF_PLANT_KEYS
+        if self._values["model.urdf_joint_dynamics"] == "ignore":  # keys as before it existed
+            left_out += schema.URDF_PLANT_KEYS
         out = {k: self[k] for k in (self._values if names is None else names)
                if k not in left_out}
         if urdf and "model.urdf" in out:

@@ -25,12 +25,18 @@ AXIS_VECTORS: dict[str, tuple[float, float, float]] = {
 """Joint axis names accepted in the config, as unit vectors of the link frame."""
 
 MODEL_SOURCES = ("cones", "urdf")
+URDF_JOINT_DYNAMICS = ("ignore", "apply")
+"""``model.urdf_joint_dynamics``: the URDF's ``<dynamics damping friction>`` left out of the
+plant, or applied as explicit joint torques (core/arm/build.py, :func:`urdf_joint_dynamics`)."""
 CONE_KEYS = ("model.link_masses", "model.link_lengths", "model.radius_proximal",
              "model.radius_distal", "model.joint_axes")
 """The arm of ``model.source: cones`` (unused, and not checked per joint, for a URDF arm)."""
 URDF_KEYS = ("model.source", "model.urdf", "model.base_link", "model.tip_link",
              "model.locked_joints")
 """What names a URDF arm (left out of every digest of a cone arm: its keys stay as they were)."""
+URDF_PLANT_KEYS = ("model.urdf_joint_dynamics",)
+"""What a URDF arm's plant adds to its rigid body (not its nominal model; left out of every
+digest of a cone arm, as :data:`URDF_KEYS`)."""
 
 
 def parse_locked_joints(text: str) -> dict[str, float]:
@@ -284,6 +290,11 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("model.locked_joints", SHARED, Kind.STRING,
               "model.source urdf: joints held at a value, as 'name: value, name: value' (rad, "
               "m for a prismatic joint); empty: none", extra_rule=_locks_problem),
+    Parameter("model.urdf_joint_dynamics", SHARED, Kind.STRING,
+              "model.source urdf: the URDF's <dynamics damping friction> in the plant: ignore "
+              "(the rigid body only) or apply (-b qdot - F tanh(qdot / "
+              "patient.friction.stribeck_velocity) at every RK4 stage; the nominal model "
+              "leaves them out)", choices=URDF_JOINT_DYNAMICS),
     Parameter("trajectory.start", SHARED, Kind.DOUBLE_ARRAY, "q_d(0) of eq (14) (rad)",
               per_joint=True),
     Parameter("trajectory.goal", SHARED, Kind.DOUBLE_ARRAY, "q_d(T) of eq (14) (rad)",
@@ -638,6 +649,9 @@ def check_consistency(values: Mapping[str, Any]) -> None:
                           f"must be a whole number of control periods ({period:g} s)")
     if values["model.source"] == "cones":
         _check_cones(values)
+        if values["model.urdf_joint_dynamics"] != "ignore":
+            raise ConfigError("model.urdf_joint_dynamics",
+                              "a cone arm has no URDF <dynamics>: only with model.source urdf")
     elif not values["model.urdf"] or not values["model.base_link"] or \
             not values["model.tip_link"]:
         empty = next(k for k in ("model.urdf", "model.base_link", "model.tip_link")

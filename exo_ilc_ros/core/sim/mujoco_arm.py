@@ -13,19 +13,24 @@ agree to rounding (:mod:`test.test_mujoco`). ``mujoco`` is imported only when a 
 
 Joint effects MuJoCo expresses natively (viscous ``damping``, Coulomb ``frictionloss``, rotor
 ``armature``, joint ``stiffness`` towards ``springref``) are taken from :class:`JointEffects`;
-all zero by default (the paper's plant).
+all zero by default (the paper's plant). A URDF arm's ``<dynamics damping friction>`` with
+``model.urdf_joint_dynamics: apply``: its damping joins ``damping``, its Coulomb friction is
+the explicit smooth torque of our plant (:class:`~..arm.mujoco_urdf.SmoothFriction`), not
+``frictionloss``.
 """
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from ..arm.build import build_arm
+from ..arm.build import build_arm, urdf_joint_dynamics
 from ..arm.model import ArmModel
+from ..arm.mujoco_urdf import SmoothFriction
 from ..errors import ModelError
 from ..loop.patient import spasticity_values
 from ..loop.plant import clamp_counted
@@ -121,18 +126,31 @@ def effects_from_config(config: Config) -> JointEffects:
     stiffness -> ``stiffness`` towards ``passive.rest_position``. The spastic stiffness and
     damping are the Modified Ashworth preset's or the ``custom`` values
     (:func:`.patient.spasticity_values`). What MuJoCo cannot express is listed by
-    :func:`effects_not_simulated`. All zero: the MJCF has no effect attributes."""
+    :func:`effects_not_simulated`. A URDF arm's applied damping joins ``damping``
+    (:func:`..arm.build.urdf_joint_dynamics`; its friction is :func:`explicit_friction`). All
+    zero: the MJCF has no effect attributes."""
 
     k_spastic, b_spastic, _, _, _ = spasticity_values(config)
+    arm_damping, _ = urdf_joint_dynamics(config)
 
     def joint(name: str) -> np.ndarray:
         return np.asarray(config[f"patient.{name}"], dtype=float)
 
     return JointEffects(
-        damping=tuple(joint("friction.viscous") + np.asarray(b_spastic, dtype=float)),
+        damping=tuple(joint("friction.viscous") + np.asarray(b_spastic, dtype=float)
+                      + arm_damping),
         frictionloss=tuple(joint("friction.coulomb")),
         stiffness=tuple(joint("passive.stiffness") + np.asarray(k_spastic, dtype=float)),
         springref=tuple(joint("passive.rest_position")))
+
+
+def explicit_friction(config: Config) -> SmoothFriction | None:
+    """A URDF arm's applied Coulomb friction as the explicit torque -F tanh(qdot / v_s) of our
+    plant (v_s = ``patient.friction.stribeck_velocity``); None: none."""
+    _, arm_friction = urdf_joint_dynamics(config)
+    if not np.any(arm_friction != 0.0):
+        return None
+    return SmoothFriction(arm_friction, config["patient.friction.stribeck_velocity"])
 
 
 def effects_not_simulated(config: Config) -> list[str]:
@@ -167,7 +185,8 @@ class MujocoArm:
 
     def __init__(self, model: ArmModel, joint_names: Sequence[str], period: float,
                  timestep: float, effort_limit: Sequence[float],
-                 effects: JointEffects | None = None) -> None:
+                 effects: JointEffects | None = None,
+                 friction: SmoothFriction | None = None) -> None:
         import mujoco
 
         self._mujoco = mujoco
@@ -187,6 +206,8 @@ class MujocoArm:
         """The effort applied over the last period (after the limit)."""
         self._no_count = np.zeros(n, dtype=np.int64)
         self._mass = np.zeros((n, n))
+        self.friction = friction
+        """An explicit smooth Coulomb torque at every RK4 stage (None: none)."""
 
     @classmethod
     def from_config(cls, config: Config, mass_uncertainty: float | None = None) -> MujocoArm:
@@ -197,7 +218,7 @@ class MujocoArm:
         arm = build_arm(config).with_mass_scale(delta)
         return cls(arm, config["joint_names"], config["control.period"],
                    config["integration_step"], config["control.effort_limit"],
-                   effects_from_config(config))
+                   effects_from_config(config), explicit_friction(config))
 
     @property
     def position(self) -> np.ndarray:
@@ -234,8 +255,9 @@ class MujocoArm:
         if beyond < 0:
             return -1
         self.data.ctrl[:] = self.applied
-        for _ in range(self.substeps):
-            self._mujoco.mj_step(self.model, self.data)
+        with contextlib.nullcontext() if self.friction is None else self.friction:
+            for _ in range(self.substeps):
+                self._mujoco.mj_step(self.model, self.data)
         return beyond
 
     def inertia_and_bias(self, q: Sequence[float], qd: Sequence[float]

@@ -122,7 +122,9 @@ def test_one_value_for_every_joint() -> None:
     assert "or one value for every joint" in str(info.value)
     panda = load_config(ARMS / "panda.yaml")
     assert panda.joints == 7 and panda["control.kp"] == [16.0] * 7
-    assert panda["patient.friction.viscous"] == [0.0] * 7  # the shipped scalar, broadcast
+    assert panda["safety.error_envelope"] == [1.0] * 7  # the shipped scalar, broadcast
+    # a patient's per-joint key: once per joint of the patient (panda.yaml maps three)
+    assert panda["patient.friction.viscous"] == [0.0] * 3
     assert panda["control.effort_limit"] == [87.0] * 4 + [12.0] * 3  # the URDF's <limit effort>
     with pytest.raises(ConfigError) as info:
         panda.replace({"control.kd": [8.0] * 6 + [-1.0]})

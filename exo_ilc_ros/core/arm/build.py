@@ -52,12 +52,14 @@ def _urdf_arm(config: Config, mass_uncertainty: float, person: bool) -> ArmModel
                                     inertias=chain.inertias * scale)
     if person and config["person.enabled"]:
         segments, placements = person_segments(config)
-        missing = [p for p in placements.values() if p.link not in chain.link_poses]
-        if missing:
-            segment = next(s for s, p in placements.items() if p is missing[0])
-            raise ConfigError(f"person.{segment}.link", f"link {missing[0].link!r} is not a "
-                              f"link of the chain {chain.base_link!r} -> {chain.tip_link!r} "
-                              f"of {chain.source}")
+        for segment, placement in placements.items():
+            pose = chain.link_poses.get(placement.link)
+            if pose is None or pose[0] < 0:
+                where = "not a link of" if pose is None else "fixed to the base of"
+                raise ConfigError(f"person.{segment}.link", f"link {placement.link!r} is "
+                                  f"{where} the chain {chain.base_link!r} -> "
+                                  f"{chain.tip_link!r} of {chain.source} (a segment moves "
+                                  "with a link the joints move)")
         chain = with_segments(chain, segments, placements)
     return arm_from_chain(chain)
 

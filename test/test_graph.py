@@ -410,12 +410,16 @@ def test_run_reports_the_mass_uncertainty_it_ran(tmp_path: Path, store: bool,
 
 
 def test_urdf_arm_through_the_graph_equals_in_process(tmp_path: Path) -> None:
-    """The Panda (config/arms/panda.yaml, 7 joints from its URDF) through the graph: every node
-    validates the 7-joint config (the other nodes' per-joint keys from the parameters file, not
-    the shipped 3-joint defaults) and the trials are simulate's to 1e-9."""
+    """The Panda (config/arms/panda.yaml, 7 joints from its URDF) with a person strapped to it
+    (config/person.yaml: in the plant, not in the nominal model) and the friction scenario
+    mapped onto its joints (patient.joints) through the graph: every node validates the 7-joint
+    config (the other nodes' per-joint keys from the parameters file, not the shipped 3-joint
+    defaults; the patient's 3-joint lists by the mapping) and the trials are simulate's to
+    1e-9."""
     arm = ROOT / "config" / "arms" / "panda.yaml"
     graph_json, local_json = tmp_path / "graph.json", tmp_path / "local.json"
-    common = ["--config", str(arm), "--trials", "2", "--mass-uncertainty", "0.1"]
+    common = ["--config", str(arm), "--scenario", str(ROOT / "config" / "person.yaml"),
+              "friction", "--trials", "2", "--mass-uncertainty", "0.1"]
     result = _exo_ilc("run", "--no-bag", "--no-store", *common, "--json", str(graph_json),
                       timeout=200, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]

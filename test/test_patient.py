@@ -386,8 +386,13 @@ def test_bad_scenario_values_name_file_key_and_rule(tmp_path: Path, yaml_body: s
 
 
 def test_every_patient_parameter_is_in_the_plant_section() -> None:
+    """... but for where the patient's joints lie on the arm (patient.joints, joint_zero): the
+    arm's, shared, since the length of every per-joint patient list depends on them."""
     names = [p for p in schema.PARAMETERS if p.name.startswith("patient.")]
-    assert names and all(p.section == schema.PLANT and not p.live for p in names)
+    shared = {schema.PATIENT_JOINTS, "patient.joint_zero"}
+    assert names and all(not p.live for p in names)
+    assert all((p.section == schema.SHARED) == (p.name in shared) for p in names)
+    assert all(p.section == schema.PLANT for p in names if p.name not in shared)
 
 
 class _Plant:

@@ -22,6 +22,7 @@ from exo_ilc_ros.core import run_trials
 from exo_ilc_ros.core.arm.build import build_arm, urdf_chain, urdf_joint_dynamics, view_urdf
 from exo_ilc_ros.core.arm.dynamics import inertia_and_bias
 from exo_ilc_ros.core.arm.forward_kinematics import UrdfKinematics
+from exo_ilc_ros.core.arm.joint_forces import REST
 from exo_ilc_ros.core.arm.mujoco_urdf import MujocoUrdfArm
 from exo_ilc_ros.core.arm.urdf import arm_urdf
 from exo_ilc_ros.core.convergence.growth import fit_growth
@@ -127,7 +128,9 @@ def test_one_value_for_every_joint() -> None:
     assert "or one value for every joint" in str(info.value)
     panda = load_config(ARMS / "panda.yaml")
     assert panda.joints == 7 and panda["control.kp"] == [16.0] * 7
-    assert panda["patient.friction.viscous"] == [0.0] * 7  # the shipped scalar, broadcast
+    assert panda["safety.error_envelope"] == [1.0] * 7  # the shipped scalar, broadcast
+    # a patient's per-joint key: once per joint of the patient (panda.yaml maps three)
+    assert panda["patient.friction.viscous"] == [0.0] * 3
     assert panda["control.effort_limit"] == [87.0] * 4 + [12.0] * 3  # the URDF's <limit effort>
     with pytest.raises(ConfigError) as info:
         panda.replace({"control.kd": [8.0] * 6 + [-1.0]})
@@ -231,8 +234,9 @@ def test_urdf_joint_dynamics_applied_equal_in_our_plant_and_mujoco(tmp_path: Pat
     chain = urdf_chain(config)
     assert urdf_joint_dynamics(config)[0] == pytest.approx([0.8] * 7)
     assert urdf_joint_dynamics(config)[1] == pytest.approx([0.6] * 7)
-    assert not np.any(urdf_joint_dynamics(ignored)[0]) and not np.any(PatientModel(
-        ignored).joint) and not PatientModel(ignored).enabled
+    ignored_forces = np.delete(PatientModel(ignored).joint, REST, axis=0)  # rest pose: no force
+    assert not np.any(urdf_joint_dynamics(ignored)[0]) and not np.any(ignored_forces) \
+        and not PatientModel(ignored).enabled
     assert config.digest() != ignored.digest()
     assert "model.urdf_joint_dynamics" not in ignored.identity_values()  # keys as before
     if plant == "urdf":

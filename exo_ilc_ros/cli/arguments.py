@@ -225,11 +225,13 @@ def scenario(text: str) -> str:
 
 
 def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
-    """``--scenario NAME|FILE``: a virtual patient laid over ``--config``."""
-    parser.add_argument("--scenario", type=scenario, metavar="NAME|FILE",
+    """``--scenario NAME|FILE [NAME|FILE ...]``: virtual patients (or any overlays) laid over
+    ``--config``, in order."""
+    parser.add_argument("--scenario", type=scenario, metavar="NAME|FILE", nargs="+",
                         help="virtual patient laid over --config: a shipped scenario "
                         "(ideal, sensor, friction, spastic, voluntary, realistic, learning; "
-                        "config/scenarios/) or a ROS parameter YAML of the same layout")
+                        "config/scenarios/) or a ROS parameter YAML of the same layout; "
+                        "several are laid over in order (e.g. config/robust.yaml friction)")
 
 
 def write_output(text: str, out: str | None) -> None:

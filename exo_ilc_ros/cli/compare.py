@@ -71,7 +71,7 @@ def compare(args: argparse.Namespace) -> int:
         raise ConfigError("--no-tuned", f"cannot be combined with --tuned {args.tuned}")
     base = config_with_flags(args.config, {} if args.trials is None else
                              {"max_trials": ("--trials", args.trials)},
-                             [args.scenario] if args.scenario else [])
+                             args.scenario or [])
     trials = int(base["max_trials"])
     variants = [Variant("sign (paper)", base.replace({"law": "sign"}), "sign")]
     tuned_path = None if args.no_tuned else (Path(args.tuned) if args.tuned else find_tuned())

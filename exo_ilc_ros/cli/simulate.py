@@ -64,7 +64,7 @@ def config_from_args(args: argparse.Namespace) -> Config:
         flags["law"] = ("--law", args.law)
     if args.trials is not None:
         flags["max_trials"] = ("--trials", args.trials)
-    return config_with_flags(args.config, flags, [args.scenario] if args.scenario else [])
+    return config_with_flags(args.config, flags, args.scenario or [])
 
 
 def register(sub: Any) -> None:

@@ -30,6 +30,7 @@ from enum import Enum
 
 import numpy as np
 
+from ..params.schema import PERSON_SEGMENTS
 from ..params.urdf_xml import UrdfError
 from .urdf_chain import UrdfChain
 
@@ -60,7 +61,7 @@ class SegmentTable:
 REFERENCE_STATURE_M = {Sex.MALE: 1.741, Sex.FEMALE: 1.735}
 """Stature of de Leva's reference subjects (m)."""
 
-SEGMENTS = ("upper_arm", "forearm", "hand")
+SEGMENTS = PERSON_SEGMENTS
 """Shoulder -> elbow, elbow -> wrist, wrist -> third metacarpal head."""
 
 DE_LEVA_1996: Mapping[tuple[str, Sex], SegmentTable] = {

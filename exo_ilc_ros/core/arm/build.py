@@ -1,17 +1,20 @@
 """The arm a config describes (its ``model.*`` keys): the nominal model the computed torque
-uses; the plant scales its masses (:meth:`.model.ArmModel.with_mass_scale`). ``model.source``
-says where it comes from: the paper's truncated cones (``cones``) or a URDF's chain (``urdf``,
-:mod:`.urdf_chain`)."""
+uses (:func:`build_arm`) and the plant (:func:`build_plant`: the masses scaled, eq (15), and a
+person's segments, ``person.*``). ``model.source`` says where it comes from: the paper's
+truncated cones (``cones``) or a URDF's chain (``urdf``, :mod:`.urdf_chain`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import xml.etree.ElementTree as ET
 from typing import Any
 
 import numpy as np
 
+from ..errors import ConfigError, ModelError
 from ..params import schema
 from ..params.config import Config, urdf_path, urdf_source
+from .body_segments import Segment, SegmentPlacement, arm_segments, with_segments
 from .model import ArmModel
 from .urdf import arm_urdf
 from .urdf_chain import UrdfChain, read_urdf_chain
@@ -20,12 +23,64 @@ _CHAINS: dict[tuple[Any, ...], UrdfChain] = {}
 
 
 def build_arm(config: Config) -> ArmModel:
-    """The nominal arm of the config (the model the computed torque uses)."""
+    """The nominal arm of the config (the model the computed torque uses): a URDF arm with the
+    person's segments only with ``person.in_nominal``."""
     if config["model.source"] == "urdf":
-        return arm_from_chain(urdf_chain(config))
+        return _urdf_arm(config, 0.0, bool(config["person.in_nominal"]))
     return ArmModel.from_links(config["model.link_masses"], config["model.link_lengths"],
                                config["model.radius_proximal"], config["model.radius_distal"],
                                config["model.joint_axes"], config["model.gravity"])
+
+
+def build_plant(config: Config, mass_uncertainty: float | None = None) -> ArmModel:
+    """The plant of the config: the robot's masses and inertias scaled by (1 + delta), eq (15)
+    (delta: ``mass_uncertainty``, default the config's), plus the person's segments with
+    ``person.enabled`` (not scaled: the person's are de Leva's estimate either way)."""
+    delta = float(config["mass_uncertainty"] if mass_uncertainty is None else mass_uncertainty)
+    if config["model.source"] == "urdf":
+        return _urdf_arm(config, delta, bool(config["person.enabled"]))
+    return build_arm(config).with_mass_scale(delta)
+
+
+def _urdf_arm(config: Config, mass_uncertainty: float, person: bool) -> ArmModel:
+    chain = urdf_chain(config)
+    if mass_uncertainty != 0.0:
+        scale = 1.0 + mass_uncertainty
+        if scale <= 0.0:
+            raise ModelError("mass uncertainty must be greater than -1")
+        chain = dataclasses.replace(chain, masses=chain.masses * scale,
+                                    inertias=chain.inertias * scale)
+    if person and config["person.enabled"]:
+        segments, placements = person_segments(config)
+        for segment, placement in placements.items():
+            pose = chain.link_poses.get(placement.link)
+            if pose is None or pose[0] < 0:
+                where = "not a link of" if pose is None else "fixed to the base of"
+                raise ConfigError(f"person.{segment}.link", f"link {placement.link!r} is "
+                                  f"{where} the chain {chain.base_link!r} -> "
+                                  f"{chain.tip_link!r} of {chain.source} (a segment moves "
+                                  "with a link the joints move)")
+        chain = with_segments(chain, segments, placements)
+    return arm_from_chain(chain)
+
+
+def person_segments(config: Config) -> tuple[tuple[Segment, ...], dict[str, SegmentPlacement]]:
+    """The person's segments (de Leva 1996, :func:`.body_segments.arm_segments`) and where
+    each is strapped (the segments with a ``person.<segment>.link``)."""
+    lengths = {s: config[f"person.{s}.length"] for s in schema.PERSON_SEGMENTS
+               if config[f"person.{s}.length"] > 0.0}
+    segments = arm_segments(config["person.body_mass"], config["person.height"],
+                            config["person.sex"], lengths)
+    placements = {
+        s: SegmentPlacement(config[f"person.{s}.link"], _xyz(config[f"person.{s}.origin"]),
+                            _xyz(config[f"person.{s}.direction"]),
+                            _xyz(config[f"person.{s}.sagittal_axis"]))
+        for s in schema.PERSON_SEGMENTS if config[f"person.{s}.link"]}
+    return segments, placements
+
+
+def _xyz(value: list[float]) -> tuple[float, float, float]:
+    return float(value[0]), float(value[1]), float(value[2])
 
 
 def urdf_chain(config: Config) -> UrdfChain:

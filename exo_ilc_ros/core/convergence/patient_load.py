@@ -13,7 +13,7 @@ import numpy as np
 
 from ..arm.build import build_arm
 from ..learning.norm_optimal_model import PatientLinearisation
-from ..loop.patient import spasticity_values
+from ..loop.patient import patient_values, spasticity_values
 from ..params.config import Config
 from ..reference.build import build_reference
 
@@ -40,11 +40,9 @@ class PatientLoad:
 def patient_load(config: Config, label: str = "") -> PatientLoad:
     """The linear joint forces of the patient ``config`` describes (``patient.*`` keys)."""
     spastic_stiffness, spastic_damping, *_ = spasticity_values(config)
-    stiffness = np.asarray(config["patient.passive.stiffness"], dtype=float) \
-        + np.asarray(config["patient.voluntary.stiffness"], dtype=float) \
-        + np.asarray(spastic_stiffness, dtype=float)
-    damping = np.asarray(config["patient.friction.viscous"], dtype=float) \
-        + np.asarray(config["patient.voluntary.damping"], dtype=float) \
-        + np.asarray(spastic_damping, dtype=float)
+    stiffness = patient_values(config, "passive.stiffness") \
+        + patient_values(config, "voluntary.stiffness") + np.asarray(spastic_stiffness)
+    damping = patient_values(config, "friction.viscous") \
+        + patient_values(config, "voluntary.damping") + np.asarray(spastic_damping)
     inertia = np.diag(build_arm(config).metric_tensor(build_reference(config).position[0]))
     return PatientLoad(label, stiffness, damping, stiffness / inertia, damping / inertia)

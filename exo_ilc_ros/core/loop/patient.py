@@ -2,9 +2,12 @@
 (which keeps the viscous, spring and friction forces Q^v, Q^c, Q^f and sets them to zero).
 
 Every effect is a ``patient.*`` parameter of the plant_simulator section, off by default (the
-shipped config gives the paper's numbers bit for bit). One code path: the compiled trial of
-:func:`trial.simulate_trial_guarded` and the plant_simulator node's :class:`plant.PlantStepper`
-call the same kernels below in the same order, so the graph equals the in-process runner.
+shipped config gives the paper's numbers bit for bit). Its per-joint values are for the
+patient's joints: the arm's, or those ``patient.joints`` names, each acting on the arm joint it
+maps to (:func:`patient_values`; an arm joint not named gets no patient effect). One code path:
+the compiled trial of :func:`trial.simulate_trial_guarded` and the plant_simulator node's
+:class:`plant.PlantStepper` call the same kernels below in the same order, so the graph equals
+the in-process runner.
 
 Per sample i of a trial (true state x_i = (q_i, qdot_i) of the plant):
 
@@ -40,6 +43,7 @@ session draws its own; fatigue is a function of k.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,6 +52,7 @@ from numba import njit
 from .. import _numba_cache  # noqa: F401  (sets numba's cache directory before any kernel)
 from ..arm.build import urdf_joint_dynamics
 from ..arm.joint_forces import COULOMB, REST, STIFFNESS, VISCOUS
+from ..params import schema
 from ..params.config import Config
 from .plant import clamp_counted, rk4_period_with_joint_forces
 from .record import TrialRecord
@@ -99,19 +104,62 @@ saturate; stretch-evoked torque depends only weakly on velocity, Powers, Campbel
 1989, Ann Neurol 26:32). A fitted table for one patient should replace them."""
 
 
+def patient_joint_indices(config: Config) -> np.ndarray:
+    """The arm joint (index into ``joint_names``) each of the patient's joints acts on, in the
+    order of the ``patient.*`` per-joint lists: ``patient.joints``, or every arm joint when it
+    is empty."""
+    names = config["joint_names"]
+    mapping = schema.parse_patient_joints(config[schema.PATIENT_JOINTS])
+    if not mapping:
+        return np.arange(len(names))
+    return np.array([names.index(arm) for arm, _ in mapping.values()], dtype=np.intp)
+
+
+def patient_joint_signs(config: Config) -> np.ndarray:
+    """+1 or -1 per patient joint: -1 where the patient's angle grows as the arm joint's
+    falls (``-arm_joint`` in ``patient.joints``)."""
+    mapping = schema.parse_patient_joints(config[schema.PATIENT_JOINTS])
+    if not mapping:
+        return np.ones(config.joints)
+    return np.array([sign for _, sign in mapping.values()])
+
+
+def rest_positions(config: Config) -> np.ndarray:
+    """q_0 per arm joint, in the arm's angles: ``patient.joint_zero`` + sign x
+    ``patient.passive.rest_position`` (0 where no patient joint acts: no stiffness there)."""
+    zero = np.asarray(config["patient.joint_zero"], dtype=float)
+    rest = np.asarray(config["patient.passive.rest_position"], dtype=float)
+    return on_arm_joints(config, zero + patient_joint_signs(config) * rest)
+
+
+def on_arm_joints(config: Config, values: Sequence[float]) -> np.ndarray:
+    """A value per patient joint as one per arm joint (0 on an arm joint no patient joint
+    acts on: no effect there)."""
+    out = np.zeros(config.joints)
+    out[patient_joint_indices(config)] = values
+    return out
+
+
+def patient_values(config: Config, key: str) -> np.ndarray:
+    """``patient.<key>`` (a per-joint value of the patient) per arm joint
+    (:func:`on_arm_joints`)."""
+    return on_arm_joints(config, config[f"patient.{key}"])
+
+
 def spasticity_values(config: Config) -> tuple[list[float], list[float], list[float],
                                                 list[float], list[float]]:
-    """Per joint: spastic stiffness, damping, reflex gain, reflex threshold, reflex ceiling
-    (0: none) (the MAS preset, or the ``custom`` values)."""
+    """Per arm joint: spastic stiffness, damping, reflex gain, reflex threshold, reflex ceiling
+    (0: none) (the MAS preset on every patient joint, or the ``custom`` values; 0 on an arm
+    joint the patient does not act on)."""
     grade = config["patient.spasticity.mas_grade"]
-    n = config.joints
+    n = len(patient_joint_indices(config))
     if grade != "custom":
-        k, b, g, th, ceiling = MAS_PRESETS[grade]
-        return [k] * n, [b] * n, [g] * n, [th] * n, [ceiling] * n
-    return (config["patient.spasticity.stiffness"], config["patient.spasticity.damping"],
-            config["patient.spasticity.reflex_gain"],
-            config["patient.spasticity.reflex_threshold"],
-            config["patient.spasticity.reflex_max"])
+        values = [[x] * n for x in MAS_PRESETS[grade]]
+    else:
+        values = [config[f"patient.spasticity.{key}"] for key in
+                  ("stiffness", "damping", "reflex_gain", "reflex_threshold", "reflex_max")]
+    k, b, g, th, ceiling = (on_arm_joints(config, v).tolist() for v in values)
+    return k, b, g, th, ceiling
 
 
 @dataclass(frozen=True, eq=False)
@@ -140,15 +188,15 @@ class PatientModel:
         stiff, damp, gain, threshold, reflex_max = spasticity_values(config)
         joint = np.zeros((_JOINT_ROWS, n))
         arm_damping, arm_friction = urdf_joint_dynamics(config)
-        joint[VISCOUS] = np.add(config["patient.friction.viscous"], damp) + arm_damping
-        joint[COULOMB] = np.add(config["patient.friction.coulomb"], arm_friction)
-        joint[STIFFNESS] = np.add(config["patient.passive.stiffness"], stiff)
-        joint[REST] = config["patient.passive.rest_position"]
+        joint[VISCOUS] = patient_values(config, "friction.viscous") + damp + arm_damping
+        joint[COULOMB] = patient_values(config, "friction.coulomb") + arm_friction
+        joint[STIFFNESS] = patient_values(config, "passive.stiffness") + stiff
+        joint[REST] = rest_positions(config)
         joint[REFLEX_GAIN] = gain
         joint[REFLEX_THRESHOLD] = threshold
         joint[REFLEX_MAX] = reflex_max
-        joint[VOLUNTARY_STIFFNESS] = config["patient.voluntary.stiffness"]
-        joint[VOLUNTARY_DAMPING] = config["patient.voluntary.damping"]
+        joint[VOLUNTARY_STIFFNESS] = patient_values(config, "voluntary.stiffness")
+        joint[VOLUNTARY_DAMPING] = patient_values(config, "voluntary.damping")
         self.joint = joint
         arm_joint = np.zeros((_JOINT_ROWS, n))
         arm_joint[VISCOUS] = arm_damping
@@ -175,7 +223,7 @@ class PatientModel:
         voluntary_lag = float(config["patient.voluntary.time_constant"])
         reflex_delay = int(round(float(config["patient.spasticity.reflex_delay"]) / period))
         effort_delay = int(config["patient.effort_delay"])
-        self.learning_gain = np.asarray(config["patient.learning.gain"], dtype=float)
+        self.learning_gain = patient_values(config, "learning.gain")
         self.learning = (float(config["patient.learning.fast_retention"]),
                          float(config["patient.learning.fast_rate"]),
                          float(config["patient.learning.slow_retention"]),

@@ -134,15 +134,19 @@ def validate(values: Mapping[str, Any], source: str | None = None) -> dict[str, 
         if joints < 1:
             raise ConfigError("joint_names", "at least one joint is needed")
         urdf = out["model.source"] == "urdf"
+        patient_names = schema.patient_joint_names(out)
         for param in schema.PARAMETERS:
             if urdf and param.name in schema.CONE_KEYS:
                 continue  # a cone arm's keys: unused
+            count, labels = (len(patient_names), patient_names) if param.patient_joint \
+                else (joints, names)
             if param.per_joint and not isinstance(out[param.name], list):
-                out[param.name] = [out[param.name]] * joints  # one value for every joint
-            schema.check_value(param, out[param.name], joints, names)
+                out[param.name] = [out[param.name]] * count  # one value for every joint
+            schema.check_value(param, out[param.name], count, labels)
         schema.check_consistency(out)
         if urdf:
             _check_urdf_joints(out)
+        schema.check_patient_joints(out)
     except ConfigError as exc:
         if source and not exc.source:
             raise ConfigError(exc.key, exc.rule, source) from None
@@ -308,12 +312,17 @@ class Config:
         """The values of ``names`` (default: all) as digests and keys take them: a cone arm
         without the URDF keys (its digests stay as they were before they existed), a URDF arm
         without the cone keys and with ``model.urdf`` as the sha256 of the file's contents (not
-        its path); ``model.urdf_joint_dynamics`` only when it applies them."""
+        its path); ``model.urdf_joint_dynamics`` only when it applies them; the person's keys
+        only with ``person.enabled``, ``patient.joints`` only when given (so, too, for the keys
+        that came before them)."""
         urdf = self._values["model.source"] == "urdf"
-        left_out: tuple[str, ...] = schema.CONE_KEYS if urdf else \
-            schema.URDF_KEYS + schema.URDF_PLANT_KEYS
+        left_out = set(schema.CONE_KEYS if urdf else schema.URDF_KEYS + schema.URDF_PLANT_KEYS)
         if self._values["model.urdf_joint_dynamics"] == "ignore":  # keys as before it existed
-            left_out += schema.URDF_PLANT_KEYS
+            left_out.update(schema.URDF_PLANT_KEYS)
+        if not self._values["person.enabled"]:
+            left_out.update(schema.PERSON_KEYS)
+        if not self._values[schema.PATIENT_JOINTS]:
+            left_out.add(schema.PATIENT_JOINTS)
         out = {k: self[k] for k in (self._values if names is None else names)
                if k not in left_out}
         if urdf and "model.urdf" in out:

@@ -39,26 +39,72 @@ URDF_PLANT_KEYS = ("model.urdf_joint_dynamics",)
 digest of a cone arm, as :data:`URDF_KEYS`)."""
 
 
-def parse_locked_joints(text: str) -> dict[str, float]:
-    """``model.locked_joints`` ('name: value, name: value'; '=' works too) as a dict, or
-    ConfigError naming the entry."""
-    out: dict[str, float] = {}
+PERSON_SEGMENTS = ("upper_arm", "forearm", "hand")
+"""The person's segments (core/arm/body_segments.py): shoulder -> elbow, elbow -> wrist, wrist
+-> third metacarpal head."""
+PERSON_KEYS = ("person.enabled", "person.in_nominal", "person.body_mass", "person.height",
+               "person.sex", *(f"person.{segment}.{what}" for segment in PERSON_SEGMENTS
+                               for what in ("link", "length", "origin", "direction",
+                                            "sagittal_axis")))
+"""A person in the exoskeleton (left out of every digest while ``person.enabled`` is false:
+a run without a person keeps the keys it had before they existed)."""
+PATIENT_JOINTS = "patient.joints"
+
+
+def _name_map_entries(text: str, key: str, form: str) -> list[tuple[str, str]]:
+    """('name', 'value') of every entry of a ``name: value, name: value`` string ('=' works
+    too; ROS parameters have no map type), or ConfigError naming the entry."""
+    out: list[tuple[str, str]] = []
     for entry in (e.strip() for e in text.strip().strip("{}").split(",")):
         if not entry:
             continue
         name, sep, value = entry.replace("=", ":").rpartition(":")
-        name = name.strip().strip("'\"")
+        name, value = name.strip().strip("'\""), value.strip().strip("'\"")
+        if not sep or not name or not value:
+            raise ConfigError(key, f"entry {entry!r} is not {form}")
+        if any(name == seen for seen, _ in out):
+            raise ConfigError(key, f"joint {name!r} is given twice")
+        out.append((name, value))
+    return out
+
+
+def parse_locked_joints(text: str) -> dict[str, float]:
+    """``model.locked_joints`` ('name: value, name: value') as a dict, or ConfigError naming
+    the entry."""
+    form = "'joint_name: value' (a finite number)"
+    out: dict[str, float] = {}
+    for name, value in _name_map_entries(text, "model.locked_joints", form):
         try:
             number = float(value)
         except ValueError:
             number = math.nan
-        if not sep or not name or not math.isfinite(number):
-            raise ConfigError("model.locked_joints", f"entry {entry!r} is not 'joint_name: "
-                              "value' (a finite number)")
-        if name in out:
-            raise ConfigError("model.locked_joints", f"joint {name!r} is given twice")
+        if not math.isfinite(number):
+            raise ConfigError("model.locked_joints", f"entry '{name}: {value}' is not {form}")
         out[name] = number
     return out
+
+
+def parse_patient_joints(text: str) -> dict[str, tuple[str, float]]:
+    """``patient.joints`` ('patient_joint: arm_joint, ...'; '-arm_joint': the patient's angle
+    grows as the arm joint's falls) as {patient joint: (arm joint, +1 or -1)} in the order
+    given, or ConfigError naming the entry (an arm joint given twice too)."""
+    out = {}
+    for patient, arm in _name_map_entries(text, PATIENT_JOINTS,
+                                          "'patient_joint: arm_joint' or '-arm_joint'"):
+        sign = -1.0 if arm.startswith("-") else 1.0
+        out[patient] = (arm.lstrip("+-").strip(), sign)
+    targets = [arm for arm, _ in out.values()]
+    twice = next((t for t in targets if targets.count(t) > 1), None)
+    if twice is not None:
+        raise ConfigError(PATIENT_JOINTS, f"arm joint {twice!r} is given to two of the "
+                          "patient's joints (one patient joint per arm joint)")
+    return out
+
+
+def patient_joint_names(values: Mapping[str, Any]) -> list[str]:
+    """The joints every ``patient.*`` per-joint list is for, in its order: the patient's
+    (``patient.joints``), or the arm's ``joint_names`` when it is empty."""
+    return list(parse_patient_joints(values[PATIENT_JOINTS])) or list(values["joint_names"])
 
 
 def _locks_problem(value: Any) -> str | None:
@@ -67,6 +113,24 @@ def _locks_problem(value: Any) -> str | None:
     except ConfigError as exc:
         return exc.rule
     return None
+
+
+def _patient_joints_problem(value: Any) -> str | None:
+    try:
+        parse_patient_joints(value)
+    except ConfigError as exc:
+        return exc.rule
+    return None
+
+
+def _vector_rule(value: Any) -> str | None:
+    return None if len(value) == 3 else f"must be [x, y, z] (3 numbers), got {value!r}"
+
+
+def _direction_rule(value: Any) -> str | None:
+    if len(value) != 3:
+        return _vector_rule(value)
+    return None if any(value) else "must not be zero (a direction)"
 
 
 SHARED = "/**"
@@ -99,6 +163,8 @@ class Parameter:
     description: str
     per_joint: bool = False
     """An array with one entry per joint (or one value for every joint: validation repeats it)."""
+    patient_joint: bool = False
+    """Per joint of the patient (:func:`patient_joint_names`), not of the arm."""
     minimum: float | None = None
     strictly_positive: bool = False
     choices: tuple[str, ...] = ()
@@ -159,8 +225,14 @@ def _patient_parameters() -> list[Parameter]:
     def p(name: str, kind: Kind, text: str, **rules: Any) -> Parameter:
         return Parameter(f"patient.{name}", PLANT, kind, text, **rules)
 
-    joint = {"per_joint": True, "minimum": 0.0}
+    joint = {"per_joint": True, "patient_joint": True, "minimum": 0.0}
     return [
+        Parameter(PATIENT_JOINTS, SHARED, Kind.STRING, "the patient's joints and the arm joint "
+                  "each acts on, 'patient_joint: arm_joint, ...' ('-arm_joint': the patient's "
+                  "angle grows as the arm's falls); every patient.* per-joint list is in this "
+                  "order, arm joints not named get no patient effect; empty: the patient's "
+                  "joints are the arm's (joint_names)",
+                  extra_rule=_patient_joints_problem),
         p("seed", Kind.INTEGER, "seed of the patient's random numbers (trial k draws from "
           "SeedSequence([seed, k]))", minimum=0.0),
         p("session", Kind.INTEGER, "the patient's therapy session the run is (1: the first, "
@@ -185,7 +257,11 @@ def _patient_parameters() -> list[Parameter]:
         p("passive.stiffness", Kind.DOUBLE_ARRAY, "passive joint stiffness K of "
           "K (q - q_0) (N m/rad)", **joint),
         p("passive.rest_position", Kind.DOUBLE_ARRAY, "q_0: where the passive (and spastic) "
-          "stiffness exerts no torque (rad)", per_joint=True),
+          "stiffness exerts no torque (rad, the patient's angle: from patient.joint_zero, "
+          "signed as patient.joints)", per_joint=True, patient_joint=True),
+        Parameter("patient.joint_zero", SHARED, Kind.DOUBLE_ARRAY, "the arm joint's angle "
+                  "where the patient's joint is at 0 (rad; the patient's angles, "
+                  "passive.rest_position, count from it)", per_joint=True, patient_joint=True),
         p("spasticity.mas_grade", Kind.STRING, "custom (the values below) or a Modified "
           "Ashworth grade 0, 1, 1+, 2, 3 (its preset replaces them)", choices=MAS_GRADES),
         p("spasticity.stiffness", Kind.DOUBLE_ARRAY, "spastic stiffness added to "
@@ -230,6 +306,46 @@ def _patient_parameters() -> list[Parameter]:
         p("effort_delay", Kind.INTEGER, "control periods between a command and its torque at "
           "the joint", minimum=0.0),
     ]
+def _person_parameters() -> list[Parameter]:
+    """A person in the exoskeleton (core/arm/body_segments.py, de Leva 1996): off by default."""
+    out = [
+        Parameter("person.enabled", SHARED, Kind.BOOL,
+                  "the plant carries a person's upper arm, forearm and hand (de Leva 1996 "
+                  "segments from body mass and height) strapped to the links below; "
+                  "model.source urdf only (the paper's cone links are the arm itself)"),
+        Parameter("person.in_nominal", SHARED, Kind.BOOL,
+                  "the nominal model (computed torque, the norm-optimal law's model) carries "
+                  "the person too; false: the lab knows its robot, not the patient, and the "
+                  "learning takes the person up"),
+        Parameter("person.body_mass", SHARED, Kind.DOUBLE, "the person's body mass (kg)",
+                  strictly_positive=True),
+        Parameter("person.height", SHARED, Kind.DOUBLE, "the person's height (m): scales "
+                  "de Leva's segment lengths", strictly_positive=True),
+        Parameter("person.sex", SHARED, Kind.STRING, "de Leva's table: male or female",
+                  choices=("male", "female")),
+    ]
+    for segment in PERSON_SEGMENTS:
+        base = f"person.{segment}"
+        out += [
+            Parameter(f"{base}.link", SHARED, Kind.STRING,
+                      f"the exoskeleton link the {segment} is strapped to (it moves with that "
+                      "link's body); empty: left out"),
+            Parameter(f"{base}.length", SHARED, Kind.DOUBLE,
+                      f"the {segment}'s measured joint-to-joint length (m); 0: de Leva's "
+                      "reference length scaled by person.height", minimum=0.0),
+            Parameter(f"{base}.origin", SHARED, Kind.DOUBLE_ARRAY,
+                      f"the {segment}'s proximal joint centre in the link's frame (m)",
+                      extra_rule=_vector_rule),
+            Parameter(f"{base}.direction", SHARED, Kind.DOUBLE_ARRAY,
+                      f"the {segment}'s direction, proximal to distal, in the link's frame",
+                      extra_rule=_direction_rule),
+            Parameter(f"{base}.sagittal_axis", SHARED, Kind.DOUBLE_ARRAY,
+                      f"the {segment}'s sagittal (anteroposterior) axis in the link's frame, "
+                      "normal to its direction", extra_rule=_direction_rule),
+        ]
+    return out
+
+
 def _share_rule(value: Any) -> str | None:
     return None if value <= 1.0 else f"must be <= 1 (a share of the periods), got {value!r}"
 
@@ -391,6 +507,7 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("clock_every", PLANT, Kind.INTEGER,
               "publish /clock every this many control periods (and at each trial's first "
               "sample); 1: every period", strictly_positive=True),
+    *_person_parameters(),
     *_patient_parameters(),
     Parameter("law", SUPERVISOR, Kind.STRING,
               "learning law: sign (sgnPDD^2, eq (11)), linear (Arimoto PDD^2-type) or "
@@ -611,8 +728,10 @@ def check_value(param: Parameter, value: Any, joints: int,
     fail(lambda x: not math.isfinite(x), "must be finite (no NaN or inf)")
     if param.per_joint and isinstance(value, list) and len(value) != joints:
         names = f": {', '.join(joint_names)}" if joint_names else ""
-        raise ConfigError(param.name, f"must have one entry per joint ({joints}{names}) or one "
-                          f"value for every joint, got {len(value)} entries")
+        whose = f" of the patient (the patient's joints: {PATIENT_JOINTS} maps them onto the " \
+            "arm's)" if param.patient_joint else ""
+        raise ConfigError(param.name, f"must have one entry per joint{whose} ({joints}{names}) "
+                          f"or one value for every joint, got {len(value)} entries")
     if param.minimum is not None:
         minimum = param.minimum
         fail(lambda x: x < minimum, f"must be >= {minimum:g}")
@@ -670,6 +789,7 @@ def check_consistency(values: Mapping[str, Any]) -> None:
                                   "give either a mas_grade (its preset) or the custom values, "
                                   "not both (set mas_grade: custom)")
 
+    _check_person(values)
     hold = hold_gain_problem(values)
     if hold is not None:
         raise ConfigError(*hold)
@@ -691,3 +811,36 @@ def _check_cones(values: Mapping[str, Any]) -> None:
                               "length, so it needs a positive radius")
     if all(m == 0.0 for m in masses):
         raise ConfigError("model.link_masses", "at least one link must have mass")
+
+
+def check_patient_joints(values: Mapping[str, Any]) -> None:
+    """Every arm joint ``patient.joints`` names is one of ``joint_names`` (checked once they
+    are known to be the arm's: a URDF arm's after the URDF's)."""
+    arm = list(values["joint_names"])
+    for patient, (target, _) in parse_patient_joints(values[PATIENT_JOINTS]).items():
+        if target not in arm:
+            raise ConfigError(PATIENT_JOINTS, f"the patient's joint {patient!r} acts on "
+                              f"{target!r}, which is not a joint of the arm ({', '.join(arm)})")
+
+
+def _check_person(values: Mapping[str, Any]) -> None:
+    """A person only on a URDF arm, each segment's sagittal axis normal to its direction."""
+    if not values["person.enabled"]:
+        return
+    if values["model.source"] != "urdf":
+        raise ConfigError("person.enabled", "the paper's arm (model.source cones) is the "
+                          "person's arm itself: its links are the upper arm and forearm "
+                          "(model.link_masses); a person's segments are added to a URDF "
+                          "exoskeleton (model.source urdf)")
+    linked = [s for s in PERSON_SEGMENTS if values[f"person.{s}.link"]]
+    if not linked:
+        raise ConfigError("person.enabled", "no segment is strapped to a link (give "
+                          "person.upper_arm.link, person.forearm.link or person.hand.link)")
+    for segment in linked:
+        along = values[f"person.{segment}.direction"]
+        axis = values[f"person.{segment}.sagittal_axis"]
+        dot = sum(a * b for a, b in zip(along, axis, strict=True))
+        norms = math.sqrt(sum(a * a for a in along) * sum(b * b for b in axis))
+        if abs(dot) > 1e-9 * norms:
+            raise ConfigError(f"person.{segment}.sagittal_axis", f"must be normal to "
+                              f"person.{segment}.direction {along}, got {axis}")

@@ -26,9 +26,10 @@ PROFILE_FORMAT = 1
 
 MODEL_KEYS = ("joint_names", "model.link_masses", "model.link_lengths", "model.radius_proximal",
               "model.radius_distal", "model.joint_axes", "model.gravity", "control.period",
-              "control.kp", "control.kd", *schema.URDF_KEYS)
+              "control.kp", "control.kd", *schema.URDF_KEYS, *schema.PERSON_KEYS)
 """What a feed-forward was learned *for*: the controller's nominal model and loop (a URDF arm by
-its file's contents, :meth:`~exo_ilc_ros.core.params.config.Config.identity_values`)."""
+its file's contents, a person's segments only with ``person.enabled``,
+:meth:`~exo_ilc_ros.core.params.config.Config.identity_values`)."""
 
 
 SESSION_KEY = "patient.session"

@@ -41,8 +41,9 @@ from typing import Any
 
 import numpy as np
 
-from ..arm.build import build_arm
+from ..arm.build import build_arm, build_plant
 from ..arm.model import ArmModel
+from ..loop.patient import patient_values, rest_positions
 from ..loop.record import TrialRecord
 from ..params.config import Config
 
@@ -205,11 +206,11 @@ class PassiveArm:
     def from_config(cls, config: Config) -> PassiveArm | None:
         """The config's passive arm, None when it has none (or no ``patient.*``)."""
         try:
-            arm = cls(np.asarray(config["patient.friction.viscous"], dtype=float),
-                      np.asarray(config["patient.friction.coulomb"], dtype=float),
+            arm = cls(patient_values(config, "friction.viscous"),
+                      patient_values(config, "friction.coulomb"),
                       float(config["patient.friction.stribeck_velocity"]),
-                      np.asarray(config["patient.passive.stiffness"], dtype=float),
-                      np.asarray(config["patient.passive.rest_position"], dtype=float))
+                      patient_values(config, "passive.stiffness"),
+                      rest_positions(config))
         except KeyError:
             return None
         if not (np.any(arm.viscous) or np.any(arm.coulomb) or np.any(arm.stiffness)):
@@ -322,14 +323,13 @@ _MODELS: dict[str, tuple[ArmModel, ArmModel, PassiveArm | None]] = {}
 
 
 def config_models(config: Config) -> tuple[ArmModel, ArmModel, PassiveArm | None]:
-    """The nominal model, the plant (masses (1 + mass_uncertainty)) and the passive arm of
-    ``config``, cached by the config's digest (a node measures every trial with them)."""
+    """The nominal model, the plant (:func:`~exo_ilc_ros.core.arm.build.build_plant`) and the
+    passive arm of ``config``, cached by the config's digest (a node measures every trial with
+    them)."""
     key = config.digest()
     if key not in _MODELS:
-        nominal = build_arm(config)
         _MODELS.clear()
-        _MODELS[key] = (nominal, nominal.with_mass_scale(float(config["mass_uncertainty"])),
-                        PassiveArm.from_config(config))
+        _MODELS[key] = (build_arm(config), build_plant(config), PassiveArm.from_config(config))
     return _MODELS[key]
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..arm.build import build_arm
+from ..arm.build import build_arm, build_plant
 from ..errors import SafetyError
 from ..loop.hold import ramp_samples
 from ..loop.patient import PatientModel
@@ -20,14 +20,15 @@ _NO_TORQUE = np.zeros((0, 0))
 
 class Experiment:
     """The closed loop of one configuration: nominal model in the controller, the plant with
-    masses scaled by (1 + mass_uncertainty), the sampled reference, gains and limits."""
+    masses scaled by (1 + mass_uncertainty) and a person's segments (``person.*``), the sampled
+    reference, gains and limits."""
 
     def __init__(self, config: Config, mass_uncertainty: float | None = None) -> None:
         self.config = config
         self.mass_uncertainty = float(config["mass_uncertainty"] if mass_uncertainty is None
                                       else mass_uncertainty)
         self.nominal = build_arm(config)
-        self.plant = self.nominal.with_mass_scale(self.mass_uncertainty)
+        self.plant = build_plant(config, self.mass_uncertainty)
         self.reference = build_reference(config)
         self.kp = np.asarray(config["control.kp"], dtype=float)
         self.kd = np.asarray(config["control.kd"], dtype=float)

@@ -28,11 +28,11 @@ from typing import Any
 
 import numpy as np
 
-from ..arm.build import build_arm, urdf_joint_dynamics
+from ..arm.build import build_plant, urdf_joint_dynamics
 from ..arm.model import ArmModel
 from ..arm.mujoco_urdf import SmoothFriction
 from ..errors import ModelError
-from ..loop.patient import spasticity_values
+from ..loop.patient import patient_values, rest_positions, spasticity_values
 from ..loop.plant import clamp_counted
 from ..params.config import Config
 
@@ -134,14 +134,14 @@ def effects_from_config(config: Config) -> JointEffects:
     arm_damping, _ = urdf_joint_dynamics(config)
 
     def joint(name: str) -> np.ndarray:
-        return np.asarray(config[f"patient.{name}"], dtype=float)
+        return patient_values(config, name)
 
     return JointEffects(
         damping=tuple(joint("friction.viscous") + np.asarray(b_spastic, dtype=float)
                       + arm_damping),
         frictionloss=tuple(joint("friction.coulomb")),
         stiffness=tuple(joint("passive.stiffness") + np.asarray(k_spastic, dtype=float)),
-        springref=tuple(joint("passive.rest_position")))
+        springref=tuple(rest_positions(config)))
 
 
 def explicit_friction(config: Config) -> SmoothFriction | None:
@@ -211,11 +211,12 @@ class MujocoArm:
 
     @classmethod
     def from_config(cls, config: Config, mass_uncertainty: float | None = None) -> MujocoArm:
-        """The plant of ``config``: masses scaled by (1 + ``mass_uncertainty``) (default the
-        config's), MuJoCo's time step = ``integration_step``."""
+        """The plant of ``config`` (:func:`~exo_ilc_ros.core.arm.build.build_plant`: masses
+        scaled by (1 + ``mass_uncertainty``, default the config's), a person's segments),
+        MuJoCo's time step = ``integration_step``."""
 
         delta = config["mass_uncertainty"] if mass_uncertainty is None else mass_uncertainty
-        arm = build_arm(config).with_mass_scale(delta)
+        arm = build_plant(config, delta)
         return cls(arm, config["joint_names"], config["control.period"],
                    config["integration_step"], config["control.effort_limit"],
                    effects_from_config(config), explicit_friction(config))

@@ -101,3 +101,28 @@ def test_report_renders_in_headless_chromium(session_pages: tuple[Path, Path]) -
     # colours: the figures' lines are drawn, not only black text on white
     rgb = image[..., :3]
     assert np.count_nonzero(rgb.max(axis=2) - rgb.min(axis=2) > 0.3) > 500
+
+
+def test_a_seven_joint_arms_session_has_a_column_per_joint(tmp_path: Path) -> None:
+    """Issue 27: a therapy session on a URDF arm (the Panda, 7 joints): the report's metric
+    table has one column per joint, by the arm's joint names, every number with its unit."""
+    from exo_ilc_ros.core.params.config import load_config
+
+    arm = ROOT / "config" / "arms" / "panda.yaml"
+    names = load_config(arm)["joint_names"]
+    assert len(names) == 7
+    common = ["--config", str(arm), "--patient", "p7", "--profiles", str(tmp_path / "profiles"),
+              "--trials", "3", "--quiet", "--bag", str(tmp_path / "bags")]
+    assert main(["simulate", *common, "--new-patient"]) == 0
+    page = tmp_path / "report.html"
+    bags = sorted(str(p) for p in (tmp_path / "bags").iterdir())
+    assert main(["report", *bags, "--html", str(page)]) == 0
+    text = page.read_text()
+    (table,) = re.findall(r"<table><tr><th class=l>metric</th>.*?</table>", text, re.S)
+    header = re.findall(r"<th>([^<]*)</th>", table.split("</tr>", 1)[0])
+    assert [h for h in header if h in names] == list(names)
+    cells = re.findall(r"<td>([^<]*)</td>", table)
+    assert len(cells) >= 7 * 8
+    for cell in cells:
+        for part in cell.split(" → "):
+            assert UNIT.match(part), f"number without its unit: {cell!r}"

@@ -85,6 +85,22 @@ def test_settles_after_the_dwell_and_fails_on_timeout_or_motion() -> None:
     assert nan.update(0, np.full(3, np.nan), at) is HomingState.SETTLING
 
 
+def test_the_dwell_begins_within_half_the_tolerances_and_ends_outside_the_whole() -> None:
+    """Hysteresis: 0.8 mrad away (within the 1 mrad tolerance, not within half of it) does not
+    begin the dwell; 0.4 mrad does, and the arm may then drift to 0.9 mrad (its PID still
+    settling) without failing; beyond 1 mrad fails."""
+    goal, rest = np.zeros(3), np.zeros(3)
+    near = Homing(_settings(), goal, 0.01, 0, goal)
+    assert near.update(0, np.array([8e-4, 0.0, 0.0]), rest) is HomingState.SETTLING
+    assert near.update(10 * MS, np.array([4e-4, 0.0, 0.0]), rest) is HomingState.DWELL
+    assert near.update(100 * MS, np.array([9e-4, 0.0, 0.0]), rest) is HomingState.DWELL
+    assert near.update(210 * MS, np.array([9e-4, 0.0, 0.0]), rest) is HomingState.READY
+    slow = Homing(_settings(), goal, 0.01, 0, goal)  # half the velocity tolerance, too
+    assert slow.update(0, goal, np.array([0.0, 8e-3, 0.0])) is HomingState.SETTLING
+    assert slow.update(10 * MS, goal, np.array([0.0, 4e-3, 0.0])) is HomingState.DWELL
+    assert slow.update(20 * MS, np.array([0.0, 0.0, 1.1e-3]), rest) is HomingState.FAILED
+
+
 def test_grid_and_interpolation() -> None:
     """Stamps go to the nearest grid point (offset kept); missing rows are interpolated."""
     step = 10 * MS

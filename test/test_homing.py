@@ -173,9 +173,10 @@ def test_the_heavier_panda_on_mujoco_homes_with_the_integral_and_learns() -> Non
     """The Panda (config/arms/panda.yaml) on MuJoCo, 10 % heavier than its model, through
     the controller's homing decisions and the protocol: homing's PID settles within 1 mrad
     (its integral takes out the gravity error at q_d(0)), each homing takes the path and
-    less than 0.5 s more (to within half the tolerance, then the 0.2 s dwell), and the linear law is within the bound on every joint at
-    trial 3, as in-process. With the trial's PD (kp 16, kd 8) and no integral, homing leaves
-    the gravity sag (0.25 rad on joint 6) and fails."""
+    less than 0.5 s more (to within half the tolerance, then the 0.2 s dwell), and the
+    linear law is within the bound on every joint at trial 3, as in-process. With the
+    trial's PD (kp 16, kd 8) and no integral, homing leaves the gravity sag (0.25 rad on
+    joint 6) and fails."""
     from exo_ilc_ros.core.protocol.homing import homing_duration
 
     graph, protocol = _panda_graph({"max_trials": 4})

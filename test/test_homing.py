@@ -37,7 +37,9 @@ MS = 1_000_000
 
 def _settings(**kw: Any) -> HomingSettings:
     base = dict(speed_limit=0.5, position_tolerance=np.full(3, 1e-3),
-                velocity_tolerance=np.full(3, 1e-2), dwell=0.2, timeout=1.0)
+                velocity_tolerance=np.full(3, 1e-2), dwell=0.2, timeout=1.0,
+                kp=np.full(3, 192.0), kd=np.full(3, 24.0), ki=np.full(3, 512.0),
+                integral_limit=np.full(3, 10.0))
     base.update(kw)
     return HomingSettings(**base)  # type: ignore[arg-type]
 
@@ -83,6 +85,22 @@ def test_settles_after_the_dwell_and_fails_on_timeout_or_motion() -> None:
     assert nan.update(0, np.full(3, np.nan), at) is HomingState.SETTLING
 
 
+def test_the_dwell_begins_within_half_the_tolerances_and_ends_outside_the_whole() -> None:
+    """Hysteresis: 0.8 mrad away (within the 1 mrad tolerance, not within half of it) does not
+    begin the dwell; 0.4 mrad does, and the arm may then drift to 0.9 mrad (its PID still
+    settling) without failing; beyond 1 mrad fails."""
+    goal, rest = np.zeros(3), np.zeros(3)
+    near = Homing(_settings(), goal, 0.01, 0, goal)
+    assert near.update(0, np.array([8e-4, 0.0, 0.0]), rest) is HomingState.SETTLING
+    assert near.update(10 * MS, np.array([4e-4, 0.0, 0.0]), rest) is HomingState.DWELL
+    assert near.update(100 * MS, np.array([9e-4, 0.0, 0.0]), rest) is HomingState.DWELL
+    assert near.update(210 * MS, np.array([9e-4, 0.0, 0.0]), rest) is HomingState.READY
+    slow = Homing(_settings(), goal, 0.01, 0, goal)  # half the velocity tolerance, too
+    assert slow.update(0, goal, np.array([0.0, 8e-3, 0.0])) is HomingState.SETTLING
+    assert slow.update(10 * MS, goal, np.array([0.0, 4e-3, 0.0])) is HomingState.DWELL
+    assert slow.update(20 * MS, np.array([0.0, 0.0, 1.1e-3]), rest) is HomingState.FAILED
+
+
 def test_grid_and_interpolation() -> None:
     """Stamps go to the nearest grid point (offset kept); missing rows are interpolated."""
     step = 10 * MS
@@ -99,6 +117,94 @@ def test_homing_parameters_are_checked() -> None:
         load_config(overrides={"homing.position_tolerance": [0.001, 0.0, 0.001]})
     with pytest.raises(ConfigError, match="protocol"):
         load_config(overrides={"protocol": "teleport"})
+    with pytest.raises(ConfigError, match=r"homing\.ki: .*must be >= 0"):
+        load_config(overrides={"homing.ki": -1.0})
+    # the trial's PD (kp 16, kd 8) with ki 200 > kp kd: unstable by the integral (the PD
+    # part alone is stable); a triple pole at -40 s^-1 is too fast for 100 Hz with the
+    # command one period late, and fine at 1 kHz
+    with pytest.raises(ConfigError, match=r"homing\.ki: joint 1: .*not stable"):
+        load_config(overrides={"homing.kp": 16.0, "homing.kd": 8.0, "homing.ki": 200.0})
+    load_config(overrides={"homing.kp": 16.0, "homing.kd": 8.0, "homing.ki": 100.0})
+    with pytest.raises(ConfigError, match=r"homing\.kd: joint 1: .*not stable"):
+        load_config(overrides={"homing.kp": 4800.0, "homing.kd": 120.0, "homing.ki": 64000.0})
+    load_config(overrides={"homing.kp": 4800.0, "homing.kd": 120.0, "homing.ki": 64000.0,
+                           "control.period": 0.001})
+    with pytest.raises(ConfigError, match=r"homing\.kd: joint 1: .*not stable"):
+        load_config(overrides={"homing.kp": 40000.0, "homing.kd": 400.0, "homing.ki": 0.0})
+
+
+def test_the_integral_is_bounded_and_waits_while_the_effort_is_at_its_limit() -> None:
+    """Anti-windup: an arm held 0.1 rad away makes z grow by 0.1 period per sample until
+    |K_I z| reaches integral_limit, then no further; a sample whose last effort was at its
+    limit leaves z as it is."""
+    settings = _settings(integral_limit=np.array([10.0, 10.0, 0.0]))
+    goal = np.zeros(3)
+    held = np.full(3, -0.1)
+    homing = Homing(settings, goal, 0.01, 0, goal)  # already there: the path is q_d(0)
+    u_ff, q_path, _ = homing.command(0, held, saturated=False)
+    np.testing.assert_allclose(homing.integral, [1e-3, 1e-3, 0.0])
+    np.testing.assert_allclose(u_ff, 512.0 * homing.integral)
+    np.testing.assert_array_equal(q_path, goal)
+    before = homing.integral.copy()
+    homing.command(10 * MS, held, saturated=True)
+    np.testing.assert_array_equal(homing.integral, before)
+    for k in range(2, 400):
+        u_ff, _, _ = homing.command(k * 10 * MS, held, saturated=False)
+    np.testing.assert_allclose(u_ff, [10.0, 10.0, 0.0])  # at the bound; joint 3: no integral
+
+
+PANDA = {"protocol": "homing", "mass_uncertainty": DELTA}
+
+
+def _panda_graph(overrides: dict[str, Any]) -> tuple[ArmGraph, HomingProtocol]:
+    from exo_ilc_ros.core.params.config import config_dir
+    from exo_ilc_ros.core.sim.mujoco_arm import MujocoArm
+
+    config = load_config(config_dir() / "arms" / "panda.yaml", overrides={**PANDA, **overrides})
+    graph = ArmGraph(config, MujocoArm.from_config(config))
+    protocol = HomingProtocol(config, graph)
+    graph.protocol = protocol
+    protocol.open({"mass_uncertainty": DELTA})
+    protocol.tick(graph_ready=True)
+    return graph, protocol
+
+
+def test_the_heavier_panda_on_mujoco_homes_with_the_integral_and_learns() -> None:
+    """The Panda (config/arms/panda.yaml) on MuJoCo, 10 % heavier than its model, through
+    the controller's homing decisions and the protocol: homing's PID settles within 1 mrad
+    (its integral takes out the gravity error at q_d(0)), each homing takes the path and
+    less than 0.5 s more (to within half the tolerance, then the 0.2 s dwell), and the
+    linear law is within the bound on every joint at trial 3, as in-process. With the
+    trial's PD (kp 16, kd 8) and no integral, homing leaves the gravity sag (0.25 rad on
+    joint 6) and fails."""
+    from exo_ilc_ros.core.protocol.homing import homing_duration
+
+    graph, protocol = _panda_graph({"max_trials": 4})
+    graph.run(10_000)
+    assert protocol.phase is Phase.FINISHED and not graph.errors, graph.errors
+    config = graph.experiment.config
+    ref = graph.experiment.reference
+    path = homing_duration(ref.position[-1], ref.position[0], config["homing.speed_limit"],
+                           config["control.period"])
+    times = [float(v["homing_time"]) for v in graph.summaries]
+    # the path starts where the hold left the arm (near q_d(T)): about this long
+    assert all(path <= t <= path + 0.5 for t in times), (path, times)
+    for values in graph.summaries:
+        e0 = np.array([float(values[f"initial_error/{n}"]) for n in config["joint_names"]])
+        assert np.all(np.abs(e0) <= 1e-3), e0
+    errors = np.array([c.record.max_abs_error for c in graph.conclusions])
+    local = run_trials(config.replace({"protocol": "services"}), DELTA, trials=4)
+    np.testing.assert_allclose(errors[0], local.max_abs_errors[0], rtol=0.01)
+    assert np.all(errors[2:] <= 0.005) and np.any(errors[1] > 0.005), errors
+    assert local.iterations_to_bound().first == [3] * 7
+
+    pd_only, failing = _panda_graph({"max_trials": 1, "homing.kp": 16.0, "homing.kd": 8.0,
+                                     "homing.ki": 0.0})
+    pd_only.run(2_000)
+    assert failing.error is not None and "did not settle" in failing.error
+    assert pd_only.driver.homing is not None
+    offset = np.abs(pd_only.arm.position - pd_only.driver.homing.goal)
+    assert 0.2 < offset[5] < 0.3, offset
 
 
 class ArmGraph:
@@ -183,7 +289,9 @@ class ArmGraph:
                 protocol.on_sample(stamp, q, qd)
             for ev in events:
                 if ev.kind == "homed":
-                    protocol.on_homed(ev.trial, self.token, ev.stamp_ns)
+                    assert self.driver.homing is not None
+                    protocol.on_homed(ev.trial, self.token, ev.stamp_ns,
+                                      self.driver.homing.start_ns)
                 elif ev.kind == "homing_failed":
                     protocol.on_homing_failed(ev.trial, self.token, ev.reason)
                 elif ev.kind == "done":

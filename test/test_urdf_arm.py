@@ -398,6 +398,24 @@ def test_convergence_figure_has_one_panel_per_joint_of_any_arm() -> None:
     assert titles[3].startswith("Joint 4 (panda_joint4)")
 
 
+def test_tables_name_the_arms_joints_and_quote_the_paper_for_its_arm_only() -> None:
+    """The iterations table and the comparison's footnote: a column per joint by the arm's
+    joint names, the paper's joint-1 iterations only for the paper's arm (its joints), not
+    for the Panda's seven."""
+    from exo_ilc_ros.analysis.comparison import ComparedRun, format_comparison
+    from exo_ilc_ros.analysis.report import format_iterations
+
+    for config, paper in ((load_config(ARMS / "panda.yaml"), False), (load_config(), True)):
+        names = config["joint_names"]
+        summary = RunSummary.from_result(run_trials(config, 0.1, 2))
+        table = format_iterations([summary], names)
+        header = table.splitlines()[1]
+        assert all(name in header for name in names)
+        assert ("paper joint 1" in header) is paper and ("35/96/101" in table) is paper
+        compared = format_comparison([ComparedRun("linear", summary)], names)
+        assert ("paper, joint 1" in compared) is paper
+
+
 def test_live_view_draws_the_urdf_arm() -> None:
     """The live view's arm (view_urdf): the cone arm's generated URDF as before; a URDF arm's own
     file, its root link and its locked joints at their values (the fingers' transforms move)."""

@@ -20,6 +20,7 @@ import numpy as np
 from ..core.params.config import Config
 from ..core.session.learning_session import run_trials
 from ..core.session.summary import RunSummary
+from .report import is_paper_arm
 
 
 @dataclass(frozen=True)
@@ -104,8 +105,9 @@ def format_comparison(runs: Sequence[ComparedRun], joint_names: Sequence[str]) -
         lines.append(f"{r.label:<{width}}{r.summary.mass_uncertainty:>6.2f}  {cells}"
                      f"{r.floor:>11.2e}{r.peak:>11.2e}"
                      + (f"{ff:>11.3g}" if ff is not None else f"{'':>11}"))
-    lines.append("('-': never within / not within at the last trial; paper, joint 1: 35 / 96 / "
-                 "101 at 5 / 10 / 15 %)")
+    lines.append("('-': never within / not within at the last trial"
+                 + ("; paper, joint 1: 35 / 96 / 101 at 5 / 10 / 15 %)"
+                    if is_paper_arm(joint_names) else ")"))
     return "\n".join(lines)
 
 

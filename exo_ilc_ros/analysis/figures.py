@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 
 from ..bag.run import TrialData
 from ..core.session.summary import RunSummary
-from .report import PAPER_FIRST_JOINT1, PAPER_OTHER_JOINTS_WITHIN
+from .report import PAPER_FIRST_JOINT1, PAPER_OTHER_JOINTS_WITHIN, is_paper_arm
 
 
 def run_label(run: RunSummary) -> str:
@@ -26,9 +26,10 @@ def convergence_figure(runs: Sequence[RunSummary], joint_names: Sequence[str],
                        labels: Sequence[str] | None = None) -> Figure:
     """Figures 5-7 of the paper: max |e_j| per iteration, one subplot per joint (any number),
     one curve per run, the bound drawn (dashed), log y axis; the titles quote the paper's
-    iterations for a 3-joint arm only."""
+    iterations for the paper's arm only (:func:`.report.is_paper_arm`)."""
     labels = list(labels) if labels is not None else [run_label(r) for r in runs]
     n = len(joint_names)
+    paper_arm = is_paper_arm(joint_names)
     columns = 1 if max((len(label) for label in labels), default=0) > 40 else 2
     legend_rows = -(-(len(runs) + 1) // columns)
     fig = Figure(figsize=(6.4, 2.6 * n + 0.2 * legend_rows + 0.2), layout="constrained")
@@ -43,7 +44,7 @@ def convergence_figure(runs: Sequence[RunSummary], joint_names: Sequence[str],
                    label=f"bound {bound:g} rad")
         paper = ", ".join(f"{100 * d:g} %: {k}" for d, k in PAPER_FIRST_JOINT1.items()) \
             if j == 0 else f"within {PAPER_OTHER_JOINTS_WITHIN}"
-        quoted = f"; paper: {paper}" if n == 3 else ""  # the paper's numbers: its 3 joints
+        quoted = f"; paper: {paper}" if paper_arm else ""
         ax.set_title(f"Joint {j + 1} ({joint_names[j]}){quoted}", fontsize=9)
         ax.set_ylabel(f"max |e{j + 1}| (rad)")
         ax.grid(True, which="both", linewidth=0.3)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -10,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..core.convergence.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth
+from ..core.params.config import load_config
 from ..core.programs.spread import IterationSpread
 from ..core.session.summary import RunSummary
 from .loop import format_growth
@@ -17,6 +19,17 @@ from .loop import format_growth
 PAPER_FIRST_JOINT1 = {0.05: 35, 0.10: 96, 0.15: 101}
 """Iterations to the 0.005 rad bound the paper reports for joint 1; joints 2-3: within 20."""
 PAPER_OTHER_JOINTS_WITHIN = 20
+
+
+@functools.cache
+def _paper_joint_names() -> tuple[str, ...]:
+    return tuple(load_config()["joint_names"])
+
+
+def is_paper_arm(joint_names: Sequence[str]) -> bool:
+    """The paper's iterations apply: the arm's joints are the paper arm's (the shipped
+    config's ``joint_names``), not a URDF arm's or another cone arm's."""
+    return tuple(joint_names) == _paper_joint_names()
 
 
 def write_json(path: Path | str, config_values: dict[str, Any],
@@ -141,23 +154,26 @@ def format_long_run(runs: Sequence[RunSummary], joint_names: Sequence[str],
 
 def format_iterations(runs: Sequence[RunSummary], joint_names: Sequence[str],
                       labels: Sequence[str] | None = None) -> str:
-    """Iterations to the bound per joint (first / settled) beside the paper's numbers (not for
-    therapy exercises: another movement than the paper's); ``labels`` (e.g. bag names) in a
-    first column, one per run, else the exercise for a therapy run."""
+    """Iterations to the bound per joint (first / settled), one column per joint named by the
+    arm's ``joint_names``, beside the paper's numbers for the paper's arm only
+    (:func:`is_paper_arm`; not for therapy exercises either: another movement than the
+    paper's); ``labels`` (e.g. bag names) in a first column, one per run, else the exercise for
+    a therapy run."""
     therapy = all(exercise_of(r) for r in runs)
     if labels is None and therapy:
         labels = [str(exercise_of(r)) for r in runs]
+    paper_column = not therapy and is_paper_arm(joint_names)
     lines = ["Iterations to the bound, first within / settled within"
-             + ("" if therapy else f" (paper: joint 1 35/96/101 at 5/10/15 %, joints 2-3 "
-                                   f"within {PAPER_OTHER_JOINTS_WITHIN})")]
+             + (f" (paper: joint 1 35/96/101 at 5/10/15 %, joints 2-3 within "
+                f"{PAPER_OTHER_JOINTS_WITHIN})" if paper_column else "")]
     w = max([8] + [len(r.law) + 1 for r in runs])  # 8 for sign / linear, wider for norm_optimal
     cell = max([len(name) + 2 for name in joint_names] + [20])
     first = max([len(label) + 2 for label in labels] + [5]) if labels is not None else 0
     column = "exercise" if therapy and labels is not None else "bag" if labels else ""
     header = (f"{column:<{first}}{'law':<{w}}{'delta':>7}  "
               + "".join(f"{name:>{cell}}" for name in joint_names))
-    paper_width = 0 if therapy else 15
-    lines += [header + ("" if therapy else f"{'paper joint 1':>15}"),
+    paper_width = 15 if paper_column else 0
+    lines += [header + (f"{'paper joint 1':>15}" if paper_column else ""),
               "-" * (len(header) + paper_width)]
     for i, r in enumerate(runs):
         its = r.iterations_to_bound()
@@ -166,7 +182,7 @@ def format_iterations(runs: Sequence[RunSummary], joint_names: Sequence[str],
         paper = PAPER_FIRST_JOINT1.get(round(r.mass_uncertainty, 4))
         label = labels[i] if labels is not None else ""
         lines.append(f"{label:<{first}}{law_of(r):<{w}}{r.mass_uncertainty:>7.3f}  {cells}"
-                     + ("" if therapy else f"{_fmt(paper):>15}"))
+                     + (f"{_fmt(paper):>15}" if paper_column else ""))
     lines.append("('-': never within the bound / not within at the last trial)")
     if any("spread" in r.extra for r in runs):
         lines.append("")

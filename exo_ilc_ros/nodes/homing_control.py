@@ -5,7 +5,8 @@ safe hold between trials, so a real arm is never left with a stale command), and
 controller's reports go to /diagnostics on ``computed_torque_controller/trial``:
 
 * ``homed``: values ``trial``, ``t0_ns`` (the stamp of the trial's sample 0), ``token`` (the
-  feed-forward's header stamp, which names the attempt);
+  feed-forward's header stamp, which names the attempt), ``homing_start_ns`` (the stamp of
+  homing's first sample);
 * ``homing_failed``: ``trial``, ``t0_ns`` = -1, ``token``, ``reason`` (health ERROR with it);
 * ``done``: as under the services protocol (``trial``, ``t0_ns``, ``aborted_at``,
   ``watchdog_trips``).
@@ -115,6 +116,8 @@ class HomingControl:
             node.trial, node.t0_ns = event.trial, event.stamp_ns
             node.aborted_at, node.trial_trips, node.holding = -1, 0, False
             values.append(("t0_ns", str(event.stamp_ns)))
+            if self.driver.homing is not None:
+                values.append(("homing_start_ns", str(self.driver.homing.start_ns)))
         elif event.kind == "homing_failed":
             self.homing_failures.append(event.trial)
             node.get_logger().error(f"trial {event.trial}: {event.reason}; safe hold "

@@ -226,7 +226,7 @@ class IlcSupervisor(Node):
         if token is None:
             return
         if message == "homed":
-            self.protocol.on_homed(trial, token, t0)
+            self.protocol.on_homed(trial, token, t0, int_value(values, "homing_start_ns") or 0)
         elif message == "homing_failed":
             self.protocol.on_homing_failed(trial, token, values.get("reason", ""))
 

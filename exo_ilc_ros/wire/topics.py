@@ -151,7 +151,7 @@ again (the commands it got are not the ones the record would assume). Under ``pr
 (no reset/start services; the feed-forward's header stamp is a token naming the attempt) also
 ``homed`` (values ``trial``, ``token``, ``t0_ns`` = the stamp of the trial's sample 0) and
 ``homing_failed`` (``trial``, ``token``, ``t0_ns`` = -1, ``reason``); the trial summary then
-adds ``samples_missing``, ``samples_late``, ``initial_error/<joint>`` and
+adds ``samples_missing``, ``samples_late``, ``homing_time``, ``initial_error/<joint>`` and
 ``initial_velocity/<joint>`` (core/protocol/homing_protocol.py)."""
 PLANT_HEALTH_STATUS = "plant_simulator/health"
 PLANT_TRIAL_STATUS = "plant_simulator/trial"

@@ -199,6 +199,18 @@ class ControlStep:
                      self.control_input, self.effort)
         return self.effort
 
+    def with_gains(self, u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray,
+                   q: np.ndarray, qd: np.ndarray, kp: np.ndarray, kd: np.ndarray) -> np.ndarray:
+        """As :meth:`__call__` (no joint forces) with the gains ``kp``, ``kd`` instead of the
+        controller's (homing's own, :mod:`exo_ilc_ros.core.protocol.homing`)."""
+        control_into(u_ff, q_ref, qd_ref, q, qd, self._no_force, kp, kd, self._nominal,
+                     self._limit, self._ws, self.control_input, self.effort)
+        return self.effort
+
+    def saturated(self) -> bool:
+        """Any joint of the last commanded effort at its limit."""
+        return bool(np.any(np.abs(self.effort) >= self._limit))
+
 
 class GuardedControlStep(ControlStep):
     """:class:`ControlStep` with the error envelope and the safe hold, one sample at a time:

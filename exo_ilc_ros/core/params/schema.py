@@ -16,7 +16,7 @@ from enum import Enum
 from typing import Any
 
 from ..errors import ConfigError
-from .hold_rule import hold_gain_problem
+from .hold_rule import hold_gain_problem, homing_gain_problem
 
 AXIS_VECTORS: dict[str, tuple[float, float, float]] = {
     "x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0),
@@ -485,6 +485,21 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("homing.timeout", CONTROLLER, Kind.DOUBLE,
               "protocol homing: how long after the path's end the arm may take to settle "
               "before homing fails (s)", strictly_positive=True),
+    Parameter("homing.kp", CONTROLLER, Kind.DOUBLE_ARRAY,
+              "protocol homing: K_P of homing's own PID (s^-2, through a_N(q) as control.kp); "
+              "with kd and ki it must be stable at control.period with the command one period "
+              "late (core/params/hold_rule.py)", per_joint=True, minimum=0.0),
+    Parameter("homing.kd", CONTROLLER, Kind.DOUBLE_ARRAY,
+              "protocol homing: K_D of homing's own PID (s^-1, as control.kd)", per_joint=True,
+              minimum=0.0),
+    Parameter("homing.ki", CONTROLLER, Kind.DOUBLE_ARRAY,
+              "protocol homing: K_I of homing's own PID (s^-3): the integral of q_path - q "
+              "takes out the nominal model's gravity error at q_d(0); 0: no integral",
+              per_joint=True, minimum=0.0),
+    Parameter("homing.integral_limit", CONTROLLER, Kind.DOUBLE_ARRAY,
+              "protocol homing: bound on |K_I integral| per joint (rad/s^2, through a_N(q)); "
+              "the integral stops there and while any effort is at its limit (anti-windup)",
+              per_joint=True, minimum=0.0),
     Parameter("max_missing_samples", SUPERVISOR, Kind.INTEGER,
               "protocol homing: samples of a trial that may be missing (filled by linear "
               "interpolation); a trial missing more is run again, not learned from",
@@ -793,6 +808,9 @@ def check_consistency(values: Mapping[str, Any]) -> None:
     hold = hold_gain_problem(values)
     if hold is not None:
         raise ConfigError(*hold)
+    homing = homing_gain_problem(values)
+    if homing is not None:
+        raise ConfigError(*homing)
     if len(set(values["joint_names"])) != len(values["joint_names"]):
         raise ConfigError("joint_names", "joint names must be unique")
     if any(not name for name in values["joint_names"]):

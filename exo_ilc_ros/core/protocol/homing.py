@@ -2,13 +2,20 @@
 to x_d(0) between trials, and when a trial may start.
 
 Between trials the controller moves the arm from wherever it stopped to q_d(0) along a
-rest-to-rest quintic in joint space (eq (14)'s polynomial, :class:`HomingPath`) under the same
-computed torque + PD as a trial (eqs (11), (16) with u_ff = the path's acceleration). Its duration
+rest-to-rest quintic in joint space (eq (14)'s polynomial, :class:`HomingPath`) under computed
+torque with homing's own PID (eq (16) with u = qddot_path + K_P e + K_D e_dot + K_I z, e =
+q_path - q, z its integral: :meth:`Homing.command`). The nominal model's gravity error at q_d(0)
+is a constant torque there: PD alone leaves it as an offset (delta a_N^-1 g_N / K_P: 0.24 rad on
+the Panda's joints 4 and 6 at kp 16 and delta 10 %), the integral takes it out. The integral is
+bounded (|K_I z| <= ``integral_limit``) and frozen while any effort is at its limit
+(anti-windup), so an arm held away meets at most a_N ``integral_limit`` more and homing still
+times out. Its duration
 follows from the distance and a speed limit: the quintic's peak speed is 15/8 |Δq| / T, so
 T = 15/8 max_j |Δq_j| / ``speed_limit``, rounded up to whole control periods. Once the path has
-ended, :class:`Homing` waits until |q - q_d(0)| <= ``position_tolerance`` and |qdot| <=
-``velocity_tolerance`` (every joint) hold for ``dwell`` seconds; the trial then starts at the next
-sample. Two faults end homing in the safe hold, the trial not started:
+ended, :class:`Homing` waits until the arm is within half of both tolerances
+(:data:`DWELL_ENTRY`), then until |q - q_d(0)| <= ``position_tolerance`` and |qdot| <=
+``velocity_tolerance`` (every joint) have held for ``dwell`` seconds; the trial then starts at
+the next sample. Two faults end homing in the safe hold, the trial not started:
 
 * it does not settle within ``timeout`` seconds after the path's end;
 * the arm leaves the tolerances during the dwell (someone moved it).
@@ -30,6 +37,11 @@ from ..reference.trajectory import QuinticTrajectory
 
 QUINTIC_PEAK_SPEED = 15.0 / 8.0
 """Peak of d/dtau (10 tau^3 - 15 tau^4 + 6 tau^5) on [0, 1], at tau = 1/2."""
+DWELL_ENTRY = 0.5
+"""The dwell begins once the arm is within this fraction of both tolerances (it fails only if
+the arm leaves the whole tolerances): a hysteresis band, since homing's PID, still settling,
+can move a joint back out by a little (up to 1.2e-4 rad on the Panda on MuJoCo at 10-15 %),
+which without it would read as the arm being moved during the dwell."""
 
 
 @dataclass(frozen=True)
@@ -46,14 +58,25 @@ class HomingSettings:
     """How long both must hold before the trial starts (s)."""
     timeout: float
     """How long after the path's end the arm may take to come within the tolerances (s)."""
+    kp: np.ndarray
+    """K_P of homing's PID, per joint (s^-2, through a_N(q))."""
+    kd: np.ndarray
+    """K_D of homing's PID, per joint (s^-1)."""
+    ki: np.ndarray
+    """K_I of homing's PID, per joint (s^-3; 0: no integral)."""
+    integral_limit: np.ndarray
+    """Bound on |K_I z|, per joint (rad/s^2)."""
 
     @classmethod
     def from_config(cls, config: Config) -> HomingSettings:
         """The settings of ``config``."""
-        return cls(float(config["homing.speed_limit"]),
-                   np.asarray(config["homing.position_tolerance"], dtype=float),
-                   np.asarray(config["homing.velocity_tolerance"], dtype=float),
-                   float(config["homing.dwell"]), float(config["homing.timeout"]))
+        def joints(key: str) -> np.ndarray:
+            return np.asarray(config[key], dtype=float)
+
+        return cls(float(config["homing.speed_limit"]), joints("homing.position_tolerance"),
+                   joints("homing.velocity_tolerance"), float(config["homing.dwell"]),
+                   float(config["homing.timeout"]), joints("homing.kp"), joints("homing.kd"),
+                   joints("homing.ki"), joints("homing.integral_limit"))
 
 
 def homing_duration(start: np.ndarray, goal: np.ndarray, speed_limit: float,
@@ -110,7 +133,13 @@ class Homing:
                  stamp_ns: int, q: np.ndarray) -> None:
         self.settings = settings
         self.goal = np.array(goal, dtype=float)
+        self.period = float(period)
         self.path = HomingPath(q, self.goal, settings.speed_limit, period)
+        self.integral = np.zeros_like(self.goal)
+        """z, the integral of q_path - q (rad s), within +-integral_limit / K_I."""
+        ki = settings.ki
+        self._integral_bound = np.divide(settings.integral_limit, ki,
+                                         out=np.zeros_like(self.goal), where=ki > 0.0)
         self.start_ns = int(stamp_ns)
         self.state = HomingState.PATH
         self.dwell_since: int | None = None
@@ -125,11 +154,24 @@ class Homing:
         """The path's q, qdot, qddot at this sample (the controller's reference)."""
         return self.path(self.elapsed(stamp_ns))
 
-    def within(self, q: np.ndarray, qd: np.ndarray) -> bool:
-        """|q - q_d(0)| and |qdot| within the tolerances, every joint (NaN is not)."""
+    def command(self, stamp_ns: int, q: np.ndarray, saturated: bool
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(u_ff, q_path, qdot_path) at this sample: u_ff = qddot_path + K_I z, the PID's
+        feed-forward and integral part (K_P, K_D act on the path through the controller).
+        z += period (q_path - q) first, clipped to +-integral_limit / K_I; not while
+        ``saturated`` (an effort of the last sample at its limit)."""
+        q_path, qd_path, qdd_path = self.reference(stamp_ns)
+        if not saturated:
+            np.clip(self.integral + self.period * (q_path - q), -self._integral_bound,
+                    self._integral_bound, out=self.integral)
+        return qdd_path + self.settings.ki * self.integral, q_path, qd_path
+
+    def within(self, q: np.ndarray, qd: np.ndarray, fraction: float = 1.0) -> bool:
+        """|q - q_d(0)| and |qdot| within ``fraction`` of the tolerances, every joint (NaN is
+        not)."""
         s = self.settings
-        return bool(np.all(np.abs(q - self.goal) <= s.position_tolerance) and
-                    np.all(np.abs(qd) <= s.velocity_tolerance))
+        return bool(np.all(np.abs(q - self.goal) <= fraction * s.position_tolerance) and
+                    np.all(np.abs(qd) <= fraction * s.velocity_tolerance))
 
     def update(self, stamp_ns: int, q: np.ndarray, qd: np.ndarray) -> HomingState:
         """The state after the sample (stamp, q, qdot); READY and FAILED are final."""
@@ -144,7 +186,7 @@ class Homing:
             self._fail(f"the arm moved during the dwell: {self._distance(q, qd)} after "
                        f"{(int(stamp_ns) - (self.dwell_since or 0)) * 1e-9:.3g} s of the "
                        f"{s.dwell:g} s dwell")
-        elif inside:
+        elif self.state is HomingState.DWELL or (inside and self.within(q, qd, DWELL_ENTRY)):
             if self.dwell_since is None:
                 self.dwell_since = int(stamp_ns)
                 self.state = HomingState.DWELL
@@ -247,6 +289,8 @@ class HomingController:
         self.loaded = False
         """A profile waits for the next sample to start homing."""
         self.homing: Homing | None = None
+        self.saturated = False
+        """An effort of the last homing sample was at its limit (the integral waits)."""
         self.start_next = False
         self.aborted_at = -1
         self.tripped = False
@@ -281,6 +325,7 @@ class HomingController:
         if self.loaded:
             self.loaded = False
             self.homing = Homing(self.settings, self.q_ref[0], self.period, stamp_ns, q)
+            self.saturated = False
             self.mode = ControllerMode.HOMING
             self.start_next = False
             self.failure = ""
@@ -313,8 +358,11 @@ class HomingController:
             return self.step.hold(q, qd)
         if state is HomingState.READY:
             self.start_next = True
-        q_path, qd_path, qdd_path = homing.reference(stamp_ns)
-        return self.step(qdd_path, q_path, qd_path, q, qd)
+        u_ff, q_path, qd_path = homing.command(stamp_ns, q, self.saturated)
+        s = self.settings
+        effort = self.step.with_gains(u_ff, q_path, qd_path, q, qd, s.kp, s.kd)
+        self.saturated = self.step.saturated()
+        return effort
 
     def _trial_effort(self, stamp_ns: int, q: np.ndarray, qd: np.ndarray,
                       events: list[ControllerEvent]) -> np.ndarray:

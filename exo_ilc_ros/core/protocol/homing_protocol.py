@@ -46,6 +46,8 @@ class HomingProtocol(TrialProtocol):
         self.deferred = False
         """The next trial's feed-forward waits until the recorder filed the last trial (the
         controller would home and start it at once: there is no start to hold back)."""
+        self.homing_time = 0.0
+        """Of the running trial: the arm's seconds from homing's first sample to sample 0."""
         self.past_end = False
         self.late = 0
         self.missing = 0
@@ -91,11 +93,14 @@ class HomingProtocol(TrialProtocol):
         self.starting = False
 
     # --- inputs ----------------------------------------------------------------------------
-    def on_homed(self, trial: int, token: int, t0_ns: int) -> None:
-        """The controller homed the arm; the trial's sample 0 is stamped ``t0_ns``."""
+    def on_homed(self, trial: int, token: int, t0_ns: int, homing_start_ns: int = 0) -> None:
+        """The controller homed the arm; the trial's sample 0 is stamped ``t0_ns``, homing's
+        first sample ``homing_start_ns`` (0: not reported)."""
         if self.phase is not Phase.HOMING or (trial, token) != (self.trial, self.samples.t0_ns):
             return
         self.samples.start(t0_ns)
+        self.homing_time = (int(t0_ns) - int(homing_start_ns)) * 1e-9 if homing_start_ns \
+            else 0.0
         self.port.event("start", [("trial", str(trial))], t0_ns)
         self._enter(Phase.RUNNING)
         recent, self.recent = list(self.recent), deque(maxlen=self.recent.maxlen)
@@ -158,12 +163,15 @@ class HomingProtocol(TrialProtocol):
 
     # --- reporting -------------------------------------------------------------------------
     def summary_values(self, record: TrialRecord, names: list[str]) -> list[tuple[str, str]]:
-        """The homing keys of a trial summary: ``samples_missing``, ``samples_late`` and the
+        """The homing keys of a trial summary: ``samples_missing``, ``samples_late``,
+        ``homing_time`` (s of the arm's clock from homing's first sample to the trial's sample
+        0: homing's path, settling and dwell; 0 when the controller did not say), and the
         initial-state error homing left, ``initial_error/<joint>`` (q_d(0) - q(0), rad) and
         ``initial_velocity/<joint>`` (qdot(0), rad/s)."""
         e0 = record.reference.position[0] - record.position[0]
         v0 = record.velocity[0]
         return [("samples_missing", str(self.missing)), ("samples_late", str(self.late)),
+                ("homing_time", repr(round(self.homing_time, 9))),
                 *((f"initial_error/{n}", repr(float(x))) for n, x in zip(names, e0, strict=True)),
                 *((f"initial_velocity/{n}", repr(float(x)))
                   for n, x in zip(names, v0, strict=True))]

@@ -10,7 +10,8 @@ supervisor's process), without ``--live`` and with it (foxglove_bridge, its own 
 a headless WebSocket client in a process of its own, subscribed to every channel:
 test/live_client.py), in turn (ABBA) in one run. ``--feed relay`` (default, as ``exo-ilc run``):
 the recorder hands the view its messages; ``--feed dds``: the view reads DDS itself (as
-``ros2 run exo_ilc_ros foxglove_bridge`` beside a recorder of its own does). Also, from trial
+``ros2 run exo_ilc_ros foxglove_bridge`` beside a recorder of its own does); ``--live-rate``
+the view's display rate (default 200 samples/s of wall time, 0: every sample). Also, from trial
 4's start to the end, the CPU time per control step of the loop's processes (plant and
 controller: what one more reader of their topics costs them), of the bridge and of the
 client (steadier than a rate on a shared machine; the bridge's start-up, about 2 s of imports,
@@ -39,6 +40,7 @@ from exo_ilc_ros.nodes.registry import BRIDGE, CONTROLLER, PLANT
 from exo_ilc_ros.orchestration.graph import GraphSession
 from exo_ilc_ros.orchestration.live import LiveView
 from exo_ilc_ros.orchestration.recording import Recording
+from exo_ilc_ros.wire.relay import DISPLAY_RATE
 from exo_ilc_ros.wire.tf import TF
 
 FIRST_MEASURED = 4
@@ -54,7 +56,8 @@ def _free_port() -> int:
 
 
 def run_once(config: Config, bag_dir: Path, live: bool,
-             bridge: dict[str, str] | None = None, relayed: bool = True) -> dict[str, float]:
+             bridge: dict[str, str] | None = None, relayed: bool = True,
+             rate: float = DISPLAY_RATE) -> dict[str, float]:
     """One recorded run (as ``exo-ilc run`` records), with the live view and a client
     subscribed to everything or without: the in-trial rates (graph_bench's), the CPU time per
     control step of each process from trial 4's start to the end (``cpu_<name>``; the client
@@ -69,9 +72,11 @@ def run_once(config: Config, bag_dir: Path, live: bool,
     try:
         with contextlib.ExitStack() as stack:
             view = stack.enter_context(LiveView(recorded, port, parameters=bridge,
-                                                relayed=relayed)) if live else None
+                                                relayed=relayed, sample_rate=rate)) \
+                if live else None
             recording = stack.enter_context(Recording(
-                recorded, bag_dir, relay=view.relay if view is not None else None))
+                recorded, bag_dir, relay=view.relay if view is not None else None,
+                relay_rate=rate))
             nodes = list(recording.graph_nodes())
             if view is not None:
                 nodes.append(view.spec)
@@ -115,7 +120,7 @@ def _loop_cpu(run: dict[str, float]) -> float:
 
 def bench_live(trials: int, repeats: int, bag_dir: Path,
                bridge: dict[str, str] | None = None, quiet: float = 0.15,
-               relayed: bool = True) -> None:
+               relayed: bool = True, rate: float = DISPLAY_RATE) -> None:
     """The two modes in turn, ``repeats`` rounds; the cost from the medians and per round."""
     config = load_config(overrides={"max_trials": trials})
     without: list[dict[str, float]] = []
@@ -123,7 +128,7 @@ def bench_live(trials: int, repeats: int, bag_dir: Path,
     for round_ in range(repeats):
         for mode in (False, True) if round_ % 2 == 0 else (True, False):
             (live if mode else without).append(run_once(config, bag_dir, mode, bridge,
-                                                        relayed))
+                                                        relayed, rate))
         a, b = without[-1], live[-1]
         print(f"  round {round_ + 1}: steps/s within trials without --live "
               f"{a['steps_per_s_in_trial']:.0f} [other tenants {a['others']:.2f} cores], with "
@@ -172,11 +177,16 @@ def main() -> None:
     parser.add_argument("--feed", choices=("relay", "dds"), default="relay",
                         help="how the view gets the graph's topics: from the recorder (relay, "
                         "as exo-ilc run does) or as one more DDS reader (as ros2 run does)")
+    parser.add_argument("--live-rate", type=float, default=DISPLAY_RATE, metavar="HZ",
+                        help="the view's display rate, as exo-ilc run --live-rate (0: every "
+                        "sample)")
     args = parser.parse_args()
     bridge = dict(item.split(":=", 1) for item in args.bridge)
-    print(f"foxglove_bridge parameters: {bridge or 'defaults'}; feed: {args.feed}", flush=True)
+    print(f"foxglove_bridge parameters: {bridge or 'defaults'}; feed: {args.feed}; display "
+          f"rate: {args.live_rate:g} samples/s of wall time (0: every sample)", flush=True)
     with tempfile.TemporaryDirectory(prefix="live_bench_") as tmp:
-        bench_live(args.trials, args.repeats, Path(tmp), bridge, relayed=args.feed == "relay")
+        bench_live(args.trials, args.repeats, Path(tmp), bridge, relayed=args.feed == "relay",
+                   rate=args.live_rate)
 
 
 if __name__ == "__main__":

@@ -329,9 +329,9 @@ def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
     run = subprocess.run(
         [sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--config", str(config_file),
          "--trials", "2", "--live", "--live-port", str(port),
-         # every sample is asked for: by default the view reads them best effort and may lose
-         # some on a loaded machine (by design: it never makes the loop repair one for it)
-         "--live-param", "sample_reliability:=reliable", "--bag-dir",
+         # every sample is asked for: by default the view shows a lock-step run at 200
+         # samples per second of wall time (its display rate), not every sample
+         "--live-rate", "0", "--bag-dir",
          str(tmp_path / "bags"), "--no-store", "--quiet"],
         text=True, capture_output=True, timeout=240, stdin=subprocess.DEVNULL, check=False)
     assert run.returncode == 0, run.stderr[-3000:]

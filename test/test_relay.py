@@ -89,3 +89,18 @@ def test_a_view_that_restarts_gets_what_came_after(tmp_path: Path) -> None:
     assert got and got[-1][0] == 4 and all(t in (SAMPLE, RESULT) for _, t, _ in got)
     sender.close()
     receiver.close()
+
+
+def test_the_display_rate_thins_the_samples_only() -> None:
+    """SampleGate: at 200/s, samples 1 ms apart (a lock-step run) are shown every 5 ms; 10 ms
+    apart (a real-time 100 Hz loop) every one; the trial results always; 0: every sample."""
+    gate = relay.SampleGate(200.0, {SAMPLE})
+    fast = [gate.admit(SAMPLE, i * 1_000_000) for i in range(100)]
+    assert sum(fast) == 20 and fast[0] and fast[5] and not any(fast[1:5])
+    assert all(gate.admit(RESULT, i) for i in range(100))
+    slow = relay.SampleGate(200.0, {SAMPLE})
+    assert all(slow.admit(SAMPLE, i * 10_000_000) for i in range(100))
+    every = relay.SampleGate(0.0, {SAMPLE})
+    assert all(every.admit(SAMPLE, i) for i in range(100))
+    with pytest.raises(ValueError, match=">= 0"):
+        relay.SampleGate(-1.0, {SAMPLE})

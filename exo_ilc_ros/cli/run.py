@@ -26,6 +26,7 @@ from ..orchestration.launcher import GraphError, graph_nodes
 from ..orchestration.live import DEFAULT_HOST, DEFAULT_PORT, LiveView
 from ..orchestration.recording import Recording
 from ..wire import topics
+from ..wire.relay import DISPLAY_RATE
 from .arguments import directory, domain_id, shown_command
 from .simulate import aborted_exit, add_config_arguments, config_from_args, print_report
 from .therapy import add_therapy_arguments, run_session_graph, uses_therapy
@@ -79,6 +80,10 @@ def register(sub: Any) -> None:
                         help="with --live: the address to bind (default 127.0.0.1, this "
                         "machine only; 0.0.0.0 lets anyone who can reach this machine watch "
                         "the run, without a password: docs/live-view.md)")
+    parser.add_argument("--live-rate", type=display_rate, default=None, metavar="HZ",
+                        help="with --live: samples shown per second of wall time, per topic "
+                        f"(default {DISPLAY_RATE:g}: every sample of a real-time loop up to "
+                        "that rate; a faster lock-step run is shown at it; 0: every sample)")
     parser.add_argument("--live-param", action="append", default=[], metavar="NAME:=VALUE",
                         type=bridge_parameter,
                         help="with --live: a foxglove_bridge parameter, e.g. "
@@ -92,6 +97,18 @@ def bridge_parameter(text: str) -> tuple[str, str]:
     if not sep or not name:
         raise argparse.ArgumentTypeError(f"not name:=value: {text!r}")
     return name, value
+
+
+def display_rate(text: str) -> float:
+    """Samples per second of wall time, >= 0 (0: every sample)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not value >= 0.0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"a rate is >= 0 samples/s (0: every sample), got "
+                                         f"{text}")
+    return value
 
 
 def port_number(text: str) -> int:
@@ -128,9 +145,10 @@ def run(args: argparse.Namespace) -> int:
         given = "--bag-dir" if args.bag_dir is not None else "--isolated-recorder"
         raise ConfigError("--no-bag", f"records nothing: {given} would be ignored; drop one")
     if not args.live and (args.live_port is not None or args.live_host is not None or
-                          args.live_param):
+                          args.live_param or args.live_rate is not None):
         given = "--live-port" if args.live_port is not None else \
-            "--live-host" if args.live_host is not None else "--live-param"
+            "--live-host" if args.live_host is not None else \
+            "--live-rate" if args.live_rate is not None else "--live-param"
         raise ConfigError(given, "needs --live")
     args.bag_dir = "bags" if args.bag_dir is None else args.bag_dir
     config = config_from_args(args)  # an invalid YAML fails here, before any node starts
@@ -260,21 +278,24 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
     nodes = graph_nodes(args.plant, config["protocol"])
     with contextlib.ExitStack() as stack:
         extra: list[Any] = []
-        relay = None
+        relay, rate = None, DISPLAY_RATE
         if getattr(args, "live", False):
             live = stack.enter_context(LiveView(
                 run_config, DEFAULT_PORT if args.live_port is None else args.live_port,
                 args.live_host or DEFAULT_HOST, dict(args.live_param),
-                relayed=not args.no_bag))  # the recorder feeds it
+                relayed=not args.no_bag,  # the recorder feeds it
+                sample_rate=DISPLAY_RATE if args.live_rate is None else args.live_rate))
             print(f"live view: {live.url} (Foxglove app: Open connection, Foxglove WebSocket; "
                   "layout config/layouts/foxglove.json)", file=sys.stderr, flush=True)
             extra.append(live.spec)
             relay = live.relay
-        return _run_graph_once(args, run_config, delta, trials, nodes, extra, relay)
+            rate = live.sample_rate
+        return _run_graph_once(args, run_config, delta, trials, nodes, extra, relay, rate)
 
 
 def _run_graph_once(args: argparse.Namespace, run_config: Config, delta: float, trials: int,
-                    nodes: Any, extra: list[Any], relay: Path | None = None) -> RunSummary:
+                    nodes: Any, extra: list[Any], relay: Path | None = None,
+                    relay_rate: float = DISPLAY_RATE) -> RunSummary:
     config = run_config
     with tqdm(total=trials, desc=f"graph {config['law']} delta={delta:g}", unit="trial",
               file=sys.stderr, disable=None) as bar:
@@ -293,7 +314,7 @@ def _run_graph_once(args: argparse.Namespace, run_config: Config, delta: float, 
         else:
             run_config = run_config.replace({"wait_for_recorder": True})
             with Recording(run_config, args.bag_dir, name=bag_name(args, run_config),
-                           relay=relay) as recording:
+                           relay=relay, relay_rate=relay_rate) as recording:
                 result = run_graph(run_config, domain, on_summary=progress,
                                    nodes=recording.graph_nodes(args.isolated_recorder, nodes),
                                    on_start=announce_graph(bar, recording.path), extra=extra)

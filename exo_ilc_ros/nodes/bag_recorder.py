@@ -28,8 +28,10 @@ Parameters (the recorder's own, not part of the experiment's schema):
 ``config_file`` (the run's effective parameter YAML, for the provenance), ``split_every``
 (trials per storage file, default 1; 0: one file), ``storage`` (``mcap`` or ``sqlite3``) and
 ``relay`` (a Unix socket path: hand every message of ``topics.LIVE_TOPICS`` it takes to the
-live view listening there, :mod:`~exo_ilc_ros.wire.relay`; then the other topics are taken
-every :data:`RELAY_PERIOD`; default none).
+live view listening there, at the bag's log time, :mod:`~exo_ilc_ros.wire.relay`; then the
+other topics are taken every :data:`RELAY_PERIOD`; default none) and ``relay_rate`` (the
+view's display rate, per-sample messages per second of wall time, 0: every one;
+:class:`~exo_ilc_ros.wire.relay.SampleGate`).
 """
 
 from __future__ import annotations
@@ -60,11 +62,12 @@ from ..bag.provenance import (
 )
 from ..bag.view import ArmView
 from ..bag.writer import BagWriter
+from ..core.errors import ConfigError
 from ..core.params.config import load_config
 from ..wire import topics
 from ..wire.protocol import int_value, key_values
 from ..wire.qos import RECORDER_DEPTH, TRANSIENT_LOCAL_TOPICS, offered_qos
-from ..wire.relay import RelaySender
+from ..wire.relay import DISPLAY_RATE, RelaySender, SampleGate
 from ..wire.sim_time import SimClock
 from .common import EVENTS_QOS, CountingPublisher, Inbox, receive_time, run_nodes, wall_clock
 from .diagnostics import diagnostic_array, status
@@ -124,8 +127,13 @@ class BagRecorder(Node):
         self.split_every = int(self.declare_parameter("split_every", 1).value)
         storage = str(self.declare_parameter("storage", "mcap").value)
         relay = str(self.declare_parameter("relay", "").value)
+        rate = float(self.declare_parameter("relay_rate", DISPLAY_RATE).value)
         self.relay = RelaySender(relay, topics.PER_SAMPLE) if relay else None
         """The live view's feed (:mod:`~exo_ilc_ros.wire.relay`), when it runs beside us."""
+        try:
+            self.relay_gate = SampleGate(rate, topics.PER_SAMPLE)
+        except ValueError as exc:
+            raise ConfigError("relay_rate", str(exc), NAME) from None
         self.data_period = RELAY_PERIOD if relay else DATA_PERIOD
         path = Path(bag_path) if bag_path else Path("bags") / self.run_name
 
@@ -213,11 +221,13 @@ class BagRecorder(Node):
         if taken or everything or now >= self.data_due:
             self.data_due = now + self.data_period
             taken = sorted([*taken, *self.inbox.take()], key=receive_time)
-        if self.relay is not None:
-            self.relay.send(m for m in taken if m[1] in LIVE)
         samples: list[tuple[int, str, bytes, int]] = []  # one batch up to an event
+        shown: list[tuple[int, str, bytes]] = []  # for the live view (relay)
         for received, topic, raw in taken:
             log_time = self.sim_clock.advance(topic, raw)
+            if self.relay is not None and topic in LIVE and self.relay_gate.admit(topic,
+                                                                                  received):
+                shown.append((log_time, topic, raw))
             if topic in PROTOCOL_TOPICS:
                 self.messages += self.writer.write_many(samples)
                 samples = []
@@ -227,6 +237,8 @@ class BagRecorder(Node):
                 if topic in VIEWED and self.view is not None:
                     self.view_pending.append((received, topic, raw))
         self.messages += self.writer.write_many(samples)
+        if self.relay is not None:
+            self.relay.send(shown)
         return len(taken)
 
     def write_view(self) -> int:
@@ -343,14 +355,14 @@ class BagRecorder(Node):
     def destroy_node(self) -> None:
         """Close the bag (writes the last file and metadata.yaml), then the node."""
         self.poll(everything=True)
-        self.write_view()
-        self.events.destroy()
-        self.inbox.destroy()
-        if self.relay is not None:
+        if self.relay is not None:  # the view waits for this before it stops
             self.relay.close()
             if self.relay.dropped:
                 print(f"[{NAME}] the live view did not keep up: {self.relay.dropped} samples "
                       "not shown (the bag has them)", file=sys.stderr, flush=True)
+        self.write_view()
+        self.events.destroy()
+        self.inbox.destroy()
         self.writer.set_custom_data(TRIALS_COMPLETED, str(self.completed))
         for key, text in parameter_changes_data(self.changes).items():
             self.writer.set_custom_data(key, text)

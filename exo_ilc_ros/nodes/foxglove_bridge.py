@@ -26,15 +26,21 @@ reader and the view's log times are the bag's.
 
 It never slows the control loop: its own process; ``log()`` never blocks; a client that
 reads too slowly loses its oldest messages (``message_backlog_size`` per client, the SDK's
-rule), not the graph its rate; /tf is computed only while someone subscribes to it.
+rule), not the graph its rate; /tf is computed only while someone subscribes to it; the
+per-sample topics are shown at a display rate (:class:`~exo_ilc_ros.wire.relay.SampleGate`,
+default 200 per second of wall time: every sample of a real-time loop up to 200 Hz, a sample
+every 5 ms of a lock-step simulation that runs faster), so its cost does not grow with the
+graph's speed. Trial events, results, the feed-forward and /diagnostics are always shown.
 
 Parameters: ``host`` (default 127.0.0.1: this machine only), ``port`` (8765; 0 = any free
 port), ``config_file`` (the run's parameter YAML, for the arm; default the shipped one),
 ``message_backlog`` (per client, default 4096), ``sample_reliability`` (``best_effort``, the
 default, or ``reliable``: how the per-sample topics are read, :func:`reader_qos`),
 ``relay`` (a Unix socket path to listen at for the recorder's feed instead of reading DDS;
-default none), ``scheduling`` (``idle``, the default: the process runs at ``SCHED_IDLE``, on
-CPU the loop leaves free; ``batch``; ``normal``).
+default none; the recorder's ``relay_rate`` then sets the display rate), ``sample_rate`` (the
+display rate, per-sample messages per second of wall time; 0: every sample), ``scheduling``
+(``idle``, the default: the process runs at ``SCHED_IDLE``, on CPU the loop leaves free;
+``batch``; ``normal``).
 """
 
 from __future__ import annotations
@@ -57,7 +63,7 @@ from ..bag.view import ArmView
 from ..core.errors import ConfigError
 from ..core.params.config import load_config
 from ..wire import topics
-from ..wire.relay import RelayReceiver
+from ..wire.relay import DISPLAY_RATE, RelayReceiver, SampleGate
 from ..wire.sim_time import SimClock
 from ..wire.tf import TF
 from .bag_recorder import message_class
@@ -125,6 +131,8 @@ class FoxgloveBridge(Node):
     (:class:`~.common.DrainingNode`), then the server stops."""
     FLUSH = 0.5
     """s given to the server to send what it holds before it stops."""
+    RELAY_WAIT = 10.0
+    """s at most to wait for the recorder's last messages after a stop."""
 
     def __init__(self) -> None:
         super().__init__(NAME)
@@ -156,6 +164,11 @@ class FoxgloveBridge(Node):
                               "program on that port? choose another with --live-port)",
                               NAME) from None
         relay = str(self.declare_parameter("relay", "").value)
+        rate = float(self.declare_parameter("sample_rate", DISPLAY_RATE).value)
+        try:
+            self.gate = SampleGate(rate, SAMPLED)
+        except ValueError as exc:
+            raise ConfigError("sample_rate", str(exc), NAME) from None
         self.relay = RelayReceiver(relay) if relay else None
         self.inbox = Inbox(self)
         for topic in FORWARDED if self.relay is None else ():
@@ -179,9 +192,15 @@ class FoxgloveBridge(Node):
 
     def poll(self) -> int:
         """Forward what waits, in receive order; returns how many messages."""
-        taken = self.inbox.take() if self.relay is None else self.relay.take()
-        for _, topic, raw in taken:
-            log_time = self.sim_clock.advance(topic, raw)
+        if self.relay is not None:  # already at the display rate, at the bag's log times
+            taken = self.relay.take()
+        else:  # every message advances the sim clock; the display rate picks the samples
+            taken = []
+            for received, topic, raw in self.inbox.take():
+                log_time = self.sim_clock.advance(topic, raw)
+                if self.gate.admit(topic, received):
+                    taken.append((log_time, topic, raw))
+        for log_time, topic, raw in taken:
             channel = self.channels[topic]
             if topic in REPLAYED:
                 self._keep(topic, log_time, raw)
@@ -224,8 +243,16 @@ class FoxgloveBridge(Node):
             channel.log(out[1], log_time=out[0])
 
     def destroy_node(self) -> None:
-        """Stop the server (after :data:`FLUSH`), leave the subscriptions, then the node."""
+        """Stop the server (after :data:`FLUSH`), leave the subscriptions, then the node. Fed
+        by the recorder, first forward what it still sends until it closes the relay (it
+        sends the run's last messages once it has drained DDS, after we were told to stop;
+        at most :data:`RELAY_WAIT` s)."""
         self.poll()
+        if self.relay is not None:
+            deadline = time.monotonic() + self.RELAY_WAIT
+            while not self.relay.finished and time.monotonic() < deadline:
+                time.sleep(0.01)
+                self.poll()
         time.sleep(self.FLUSH)
         self.server.stop()
         self.inbox.destroy()

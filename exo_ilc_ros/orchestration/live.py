@@ -11,6 +11,7 @@ from types import TracebackType
 
 from ..core.params.config import Config
 from ..nodes.registry import BRIDGE
+from ..wire.relay import DISPLAY_RATE
 from .launcher import NodeSpec
 
 DEFAULT_PORT = 8765
@@ -23,12 +24,15 @@ class LiveView:
 
     def __init__(self, config: Config, port: int = DEFAULT_PORT,
                  host: str = DEFAULT_HOST, parameters: Mapping[str, str] | None = None,
-                 relayed: bool = False) -> None:
+                 relayed: bool = False, sample_rate: float = DISPLAY_RATE) -> None:
         self.config = config
         self.port = port
         self.host = host
         self.parameters = dict(parameters or {})
         """More of the bridge's parameters (``sample_reliability``, ``scheduling``, ...)."""
+        self.sample_rate = sample_rate
+        """The view's display rate (per-sample messages per second of wall time, 0: every
+        one): the bridge's ``sample_rate``, or the recorder's ``relay_rate`` when relayed."""
         self.relayed = relayed
         """Fed by the run's recorder (:attr:`relay`) instead of reading DDS: give
         :attr:`relay` to the :class:`~.recording.Recording`."""
@@ -61,7 +65,8 @@ class LiveView:
         """``foxglove_bridge`` as one more process of the graph."""
         if self.config_file is None:
             raise RuntimeError("LiveView.spec outside its with-block")
-        parameters = {**self.parameters, **({"relay": str(self.relay)} if self.relay else {})}
+        parameters = {"sample_rate": repr(float(self.sample_rate)), **self.parameters,
+                      **({"relay": str(self.relay)} if self.relay else {})}
         more = tuple(arg for name, value in parameters.items()
                      for arg in ("-p", f"{name}:={value}"))
         return NodeSpec(BRIDGE.name, BRIDGE.module,

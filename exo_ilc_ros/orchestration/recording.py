@@ -19,6 +19,7 @@ from ..bag.run_writer import run_name, unique_path
 from ..core.params import schema
 from ..core.params.config import Config
 from ..nodes.registry import RECORDER
+from ..wire.relay import DISPLAY_RATE
 from .launcher import GRAPH_NODES, NodeSpec, composed
 
 RECORDER_MODULE = RECORDER.module
@@ -29,9 +30,12 @@ class Recording:
     keeps the run's effective config in a file the recorder copies into the bag."""
 
     def __init__(self, config: Config, bag_dir: Path | str = "bags", name: str = "",
-                 split_every: int = 1, relay: Path | None = None) -> None:
+                 split_every: int = 1, relay: Path | None = None,
+                 relay_rate: float = DISPLAY_RATE) -> None:
         self.config = config
         self.relay = relay
+        self.relay_rate = relay_rate
+        """The live view's display rate (:class:`~exo_ilc_ros.wire.relay.SampleGate`)."""
         """Where the live view listens for the recorder's feed (:attr:`.live.LiveView.relay`)."""
         self.name = name or run_name("graph", config["law"], config["mass_uncertainty"])
         self.path = unique_path(bag_dir, self.name).resolve()
@@ -50,7 +54,8 @@ class Recording:
         self.params_file.write_text(yaml.safe_dump({RECORDER.name: {"ros__parameters": {
             "bag_path": str(self.path), "run_name": self.name,
             "config_file": str(self.config_file), "split_every": self.split_every,
-            **({"relay": str(self.relay)} if self.relay else {})}}}))
+            **({"relay": str(self.relay), "relay_rate": float(self.relay_rate)}
+               if self.relay else {})}}}))
         self.path.parent.mkdir(parents=True, exist_ok=True)
         return self
 

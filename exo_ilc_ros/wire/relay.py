@@ -1,20 +1,20 @@
 """The recorder's relay to the live view: the messages the recorder already took from DDS,
-handed on over a local Unix socket, so the view is not one more DDS reader of the loop's topics.
+handed on over a local Unix socket, so the view is not one more DDS reader of the loop's topics,
+at the display rate (:class:`SampleGate`).
 
 Each reader of ``/joint_states``, ``/clock`` and the commands costs the plant's and the
 controller's writers one more delivery per sample (``bench/live_bench.py``: +12 to 20 % of the
 loop's CPU for the view's readers). With a relay, the recorder (which reads every topic for the
-bag) sends each message it took, as (DDS receive time, topic, CDR bytes), in the order it
-writes them; the view receives them in that order and logs them at the same sim times as the
-bag.
+bag) sends each message it took, as (log time, topic, CDR bytes), in the order it writes them;
+the view receives them in that order and logs them at the bag's log times.
 
 Never a wait for the view: the sender is non-blocking; what the socket does not take now stays
 queued (:class:`RelaySender`), and past :data:`QUEUED_BYTES` the oldest per-sample messages are
 dropped (counted), never the trial results. A view that is not up yet, or went away, loses
 nothing but samples beyond the queue: the sender connects again at its next send.
 
-A stream: ``u16`` topic length, topic (UTF-8), ``u64`` receive time (ns), ``u32`` payload
-length, payload; little-endian.
+A stream: ``u16`` topic length, topic (UTF-8), ``u64`` log time (ns), ``u32`` payload length,
+payload; little-endian.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ import contextlib
 import os
 import socket
 import struct
+import time
 from collections import deque
 from collections.abc import Collection, Iterable
 from pathlib import Path
@@ -31,16 +32,19 @@ HEADER = struct.Struct("<H")
 BODY = struct.Struct("<QI")
 QUEUED_BYTES = 32 * 1024 * 1024
 """Bytes the sender keeps for a view that does not read (then the oldest samples go)."""
+DISPLAY_RATE = 200.0
+"""Per-sample messages per second of wall time the live view shows by default (each of
+/joint_states, the commands, /clock): every sample of a real-time loop up to 200 Hz."""
 CHUNK = 1 << 20
 """Bytes per send and per receive call."""
 Message = tuple[int, str, bytes]
-"""(DDS receive time ns, topic, CDR bytes)."""
+"""(time ns, topic, CDR bytes): the bag's log time on the stream."""
 
 
-def frame(received: int, topic: str, raw: bytes) -> bytes:
+def frame(time_ns: int, topic: str, raw: bytes) -> bytes:
     """One message on the stream."""
     name = topic.encode()
-    return b"".join((HEADER.pack(len(name)), name, BODY.pack(received, len(raw)), raw))
+    return b"".join((HEADER.pack(len(name)), name, BODY.pack(time_ns, len(raw)), raw))
 
 
 def unframe(buffer: bytes | bytearray) -> tuple[list[Message], int]:
@@ -53,13 +57,38 @@ def unframe(buffer: bytes | bytearray) -> tuple[list[Message], int]:
         head = at + HEADER.size + length + BODY.size
         if len(buffer) < head:
             break
-        received, size = BODY.unpack_from(view, head - BODY.size)
+        time_ns, size = BODY.unpack_from(view, head - BODY.size)
         if len(buffer) < head + size:
             break
         topic = bytes(view[at + HEADER.size:at + HEADER.size + length]).decode()
-        out.append((received, topic, bytes(view[head:head + size])))
+        out.append((time_ns, topic, bytes(view[head:head + size])))
         at = head + size
     return out, at
+
+
+class SampleGate:
+    """The live view's display rate: of each per-sample topic (``per_sample``), a message only
+    if ``1 / rate`` s of wall time passed since the last one let through (``rate`` 0: every
+    one). The other topics always pass. At the loop's own pace (a real arm at 100 Hz) a rate
+    above it shows every sample; a lock-step simulation running far faster than real time is
+    shown at ``rate`` samples per second, so the view's cost does not grow with the graph's
+    speed (``bench/live_bench.py``)."""
+
+    def __init__(self, rate: float, per_sample: Collection[str]) -> None:
+        if not rate >= 0.0:
+            raise ValueError(f"a display rate is >= 0 samples/s (0: every sample), not {rate!r}")
+        self.spacing = int(1e9 / rate) if rate > 0.0 else 0
+        self.per_sample = frozenset(per_sample)
+        self._next: dict[str, int] = {}
+
+    def admit(self, topic: str, wall_ns: int) -> bool:
+        """Whether ``topic``'s message received at ``wall_ns`` (wall clock, ns) is shown."""
+        if not self.spacing or topic not in self.per_sample:
+            return True
+        if wall_ns < self._next.get(topic, 0):
+            return False
+        self._next[topic] = wall_ns + self.spacing
+        return True
 
 
 class RelaySender:
@@ -80,8 +109,8 @@ class RelaySender:
 
     def send(self, messages: Iterable[Message]) -> None:
         """Queue ``messages`` and send what the socket takes now."""
-        for received, topic, raw in messages:
-            data = frame(received, topic, raw)
+        for time_ns, topic, raw in messages:
+            data = frame(time_ns, topic, raw)
             self._queue.append((topic in self.droppable, data))
             self._queued += len(data)
         self._bound()
@@ -139,9 +168,17 @@ class RelaySender:
             self._socket.close()
             self._socket = None
 
-    def close(self) -> None:
-        """Try once more to send what is queued, then close."""
+    def close(self, timeout: float = 2.0) -> None:
+        """Send what is queued (for at most ``timeout`` s: the run is over, the loop waits for
+        nothing), then close."""
+        deadline = time.monotonic() + timeout
         self.flush()
+        while (self._queue or self._partial) and self._socket is not None \
+                and time.monotonic() < deadline:
+            time.sleep(0.001)
+            self.flush()
+        self.dropped += len(self._queue)
+        self._queue.clear()
         self._close()
 
 
@@ -157,6 +194,18 @@ class RelayReceiver:
         self._listener.listen(4)
         self._listener.setblocking(False)
         self._peers: list[tuple[socket.socket, bytearray]] = []
+        self._connected = False
+
+    @property
+    def finished(self) -> bool:
+        """A sender connected and every sender has closed (the recorder's last message is in),
+        or none ever connected (nothing to wait for)."""
+        return not self._peers
+
+    @property
+    def connected(self) -> bool:
+        """Whether a sender connected at some point."""
+        return self._connected
 
     def take(self) -> list[Message]:
         """Every whole message received so far, in the order each sender sent them."""
@@ -164,6 +213,7 @@ class RelayReceiver:
             while True:
                 peer, _ = self._listener.accept()
                 peer.setblocking(False)
+                self._connected = True
                 self._peers.append((peer, bytearray()))
         out: list[Message] = []
         open_peers = []

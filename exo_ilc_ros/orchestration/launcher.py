@@ -31,6 +31,10 @@ LOCK_PATTERN = ".exo_ilc_ros_domain_{}.lock"
 """Same lock files as the test session (test/conftest.py), so concurrent runs never share."""
 
 
+READY_TIMEOUT = 60.0
+"""s a node with a ``ready_marker`` may take to print it."""
+
+
 class GraphError(ExoIlcError):
     """A node of the graph failed, or the graph made no progress."""
 
@@ -48,6 +52,9 @@ class NodeSpec:
     """Run this file instead of ``python -m module`` (e.g. colcon's ``lib/exo_ilc_ros/<node>``)."""
     program_arguments: tuple[str, ...] = ()
     """Arguments before ``--ros-args`` (a container's node names)."""
+    ready_marker: str = ""
+    """Started before the others, which start once its output holds this text (the live view:
+    serving before trial 1, and its start-up off the loop's CPU); "": started with them."""
 
     def command(self, params_file: Path | str) -> list[str]:
         """The command line of this node with ``params_file``."""
@@ -153,14 +160,37 @@ class GraphProcesses:
     _logs: list[IO[bytes]] = field(default_factory=list)
 
     def start(self) -> None:
-        """Start every node; its stdout and stderr go to ``log_dir/<name>.log``."""
+        """Start every node; its stdout and stderr go to ``log_dir/<name>.log``. Nodes with a
+        :attr:`NodeSpec.ready_marker` first: the rest once each has printed it."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
+        first = [spec for spec in self.specs if spec.ready_marker]
+        for spec in first:
+            self._start(spec)
+        for spec in first:
+            self._wait_ready(spec)
         for spec in self.specs:
-            log = open(self.log_dir / f"{spec.name}.log", "wb")  # noqa: SIM115 (closed in stop)
-            self._logs.append(log)
-            self.processes[spec.name] = subprocess.Popen(
-                spec.command(self.params_file), env=self.env, stdin=subprocess.DEVNULL,
-                stdout=log, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
+            if not spec.ready_marker:
+                self._start(spec)
+
+    def _start(self, spec: NodeSpec) -> None:
+        log = open(self.log_dir / f"{spec.name}.log", "wb")  # noqa: SIM115 (closed in stop)
+        self._logs.append(log)
+        self.processes[spec.name] = subprocess.Popen(
+            spec.command(self.params_file), env=self.env, stdin=subprocess.DEVNULL,
+            stdout=log, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
+
+    def _wait_ready(self, spec: NodeSpec) -> None:
+        """Until ``spec``'s log holds its marker (GraphError if it exits or takes more than
+        :data:`READY_TIMEOUT` s)."""
+        deadline = time.monotonic() + READY_TIMEOUT
+        path = self.log_dir / f"{spec.name}.log"
+        while spec.ready_marker not in path.read_text(errors="replace"):
+            if self.processes[spec.name].poll() is not None:
+                self.check()
+            if time.monotonic() > deadline:
+                raise GraphError(f"node {spec.name} not ready within {READY_TIMEOUT:g} s:\n"
+                                 f"{self.log_tail(spec.name)}")
+            time.sleep(0.05)
 
     def log_tail(self, name: str, lines: int = 15) -> str:
         """The last lines a node wrote."""

@@ -16,6 +16,8 @@ from .launcher import NodeSpec
 
 DEFAULT_PORT = 8765
 DEFAULT_HOST = "127.0.0.1"
+READY_MARKER = '{"foxglove_port": '
+"""What foxglove_bridge prints once it serves: the graph starts after it (``NodeSpec``)."""
 
 
 class LiveView:
@@ -71,4 +73,5 @@ class LiveView:
                      for arg in ("-p", f"{name}:={value}"))
         return NodeSpec(BRIDGE.name, BRIDGE.module,
                         ("-p", f"host:={self.host}", "-p", f"port:={self.port}",
-                         "-p", f"config_file:={self.config_file}", *more))
+                         "-p", f"config_file:={self.config_file}", *more),
+                        ready_marker=READY_MARKER)

@@ -412,6 +412,11 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("memory", SUPERVISOR, Kind.STRING,
               "u_{k-1} of eq (11): total_input (feed-forward + feedback) or feedforward",
               choices=("total_input", "feedforward"), live=True),
+    Parameter("learning_velocity", SUPERVISOR, Kind.STRING,
+              "the velocity the learning step reads from a trial: measured (as the controller "
+              "saw it: differentiated and filtered on most arms, so it lags) or position "
+              "(central differences of the measured position between trials: zero phase; the "
+              "memory's PD part re-formed with it)", choices=("measured", "position")),
     Parameter("initial_feedforward", SUPERVISOR, Kind.STRING,
               "feed-forward of trial 1: zero or reference_acceleration (q_ddot_d)",
               choices=("zero", "reference_acceleration")),

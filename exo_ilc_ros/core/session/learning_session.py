@@ -38,7 +38,7 @@ from ..learning.laws import FeedforwardUpdate, LearningLaw
 from ..learning.norm_optimal_model import PatientLinearisation
 from ..learning.patient_model import JointForceModel, JointForceStep
 from ..loop.patient import PatientLearning, true_error
-from ..loop.record import TrialRecord
+from ..loop.record import TrialRecord, position_velocity_record
 from ..loop.trial import record_from_samples
 from ..params import schema
 from ..params.config import Config
@@ -195,11 +195,12 @@ class LearningSession:
             raise SafetyError(f"trial {record.trial} concluded, but trial {self.trial} is the "
                               "one running")
         applied = self._apply_staged()
+        learned_from = self._learned_from(record)
         if record.aborted:
             update = self.next_update
             self.aborted_trials.append(record.trial)
         else:
-            update = self.active_law.update(record)
+            update = self.active_law.update(learned_from)
             checked = check_feedforward_array(update.feedforward, self.feedforward.shape,
                                               "learned feed-forward")
             if isinstance(checked, Rejection):
@@ -207,9 +208,9 @@ class LearningSession:
                                   f"feed-forward ({checked}); it was not stored or used")
         forces = None
         if self.joint_forces is not None:
-            forces = self.joint_forces.conclude(record)
+            forces = self.joint_forces.conclude(learned_from)
             if forces.joint_force is not None:
-                update = self._with_patient(update, record, forces, self.joint_forces)
+                update = self._with_patient(update, learned_from, forces, self.joint_forces)
         within = self._within(record)
         self.within_streak = self.within_streak + 1 if within else 0
         self.completed = record.trial
@@ -248,7 +249,8 @@ class LearningSession:
             if item.record.aborted:
                 self.aborted_trials.append(item.record.trial)
             if self.joint_forces is not None:  # the identification is replayed, exactly
-                self.replayed[k] = step = self.joint_forces.conclude(item.record)
+                self.replayed[k] = step = self.joint_forces.conclude(
+                    self._learned_from(item.record))
                 if step.joint_force is not None:  # and norm-optimal's model with it
                     self._rebuild_about_patient()
         if stored and self.joint_forces is not None:
@@ -272,6 +274,15 @@ class LearningSession:
         return store, restored
 
     # --- rules --------------------------------------------------------------------------------
+    def _learned_from(self, record: TrialRecord) -> TrialRecord:
+        """The record the law and the identified patient learn from: ``record`` itself, or
+        with ``learning_velocity: position`` its velocity from the measured position
+        (:func:`..loop.record.position_velocity_record`; not an aborted trial's, which is not
+        learned from)."""
+        if self.config["learning_velocity"] != "position" or record.aborted:
+            return record
+        return position_velocity_record(record, np.asarray(self.config["control.kd"]))
+
     def _rebuild_about_patient(self) -> str:
         """Norm-optimal's model rebuilt about the identified plant once the linearised forces
         moved by more than ``identification.rebuild_threshold`` (relative, any joint and

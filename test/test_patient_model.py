@@ -4,6 +4,7 @@ whose truth is known."""
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
 import itertools
@@ -17,6 +18,7 @@ from exo_ilc_ros.core.arm.build import build_arm
 from exo_ilc_ros.core.errors import SafetyError
 from exo_ilc_ros.core.learning.norm_optimal_model import PatientLinearisation, build_lifted_model
 from exo_ilc_ros.core.learning.patient_model import JointForceModel
+from exo_ilc_ros.core.learning.progress_gain import ProgressGain
 from exo_ilc_ros.core.learning.qfilter import qfilter_of
 from exo_ilc_ros.core.loop.record import position_velocity_record
 from exo_ilc_ros.core.params.config import Config, config_dir, load_config, scenario_path
@@ -69,7 +71,8 @@ def test_forces_phase_in_within_the_trust_limits() -> None:
 def test_the_handover_keeps_the_total_input() -> None:
     """adoption: handover: when the forces change by d tau the learned feed-forward gives up
     a_N(q_d)^-1 d tau (a_N from the model's metric tensor, solved here independently)."""
-    config = _config("friction", **{"identification.inverse_gain": 0.0})
+    config = _config("friction", **{"identification.inverse_gain": 0.0,
+                                    "progress_gain.position": 0.0})
     session = LearningSession(config)
     experiment = Experiment(config)
     nominal = build_arm(config)
@@ -92,7 +95,8 @@ def test_the_update_inverts_the_arm_with_the_identified_patient() -> None:
     """inverse_gain g: the update adds g Q[a_N(q_d)^-1 (tau_p(q_d, qdot_d) - tau_p(q, qdot))]
     (Q the law's Q-filter; after the handover), for friction by hand:
     K e + B e_dot + F_c (tanh(qdot_d / v_s) - tanh(qdot / v_s)) with the estimate's K, B, F_c."""
-    config = _config("friction", **{"identification.voluntary": False})
+    config = _config("friction", **{"identification.voluntary": False,
+                                    "progress_gain.position": 0.0})
     session = LearningSession(config)
     experiment = Experiment(config)
     nominal = build_arm(config)
@@ -279,3 +283,44 @@ def test_learning_from_the_position_velocity_lowers_the_sensor_floor() -> None:
 
     measured, position = settled("measured"), settled("position")
     assert position < 0.6 * measured, (position, measured)
+
+
+def test_progress_gain_acts_only_while_the_error_makes_new_lows(tmp_path: Path) -> None:
+    """progress_gain (PG): a joint gets Q[G e] after a trial whose max |e| beats the lowest so
+    far by more than the margin, nothing once it stops falling; the session adds exactly that
+    to the law's update, and a run resumed from the store rebuilds the lowest error."""
+    rule = ProgressGain(np.array([0.0, 0.0, 5.0]), 0.02)
+    np.testing.assert_array_equal(rule.active(np.array([1.0, 1.0, 1.0]), None), [True] * 3)
+    np.testing.assert_array_equal(rule.active(np.array([0.5, 0.99, 0.97]),
+                                              np.array([1.0, 1.0, 1.0])), [True, False, True])
+    error = np.ones((5, 3))
+    assert rule.step(error, np.array([True, True, False])) is None  # no gain on joints 1, 2
+    np.testing.assert_array_equal(rule.step(error, np.array([False, False, True])),
+                                  np.tile([0.0, 0.0, 5.0], (5, 1)))
+
+    config = _config("friction", **{"progress_gain.position": [0.0, 0.0, 5.0]})
+    plain_config = _config("friction", **{"progress_gain.position": 0.0})
+    with_gain, plain = LearningSession(config), LearningSession(plain_config)
+    experiment = Experiment(config)
+    qfilter = qfilter_of(config)
+    assert qfilter is not None
+    lowest = None
+    for _ in range(4):
+        record = experiment.run_trial(with_gain.feedforward, with_gain.trial, with_gain.levels,
+                                      None, with_gain.joint_force)
+        plain.next_update = with_gain.next_update  # the same state, without the gain
+        plain.joint_forces = copy.deepcopy(with_gain.joint_forces)
+        plain.trial = with_gain.trial
+        expected = plain.conclude(record).update.feedforward
+        active = rule.active(record.max_abs_error, lowest)
+        lowest = record.max_abs_error.copy() if lowest is None else np.minimum(
+            lowest, record.max_abs_error)
+        if active[2]:
+            expected = expected + qfilter.apply(np.where(active, [0.0, 0.0, 5.0], 0.0)
+                                                * record.error)
+        np.testing.assert_allclose(with_gain.conclude(record).update.feedforward, expected,
+                                   rtol=1e-12, atol=1e-12)
+    whole = run_trials(config, trials=6)
+    run_trials(config, trials=3, store=tmp_path)
+    resumed = run_trials(config, trials=6, store=tmp_path, resume=True)
+    np.testing.assert_array_equal(whole.final.feedforward, resumed.final.feedforward)

@@ -3,7 +3,7 @@ store keeps and every report reads."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -79,3 +79,22 @@ class TrialRecord:
         end = None if self.aborted_at is None else self.aborted_at + 1
         error = self.reference.position - self.true_position
         return np.asarray(np.max(np.abs(error[:end]), axis=0))
+
+
+def position_velocity_record(record: TrialRecord, kd: np.ndarray) -> TrialRecord:
+    """``record`` re-read with qdot from its measured position by central differences
+    (``numpy.gradient``: zero phase, possible between trials; the first and last sample take
+    their neighbour's: the one-sided differences there are twice as noisy, and the last
+    sample's feed-forward, never applied, random-walked on them) instead of the velocity the
+    controller measured during the trial, and ``control_input`` as the controller would have
+    formed it with that velocity (u + K_D (qdot_measured - qdot_position)). A differentiated,
+    filtered encoder velocity lags (half a period for the difference, the filter's time
+    constant on top); a law that learns from it drives K_P e + K_D (e_dot + tau qddot) + ...
+    to zero, not e, and keeps a repeating error ~ tau K_D / K_P qddot_d
+    (docs/patient-aware.md). The learning law's ``learning_velocity: position``."""
+    velocity = np.gradient(record.position, record.reference.period, axis=0)
+    if velocity.shape[0] > 2:  # the ends held at their neighbours' (one-sided differences
+        velocity[0], velocity[-1] = velocity[1], velocity[-2]  # spiked the last u_ff sample)
+    control_input = record.control_input + np.asarray(kd, dtype=float) * (
+        record.velocity - velocity)
+    return replace(record, velocity=velocity, control_input=control_input)

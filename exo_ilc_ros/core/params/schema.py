@@ -555,6 +555,11 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("memory", SUPERVISOR, Kind.STRING,
               "u_{k-1} of eq (11): total_input (feed-forward + feedback) or feedforward",
               choices=("total_input", "feedforward"), live=True),
+    Parameter("learning_velocity", SUPERVISOR, Kind.STRING,
+              "the velocity the learning step reads from a trial: measured (as the controller "
+              "saw it: differentiated and filtered on most arms, so it lags) or position "
+              "(central differences of the measured position between trials: zero phase; the "
+              "memory's PD part re-formed with it)", choices=("measured", "position")),
     Parameter("initial_feedforward", SUPERVISOR, Kind.STRING,
               "feed-forward of trial 1: zero or reference_acceleration (q_ddot_d)",
               choices=("zero", "reference_acceleration")),
@@ -612,6 +617,13 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("feedforward_limit", SUPERVISOR, Kind.DOUBLE_ARRAY,
               "bound on |learned feed-forward| per joint (rad/s^2, the units of u); 0: no bound",
               per_joint=True, minimum=0.0, live=True),
+    Parameter("progress_gain.position", SUPERVISOR, Kind.DOUBLE_ARRAY,
+              "extra position learning gain per joint (units of u per rad): the update adds "
+              "Q[G e] while the joint's max |e| is a new low by more than progress_gain.margin "
+              "(core/learning/progress_gain.py); 0: off", per_joint=True, minimum=0.0),
+    Parameter("progress_gain.margin", SUPERVISOR, Kind.DOUBLE,
+              "share by which a trial's max |e| must beat the lowest so far for "
+              "progress_gain to act", minimum=0.0, extra_rule=_margin_rule),
     Parameter("assist_as_needed.enabled", SUPERVISOR, Kind.BOOL,
               "assist-as-needed (core/learning/assist.py, Emken et al. 2007): forgetting factor "
               "and error deadband around the law", live=True),

@@ -37,8 +37,9 @@ from ..learning.factory import build_law
 from ..learning.laws import FeedforwardUpdate, LearningLaw
 from ..learning.norm_optimal_model import PatientLinearisation
 from ..learning.patient_model import JointForceModel, JointForceStep
+from ..learning.progress_gain import progress_gain_of
 from ..loop.patient import PatientLearning, true_error
-from ..loop.record import TrialRecord
+from ..loop.record import TrialRecord, position_velocity_record
 from ..loop.trial import record_from_samples
 from ..params import schema
 from ..params.config import Config
@@ -113,6 +114,8 @@ class LearningSession:
     _custom_law: bool = field(default=False, init=False, repr=False)
     _staged: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
     _patient: PatientLinearisation | None = field(default=None, init=False, repr=False)
+    _lowest_error: np.ndarray | None = field(default=None, init=False, repr=False)
+    """Per joint the lowest max |e| of the completed trials so far (``progress_gain``)."""
 
     def __post_init__(self) -> None:
         self._custom_law = self.law is not None
@@ -195,11 +198,12 @@ class LearningSession:
             raise SafetyError(f"trial {record.trial} concluded, but trial {self.trial} is the "
                               "one running")
         applied = self._apply_staged()
+        learned_from = self._learned_from(record)
         if record.aborted:
             update = self.next_update
             self.aborted_trials.append(record.trial)
         else:
-            update = self.active_law.update(record)
+            update = self.active_law.update(learned_from)
             checked = check_feedforward_array(update.feedforward, self.feedforward.shape,
                                               "learned feed-forward")
             if isinstance(checked, Rejection):
@@ -207,9 +211,11 @@ class LearningSession:
                                   f"feed-forward ({checked}); it was not stored or used")
         forces = None
         if self.joint_forces is not None:
-            forces = self.joint_forces.conclude(record)
+            forces = self.joint_forces.conclude(learned_from)
             if forces.joint_force is not None:
-                update = self._with_patient(update, record, forces, self.joint_forces)
+                update = self._with_patient(update, learned_from, forces, self.joint_forces)
+        if not record.aborted:
+            update = self._with_progress(update, record)
         within = self._within(record)
         self.within_streak = self.within_streak + 1 if within else 0
         self.completed = record.trial
@@ -247,8 +253,11 @@ class LearningSession:
             self.within_streak = self.within_streak + 1 if within else 0
             if item.record.aborted:
                 self.aborted_trials.append(item.record.trial)
+            else:  # progress_gain's lowest error so far
+                self._lowest_error = self._lowest_after(item.record)
             if self.joint_forces is not None:  # the identification is replayed, exactly
-                self.replayed[k] = step = self.joint_forces.conclude(item.record)
+                self.replayed[k] = step = self.joint_forces.conclude(
+                    self._learned_from(item.record))
                 if step.joint_force is not None:  # and norm-optimal's model with it
                     self._rebuild_about_patient()
         if stored and self.joint_forces is not None:
@@ -272,6 +281,15 @@ class LearningSession:
         return store, restored
 
     # --- rules --------------------------------------------------------------------------------
+    def _learned_from(self, record: TrialRecord) -> TrialRecord:
+        """The record the law and the identified patient learn from: ``record`` itself, or
+        with ``learning_velocity: position`` its velocity from the measured position
+        (:func:`..loop.record.position_velocity_record`; not an aborted trial's, which is not
+        learned from)."""
+        if self.config["learning_velocity"] != "position" or record.aborted:
+            return record
+        return position_velocity_record(record, np.asarray(self.config["control.kd"]))
+
     def _rebuild_about_patient(self) -> str:
         """Norm-optimal's model rebuilt about the identified plant once the linearised forces
         moved by more than ``identification.rebuild_threshold`` (relative, any joint and
@@ -307,6 +325,23 @@ class LearningSession:
                                      joint_force=forces.joint_force)
         rebuilt = self._rebuild_about_patient()
         return dataclasses.replace(update, notes=(*update.notes, rebuilt)) if rebuilt else update
+
+    def _lowest_after(self, record: TrialRecord) -> np.ndarray:
+        """The lowest max |e| per joint once completed trial ``record`` is counted."""
+        m = np.asarray(record.max_abs_error, dtype=float)
+        return m.copy() if self._lowest_error is None else np.minimum(self._lowest_error, m)
+
+    def _with_progress(self, update: FeedforwardUpdate, record: TrialRecord) -> FeedforwardUpdate:
+        """``progress_gain`` (:mod:`..learning.progress_gain`): Q[G e] added on the joints whose
+        error in completed trial ``record`` is a new low; the lowest error follows."""
+        rule = progress_gain_of(self.config)
+        active = None if rule is None else rule.active(record.max_abs_error,
+                                                       self._lowest_error)
+        self._lowest_error = self._lowest_after(record)
+        step = None if rule is None or active is None else rule.step(record.error, active)
+        if step is None:
+            return update
+        return dataclasses.replace(update, feedforward=update.feedforward + step)
 
     def _adopt(self, update: FeedforwardUpdate, forces: JointForceStep) -> np.ndarray:
         """The learned feed-forward once the identified forces changed

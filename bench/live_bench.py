@@ -57,7 +57,8 @@ def _free_port() -> int:
 
 def run_once(config: Config, bag_dir: Path, live: bool,
              bridge: dict[str, str] | None = None, relayed: bool = True,
-             rate: float = DISPLAY_RATE) -> dict[str, float]:
+             rate: float = DISPLAY_RATE, with_client: bool = True,
+             feed: str = "relay") -> dict[str, float]:
     """One recorded run (as ``exo-ilc run`` records), with the live view and a client
     subscribed to everything or without: the in-trial rates (graph_bench's), the CPU time per
     control step of each process from trial 4's start to the end (``cpu_<name>``; the client
@@ -66,7 +67,7 @@ def run_once(config: Config, bag_dir: Path, live: bool,
     port = _free_port()
     client = subprocess.Popen([sys.executable, str(CLIENT), f"ws://127.0.0.1:{port}", "120"],
                               stdout=subprocess.PIPE, stdin=subprocess.DEVNULL,
-                              text=True) if live else None
+                              text=True) if live and with_client else None
     busy, own, began = _machine_busy_seconds(), _own_seconds(), time.monotonic()
     marks: list[dict[str, float]] = []
     try:
@@ -75,7 +76,8 @@ def run_once(config: Config, bag_dir: Path, live: bool,
                                                 relayed=relayed, sample_rate=rate)) \
                 if live else None
             recording = stack.enter_context(Recording(
-                recorded, bag_dir, relay=view.relay if view is not None else None,
+                recorded, bag_dir, relay=view.relay if view is not None and feed != "none"
+                else None,
                 relay_rate=rate))
             nodes = list(recording.graph_nodes())
             if view is not None:
@@ -120,7 +122,8 @@ def _loop_cpu(run: dict[str, float]) -> float:
 
 def bench_live(trials: int, repeats: int, bag_dir: Path,
                bridge: dict[str, str] | None = None, quiet: float = 0.15,
-               relayed: bool = True, rate: float = DISPLAY_RATE) -> None:
+               relayed: bool = True, rate: float = DISPLAY_RATE,
+               with_client: bool = True, feed: str = "relay") -> None:
     """The two modes in turn, ``repeats`` rounds; the cost from the medians and per round."""
     config = load_config(overrides={"max_trials": trials})
     without: list[dict[str, float]] = []
@@ -128,7 +131,7 @@ def bench_live(trials: int, repeats: int, bag_dir: Path,
     for round_ in range(repeats):
         for mode in (False, True) if round_ % 2 == 0 else (True, False):
             (live if mode else without).append(run_once(config, bag_dir, mode, bridge,
-                                                        relayed, rate))
+                                                        relayed, rate, with_client, feed))
         a, b = without[-1], live[-1]
         print(f"  round {round_ + 1}: steps/s within trials without --live "
               f"{a['steps_per_s_in_trial']:.0f} [other tenants {a['others']:.2f} cores], with "
@@ -174,19 +177,22 @@ def main() -> None:
     parser.add_argument("--bridge", nargs="*", default=[], metavar="NAME:=VALUE",
                         help="foxglove_bridge parameters, e.g. scheduling:=normal "
                         "sample_reliability:=reliable")
-    parser.add_argument("--feed", choices=("relay", "dds"), default="relay",
+    parser.add_argument("--feed", choices=("relay", "dds", "none"), default="relay",
                         help="how the view gets the graph's topics: from the recorder (relay, "
-                        "as exo-ilc run does) or as one more DDS reader (as ros2 run does)")
+                        "as exo-ilc run does) or as one more DDS reader (as ros2 run does); none: "
+                        "the bridge gets nothing (what its process alone costs)")
     parser.add_argument("--live-rate", type=float, default=DISPLAY_RATE, metavar="HZ",
                         help="the view's display rate, as exo-ilc run --live-rate (0: every "
                         "sample)")
+    parser.add_argument("--no-client", action="store_true",
+                        help="the view without a client connected (what the bridge alone costs)")
     args = parser.parse_args()
     bridge = dict(item.split(":=", 1) for item in args.bridge)
     print(f"foxglove_bridge parameters: {bridge or 'defaults'}; feed: {args.feed}; display "
           f"rate: {args.live_rate:g} samples/s of wall time (0: every sample)", flush=True)
     with tempfile.TemporaryDirectory(prefix="live_bench_") as tmp:
-        bench_live(args.trials, args.repeats, Path(tmp), bridge, relayed=args.feed == "relay",
-                   rate=args.live_rate)
+        bench_live(args.trials, args.repeats, Path(tmp), bridge, relayed=args.feed != "dds",
+                   rate=args.live_rate, with_client=not args.no_client, feed=args.feed)
 
 
 if __name__ == "__main__":

@@ -26,7 +26,7 @@ run's provenance and every parameter change with the trial it took effect at.
 Parameters (the recorder's own, not part of the experiment's schema):
 ``bag_path`` (default ``bags/<run_name>``), ``run_name`` (default ``run_<date>-<time>``),
 ``config_file`` (the run's effective parameter YAML, for the provenance), ``split_every``
-(trials per storage file, default 1; 0: one file), ``storage`` (``mcap`` or ``sqlite3``) and
+(trials per storage file, default 1; 0: one file), ``storage`` (``mcap`` or ``sqlite3``),
 ``relay`` (a Unix socket path: hand every message of ``topics.LIVE_TOPICS`` it takes to the
 live view listening there, at the bag's log time, :mod:`~exo_ilc_ros.wire.relay`; then the
 other topics are taken every :data:`RELAY_PERIOD`; default none) and ``relay_rate`` (the

@@ -38,6 +38,7 @@ from ..learning.laws import FeedforwardUpdate, LearningLaw
 from ..learning.norm_optimal_model import PatientLinearisation
 from ..learning.patient_model import JointForceModel, JointForceStep
 from ..learning.progress_gain import progress_gain_of
+from ..learning.qfilter import feedforward_limit_of
 from ..loop.patient import PatientLearning, true_error
 from ..loop.record import TrialRecord, position_velocity_record
 from ..loop.trial import record_from_samples
@@ -341,7 +342,11 @@ class LearningSession:
         step = None if rule is None or active is None else rule.step(record.error, active)
         if step is None:
             return update
-        return dataclasses.replace(update, feedforward=update.feedforward + step)
+        feedforward = update.feedforward + step
+        limit = feedforward_limit_of(self.config)  # the law's sat_U holds for the sum too
+        if limit is not None:
+            feedforward = np.clip(feedforward, -limit, limit)
+        return dataclasses.replace(update, feedforward=feedforward)
 
     def _adopt(self, update: FeedforwardUpdate, forces: JointForceStep) -> np.ndarray:
         """The learned feed-forward once the identified forces changed

@@ -138,7 +138,7 @@ def test_every_single_byte_flip_is_detected(bag: Path) -> None:
     a CRC, a length the CRCs cover, or the magic), and never raises."""
     file = bag / f"{bag.name}_{TRIALS}.mcap"  # the last file: the ``finished`` event
     original = file.read_bytes()
-    assert len(original) < 40_000  # its metadata record carries the run's config too
+    assert len(original) < 50_000  # its metadata record carries the run's config too
     missed = []
     data = bytearray(original)
     for offset in range(len(original)):

@@ -287,7 +287,7 @@ def _seven_joint_overrides() -> tuple[tuple[str, Any], ...]:
     overrides: dict[str, Any] = {}
     for p in schema.PARAMETERS:
         value = config[p.name]
-        if isinstance(value, list) and len(value) == 3 and p.name != "joint_names":
+        if p.per_joint and isinstance(value, list) and len(value) == 3:
             overrides[p.name] = (value + [value[-1]] * 4)[:n]
     overrides.update({
         "joint_names": [f"joint_{i}" for i in range(n)],

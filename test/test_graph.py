@@ -90,12 +90,20 @@ def test_norm_optimal_graph_equals_in_process(tmp_path: Path) -> None:
     assert reference.max_abs_errors[-1].max() < 0.1 * reference.max_abs_errors[0].max()
 
 
-def _set(session: Any, name: str, value: Any) -> Any:
-    from rclpy.parameter import Parameter
+def _parameter_client(session: Any) -> Any:
+    """The supervisor's parameter client, its services discovered (on a loaded machine that
+    can take longer than a short run's trials: discover before the trials run out)."""
     from rclpy.parameter_client import AsyncParameterClient
 
     client = AsyncParameterClient(session.node, "ilc_supervisor")
     assert client.wait_for_services(timeout_sec=20.0), "ilc_supervisor parameter services"
+    return client
+
+
+def _set(session: Any, name: str, value: Any, client: Any = None) -> Any:
+    from rclpy.parameter import Parameter
+
+    client = client or _parameter_client(session)
     future = client.set_parameters([Parameter(name, value=value)])
     session.spin_until(future.done, timeout=20.0)
     return future.result().results[0]
@@ -350,8 +358,10 @@ def test_recorded_live_change_replays_in_process_exactly(tmp_path: Path) -> None
     change = {"schedule.position.threshold_low": [0.0, 0.0, 0.0]}
     with Recording(config, tmp_path / "bags") as recording, \
             GraphSession(config, nodes=recording.graph_nodes()) as session:
+        client = _parameter_client(session)  # before the 60 short trials run out
         session.spin_until(lambda: len(session.summaries) >= 3, timeout=120.0)
-        assert _set(session, "schedule.position.threshold_low", [0.0, 0.0, 0.0]).successful
+        assert _set(session, "schedule.position.threshold_low", [0.0, 0.0, 0.0],
+                    client).successful
         session.spin_until(lambda: session.finished, timeout=180.0, stall_timeout=60.0)
     marked = [s.trial for s in session.summaries if "parameters_changed" in s.values]
     assert len(marked) == 1, "exactly one trial boundary applied the change"

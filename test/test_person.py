@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from test_urdf_chain import _pinocchio
 
 from exo_ilc_ros.core import load_config, run_trials
 from exo_ilc_ros.core.arm.body_segments import segment_inertial
@@ -28,14 +29,7 @@ FINGERS = {"panda_finger_joint1": 0.02, "panda_finger_joint2": 0.02}
 def _panda_pinocchio(with_person_of: object = None) -> tuple[pin.Model, pin.Data]:
     """Pinocchio's Panda (fingers locked at 0.02 m) and, given a config, each of its person's
     segments appended as a body to the joint that moves its link."""
-    model = pin.buildModelFromUrdf(str(CONFIG.parent / "urdf" / "panda.urdf"))
-    q = pin.neutral(model)
-    ids = []
-    for name, value in FINGERS.items():
-        joint = model.getJointId(name)
-        ids.append(joint)
-        q[model.joints[joint].idx_q] = value
-    model = pin.buildReducedModel(model, ids, q)
+    model, _ = _pinocchio((CONFIG.parent / "urdf" / "panda.urdf").read_text(), FINGERS)
     if with_person_of is not None:
         segments, placements = person_segments(with_person_of)  # type: ignore[arg-type]
         for segment in segments:

@@ -194,18 +194,12 @@ class RelayReceiver:
         self._listener.listen(4)
         self._listener.setblocking(False)
         self._peers: list[tuple[socket.socket, bytearray]] = []
-        self._connected = False
 
     @property
     def finished(self) -> bool:
-        """A sender connected and every sender has closed (the recorder's last message is in),
-        or none ever connected (nothing to wait for)."""
+        """No sender is connected: every one that came has closed (the recorder's last message
+        is in), or none came (nothing to wait for)."""
         return not self._peers
-
-    @property
-    def connected(self) -> bool:
-        """Whether a sender connected at some point."""
-        return self._connected
 
     def take(self) -> list[Message]:
         """Every whole message received so far, in the order each sender sent them."""
@@ -213,7 +207,6 @@ class RelayReceiver:
             while True:
                 peer, _ = self._listener.accept()
                 peer.setblocking(False)
-                self._connected = True
                 self._peers.append((peer, bytearray()))
         out: list[Message] = []
         open_peers = []

@@ -107,20 +107,19 @@ def patient_joint_names(values: Mapping[str, Any]) -> list[str]:
     return list(parse_patient_joints(values[PATIENT_JOINTS])) or list(values["joint_names"])
 
 
-def _locks_problem(value: Any) -> str | None:
-    try:
-        parse_locked_joints(value)
-    except ConfigError as exc:
-        return exc.rule
-    return None
+def _parse_problem(parse: Callable[[str], object]) -> Callable[[Any], str | None]:
+    """An ``extra_rule`` from a parser: its ConfigError's rule, or None when it parses."""
+    def problem(value: Any) -> str | None:
+        try:
+            parse(value)
+        except ConfigError as exc:
+            return exc.rule
+        return None
+    return problem
 
 
-def _patient_joints_problem(value: Any) -> str | None:
-    try:
-        parse_patient_joints(value)
-    except ConfigError as exc:
-        return exc.rule
-    return None
+_locks_problem = _parse_problem(parse_locked_joints)
+_patient_joints_problem = _parse_problem(parse_patient_joints)
 
 
 def _vector_rule(value: Any) -> str | None:

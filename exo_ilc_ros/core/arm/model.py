@@ -93,6 +93,10 @@ class ArmModel:
         a, _, _ = dynamics.metric_terms(_vec(q), *self.kernel_args, False)
         return a
 
+    def metric_tensors(self, positions: np.ndarray) -> np.ndarray:
+        """a(q) of eq (2) at every row of ``positions`` (samples, n): (samples, n, n)."""
+        return np.array([self.metric_tensor(q) for q in positions])
+
     def metric_derivative(self, q: np.ndarray) -> np.ndarray:
         """d a / d q as ``da[k, a, b] = d a_ab / d q_k``."""
         _, da, _ = dynamics.metric_terms(_vec(q), *self.kernel_args, True)

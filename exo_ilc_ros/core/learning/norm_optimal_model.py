@@ -188,7 +188,7 @@ def build_lifted_model(config: Config, patient: PatientLinearisation | None = No
         cont[:, n:2 * n, n:2 * n] = -(1.0 - gain) * hv
     if patient is not None:
         arm = build_arm(config)
-        minv = np.array([np.linalg.inv(arm.metric_tensor(q)) for q in reference.position])
+        minv = np.linalg.inv(arm.metric_tensors(reference.position))
         cont[:, n:2 * n, :n] -= gain * minv * patient.stiffness[:, None, :]
         cont[:, n:2 * n, n:2 * n] -= gain * minv * patient.damping[:, None, :]
     disc = _expm_batch(cont * period)

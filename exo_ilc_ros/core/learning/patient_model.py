@@ -167,8 +167,7 @@ class JointForceModel:
         """a_N(q_d)^-1 tau at every sample of the reference: a torque profile in the units of
         the feed-forward (eq (16) maps u to a_N u)."""
         if self._inertia is None:
-            self._inertia = np.array([self._nominal.metric_tensor(q)
-                                      for q in self.reference.position])
+            self._inertia = self._nominal.metric_tensors(self.reference.position)
         return np.linalg.solve(self._inertia, torque[..., None])[..., 0]
 
     @property

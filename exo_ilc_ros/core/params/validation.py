@@ -200,7 +200,7 @@ def validate_feedforward(names: Sequence[str], times_ns: Sequence[int],
                          f"{expected[i]} ns")
     out: list[np.ndarray] = []
     arrays = [("positions", position), ("velocities", velocity), ("accelerations", feedforward)]
-    forces = None if joint_force is None else [list(row) for row in joint_force]
+    forces = None if joint_force is None else list(joint_force)  # rows converted below
     if forces is not None and all(len(row) == 0 for row in forces):
         forces = None
     if forces is not None:

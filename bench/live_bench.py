@@ -177,7 +177,8 @@ def bench_live(trials: int, repeats: int, bag_dir: Path,
           f"without --live, {loop_b:.3f} ms with it ({100 * (loop_b / loop_a - 1):+.1f} %); "
           f"supervisor + recorder {_median_cpu(without, SUPERVISING):.3f} -> "
           f"{_median_cpu(live, SUPERVISING):.3f} ms; foxglove_bridge "
-          f"{_median_cpu(live, BRIDGE.name):.3f} ms, the client {_median_cpu(live, 'client'):.3f} ms")
+          f"{_median_cpu(live, BRIDGE.name):.3f} ms, the client "
+          f"{_median_cpu(live, 'client'):.3f} ms")
 
 
 def main() -> None:

@@ -13,9 +13,10 @@ the recorder hands the view its messages; ``--feed dds``: the view reads DDS its
 ``ros2 run exo_ilc_ros foxglove_bridge`` beside a recorder of its own does); ``--live-rate``
 the view's display rate (default 200 samples/s of wall time, 0: every sample). Also, from trial
 4's start to the end, the CPU time per control step of the loop's processes (plant and
-controller: what one more reader of their topics costs them), of the bridge and of the
-client (steadier than a rate on a shared machine; the bridge's start-up, about 2 s of imports,
-left out); what the client received; and the other tenants' load per round. Target: the view
+controller: what one more reader of their topics costs them), of the supervisor's process
+(which holds the recorder, so the relay's sending end), of the bridge and of the client
+(steadier than a rate on a shared machine; the bridge's start-up, about 2 s of imports, left
+out); what the client received; and the other tenants' load per round. Target: the view
 costs at most 10 % within trials.
 """
 

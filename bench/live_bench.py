@@ -13,9 +13,10 @@ the recorder hands the view its messages; ``--feed dds``: the view reads DDS its
 ``ros2 run exo_ilc_ros foxglove_bridge`` beside a recorder of its own does); ``--live-rate``
 the view's display rate (default 200 samples/s of wall time, 0: every sample). Also, from trial
 4's start to the end, the CPU time per control step of the loop's processes (plant and
-controller: what one more reader of their topics costs them), of the bridge and of the
-client (steadier than a rate on a shared machine; the bridge's start-up, about 2 s of imports,
-left out); what the client received; and the other tenants' load per round. Target: the view
+controller: what one more reader of their topics costs them), of the supervisor's process
+(which holds the recorder, so the relay's sending end), of the bridge and of the client
+(steadier than a rate on a shared machine; the bridge's start-up, about 2 s of imports, left
+out); what the client received; and the other tenants' load per round. Target: the view
 costs at most 10 % within trials.
 """
 
@@ -36,7 +37,7 @@ import numpy as np
 from bench.bag_bench import _bootstrap_interval, _cpu_seconds, _machine_busy_seconds, _own_seconds
 from bench.graph_bench import session_rates
 from exo_ilc_ros.core.params.config import Config, load_config
-from exo_ilc_ros.nodes.registry import BRIDGE, CONTROLLER, PLANT
+from exo_ilc_ros.nodes.registry import BRIDGE, CONTROLLER, PLANT, RECORDER, SUPERVISOR
 from exo_ilc_ros.orchestration.graph import GraphSession
 from exo_ilc_ros.orchestration.live import LiveView
 from exo_ilc_ros.orchestration.recording import Recording
@@ -113,11 +114,21 @@ def run_once(config: Config, bag_dir: Path, live: bool,
 
 
 LOOP = (PLANT.name, CONTROLLER.name)
-"""The control loop's processes (the supervisor's holds the recorder too)."""
+"""The control loop's processes."""
+SUPERVISING = f"{SUPERVISOR.name}+{RECORDER.name}"
+"""The supervisor's process, which holds the recorder (and so the relay's sending end)."""
 
 
 def _loop_cpu(run: dict[str, float]) -> float:
     return sum(run.get(f"cpu_{name}", float("nan")) for name in LOOP)
+
+
+def _cpu(run: dict[str, float], name: str) -> float:
+    return run.get(f"cpu_{name}", float("nan"))
+
+
+def _median_cpu(runs: list[dict[str, float]], name: str) -> float:
+    return float(np.median([_cpu(r, name) for r in runs]))
 
 
 def bench_live(trials: int, repeats: int, bag_dir: Path,
@@ -138,8 +149,9 @@ def bench_live(trials: int, repeats: int, bag_dir: Path,
               f"--live and a client {b['steps_per_s_in_trial']:.0f} [{b['others']:.2f}]; the "
               f"client got {b['client_messages']:.0f} messages ({b['client_tf']:.0f} /tf); CPU "
               f"ms per control step: plant+controller {_loop_cpu(a):.3f} -> {_loop_cpu(b):.3f}, "
-              f"foxglove_bridge {b.get('cpu_' + BRIDGE.name, float('nan')):.3f}, client "
-              f"{b.get('cpu_client', float('nan')):.3f}", flush=True)
+              f"supervisor+recorder {_cpu(a, SUPERVISING):.3f} -> {_cpu(b, SUPERVISING):.3f}, "
+              f"foxglove_bridge {_cpu(b, BRIDGE.name):.3f}, client {_cpu(b, 'client'):.3f}",
+              flush=True)
     key = "steps_per_s_in_trial"
     base = float(np.median([r[key] for r in without]))
     with_view = float(np.median([r[key] for r in live]))
@@ -164,9 +176,10 @@ def bench_live(trials: int, repeats: int, bag_dir: Path,
     loop_b = float(np.median([_loop_cpu(r) for r in live]))
     print(f"CPU per control step within trials (medians): plant + controller {loop_a:.3f} ms "
           f"without --live, {loop_b:.3f} ms with it ({100 * (loop_b / loop_a - 1):+.1f} %); "
-          f"foxglove_bridge "
-          f"{float(np.median([r.get('cpu_' + BRIDGE.name, np.nan) for r in live])):.3f} ms, "
-          f"the client {float(np.median([r.get('cpu_client', np.nan) for r in live])):.3f} ms")
+          f"supervisor + recorder {_median_cpu(without, SUPERVISING):.3f} -> "
+          f"{_median_cpu(live, SUPERVISING):.3f} ms; foxglove_bridge "
+          f"{_median_cpu(live, BRIDGE.name):.3f} ms, the client "
+          f"{_median_cpu(live, 'client'):.3f} ms")
 
 
 def main() -> None:

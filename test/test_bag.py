@@ -39,6 +39,7 @@ from exo_ilc_ros.core.session.learning_session import run_trials
 from exo_ilc_ros.core.session.result import RunResult
 from exo_ilc_ros.core.session.summary import RunSummary
 from exo_ilc_ros.wire import topics
+from exo_ilc_ros.wire.cdr import read_float64_array
 from exo_ilc_ros.wire.qos import offered_qos
 
 TRIALS = 5
@@ -600,6 +601,89 @@ def test_recorder_takes_the_samples_at_trial_events_not_within_a_trial(tmp_path:
         assert (counts[topics.EFFORT_COMMANDS], counts[topics.TRIAL_EVENTS]) == (8, 1)
     finally:
         rclpy.try_shutdown()
+
+
+def test_recorder_beside_a_live_view_relays_within_a_trial_and_writes_at_events(
+        tmp_path: Path) -> None:
+    """With a relay, the recorder takes the samples every RELAY_PERIOD within a trial and
+    hands them to the view at once, but writes them only at the next trial event (as without
+    a view: the bag's writing stays out of the trial), before the event and in receive
+    order; nothing is lost or written twice."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from rclpy.duration import Duration
+    from rclpy.node import Node
+    from std_msgs.msg import Float64MultiArray
+
+    from exo_ilc_ros.nodes.bag_recorder import BagRecorder
+    from exo_ilc_ros.nodes.common import EVENTS_QOS
+    from exo_ilc_ros.wire.relay import RelayReceiver
+
+    view = RelayReceiver(tmp_path / "relay.sock")
+    rclpy.init(args=["--ros-args", "-p", f"bag_path:={tmp_path / 'bag'}", "-p",
+                     f"relay:={tmp_path / 'relay.sock'}", "-p", "relay_rate:=0.0"])
+    try:
+        recorder = BagRecorder()
+        graph = Node("recorder_relay_test_graph")
+        commands = graph.create_publisher(Float64MultiArray, topics.EFFORT_COMMANDS, 10)
+        events = graph.create_publisher(DiagnosticArray, topics.TRIAL_EVENTS, EVENTS_QOS)
+        shown: list[tuple[int, str, bytes]] = []
+        try:
+            deadline = time.monotonic() + 10.0
+            while commands.get_subscription_count() < 1 or events.get_subscription_count() < 1:
+                assert time.monotonic() < deadline, "recorder not matched"
+                time.sleep(0.05)
+            time.sleep(0.5)  # the nodes' own start-up messages (parameter events) are in
+            recorder.poll()  # the first poll takes everything and starts the periods
+            before = recorder.messages
+            view.take()
+
+            def publish(first: int, count: int) -> None:
+                for i in range(first, first + count):
+                    commands.publish(Float64MultiArray(data=[float(i), 0.0, 0.0]))
+                assert commands.wait_for_all_acked(Duration(seconds=5))  # in the reader
+
+            def relayed() -> list[float]:
+                for _ in range(100):
+                    got = view.take()
+                    shown.extend(got)
+                    if got:
+                        break
+                    time.sleep(0.01)
+                return [read_float64_array(raw)[0] for _, topic, raw in shown
+                        if topic == topics.EFFORT_COMMANDS]
+
+            publish(0, 5)
+            recorder.relay_due = 0.0  # the view's period is over
+            assert recorder.poll() == 5 and recorder.messages == before  # taken, not written
+            assert relayed() == [0.0, 1.0, 2.0, 3.0, 4.0]
+            assert recorder.poll() == 0  # (within the view's period: nothing taken)
+            publish(5, 2)
+            start = DiagnosticStatus(name=topics.TRIAL_STATUS, message="start",
+                                     values=[KeyValue(key="trial", value="1")])
+            events.publish(DiagnosticArray(status=[start]))
+            assert events.wait_for_all_acked(Duration(seconds=5))
+            assert recorder.poll() == 3 and recorder.messages == before + 8
+            assert relayed() == [float(i) for i in range(7)]
+        finally:
+            graph.destroy_node()
+            recorder.destroy_node()
+        counts = _bag_topic_counts(tmp_path / "bag")
+        assert (counts[topics.EFFORT_COMMANDS], counts[topics.TRIAL_EVENTS]) == (7, 1)
+        order = []
+        for path in sorted((tmp_path / "bag").glob("*.mcap"),
+                           key=lambda f: int(f.stem.rsplit("_", 1)[1])):
+            with path.open("rb") as stream:
+                order += [(channel.topic, read_float64_array(message.data)[0]
+                           if channel.topic == topics.EFFORT_COMMANDS else None)
+                          for _, channel, message in make_reader(stream).iter_messages(
+                              topics=[topics.EFFORT_COMMANDS, topics.TRIAL_EVENTS],
+                              log_time_order=False)]
+        assert order == [*((topics.EFFORT_COMMANDS, float(i)) for i in range(7)),
+                         (topics.TRIAL_EVENTS, None)]
+    finally:
+        rclpy.try_shutdown()
+        view.close()
 
 
 def _bag_topic_counts(path: Path) -> dict[str, int]:

@@ -7,9 +7,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+from builtin_interfaces.msg import Duration
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from exo_ilc_ros.wire.cdr import (
     CdrError,
@@ -17,6 +19,7 @@ from exo_ilc_ros.wire.cdr import (
     float64_array,
     read_float64_array,
     read_joint_state,
+    read_trajectory_positions,
 )
 
 
@@ -56,6 +59,65 @@ def test_float64_array_round_trip() -> None:
     msg.layout.dim = [MultiArrayDimension(label="joints", size=3, stride=3)]
     msg.layout.data_offset = 0
     assert read_float64_array(serialize_message(msg)).tolist() == values.tolist()
+
+
+def _trajectory(frame_id: str, names: list[str], widths: list[int], velocities: int,
+                effort: list[int], seed: int = 0) -> tuple[bytes, np.ndarray | None]:
+    """A serialised JointTrajectory (by rclpy) and its positions as rows (None if the points'
+    widths differ)."""
+    rng = np.random.default_rng(seed)
+    msg = JointTrajectory()
+    msg.header.frame_id = frame_id
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 3, 7
+    msg.joint_names = names
+    rows = []
+    for i, (width, effort_count) in enumerate(zip(widths, effort, strict=True)):
+        rows.append(rng.normal(size=width))
+        msg.points.append(JointTrajectoryPoint(
+            positions=rows[-1].tolist(), velocities=rng.normal(size=velocities).tolist(),
+            accelerations=rng.normal(size=width).tolist(),
+            effort=rng.normal(size=effort_count).tolist(),
+            time_from_start=Duration(sec=i, nanosec=5)))
+    same = len(set(widths)) <= 1
+    table = (np.array(rows).reshape(len(rows), -1) if rows else np.zeros((0, len(names)))) \
+        if same else None
+    return bytes(serialize_message(msg)), table
+
+
+@pytest.mark.parametrize("frame_id", ["", "trial:12", "abcde"])
+@pytest.mark.parametrize("names", [[], ["a"], ["shoulder_flexion", "shoulder_abduction", "elbow"]])
+@pytest.mark.parametrize(("points", "width", "effort"), [(0, 3, 0), (1, 3, 0), (2, 3, 3),
+                                                         (501, 3, 0), (501, 3, 3), (7, 1, 1),
+                                                         (20, 2, 0), (5, 0, 0)])
+def test_trajectory_positions_as_rclpy_wrote_them(frame_id: str, names: list[str], points: int,
+                                                  width: int, effort: int) -> None:
+    """read_trajectory_positions (the reference arm of the live view and the bags) reads the
+    positions of every point, whatever padding the point's place gives its doubles."""
+    for velocities in (0, width):
+        raw, rows = _trajectory(frame_id, names, [width] * points, velocities, [effort] * points)
+        stamp, got_names, positions = read_trajectory_positions(raw)
+        assert stamp == 3_000_000_007 and got_names == names
+        assert rows is not None and positions.shape == rows.shape
+        assert positions.tolist() == rows.tolist()
+
+
+def test_trajectory_points_of_other_layouts_and_damaged_profiles() -> None:
+    """A point whose effort (so its padding) differs is read on its own, anywhere in the
+    profile; points with different numbers of positions, and a cut message, are CdrErrors."""
+    for where in (0, 1, 250, 499, 500):
+        effort = [0] * 501
+        effort[where] = 1
+        raw, rows = _trajectory("", ["a", "b", "c"], [3] * 501, 3, effort, seed=where)
+        assert rows is not None and read_trajectory_positions(raw)[2].tolist() == rows.tolist()
+        widths = [3] * 501
+        widths[where] = 4
+        raw, _ = _trajectory("", ["a", "b", "c"], widths, 3, [0] * 501)
+        with pytest.raises(CdrError, match="numbers of positions"):
+            read_trajectory_positions(raw)
+    raw, _ = _trajectory("", ["a", "b", "c"], [3] * 20, 3, [0] * 20)
+    for cut in (5, 30, 200, 1000):  # (20 points end at byte 2136; rclpy adds bytes after)
+        with pytest.raises(CdrError):
+            read_trajectory_positions(raw[:cut])
 
 
 def test_truncated_message_is_an_error() -> None:

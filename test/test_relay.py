@@ -46,6 +46,28 @@ def test_sender_queues_until_the_view_listens_then_delivers_in_order(tmp_path: P
     assert not path.exists()
 
 
+def test_one_send_goes_out_as_runs_cut_only_between_samples_and_results(
+        tmp_path: Path) -> None:
+    """What the recorder hands on per drain is framed into one buffer per run of samples or
+    of results (one socket send each, not one per message), and arrives whole and in order."""
+    path = tmp_path / "relay.sock"
+    sender = RelaySender(path, {SAMPLE})
+    batch = [(i, RESULT if i in (3, 4) else SAMPLE, bytes([i]) * i) for i in range(10)]
+    sender.send(batch)  # nobody listens yet: queued
+    assert [(droppable, count) for droppable, count, _ in sender._queue] == [
+        (True, 3), (False, 2), (True, 5)]
+    receiver = RelayReceiver(path)
+    got: list[tuple[int, str, bytes]] = []
+    for _ in range(100):
+        sender.flush()
+        got += receiver.take()
+        if len(got) == len(batch):
+            break
+    assert got == batch and sender.sent == len(batch) and sender.dropped == 0
+    sender.close()
+    receiver.close()
+
+
 def test_a_view_that_does_not_read_loses_old_samples_never_results(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(relay, "QUEUED_BYTES", 10_000)

@@ -22,9 +22,9 @@ from ..core.arm.build import view_urdf
 from ..core.arm.forward_kinematics import UrdfKinematics
 from ..core.params.config import Config
 from ..wire import topics
-from ..wire.cdr import read_joint_state
+from ..wire.cdr import read_joint_state, read_trajectory_positions
 from ..wire.tf import tf_message
-from .messages import serialize, time_ns, typestore
+from .messages import serialize, typestore
 
 REFERENCE_PREFIX = "reference/"
 REFERENCE_OFFSET = (0.0, 0.6, 0.0)
@@ -74,13 +74,12 @@ class ArmView:
         header stamp) and q_d per sample. ValueError (the reference unchanged) for a profile
         that does not name this arm's joints."""
         try:
-            msg = typestore().deserialize_cdr(raw, topics.TYPES[topics.FEEDFORWARD])
-            order = [list(msg.joint_names).index(n) for n in self.joint_names]
-            q = np.array([np.asarray(p.positions, dtype=float)[order] for p in msg.points],
-                         dtype=float).reshape(-1, len(order))
+            stamp, names, positions = read_trajectory_positions(raw)
+            order = [names.index(n) for n in self.joint_names]
+            q = positions[:, order]
         except Exception as exc:  # a foreign or damaged profile
             raise ValueError(f"feed-forward without this arm's reference: {exc}") from None
-        self.reference = (time_ns(msg.header.stamp), q)
+        self.reference = (stamp, q)
 
     def tf(self, raw: bytes) -> tuple[int, bytes] | None:
         """(stamp, /tf CDR) of one /joint_states message (CDR): the arm's joints at the

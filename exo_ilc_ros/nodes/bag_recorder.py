@@ -29,7 +29,8 @@ Parameters (the recorder's own, not part of the experiment's schema):
 (trials per storage file, default 1; 0: one file), ``storage`` (``mcap`` or ``sqlite3``),
 ``relay`` (a Unix socket path: hand every message of ``topics.LIVE_TOPICS`` it takes to the
 live view listening there, at the bag's log time, :mod:`~exo_ilc_ros.wire.relay`; then the
-other topics are taken every :data:`RELAY_PERIOD`; default none) and ``relay_rate`` (the
+other topics are also taken every :data:`RELAY_PERIOD`, and written when they would be
+without a view; default none) and ``relay_rate`` (the
 view's display rate, per-sample messages per second of wall time, 0: every one;
 :class:`~exo_ilc_ros.wire.relay.SampleGate`).
 """
@@ -88,8 +89,9 @@ PROTOCOL_TOPICS = frozenset({topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.P
 """Topics the recorder reads as well as writes (trial boundaries, parameter changes); the rest
 are written in batches."""
 RELAY_PERIOD = 0.05
-"""s: with a relay to the live view, the other topics are taken this often instead (what the
-view shows is at most this late)."""
+"""s: with a relay to the live view, the other topics are also taken this often (what the
+view shows is at most this late); they are still written every :data:`DATA_PERIOD` and at
+trial events, as without a view (so the bag's writing stays out of the trials)."""
 DATA_PERIOD = 1.0
 """s: the other topics are taken and written at least this often (and at every trial event).
 Within it DDS holds them: at most ``RECORDER_DEPTH`` (10 000) messages per topic, 10 000 / s,
@@ -134,7 +136,6 @@ class BagRecorder(Node):
             self.relay_gate = SampleGate(rate, topics.PER_SAMPLE)
         except ValueError as exc:
             raise ConfigError("relay_rate", str(exc), NAME) from None
-        self.data_period = RELAY_PERIOD if relay else DATA_PERIOD
         path = Path(bag_path) if bag_path else Path("bags") / self.run_name
 
         custom = {VERSION: "", RECORDED_BY: NAME, RUN_NAME: self.run_name}
@@ -188,7 +189,14 @@ class BagRecorder(Node):
             self.writer.write(topic, self.sim_clock.ns, raw, time.time_ns())
             self.messages += 1
         self.data_due = 0.0
-        """Monotonic time by which the other topics are taken again (:data:`DATA_PERIOD`)."""
+        """Monotonic time by which the other topics are taken and written again
+        (:data:`DATA_PERIOD`)."""
+        self.relay_due = 0.0
+        """With a relay: monotonic time by which the other topics are taken again for the
+        view (:data:`RELAY_PERIOD`)."""
+        self.unwritten: list[tuple[int, str, bytes, int]] = []
+        """Messages taken for the view but not written yet (log time, topic, CDR, receive
+        time), in receive order: written before anything taken after them."""
         self.status_pub = self.create_publisher(
             message_class(topics.TYPES[topics.DIAGNOSTICS]), topics.DIAGNOSTICS, EVENTS_QOS,
             publisher_class=CountingPublisher)
@@ -215,20 +223,27 @@ class BagRecorder(Node):
     def poll(self, everything: bool = False) -> int:
         """Write what waits, in the order DDS received it; returns how many messages. The
         other topics only with a trial event or parameter change, after :data:`DATA_PERIOD`,
-        or with ``everything``; else only the (mostly empty) protocol topics are looked at."""
+        or with ``everything``; else only the (mostly empty) protocol topics are looked at.
+        With a relay, the other topics are also taken every :data:`RELAY_PERIOD` for the
+        view; what is taken then is written with the next batch (:attr:`unwritten`), when it
+        would be written without a view (between trials), not within a trial."""
         taken = self.events.take()
         now = time.monotonic()
-        if taken or everything or now >= self.data_due:
-            self.data_due = now + self.data_period
-            taken = sorted([*taken, *self.inbox.take()], key=receive_time)
-        samples: list[tuple[int, str, bytes, int]] = []  # one batch up to an event
+        write = bool(taken) or everything or now >= self.data_due
+        if write:
+            self.data_due = now + DATA_PERIOD
+        if write or (self.relay is not None and now >= self.relay_due):
+            self.relay_due = now + RELAY_PERIOD
+            data = self.inbox.take()
+            taken = sorted([*taken, *data], key=receive_time) if taken else data
+        samples, self.unwritten = self.unwritten, []  # one batch up to an event
         shown: list[tuple[int, str, bytes]] = []  # for the live view (relay)
+        relay, admit, advance = self.relay, self.relay_gate.admit, self.sim_clock.advance
         for received, topic, raw in taken:
-            log_time = self.sim_clock.advance(topic, raw)
-            if self.relay is not None and topic in LIVE and self.relay_gate.admit(topic,
-                                                                                  received):
+            log_time = advance(topic, raw)
+            if relay is not None and topic in LIVE and admit(topic, received):
                 shown.append((log_time, topic, raw))
-            if topic in PROTOCOL_TOPICS:
+            if topic in PROTOCOL_TOPICS:  # (only when ``write``: taken with the events)
                 self.messages += self.writer.write_many(samples)
                 samples = []
                 self.on_message(topic, raw, received)
@@ -236,9 +251,12 @@ class BagRecorder(Node):
                 samples.append((log_time, topic, raw, received))
                 if topic in VIEWED and self.view is not None:
                     self.view_pending.append((received, topic, raw))
-        self.messages += self.writer.write_many(samples)
-        if self.relay is not None:
-            self.relay.send(shown)
+        if write:
+            self.messages += self.writer.write_many(samples)
+        else:
+            self.unwritten = samples
+        if relay is not None:
+            relay.send(shown)
         return len(taken)
 
     def write_view(self) -> int:

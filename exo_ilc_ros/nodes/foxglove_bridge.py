@@ -50,6 +50,7 @@ import os
 import sys
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import foxglove
@@ -263,23 +264,49 @@ class FoxgloveBridge(Node):
         super().destroy_node()
 
 
+AUTOGROUP = Path("/proc/self/autogroup")
+"""Linux's per-session scheduling group (``CONFIG_SCHED_AUTOGROUP``): its nice value weighs
+the whole session against the others."""
+AUTOGROUP_NICE = 19
+
+
 def yield_to_the_loop(policy: str) -> str:
     """Run this process below the control loop (before any thread starts, so every thread
     the middleware and the server start inherits it): ``idle`` (``SCHED_IDLE``: the view runs
     only on CPU the loop and everything else leave free), ``batch`` (``SCHED_BATCH`` at nice
-    10) or ``normal``. Returns what it runs at."""
+    10) or ``normal``. Returns what it runs at.
+
+    With autogroups (most desktop kernels), each session is a scheduling group of its own, and
+    a policy or nice value ranks a process only within its group: ``exo-ilc run`` starts every
+    process of the graph in a session of its own (``launcher._die_with_parent``), so the view's
+    ``SCHED_IDLE`` alone still took its group's full share of a core from the loop within
+    trials (``bench/live_bench.py``). So when the process leads its own session (nothing else
+    is in its group), the group's nice goes to 19 too (:func:`_nice_autogroup`); in a
+    session it shares (a terminal, a launch file's) the group is left alone."""
     if policy == "normal":
         return "normal"
     try:
         if policy == "idle" and hasattr(os, "SCHED_IDLE"):
             os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-            return "SCHED_IDLE"
+            return "SCHED_IDLE" + _nice_autogroup()
         if hasattr(os, "SCHED_BATCH"):
             os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
         os.nice(10)
-        return "SCHED_BATCH, nice 10"
+        return "SCHED_BATCH, nice 10" + _nice_autogroup()
     except OSError as exc:
         return f"normal ({exc.strerror})"
+
+
+def _nice_autogroup() -> str:
+    """Lower this session's autogroup to :data:`AUTOGROUP_NICE` if the process leads the
+    session (its group is its own); what was done, to append to the policy."""
+    if os.getsid(0) != os.getpid():
+        return ""
+    try:
+        AUTOGROUP.write_text(f"{AUTOGROUP_NICE}\n")
+    except OSError:  # no autogroups (kernel, or sched_autogroup_enabled=0): nothing to do
+        return ""
+    return f", autogroup nice {AUTOGROUP_NICE}"
 
 
 def main(args: list[str] | None = None) -> int:

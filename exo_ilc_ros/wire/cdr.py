@@ -5,7 +5,9 @@ messages: the fast paths the nodes, the recorder and the bag reader share.
 effort) in place; ``read_joint_state`` and ``read_float64_array`` decode the raw bytes a
 ``raw=True`` subscription delivers, for any publisher (names, frame_id and layout of any
 length); ``joint_states`` decodes a whole recorded stream at once (messages of one layout as
-rows of one array, ~20x faster than one by one). One walk over a JointState's fields
+rows of one array, ~20x faster than one by one); ``read_trajectory_positions`` reads the
+positions of a feed-forward profile (the reference arm of the live view and the bags) as
+strided rows. One walk over a JointState's fields
 (``_names_span``, ``_doubles``) serves them all. Checked against rclpy's and rosbags' own
 (de)serialisation in ``test/test_cdr.py`` and ``test/test_bag.py``.
 """
@@ -196,6 +198,24 @@ def names_segment(raw: bytes) -> bytes:
     return bytes(raw[4 + start:4 + end])
 
 
+def _strings(raw: bytes, offset: int) -> tuple[list[str], int]:
+    """A sequence of strings at body ``offset``, and the offset past it."""
+    (count,) = _U32.unpack_from(raw, 4 + _align(offset, 4))
+    offset = _align(offset, 4) + 4
+    if count > len(raw):
+        raise CdrError(f"{count} strings in a message of {len(raw)} bytes")
+    names = []
+    for _ in range(count):
+        start = _align(offset, 4)
+        (length,) = _U32.unpack_from(raw, 4 + start)
+        text = bytes(raw[4 + start + 4:4 + start + 4 + length])
+        if len(text) != length:
+            raise CdrError("a string runs past the end of the message")
+        names.append(text.rstrip(b"\x00").decode("utf-8", errors="replace"))
+        offset = start + 4 + length
+    return names, offset
+
+
 def read_joint_state_full(raw: bytes
                           ) -> tuple[int, list[str], np.ndarray, np.ndarray, np.ndarray]:
     """(stamp in ns, names, position, velocity, effort) of a serialised sensor_msgs/JointState
@@ -203,26 +223,102 @@ def read_joint_state_full(raw: bytes
     try:
         _check_header(raw)
         sec, nanosec = STAMP.unpack_from(raw, 4)
-        offset = _skip_string(raw, 8)
-        (count,) = _U32.unpack_from(raw, 4 + _align(offset, 4))
-        offset = _align(offset, 4) + 4
-        if count > len(raw):
-            raise CdrError(f"{count} names in a message of {len(raw)} bytes")
-        names = []
-        for _ in range(count):
-            start = _align(offset, 4)
-            (length,) = _U32.unpack_from(raw, 4 + start)
-            text = bytes(raw[4 + start + 4:4 + start + 4 + length])
-            if len(text) != length:
-                raise CdrError("name runs past the end of the message")
-            names.append(text.rstrip(b"\x00").decode("utf-8", errors="replace"))
-            offset = start + 4 + length
+        names, offset = _strings(raw, _skip_string(raw, 8))
         position, offset = _doubles(raw, offset)
         velocity, offset = _doubles(raw, offset)
         effort, offset = _doubles(raw, offset)
     except struct.error as exc:
         raise CdrError(f"truncated JointState: {exc}") from None
     return sec * 1_000_000_000 + nanosec, names, position, velocity, effort
+
+
+@dataclass(frozen=True)
+class _Point:
+    """Where a JointTrajectoryPoint's fields sit (body offsets)."""
+
+    counts: tuple[tuple[int, int], ...]
+    """(offset, value) of its four sequence counts: positions, velocities, accelerations,
+    effort."""
+    positions: int
+    """Offset of its first position."""
+    width: int
+    """How many positions."""
+    end: int
+    """Offset just past it (past time_from_start)."""
+
+
+def _point(raw: bytes, offset: int) -> _Point:
+    counts = []
+    positions = width = 0
+    for field in range(4):  # positions, velocities, accelerations, effort
+        at = _align(offset, 4)
+        values, offset = _doubles(raw, offset)
+        counts.append((at, values.shape[0]))
+        if field == 0:
+            positions, width = offset - 8 * values.shape[0], values.shape[0]
+    end = _align(offset, 4) + 8  # time_from_start (builtin_interfaces/Duration)
+    if 4 + end > len(raw):
+        raise CdrError("a trajectory point runs past the end of the message")
+    return _Point(tuple(counts), positions, width, end)
+
+
+def read_trajectory_positions(raw: bytes) -> tuple[int, list[str], np.ndarray]:
+    """(header stamp in ns, joint_names, positions: one row per point) of a serialised
+    trajectory_msgs/JointTrajectory (the live view's and the bags' reference arm, from
+    ``/ilc/feedforward``). Points of one layout are read as strided rows (a 501-point profile
+    in ~0.1 ms instead of ~15 ms through rosbags); CdrError if the points do not all hold as
+    many positions."""
+    try:
+        return _read_trajectory_positions(raw)
+    except struct.error as exc:
+        raise CdrError(f"truncated JointTrajectory: {exc}") from None
+
+
+def _read_trajectory_positions(raw: bytes) -> tuple[int, list[str], np.ndarray]:
+    _check_header(raw)
+    sec, nanosec = STAMP.unpack_from(raw, 4)
+    names, offset = _strings(raw, _skip_string(raw, 8))
+    offset = _align(offset, 4)
+    (count,) = _U32.unpack_from(raw, 4 + offset)
+    offset += 4
+    if count > len(raw):
+        raise CdrError(f"{count} points in a message of {len(raw)} bytes")
+    blocks: list[np.ndarray] = []
+    width: int | None = None
+    done = 0
+    while done < count:
+        # The padding before a point's doubles depends on where it starts (mod 8), so the
+        # layout repeats every one or two points: walk one period, then read its copies as
+        # strided rows for as long as every count in them is the same.
+        period = [_point(raw, offset)]
+        if period[0].end % 8 != offset % 8 and done + 1 < count:
+            second = _point(raw, period[0].end)
+            if second.end % 8 == offset % 8:
+                period.append(second)
+        width = period[0].width if width is None else width
+        if any(point.width != width for point in period):
+            raise CdrError("trajectory points with different numbers of positions")
+        k, stride = len(period), period[-1].end - offset
+        repeats = 0
+        if stride % 8 == 0:
+            fits = min((count - done) // k, (len(raw) - 4 - offset) // stride)
+            same = np.ones(fits, dtype=bool)
+            for point in period:
+                for at, value in point.counts:
+                    same &= np.ndarray((fits,), "<u4", raw, 4 + at, (stride,)) == value
+            repeats = fits if same.all() else int(np.argmin(same))
+        if repeats:
+            block = np.empty((repeats * k, width))
+            for j, point in enumerate(period):
+                block[j::k] = np.ndarray((repeats, width), "<f8", raw, 4 + point.positions,
+                                         (stride, 8))
+            offset, done = offset + repeats * stride, done + repeats * k
+        else:  # this point's layout does not repeat: it alone
+            block = np.ndarray((1, width), "<f8", raw, 4 + period[0].positions).copy()
+            offset, done = period[0].end, done + 1
+        blocks.append(block)
+    positions = np.concatenate(blocks) if blocks else np.zeros((0, len(names)))
+    return sec * 1_000_000_000 + nanosec, names, positions
 
 
 @dataclass

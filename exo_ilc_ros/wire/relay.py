@@ -41,10 +41,21 @@ Message = tuple[int, str, bytes]
 """(time ns, topic, CDR bytes): the bag's log time on the stream."""
 
 
+_HEADS: dict[str, bytes] = {}
+"""Each topic's framed name (``u16`` length, UTF-8)."""
+
+
 def frame(time_ns: int, topic: str, raw: bytes) -> bytes:
     """One message on the stream."""
-    name = topic.encode()
-    return b"".join((HEADER.pack(len(name)), name, BODY.pack(time_ns, len(raw)), raw))
+    return b"".join(_frame_parts(time_ns, topic, raw))
+
+
+def _frame_parts(time_ns: int, topic: str, raw: bytes) -> tuple[bytes, bytes, bytes]:
+    head = _HEADS.get(topic)
+    if head is None:
+        name = topic.encode()
+        head = _HEADS[topic] = HEADER.pack(len(name)) + name
+    return head, BODY.pack(time_ns, len(raw)), raw
 
 
 def unframe(buffer: bytes | bytearray) -> tuple[list[Message], int]:
@@ -93,28 +104,48 @@ class SampleGate:
 
 class RelaySender:
     """The recorder's side: :meth:`send` never blocks; messages of ``droppable`` topics are
-    the ones dropped when the view does not keep up."""
+    the ones dropped when the view does not keep up. The messages of one :meth:`send` go
+    out as one buffer (one ``send`` call, not one per message), cut only where droppable
+    messages meet kept ones."""
 
     def __init__(self, path: Path | str, droppable: Collection[str]) -> None:
         self.path = str(path)
         self.droppable = frozenset(droppable)
         self.dropped = 0
-        """Messages dropped because the view did not read them (queue full)."""
+        """Messages dropped because the view did not read them (queue full), or went away
+        while it had them in part."""
         self.sent = 0
         self._socket: socket.socket | None = None
-        self._queue: deque[tuple[bool, bytes]] = deque()
+        self._queue: deque[tuple[bool, int, bytes]] = deque()
+        """Runs of framed messages: (droppable, how many, bytes)."""
         self._queued = 0
         self._partial = memoryview(b"")
-        """The rest of a message the socket took only in part (sent before anything else)."""
+        """The rest of a run the socket took only in part (sent before anything else)."""
+        self._partial_count = 0
 
     def send(self, messages: Iterable[Message]) -> None:
         """Queue ``messages`` and send what the socket takes now."""
+        parts: list[bytes] = []
+        count = 0
+        run_droppable = True
+        droppable, queue = self.droppable, self._queue
         for time_ns, topic, raw in messages:
-            data = frame(time_ns, topic, raw)
-            self._queue.append((topic in self.droppable, data))
+            kind = topic in droppable
+            if kind != run_droppable and count:
+                data = b"".join(parts)
+                queue.append((run_droppable, count, data))
+                self._queued += len(data)
+                parts, count = [], 0
+            run_droppable = kind
+            parts.extend(_frame_parts(time_ns, topic, raw))
+            count += 1
+        if count:
+            data = b"".join(parts)
+            queue.append((run_droppable, count, data))
             self._queued += len(data)
-        self._bound()
-        self.flush()
+            self._bound()
+        if queue or self._partial:
+            self.flush()
 
     def flush(self) -> None:
         """Send what the socket takes now (connect first if needed)."""
@@ -125,31 +156,32 @@ class RelaySender:
         try:
             while self._partial or self._queue:
                 if not self._partial:
-                    _, data = self._queue.popleft()
+                    _, count, data = self._queue.popleft()
                     self._queued -= len(data)
-                    self._partial = memoryview(data)
+                    self._partial, self._partial_count = memoryview(data), count
                 done = sock.send(self._partial[:CHUNK])
                 self._partial = self._partial[done:]
                 if not self._partial:
-                    self.sent += 1
+                    self.sent += self._partial_count
         except BlockingIOError:
             return
-        except OSError:  # the view went away: what it had in part is lost, the rest waits
-            self._partial = memoryview(b"")
+        except OSError:  # the view went away: the run it had in part is lost, the rest waits
+            self.dropped += self._partial_count
+            self._partial, self._partial_count = memoryview(b""), 0
             self._close()
 
     def _bound(self) -> None:
-        """Drop the oldest droppable messages while the queue holds more than
+        """Drop the oldest droppable runs while the queue holds more than
         :data:`QUEUED_BYTES` (trial results are kept whatever they cost)."""
         if self._queued <= QUEUED_BYTES:
             return
-        kept: deque[tuple[bool, bytes]] = deque()
-        for droppable, data in self._queue:
+        kept: deque[tuple[bool, int, bytes]] = deque()
+        for droppable, count, data in self._queue:
             if droppable and self._queued > QUEUED_BYTES:
                 self._queued -= len(data)
-                self.dropped += 1
+                self.dropped += count
             else:
-                kept.append((droppable, data))
+                kept.append((droppable, count, data))
         self._queue = kept
 
     def _connect(self) -> bool:
@@ -177,7 +209,7 @@ class RelaySender:
                 and time.monotonic() < deadline:
             time.sleep(0.001)
             self.flush()
-        self.dropped += len(self._queue)
+        self.dropped += sum(count for _, count, _ in self._queue)
         self._queue.clear()
         self._close()
 

@@ -32,6 +32,7 @@ from exo_ilc_ros.core.arm.build import build_arm
 from exo_ilc_ros.core.arm.forward_kinematics import UrdfKinematics, quaternion
 from exo_ilc_ros.core.arm.urdf import arm_urdf
 from exo_ilc_ros.core.params.config import load_config
+from exo_ilc_ros.orchestration.live import LiveView
 from exo_ilc_ros.wire import topics
 from exo_ilc_ros.wire.tf import TF, TF_TYPE, tf_message
 from exo_ilc_ros.wire.topics import REFERENCE_DESCRIPTION, ROBOT_DESCRIPTION
@@ -427,3 +428,15 @@ def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
     assert len(recorded[topics.CLOCK]) % per_trial == 0  # (a rerun attempt sends its own)
     assert {s.hardware_id for _, _, m in sim_messages[topics.DIAGNOSTICS] for s in m.status} == \
         {"computed_torque_controller"}
+
+
+def test_port_zero_names_the_port_it_serves() -> None:
+    """``--live-port 0`` picks a free port before the bridge starts, so the URL printed is
+    the one to open (it used to print ws://127.0.0.1:0)."""
+    with LiveView(load_config(), 0) as view:
+        assert view.port > 0
+        assert view.url == f"ws://127.0.0.1:{view.port}"
+        assert f"port:={view.port}" in view.spec.arguments
+        with socket.socket() as probe:  # free: the bridge can bind it
+            probe.bind(("127.0.0.1", view.port))
+    assert LiveView(load_config(), 8765).port == 8765

@@ -4,6 +4,7 @@ the run's recorder where there is one (``relayed``: no extra DDS reader of the l
 
 from __future__ import annotations
 
+import socket
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path
@@ -20,6 +21,16 @@ READY_MARKER = '{"foxglove_port": '
 """What foxglove_bridge prints once it serves: the graph starts after it (``NodeSpec``)."""
 
 
+def free_port(host: str) -> int:
+    """A TCP port free on ``host`` now (the kernel's choice for port 0)."""
+    try:
+        with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as probe:
+            probe.bind((host, 0))
+            return int(probe.getsockname()[1])
+    except OSError:  # an address we cannot bind: the bridge will say why
+        return 0
+
+
 class LiveView:
     """The bridge's process spec and the run's effective config file it reads (for the
     arm's URDF); a context manager that keeps that file while the graph runs."""
@@ -28,7 +39,8 @@ class LiveView:
                  host: str = DEFAULT_HOST, parameters: Mapping[str, str] | None = None,
                  relayed: bool = False, sample_rate: float = DISPLAY_RATE) -> None:
         self.config = config
-        self.port = port
+        self.port = port if port else free_port(host)
+        """The port it serves (0 asks for a free one, chosen here so :attr:`url` names it)."""
         self.host = host
         self.parameters = dict(parameters or {})
         """More of the bridge's parameters (``sample_reliability``, ``scheduling``, ...)."""

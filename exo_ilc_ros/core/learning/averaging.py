@@ -31,9 +31,10 @@ stationary changes, within [-1, 1] while the law still converges and the changes
 ``averaging.min_gain``.
 
 The law's deadbeat-like step carries a trial's non-repeating error whole into the next
-feed-forward (the measured velocity's error sequence has rho ~ -1/2 at the `voluntary` floor:
+feed-forward (at the `voluntary` floor rho is -0.27 to -0.43 per joint over trials 500-1000:
 docs/patient-aware.md); (KG) averages it down while a repeating change still raises rho and
-with it K.
+with it K. A repeating part that is not a random walk (a patient who learns from the same
+errors) is why ``min_gain`` exists.
 """
 
 from __future__ import annotations

@@ -195,6 +195,11 @@ def _forgetting_rule(value: Any) -> str | None:
     return None if 0.0 < value <= 1.0 else f"must be in (0, 1] (1: no forgetting), got {value!r}"
 
 
+def _averaging_memory_rule(value: Any) -> str | None:
+    return None if value == 0.0 or value >= 2.0 else \
+        f"must be 0 (off) or >= 2 trials (lambda = 1 - 1 / memory), got {value!r}"
+
+
 def _node_name_rule(value: Any) -> str | None:
     ok = bool(value) and not value[0].isdigit() and all(c.isalnum() or c == "_" for c in value)
     return None if ok else f"must be a ROS node name (letters, digits and _), got {value!r}"
@@ -623,6 +628,14 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("progress_gain.margin", SUPERVISOR, Kind.DOUBLE,
               "share by which a trial's max |e| must beat the lowest so far for "
               "progress_gain to act", minimum=0.0, extra_rule=_margin_rule),
+    Parameter("averaging.memory", SUPERVISOR, Kind.DOUBLE,
+              "trials over which the law's step gain K is estimated from the lag-1 "
+              "autocorrelation of its target's trial-to-trial changes (the local-level Kalman "
+              "gain: core/learning/averaging.py); u_ff,k+1 = u_ff,k + K (T_k - u_ff,k); 0: off "
+              "(K = 1, the plain law)", minimum=0.0, extra_rule=_averaging_memory_rule),
+    Parameter("averaging.min_gain", SUPERVISOR, Kind.DOUBLE,
+              "the least step gain K averaging may set (the law never stops learning)",
+              minimum=0.0, extra_rule=_fraction_rule),
     Parameter("assist_as_needed.enabled", SUPERVISOR, Kind.BOOL,
               "assist-as-needed (core/learning/assist.py, Emken et al. 2007): forgetting factor "
               "and error deadband around the law", live=True),

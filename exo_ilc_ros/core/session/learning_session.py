@@ -33,6 +33,7 @@ import numpy as np
 
 from ..arm.build import build_arm
 from ..errors import SafetyError, StoreError
+from ..learning.averaging import AveragingGain, averaging_of
 from ..learning.factory import build_law
 from ..learning.laws import FeedforwardUpdate, LearningLaw
 from ..learning.norm_optimal_model import PatientLinearisation
@@ -117,11 +118,14 @@ class LearningSession:
     _patient: PatientLinearisation | None = field(default=None, init=False, repr=False)
     _lowest_error: np.ndarray | None = field(default=None, init=False, repr=False)
     """Per joint the lowest max |e| of the completed trials so far (``progress_gain``)."""
+    _averaging: AveragingGain | None = field(default=None, init=False, repr=False)
+    """The step gain from the trials' statistics (``averaging``; None: off)."""
 
     def __post_init__(self) -> None:
         self._custom_law = self.law is not None
         self.active_law: LearningLaw = self.law or build_law(self.config)
         self.reference = build_reference(self.config)
+        self._averaging = averaging_of(self.config)
         if self.config["profile.initial"]:  # a patient's learned profile (persistence/profiles.py)
 
             self.next_update = load_initial(self.config["profile.initial"], self.config,
@@ -211,11 +215,14 @@ class LearningSession:
                 raise SafetyError(f"trial {record.trial}: the learning law produced a bad "
                                   f"feed-forward ({checked}); it was not stored or used")
         forces = None
+        shift = None
         if self.joint_forces is not None:
             forces = self.joint_forces.conclude(learned_from)
             if forces.joint_force is not None:
-                update = self._with_patient(update, learned_from, forces, self.joint_forces)
+                update, shift = self._with_patient(update, learned_from, forces,
+                                                   self.joint_forces)
         if not record.aborted:
+            update = self._with_averaging(update, record, shift)
             update = self._with_progress(update, record)
         within = self._within(record)
         self.within_streak = self.within_streak + 1 if within else 0
@@ -256,11 +263,20 @@ class LearningSession:
                 self.aborted_trials.append(item.record.trial)
             else:  # progress_gain's lowest error so far
                 self._lowest_error = self._lowest_after(item.record)
+            learned_from = self._learned_from(item.record)
+            target = None if self._averaging is None or item.record.aborted else \
+                self.active_law.update(learned_from)
+            shift = None
             if self.joint_forces is not None:  # the identification is replayed, exactly
-                self.replayed[k] = step = self.joint_forces.conclude(
-                    self._learned_from(item.record))
+                self.replayed[k] = step = self.joint_forces.conclude(learned_from)
                 if step.joint_force is not None:  # and norm-optimal's model with it
+                    if target is not None:
+                        target, shift = self._with_patient(target, learned_from, step,
+                                                           self.joint_forces)
                     self._rebuild_about_patient()
+            if self._averaging is not None and target is not None:  # and averaging's sums
+                self._averaging.observe(target.feedforward + self._shift_or_zero(shift),
+                                        shift)
         if stored and self.joint_forces is not None:
             stored_force = stored[-1].next_update.joint_force
             if stored_force is not None:
@@ -313,11 +329,14 @@ class LearningSession:
         return "norm-optimal model rebuilt about the identified patient"
 
     def _with_patient(self, update: FeedforwardUpdate, record: TrialRecord,
-                      forces: JointForceStep, model: JointForceModel) -> FeedforwardUpdate:
+                      forces: JointForceStep, model: JointForceModel
+                      ) -> tuple[FeedforwardUpdate, np.ndarray]:
         """The law's update with the identified forces in the loop: the learned feed-forward
         after the adoption rule, plus the inverse with the patient (not for norm-optimal, whose
-        model is rebuilt about the patient instead, with a note), and the forces."""
+        model is rebuilt about the patient instead, with a note), and the forces; and what the
+        adoption rule took from the law's feed-forward (the hand-over, ``averaging``'s shift)."""
         feedforward = self._adopt(update, forces)
+        shift = update.feedforward - feedforward
         correction = None if self.config["law"] == "norm_optimal" else \
             model.learning_correction(record)
         if correction is not None:
@@ -325,7 +344,29 @@ class LearningSession:
         update = dataclasses.replace(update, feedforward=feedforward,
                                      joint_force=forces.joint_force)
         rebuilt = self._rebuild_about_patient()
-        return dataclasses.replace(update, notes=(*update.notes, rebuilt)) if rebuilt else update
+        if rebuilt:
+            update = dataclasses.replace(update, notes=(*update.notes, rebuilt))
+        return update, shift
+
+    @staticmethod
+    def _shift_or_zero(shift: np.ndarray | None) -> np.ndarray | float:
+        return 0.0 if shift is None else shift
+
+    def _with_averaging(self, update: FeedforwardUpdate, record: TrialRecord,
+                        shift: np.ndarray | None) -> FeedforwardUpdate:
+        """``averaging`` (:mod:`..learning.averaging`, (KG)): u_ff,k+1 = u_ff,k + K (T_k -
+        u_ff,k) - shift, T_k the law's target (its update plus the inverse with the patient,
+        before the hand-over ``shift`` moved it into the next trial's coordinates), u_ff,k the
+        feed-forward completed trial ``record`` ran with; K = 1: the update as it is."""
+        if self._averaging is None:
+            return update
+        target = update.feedforward + self._shift_or_zero(shift)
+        gain = self._averaging.observe(target, shift)
+        if np.all(gain >= 1.0):
+            return update
+        previous = np.asarray(record.feedforward, dtype=float)
+        feedforward = previous + gain * (target - previous) - self._shift_or_zero(shift)
+        return dataclasses.replace(update, feedforward=feedforward)
 
     def _lowest_after(self, record: TrialRecord) -> np.ndarray:
         """The lowest max |e| per joint once completed trial ``record`` is counted."""

@@ -549,6 +549,16 @@ def test_recorder_status_reports_received_then_filed(tmp_path: Path) -> None:
         rclpy.try_shutdown()
 
 
+def _wait_matched(*publishers: Any) -> None:
+    """Until the recorder's subscriptions match ``publishers``, and the nodes' own start-up
+    messages (parameter events) are in."""
+    deadline = time.monotonic() + 10.0
+    while any(p.get_subscription_count() < 1 for p in publishers):
+        assert time.monotonic() < deadline, "recorder not matched"
+        time.sleep(0.05)
+    time.sleep(0.5)
+
+
 @pytest.mark.graph
 def test_recorder_takes_the_samples_at_trial_events_not_within_a_trial(tmp_path: Path) -> None:
     """Within a trial the recorder only looks at the trial events: the commands wait in DDS
@@ -570,11 +580,7 @@ def test_recorder_takes_the_samples_at_trial_events_not_within_a_trial(tmp_path:
         commands = graph.create_publisher(Float64MultiArray, topics.EFFORT_COMMANDS, 10)
         events = graph.create_publisher(DiagnosticArray, topics.TRIAL_EVENTS, EVENTS_QOS)
         try:
-            deadline = time.monotonic() + 10.0
-            while commands.get_subscription_count() < 1 or events.get_subscription_count() < 1:
-                assert time.monotonic() < deadline, "recorder not matched"
-                time.sleep(0.05)
-            time.sleep(0.5)  # the nodes' own start-up messages (parameter events) are in
+            _wait_matched(commands, events)
             recorder.poll()  # the first poll takes everything and starts the period
             before = recorder.messages
 
@@ -629,11 +635,7 @@ def test_recorder_beside_a_live_view_relays_within_a_trial_and_writes_at_events(
         events = graph.create_publisher(DiagnosticArray, topics.TRIAL_EVENTS, EVENTS_QOS)
         shown: list[tuple[int, str, bytes]] = []
         try:
-            deadline = time.monotonic() + 10.0
-            while commands.get_subscription_count() < 1 or events.get_subscription_count() < 1:
-                assert time.monotonic() < deadline, "recorder not matched"
-                time.sleep(0.05)
-            time.sleep(0.5)  # the nodes' own start-up messages (parameter events) are in
+            _wait_matched(commands, events)
             recorder.poll()  # the first poll takes everything and starts the periods
             before = recorder.messages
             view.take()

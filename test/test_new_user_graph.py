@@ -62,8 +62,8 @@ def test_live_change_shows_in_run_and_analyze_and_a_mistyped_node_fails_fast(
             [sys.executable, "-m", "exo_ilc_ros.cli.main", "param", "set", "ilc_supervisr",
              "law", "linear", "--timeout", "120"], stdout=subprocess.PIPE,
             stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env, text=True)
-        change = _exo_ilc("param", "set", "ilc_supervisor", "law", "linear", env=env,
-                          timeout=120)
+        change = _exo_ilc("param", "set", "ilc_supervisor", "law", "linear", "--timeout",
+                          "120", env=env, timeout=150)  # the graph may still be starting
         assert change.returncode == 0, change.stderr
         _, typo_err = typo.communicate(timeout=150)
         assert typo.returncode == 2, typo_err

@@ -145,9 +145,11 @@ def _list_kind(value: Any) -> str:
     return type(value).__name__
 
 
-SETTLE = 2.0
-"""Seconds after discovery found the graph's other nodes for NODE to appear among them;
-then a mistyped NODE fails with the names of the running ones (not after --timeout)."""
+SETTLE = 5.0
+"""Seconds the discovered nodes must stay the same (no new one appearing) for NODE to count as
+missing among them; then a mistyped NODE fails with the names of the running ones (not after
+--timeout). A graph still starting (its processes coming up one after another on a loaded
+machine) keeps adding nodes, and the wait goes on."""
 
 
 def _wait_for_node(node: Any, client: Any, target: str, given: str, domain: int,
@@ -159,6 +161,7 @@ def _wait_for_node(node: Any, client: Any, target: str, given: str, domain: int,
     seen_at: float | None = None
     wanted = "/" + target.lstrip("/")
     running: list[str] = []
+    seen: list[str] = []
     while time.monotonic() - start < timeout:
         if client.wait_for_services(timeout_sec=0.1):
             return
@@ -166,7 +169,8 @@ def _wait_for_node(node: Any, client: Any, target: str, given: str, domain: int,
                           in node.get_node_names_and_namespaces()} - {"/exo_ilc_param"})
         if wanted in running or not running:
             continue
-        seen_at = seen_at or time.monotonic()
+        if seen_at is None or running != seen:  # discovery still finding nodes: wait on
+            seen_at, seen = time.monotonic(), running
         if time.monotonic() - seen_at > SETTLE:
             close = difflib.get_close_matches(wanted, running, n=1)
             hint = f"; did you mean {close[0].lstrip('/')}?" if close else ""

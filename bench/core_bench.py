@@ -52,7 +52,7 @@ def between_trials(config: Config) -> None:
     5 s trial's record, and the norm-optimal law's learning matrix (once per configuration)."""
     from exo_ilc_ros.core.learning import norm_optimal_model
 
-    experiment = Experiment(config, 0.10)
+    experiment = Experiment(config.with_mass_uncertainty(0.10))
     record = experiment.run_trial(np.zeros_like(experiment.reference.position), 1)
     norm_optimal_model.clear_cache()
     start = time.perf_counter()
@@ -89,7 +89,7 @@ def between_trials(config: Config) -> None:
 def trial_times(config: Config, repeats: int) -> tuple[float, list[float]]:
     """(seconds of the first trial: numba's compile or cache load, seconds of each of
     ``repeats`` further 5 s trials) of the in-process trial at delta 0.10, zero feed-forward."""
-    experiment = Experiment(config, 0.10)
+    experiment = Experiment(config.with_mass_uncertainty(0.10))
     feedforward = np.zeros_like(experiment.reference.position)
     start = time.perf_counter()
     experiment.run_trial(feedforward, 1)
@@ -111,7 +111,7 @@ def trials_only(arms: list[str], repeats: int) -> None:
     for arm in arms:
         config = load_config(None if arm == "default" else arm)
         warmup, times = trial_times(config, repeats)
-        experiment = Experiment(config, 0.10)
+        experiment = Experiment(config.with_mass_uncertainty(0.10))
         step = statistics.median(plant_step_times(experiment, 500))
         target = TRIAL_TARGET_MS.get(config.joints)
         print(f"{arm}: {config.joints} joints, control {1 / config['control.period']:g} Hz, RK4 "
@@ -135,7 +135,7 @@ def main() -> None:
         trials_only(args.arm, args.repeats)
         return
     config = load_config()
-    experiment = Experiment(config, 0.10)
+    experiment = Experiment(config.with_mass_uncertainty(0.10))
     feedforward = np.zeros_like(experiment.reference.position)
     start = time.perf_counter()
     experiment.run_trial(feedforward, 1)  # compiles, or loads the numba cache

@@ -157,7 +157,8 @@ def scale(constrained_too: bool, repeats: int = 5) -> None:
             if constrained_too:
                 c = config.replace({"norm_optimal.constrained": True})
                 law = norm_optimal.NormOptimalLaw.from_config(c)
-                record = Experiment(c, 0.1).run_trial(np.zeros((count, joints)), 1)
+                plant = Experiment(c.with_mass_uncertainty(0.1))
+                record = plant.run_trial(np.zeros((count, joints)), 1)
                 assert law.constraints is not None
                 t0 = time.perf_counter()
                 norm_optimal_qp.solve_constrained_recursive(law.matrices, law.constraints, record)
@@ -182,7 +183,7 @@ def arm_rate(arm: str, rate: float, deltas: list[float], trials: int) -> None:
           "configuration (the mass uncertainty is the plant's: not in the law's key)")
     verdicts: list[tuple[float, str, float]] = []
     for delta in deltas:
-        experiment = Experiment(config, delta)
+        experiment = Experiment(config.with_mass_uncertainty(delta))
         session = LearningSession(config.replace({"mass_uncertainty": delta}))
         trial_s, update_s, worst = [], [], []
         while not session.finished:

@@ -24,7 +24,8 @@ SCENARIOS = ("ideal", "sensor", "friction", "spastic", "voluntary", "realistic")
 def trial_times(scenario: str, repeats: int = 30) -> list[float]:
     """Seconds per 5 s trial (501 samples, 10 RK4 sub-steps each), the patient's draws
     included, at 10 % mass uncertainty with a fixed feed-forward."""
-    experiment = Experiment(load_config(overlays=[scenario_path(scenario)]), 0.10)
+    config = load_config(overlays=[scenario_path(scenario)]).with_mass_uncertainty(0.10)
+    experiment = Experiment(config)
     u_ff = np.zeros_like(experiment.reference.position)
     experiment.run_trial(u_ff, 1)  # compile
     times = []
@@ -37,7 +38,8 @@ def trial_times(scenario: str, repeats: int = 30) -> list[float]:
 
 def step_times(scenario: str, repeats: int = 3000) -> list[float]:
     """Seconds per control period of the node's plant (measure + step), from Python."""
-    experiment = Experiment(load_config(overlays=[scenario_path(scenario)]), 0.10)
+    config = load_config(overlays=[scenario_path(scenario)]).with_mass_uncertainty(0.10)
+    experiment = Experiment(config)
     stepper = PlantStepper(experiment)
     effort = np.array([0.5, 10.0, 2.0])
     samples = experiment.reference.samples

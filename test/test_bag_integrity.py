@@ -216,8 +216,8 @@ def test_bag_written_before_reads_with_a_note(tmp_path: Path, bag: Path, config:
 
     old = tmp_path / "old"
     writer = Writer(old, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
-    for key, value in provenance_data(config, recorded_by="exo-ilc simulate",
-                                      mass_uncertainty=0.10).items():
+    for key, value in provenance_data(config.with_mass_uncertainty(0.10),
+                                      recorded_by="exo-ilc simulate").items():
         writer.set_custom_data(key, value)
     with AnyReader([bag]) as reader, writer:
         connections = {c.topic: writer.add_connection(c.topic, c.msgtype, typestore=typestore(),

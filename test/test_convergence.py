@@ -40,7 +40,7 @@ def test_sensitivity_by_hand_at_dc_and_nyquist() -> None:
 def test_paper_loop_worst_factor_and_band() -> None:
     """The paper's gains at delta 0.05: |S| peaks at Nyquist, 1/(1 - 8 * 0.01 / 2.1) = 1.0396
     for joint 1; the whole band above a few Hz exceeds 1."""
-    a = analyze_loop(load_config(), mass_uncertainty=0.05)
+    a = analyze_loop(load_config().with_mass_uncertainty(0.05))
     assert a.worst() == pytest.approx(1.0 / (1.0 - 8.0 * PERIOD / 2.0 / 1.05), rel=1e-9)
     for j, kd in zip(a.joints, (8.0, 5.0, 7.0), strict=True):
         value, k = j.worst(False)
@@ -61,7 +61,7 @@ def test_feedforward_memory_without_learning_is_marginal() -> None:
 def test_q_filter_removes_the_band() -> None:
     config = load_config(None, {"law": "linear", "q_filter.enabled": True})
     for delta in (0.05, 0.10, 0.15):
-        a = analyze_loop(config, mass_uncertainty=delta)
+        a = analyze_loop(config.with_mass_uncertainty(delta))
         assert a.worst(filtered=False) > 1.02
         assert a.worst(filtered=True) < 0.2
 
@@ -86,7 +86,7 @@ def test_linearisation_matches_the_nonlinear_plant(delta: float) -> None:
     with the error (O(delta): 12 % on the light elbow at 15 %) and a_N(q), c_N(q, qdot) moving
     while the torque is held over a period (O(T): ~1.4 % at delta 0)."""
     config = load_config()
-    experiment = Experiment(config, delta)
+    experiment = Experiment(config.with_mass_uncertainty(delta))
     n = experiment.reference.samples
     rng = np.random.default_rng(1)
     base = np.zeros((n, 3))

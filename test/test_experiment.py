@@ -38,7 +38,7 @@ def test_reference_has_n_plus_one_samples() -> None:
 
 
 def test_trial_starts_at_the_reference_and_is_deterministic() -> None:
-    ex = Experiment(load_config(), 0.1)
+    ex = Experiment(load_config().with_mass_uncertainty(0.1))
     ff = np.zeros_like(ex.reference.position)
     a = ex.run_trial(ff, 1)
     b = ex.run_trial(ff, 1)
@@ -52,7 +52,7 @@ def test_trial_starts_at_the_reference_and_is_deterministic() -> None:
 
 def test_effort_limit_clamps_the_command() -> None:
     config = load_config(overrides={"control.effort_limit": [1.0, 1.0, 1.0]})
-    record = Experiment(config, 0.1).run_trial(np.zeros((501, 3)), 1)
+    record = Experiment(config.with_mass_uncertainty(0.1)).run_trial(np.zeros((501, 3)), 1)
     assert np.abs(record.effort).max() == pytest.approx(1.0)
 
 

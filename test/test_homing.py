@@ -213,7 +213,7 @@ class ArmGraph:
 
     def __init__(self, config: Any, arm: Any = None, start: np.ndarray | None = None
                  ) -> None:
-        self.experiment = Experiment(config, DELTA)
+        self.experiment = Experiment(config.with_mass_uncertainty(DELTA))
         ref = self.experiment.reference
         self.arm = arm or PlantStepper(self.experiment)
         q0 = ref.position[-1] if start is None else np.asarray(start, float)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.core.arm.build import build_arm
-from exo_ilc_ros.core.arm.model import ArmModel
+from exo_ilc_ros.core.arm.model import ArmModel, with_mass_scale
 from exo_ilc_ros.core.learning.identification import JointForceIdentifier
 from exo_ilc_ros.core.learning.identification_settings import (
     BASE_PARAMETERS,
@@ -238,7 +238,7 @@ def test_an_absurd_estimate_is_flagged_never_usable() -> None:
     """A nominal model three times too heavy: the mass error it leaves (-65 %) is outside the
     plausible range; every joint says so and none is usable."""
     config = _config(("friction",))
-    arm = build_arm(config).with_mass_scale(2.0)
+    arm = with_mass_scale(build_arm(config), 2.0)
     estimate = _identify(("friction",), trials=3, nominal=arm)
     for joint in estimate.joints:
         assert not joint.trustworthy

@@ -45,7 +45,7 @@ def test_paper_config_grows_and_is_flagged() -> None:
     assert np.all(errors[30:, 1:] <= config["error_bound"])
     fit = fit_growth(uff, window=60)
     assert fit is not None and fit.growing.all(), fit
-    analysis = analyze_loop(config, mass_uncertainty=0.05)
+    analysis = analyze_loop(config.with_mass_uncertainty(0.05))
     predicted = np.log([j.worst(False)[0] for j in analysis.joints])
     assert analysis.worst() > 1.0
     assert np.all(fit.rate <= predicted)
@@ -69,7 +69,7 @@ def test_predicted_factor_matches_the_measured_growth() -> None:
     k = np.arange(100, 200)
     measured = np.array([np.polyfit(k, np.log(step[100:200, j]), 1)[0] for j in range(3)])
     assert np.all(result.max_abs_errors[5:] <= config["error_bound"])  # the error looks fine
-    analysis = analyze_loop(config, mass_uncertainty=delta)
+    analysis = analyze_loop(config.with_mass_uncertainty(delta))
     rho = np.array([j.worst(False)[0] for j in analysis.joints])
     packet = np.array([packet_growth_rate(r, 150.0) for r in rho])
     np.testing.assert_allclose(measured, packet, rtol=0.05)

@@ -8,7 +8,7 @@ import pytest
 
 from exo_ilc_ros.core import Experiment, load_config
 from exo_ilc_ros.core.arm.build import build_arm
-from exo_ilc_ros.core.arm.model import ArmModel
+from exo_ilc_ros.core.arm.model import ArmModel, with_mass_scale
 from exo_ilc_ros.core.errors import ModelError
 from exo_ilc_ros.core.loop.stepper import PlantStepper
 from exo_ilc_ros.core.sim.mujoco_arm import JointEffects, MujocoArm, arm_mjcf
@@ -20,7 +20,7 @@ def test_inertia_and_bias_agree_with_rodriguez_at_1000_states(delta: float) -> N
     states (|q| <= pi, |qdot| <= 5 rad/s): relative difference (max entry over the largest
     entry) <= 1e-9. Measured: ~2e-15, rounding."""
     config = load_config(overrides={"mass_uncertainty": delta})
-    arm = build_arm(config).with_mass_scale(delta)
+    arm = with_mass_scale(build_arm(config), delta)
     mujoco_arm = MujocoArm.from_config(config)
     rng = np.random.default_rng(15)
     worst_mass = worst_bias = 0.0

@@ -48,7 +48,7 @@ def test_update_is_the_minimiser_of_the_cost() -> None:
     """The law's update is Phi u + L e of (NO2), and the gradient of (NO1) vanishes there."""
     config = _config(**{"norm_optimal.weight_input_size": [1e-6, 0.0, 2e-6],
                         "norm_optimal.weight_error": [1.0, 2.0, 0.5]})
-    experiment = Experiment(config, 0.15)
+    experiment = Experiment(config.with_mass_uncertainty(0.15))
     law = build_law(config)
     rng = np.random.default_rng(1)
     ff = 0.1 * rng.standard_normal(experiment.reference.position.shape)
@@ -95,7 +95,7 @@ def test_constrained_update_keeps_the_predicted_effort_within_the_limit() -> Non
     """A tight effort limit and feed-forward bound: the QP's prediction stays inside both and
     says so; with loose limits it is the unconstrained update."""
     loose = _config(**{"norm_optimal.constrained": True})
-    record = Experiment(loose, 0.15).run_trial(np.zeros((101, 3)), 1)
+    record = Experiment(loose.with_mass_uncertainty(0.15)).run_trial(np.zeros((101, 3)), 1)
     free = build_law(loose.replace({"norm_optimal.constrained": False})).update(record)
     step = build_law(loose).update(record)
     assert step.notes == ()
@@ -193,8 +193,8 @@ def test_active_constraints_reach_the_trial_summary_and_the_bag(tmp_path: Path) 
     from exo_ilc_ros.wire import topics
 
     loose = _config(**{"norm_optimal.constrained": True, "max_trials": 2})
-    need = np.max(np.abs(Experiment(loose, 0.15).run_trial(np.zeros((101, 3)), 1).effort),
-                  axis=0)
+    trial = Experiment(loose.with_mass_uncertainty(0.15)).run_trial(np.zeros((101, 3)), 1)
+    need = np.max(np.abs(trial.effort), axis=0)
     tight = loose.replace({"control.effort_limit": [float(x) for x in 0.98 * need],
                            "feedforward_limit": [0.3, 0.3, 0.3], "mass_uncertainty": 0.15})
     result = run_trials(tight)

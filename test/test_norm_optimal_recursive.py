@@ -135,7 +135,7 @@ def test_the_law_uses_the_recursive_form() -> None:
     law = build_law(config)
     assert isinstance(law, norm_optimal.NormOptimalLaw)
     assert isinstance(law.matrices, norm_optimal_model.RecursiveMatrices)
-    record = Experiment(config, 0.15).run_trial(
+    record = Experiment(config.with_mass_uncertainty(0.15)).run_trial(
         0.1 * np.random.default_rng(5).standard_normal((61, 3)), 1)
     dense = norm_optimal_model.learning_matrices(config)
     expected = dense.next_feedforward(record.feedforward.ravel(), record.error.ravel())
@@ -147,8 +147,8 @@ def test_the_law_uses_the_recursive_form() -> None:
 def _constrained_case(config: Config, tight: bool, feedforward_bound: float = 0.3
                       ) -> tuple[Any, Any, Any]:
     config = config.replace({"norm_optimal.constrained": True})
-    record = Experiment(config, 0.15).run_trial(np.zeros((config_samples(config),
-                                                          config.joints)), 1)
+    record = Experiment(config.with_mass_uncertainty(0.15)).run_trial(
+        np.zeros((config_samples(config), config.joints)), 1)
     if tight:
         need = np.max(np.abs(record.effort), axis=0)
         config = config.replace({"control.effort_limit": [float(x) for x in 0.98 * need],

@@ -49,9 +49,9 @@ def test_identified_patient_makes_the_update_fast_where_it_was_slow() -> None:
     spastic = patient_load(load_config(overlays=[scenario_path("spastic")]), "spastic")
     robust = load_config(config_dir() / "robust.yaml")
     aware = load_config(config_dir() / "patient_aware.yaml")
-    alone = analyze_loop(robust, mass_uncertainty=0.1).worst(filtered=True)
-    slow = analyze_loop(robust, mass_uncertainty=0.1, patient=spastic).worst(filtered=True)
-    fast = analyze_loop(aware, mass_uncertainty=0.1, patient=spastic).worst(filtered=True)
+    alone = analyze_loop(robust.with_mass_uncertainty(0.1)).worst(filtered=True)
+    slow = analyze_loop(robust.with_mass_uncertainty(0.1), patient=spastic).worst(filtered=True)
+    fast = analyze_loop(aware.with_mass_uncertainty(0.1), patient=spastic).worst(filtered=True)
     assert slow > 0.85 and fast < 0.2 and fast < alone + 0.01
 
 

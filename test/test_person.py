@@ -52,7 +52,7 @@ def test_the_person_changes_the_plants_mass_matrix_by_exactly_the_segments() -> 
     the segments as bodies: each mass matrix, and so their difference, the segments' share."""
     config = load_config(PANDA, overlays=[PERSON])
     assert config["person.enabled"] and not config["person.in_nominal"]
-    plant, nominal = build_plant(config, 0.0), build_arm(config)
+    plant, nominal = build_plant(config.with_mass_uncertainty(0.0)), build_arm(config)
     with_model, with_data = _panda_pinocchio(config)
     bare_model, bare_data = _panda_pinocchio()
     for q in _random_states(bare_model, 6):
@@ -79,9 +79,11 @@ def test_person_in_nominal_and_mass_error_leave_the_person_unscaled() -> None:
     with_nominal = config.replace({"person.in_nominal": True})
     q = np.array(config["trajectory.start"])
     assert np.allclose(build_arm(with_nominal).metric_tensor(q),
-                       build_plant(config, 0.0).metric_tensor(q), rtol=0, atol=1e-14)
+                       build_plant(config.with_mass_uncertainty(0.0)).metric_tensor(q),
+                       rtol=0, atol=1e-14)
     robot = load_config(PANDA)
-    change = build_plant(config, 0.1).metric_tensor(q) - build_plant(config, 0.0).metric_tensor(q)
+    change = (build_plant(config.with_mass_uncertainty(0.1)).metric_tensor(q)
+              - build_plant(config.with_mass_uncertainty(0.0)).metric_tensor(q))
     expected = 0.1 * build_arm(robot).metric_tensor(q)
     assert np.allclose(change, expected, rtol=1e-12, atol=1e-14)
 
@@ -181,8 +183,8 @@ def test_the_mujoco_plant_carries_the_person() -> None:
     """MuJoCo's plant (``--plant mujoco``) from the same config: its mass matrix and bias forces
     with the person equal our plant's, and differ from the robot alone by the person."""
     config = load_config(PANDA, overlays=[PERSON])
-    mujoco_plant = MujocoArm.from_config(config, 0.1)
-    plant = build_plant(config, 0.1)
+    mujoco_plant = MujocoArm.from_config(config.with_mass_uncertainty(0.1))
+    plant = build_plant(config.with_mass_uncertainty(0.1))
     q = np.array(config["trajectory.start"]) + 0.1
     qd = np.full(7, 0.2)
     mass, bias = mujoco_plant.inertia_and_bias(q, qd)
@@ -190,5 +192,5 @@ def test_the_mujoco_plant_carries_the_person() -> None:
     assert np.max(np.abs(mass - a)) < 1e-12 * np.max(np.abs(a))
     c = plant.bias_forces(q, qd)
     assert np.max(np.abs(bias - c)) < 1e-12 * np.max(np.abs(c))
-    robot = build_plant(load_config(PANDA), 0.1).metric_tensor(q)
+    robot = build_plant(load_config(PANDA).with_mass_uncertainty(0.1)).metric_tensor(q)
     assert np.max(np.abs(mass - robot)) > 1e-2 * np.max(np.abs(a))

@@ -28,7 +28,7 @@ class FakeGraph:
     """Plant, controller and recorder answering at once (``auto``) or when told."""
 
     def __init__(self, config: Any, auto_file: bool = True) -> None:
-        self.experiment = Experiment(config, PLANT["mass_uncertainty"])
+        self.experiment = Experiment(config.with_mass_uncertainty(PLANT["mass_uncertainty"]))
         self.protocol: TrialProtocol | None = None
         self.t0 = 1_000_000_000
         self.pushed: list[tuple[int, np.ndarray]] = []

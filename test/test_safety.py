@@ -20,7 +20,7 @@ TIGHT = CONFIG.replace({"safety.error_envelope": [0.1, 0.1, 0.1]})
 
 
 def test_guarded_trial_is_bit_identical_to_the_plain_kernel() -> None:
-    e = Experiment(CONFIG, 0.15)
+    e = Experiment(CONFIG.with_mass_uncertainty(0.15))
     ref = e.reference
     u_ff = np.zeros_like(ref.position)
     plain = simulate_trial(u_ff, ref.position, ref.velocity, e.kp, e.kd, e.effort_limit,

@@ -169,7 +169,7 @@ def test_mujoco_plant_of_a_urdf_arm_equals_our_dynamics(tmp_path: Path) -> None:
     Panda: mass matrix and bias forces equal ours (measured: 1.4e-15); `exo-ilc urdf` gives the
     arm's own URDF back."""
     config = load_config(ARMS / "panda.yaml")
-    plant = MujocoArm.from_config(config, 0.0)
+    plant = MujocoArm.from_config(config.with_mass_uncertainty(0.0))
     arm = build_arm(config)
     rng = np.random.default_rng(3)
     for _ in range(20):
@@ -245,7 +245,7 @@ def test_urdf_joint_dynamics_applied_equal_in_our_plant_and_mujoco(tmp_path: Pat
             config["integration_step"], config["control.period"], damping=True,
             friction=True, friction_velocity=config["patient.friction.stribeck_velocity"])
     else:
-        mujoco_arm = MujocoArm.from_config(config, 0.0)
+        mujoco_arm = MujocoArm.from_config(config.with_mass_uncertainty(0.0))
     ours = PlantStepper(Experiment(config))
     rigid = PlantStepper(Experiment(ignored))
     rng = np.random.default_rng(11)

@@ -116,7 +116,7 @@ def exercise_run(run: BagRun) -> ExerciseRun:
         if found is None and config is not None:  # a bag of a version without metrics
             record = _record_of(run, k, config)
             found = None if record is None else config_metrics(
-                record, config.replace({"mass_uncertainty": run.mass_uncertainty}))
+                record, config.with_mass_uncertainty(run.mass_uncertainty))
         if found is not None:
             metrics.append(found)
     identified = [found for found in (Identified.from_summary(k, run.summaries.get(k, {}),

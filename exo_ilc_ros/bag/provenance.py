@@ -45,16 +45,13 @@ def interpretation_options(values: Mapping[str, Any]) -> dict[str, Any]:
     return {name: values[name] for name in names if name in values}
 
 
-def provenance_data(config: Config, *, recorded_by: str, run_name: str = "",
-                    mass_uncertainty: float | None = None,
-                    law: str | None = None) -> dict[str, str]:
-    """The ``custom_data`` entries of a run with ``config`` (delta and law default to it)."""
+def provenance_data(config: Config, *, recorded_by: str,
+                    run_name: str = "") -> dict[str, str]:
+    """The ``custom_data`` entries of a run with ``config`` (its delta and law: the config's)."""
     values = config.values
-    delta = float(values["mass_uncertainty"] if mass_uncertainty is None else mass_uncertainty)
+    delta = float(values["mass_uncertainty"])
     values["mass_uncertainty"] = delta
-    if law is not None:
-        values["law"] = law
-    effective = config.replace({"mass_uncertainty": delta, "law": values["law"]})
+    effective = config
     entries = {
         VERSION: __version__,
         RECORDED_BY: recorded_by,

@@ -73,13 +73,12 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
     record; default: measured here) go into the trial summaries. Returns ``path``."""
     path = Path(path)
     names = list(config["joint_names"])
-    custom = provenance_data(config, recorded_by="exo-ilc simulate",
-                             run_name=name or path.name,
-                             mass_uncertainty=result.mass_uncertainty, law=result.law)
+    measured = config.replace({"law": result.law}).with_mass_uncertainty(result.mass_uncertainty)
+    custom = provenance_data(measured, recorded_by="exo-ilc simulate",
+                             run_name=name or path.name)
     custom.update(extra_custom_data or {})
     period_ns = int(round(float(config["control.period"]) * NS))
     clock_every = max(1, int(config["clock_every"]))
-    measured = config.replace({"mass_uncertainty": result.mass_uncertainty})
     view = ArmView(config)
     with BagWriter(path, storage=storage, custom_data=custom) as writer:
         declare_topics(writer)

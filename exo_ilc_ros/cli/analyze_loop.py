@@ -66,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     worst = 0.0
     for i, delta in enumerate(deltas):
-        analysis = analyze_loop(config, args.law, delta, lifted_trials=args.lifted)
+        analysis = analyze_loop(config.with_mass_uncertainty(delta), args.law,
+                                lifted_trials=args.lifted)
         if i:
             print()
         print(format_analysis(analysis))
@@ -109,7 +110,7 @@ def _patients(args: argparse.Namespace, config: Config, deltas: list[float]) -> 
         load = patient_load(load_config(args.config, overlays=[path]), label)
         worst = 0.0
         for delta in deltas:
-            analysis = analyze_loop(config, args.law, delta, patient=load,
+            analysis = analyze_loop(config.with_mass_uncertainty(delta), args.law, patient=load,
                                     lifted_trials=args.lifted)
             factor = analysis.worst(filtered=analysis.qfilter is not None)
             worst = max(worst, factor)

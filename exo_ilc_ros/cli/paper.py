@@ -67,7 +67,7 @@ def paper(args: argparse.Namespace) -> int:
     trials = config["max_trials"]
     bags: list[Path] = []
     for delta in PAPER_UNCERTAINTIES:
-        run_config = config.replace({"mass_uncertainty": delta})
+        run_config = config.with_mass_uncertainty(delta)
         with tqdm(total=trials, desc=f"{'in-process' if args.in_process else 'graph'} "
                   f"delta={delta:g}", unit="trial", file=sys.stderr, disable=None) as bar:
             def progress(_: Any, bar: Any = bar) -> None:

@@ -186,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
             return EXIT_INTERRUPTED if interrupted else EXIT_GRAPH
     runs: list[RunSummary] = []
     for delta in deltas:
-        run_config = config.replace({"mass_uncertainty": delta})
+        run_config = config.with_mass_uncertainty(delta)
         if root is not None:
             run_config = run_config.replace({"store.directory": str(root),
                                              "store.resume": bool(args.resume)})

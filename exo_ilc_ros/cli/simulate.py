@@ -177,7 +177,7 @@ def simulate(args: argparse.Namespace) -> int:
             runs[-1].extra["spread"] = _spread(config, delta, trials, args.spread)
         if args.json:  # the therapy metrics of every trial (core/programs/metrics.py)
 
-            measured = config.replace({"mass_uncertainty": delta})
+            measured = config.with_mass_uncertainty(delta)
             runs[-1].extra["metrics"] = [config_metrics(r, measured).to_json()
                                          for r in result.records]
         for trial, notes in result.notes.items():

@@ -91,7 +91,7 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
         raise ConfigError("--patient", "cannot be combined with --store, --resume or --replay "
                           "(the profile is saved after every trial)")
     if args.mass_uncertainty:
-        config = config.replace({"mass_uncertainty": args.mass_uncertainty[0]})
+        config = config.with_mass_uncertainty(args.mass_uncertainty[0])
     book = ProfileBook(profiles_root(args.profiles))
     plan = plan_of(args, config)
     prepared = [prepare(config, book, args.patient, name, args.new_patient)
@@ -176,7 +176,7 @@ def _graph_steps(args: argparse.Namespace, config: Any, book: ProfileBook, store
     if args.mass_uncertainty and len(args.mass_uncertainty) > 1:
         raise ConfigError("--mass-uncertainty", "one value with --patient (one patient's arm)")
     if args.mass_uncertainty:
-        config = config.replace({"mass_uncertainty": args.mass_uncertainty[0]})
+        config = config.with_mass_uncertainty(args.mass_uncertainty[0])
     if PatientModel(config).learns:
         raise ConfigError("patient.learning.gain", "a learning virtual patient's therapy "
                           "sessions run in-process (exo-ilc simulate --patient): in the graph "

@@ -168,7 +168,7 @@ class MujocoPlant(FreeRunningPlant):
             self.get_logger().warning("virtual patient: MuJoCo simulates friction, passive and "
                                       "spastic stiffness and damping only; not simulated here: "
                                       + ", ".join(missing))
-        return MujocoArm.from_config(config, self.experiment.mass_uncertainty)
+        return MujocoArm.from_config(config)
 
     def stepper_state(self, q: np.ndarray, qd: np.ndarray) -> None:
         """At rest at q_d(0) when the node starts."""

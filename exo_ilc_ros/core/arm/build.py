@@ -5,17 +5,16 @@ truncated cones (``cones``) or a URDF's chain (``urdf``, :mod:`.urdf_chain`)."""
 
 from __future__ import annotations
 
-import dataclasses
 import xml.etree.ElementTree as ET
 from typing import Any
 
 import numpy as np
 
-from ..errors import ConfigError, ModelError
+from ..errors import ConfigError
 from ..params import schema
 from ..params.config import Config, urdf_path, urdf_source
 from .body_segments import Segment, SegmentPlacement, arm_segments, with_segments
-from .model import ArmModel
+from .model import ArmModel, with_mass_scale
 from .urdf import arm_urdf
 from .urdf_chain import UrdfChain, read_urdf_chain
 
@@ -32,24 +31,21 @@ def build_arm(config: Config) -> ArmModel:
                                config["model.joint_axes"], config["model.gravity"])
 
 
-def build_plant(config: Config, mass_uncertainty: float | None = None) -> ArmModel:
+def build_plant(config: Config) -> ArmModel:
     """The plant of the config: the robot's masses and inertias scaled by (1 + delta), eq (15)
-    (delta: ``mass_uncertainty``, default the config's), plus the person's segments with
-    ``person.enabled`` (not scaled: the person's are de Leva's estimate either way)."""
-    delta = float(config["mass_uncertainty"] if mass_uncertainty is None else mass_uncertainty)
+    (delta: ``mass_uncertainty``; another delta: :meth:`Config.with_mass_uncertainty`), plus
+    the person's segments with ``person.enabled`` (not scaled: the person's are de Leva's
+    estimate either way)."""
+    delta = float(config["mass_uncertainty"])
     if config["model.source"] == "urdf":
         return _urdf_arm(config, delta, bool(config["person.enabled"]))
-    return build_arm(config).with_mass_scale(delta)
+    return with_mass_scale(build_arm(config), delta)
 
 
 def _urdf_arm(config: Config, mass_uncertainty: float, person: bool) -> ArmModel:
     chain = urdf_chain(config)
     if mass_uncertainty != 0.0:
-        scale = 1.0 + mass_uncertainty
-        if scale <= 0.0:
-            raise ModelError("mass uncertainty must be greater than -1")
-        chain = dataclasses.replace(chain, masses=chain.masses * scale,
-                                    inertias=chain.inertias * scale)
+        chain = with_mass_scale(chain, mass_uncertainty)
     if person and config["person.enabled"]:
         segments, placements = person_segments(config)
         for segment, placement in placements.items():

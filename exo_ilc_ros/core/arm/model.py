@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol, TypeVar
 
 import numpy as np
 
@@ -74,14 +75,6 @@ class ArmModel:
         """Number of joints."""
         return int(self.masses.shape[0])
 
-    def with_mass_scale(self, mass_uncertainty: float) -> ArmModel:
-        """The same arm with every mass (and so every inertia) scaled by (1 + delta), eq (15)."""
-        scale = 1.0 + float(mass_uncertainty)
-        if scale <= 0.0:
-            raise ModelError("mass uncertainty must be greater than -1")
-        return dataclasses.replace(self, masses=self.masses * scale,
-                                   inertias=self.inertias * scale)
-
     # --- the model's arrays in the order the kernels take them ---
     @property
     def kernel_args(self) -> tuple[np.ndarray, ...]:
@@ -145,6 +138,28 @@ class ArmModel:
         _, _, rc, _ = dynamics.chain_frames(_vec(q), self.axes, self.offsets, self.coms,
                                             self.inertias)
         return float(-np.sum(self.masses * (rc @ self.gravity)))
+
+
+class MassBearing(Protocol):
+    """A dataclass of an arm's links with per-link ``masses`` and ``inertias``."""
+
+    @property
+    def masses(self) -> np.ndarray: ...
+    @property
+    def inertias(self) -> np.ndarray: ...
+
+
+MassBearingT = TypeVar("MassBearingT", bound=MassBearing)
+
+
+def with_mass_scale(arm: MassBearingT, mass_uncertainty: float) -> MassBearingT:
+    """The same arm (an :class:`ArmModel` or a URDF chain) with every mass (and so every
+    inertia) scaled by (1 + delta), eq (15): the one mass scaling of the package."""
+    scale = 1.0 + float(mass_uncertainty)
+    if scale <= 0.0:
+        raise ModelError("mass uncertainty must be greater than -1")
+    return dataclasses.replace(arm, masses=arm.masses * scale,  # type: ignore[type-var]
+                               inertias=arm.inertias * scale)
 
 
 def _vec(x: np.ndarray | Sequence[float]) -> np.ndarray:

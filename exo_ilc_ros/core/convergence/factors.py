@@ -189,8 +189,8 @@ def learning_gains(config: Config, law: str) -> list[tuple[float, float, float]]
     return [(0.0, 0.0, 0.0)] * config.joints
 
 
-def analyze_loop(config: Config, law: str | None = None, mass_uncertainty: float | None = None,
-                 points: int = 2001, qfilter: QFilter | None = None,
+def analyze_loop(config: Config, law: str | None = None, points: int = 2001,
+                 qfilter: QFilter | None = None,
                  lifted_trials: int = 0, patient: PatientLoad | None = None) -> LoopAnalysis:
     """The factor (*) per joint of ``law`` (default: the config's) on ``points`` frequencies
     from 0 to Nyquist, without and with the Q-filter (``qfilter``, default: the config's).
@@ -199,7 +199,7 @@ def analyze_loop(config: Config, law: str | None = None, mass_uncertainty: float
     identification is in the loop inverts them in its update (``identification.inverse_gain``,
     taken as identified exactly), or rebuilds norm-optimal's model about them."""
     name = law or config["law"]
-    delta = float(config["mass_uncertainty"] if mass_uncertainty is None else mass_uncertainty)
+    delta = float(config["mass_uncertainty"])
     period = float(config["control.period"])
     memory = Memory(config["memory"])
     q_filter = qfilter if qfilter is not None else qfilter_of(config)

@@ -302,6 +302,11 @@ class Config:
         merged.update(overrides)
         return Config(merged, self.source)
 
+    def with_mass_uncertainty(self, delta: float) -> Config:
+        """This config with the plant's ``mass_uncertainty`` (eq (15)) set to ``delta``: the one
+        way a run at another delta is made (everything reads the key from the config)."""
+        return self.replace({"mass_uncertainty": float(delta)})
+
     def digest(self) -> str:
         """A stable hash of every value (keys stores of learned data; a URDF by its contents,
         :meth:`identity_values`)."""

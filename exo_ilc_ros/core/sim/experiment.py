@@ -23,12 +23,11 @@ class Experiment:
     masses scaled by (1 + mass_uncertainty) and a person's segments (``person.*``), the sampled
     reference, gains and limits."""
 
-    def __init__(self, config: Config, mass_uncertainty: float | None = None) -> None:
+    def __init__(self, config: Config) -> None:
         self.config = config
-        self.mass_uncertainty = float(config["mass_uncertainty"] if mass_uncertainty is None
-                                      else mass_uncertainty)
+        self.mass_uncertainty = float(config["mass_uncertainty"])
         self.nominal = build_arm(config)
-        self.plant = build_plant(config, self.mass_uncertainty)
+        self.plant = build_plant(config)
         self.reference = build_reference(config)
         self.kp = np.asarray(config["control.kp"], dtype=float)
         self.kd = np.asarray(config["control.kd"], dtype=float)

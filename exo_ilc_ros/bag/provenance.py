@@ -30,6 +30,13 @@ LAW = PREFIX + "law"
 OPTIONS = PREFIX + "options"
 PARAMETER_CHANGES = PREFIX + "parameter_changes"
 TRIALS_COMPLETED = PREFIX + "trials_completed"
+PATIENT = PREFIX + "patient"
+EXERCISE = PREFIX + "exercise"
+SESSION = PREFIX + "session"
+PROFILE_VERSION = PREFIX + "profile_version"
+PROFILE_STARTED_FROM = PREFIX + "profile_started_from"
+EXERCISE_ORDER = PREFIX + "exercise_order"
+"""The exercise's place in its session (1, 2, ...): the report lists them in that order."""
 
 NOT_OPTIONS = frozenset({"wait_for_recorder"})
 """On/off parameters that do not change the results."""

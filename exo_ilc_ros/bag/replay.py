@@ -26,7 +26,7 @@ from ..core.session.learning_session import LIVE, run_trials
 from ..core.session.result import RunResult
 from ..wire import protocol
 from .errors import BagReadError
-from .provenance import PREFIX
+from .provenance import PROFILE_VERSION
 from .run import BagRun
 from .storage import read_metadata
 
@@ -108,7 +108,7 @@ def _patient_start(run: BagRun, plan: ReplayPlan) -> tuple[np.ndarray, np.ndarra
     if not PatientModel(config).learns:
         return None
     custom = read_metadata(run.path).get("custom_data") or {}
-    version = str(custom.get(PREFIX + "profile_version") or "")
+    version = str(custom.get(PROFILE_VERSION) or "")
     if not version or not config["profile.initial"]:
         return None
     state = session_start(Path(config["profile.initial"]).parent, int(version))

@@ -326,9 +326,11 @@ def christoffel_bias(da: np.ndarray, qg: np.ndarray, qd: np.ndarray) -> np.ndarr
 
 
 @njit(cache=True, error_model="numpy")
-def _solve_spd_into(a: np.ndarray, b: np.ndarray, low: np.ndarray, y: np.ndarray,
-                    x: np.ndarray) -> None:
-    n = b.shape[0]
+def cholesky_into(a: np.ndarray, low: np.ndarray) -> bool:
+    """The Cholesky factor L of a symmetric positive definite ``a`` (a = L L^T, from a's lower
+    triangle) into the lower triangle of ``low``; False (``low`` partly written) when a pivot
+    is <= 0, i.e. ``a`` is not positive definite. The package's one Cholesky factorisation."""
+    n = a.shape[0]
     for i in range(n):
         for j in range(i + 1):
             s = a[i, j]
@@ -336,10 +338,19 @@ def _solve_spd_into(a: np.ndarray, b: np.ndarray, low: np.ndarray, y: np.ndarray
                 s -= low[i, k] * low[j, k]
             if i == j:
                 if s <= 0.0:
-                    raise ValueError("metric tensor is not positive definite")
+                    return False
                 low[i, i] = np.sqrt(s)
             else:
                 low[i, j] = s / low[j, j]
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _solve_spd_into(a: np.ndarray, b: np.ndarray, low: np.ndarray, y: np.ndarray,
+                    x: np.ndarray) -> None:
+    n = b.shape[0]
+    if not cholesky_into(a, low):
+        raise ValueError("metric tensor is not positive definite")
     for i in range(n):
         s = b[i]
         for k in range(i):

@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import ModelError
 from ..params.urdf_xml import UrdfError, axis_rotation, read_urdf_text, rpy_rotation
 from .urdf_chain import UrdfChain, read_urdf_chain
 
@@ -150,6 +151,17 @@ def mujoco_model(source: str | Path, base_link: str, tip_link: str,
     return model, chain
 
 
+
+def substeps_per_period(period: float, timestep: float,
+                        error: type[ModelError] = ModelError) -> int:
+    """MuJoCo steps of ``timestep`` per control ``period``; ``error`` if the step does not
+    divide the period (both MuJoCo plants check it here)."""
+    ratio = period / timestep
+    if abs(ratio - round(ratio)) > 1e-9 * ratio:
+        raise error(f"the MuJoCo time step {timestep:g} s must divide the control "
+                    f"period {period:g} s")
+    return int(round(ratio))
+
 class SmoothFriction:
     """The explicit Coulomb torque -F tanh(qdot / v_s) per joint, added to MuJoCo's passive
     force (``qfrc_passive``) through ``mjcb_passive`` at every evaluation of the dynamics (each
@@ -192,11 +204,7 @@ class MujocoUrdfArm:
         import mujoco
 
         self._mujoco = mujoco
-        ratio = period / timestep
-        if abs(ratio - round(ratio)) > 1e-9 * ratio:
-            raise UrdfError(f"the MuJoCo time step {timestep:g} s must divide the control "
-                            f"period {period:g} s")
-        self.substeps = int(round(ratio))
+        self.substeps = substeps_per_period(period, timestep, UrdfError)
         self.model, self.chain = mujoco_model(source, base_link, tip_link, locked, timestep,
                                               damping, gravity)
         self.data: Any = mujoco.MjData(self.model)

@@ -36,8 +36,9 @@ The constrained update (NO3) is the same sparse quadratic programme over z = (du
 :func:`exo_ilc_ros.core.learning.norm_optimal_qp.solve_constrained`, assembled here banded
 (vectorised block indices, no per-sample Python loop): :func:`solve_constrained_banded`.
 
-This module imports nothing of the package (numpy, numba, scipy; Clarabel lazily), so any
-layout can use it.
+This module imports of the package only the Cholesky factorisation of
+:mod:`exo_ilc_ros.core.arm.dynamics` (and numpy, numba, scipy; Clarabel lazily), so any layout
+can use it.
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ import numpy as np
 from numba import njit
 
 from .. import _numba_cache  # noqa: F401  (sets numba's cache directory before any kernel)
+from ..arm.dynamics import cholesky_into
 
 QP_TOLERANCE = 1e-12
 """Clarabel's gap and feasibility tolerances (as the lifted form's QP)."""
@@ -58,17 +60,8 @@ def _spd_inverse(m: np.ndarray) -> np.ndarray:
     """M^-1 of a small symmetric positive definite M (Cholesky, then two triangular solves)."""
     p = m.shape[0]
     low = np.zeros((p, p))
-    for i in range(p):
-        for j in range(i + 1):
-            s = m[i, j]
-            for q in range(j):
-                s -= low[i, q] * low[j, q]
-            if i == j:
-                if s <= 0.0:
-                    raise ValueError("M_t is not positive definite")
-                low[i, i] = np.sqrt(s)
-            else:
-                low[i, j] = s / low[j, j]
+    if not cholesky_into(m, low):
+        raise ValueError("M_t is not positive definite")
     out = np.empty((p, p))
     col = np.empty(p)
     for c in range(p):

@@ -108,36 +108,6 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
 
 
 @njit(cache=True, error_model="numpy")
-def simulate_trial(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, kp: np.ndarray,
-                   kd: np.ndarray, effort_limit: np.ndarray, period: float, substeps: int,
-                   plant: tuple, nominal: tuple, mode: int
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Test oracle only (no runner uses it): the trial of :func:`simulate_trial_guarded` without
-    the error envelope and without the plant's second clamp, which must give the same doubles
-    while every |e_j| stays within the envelope. Returns sampled q, qdot, u and effort."""
-    n_samples, n = u_ff.shape
-    q_log = np.empty((n_samples, n))
-    qd_log = np.empty((n_samples, n))
-    u_log = np.empty((n_samples, n))
-    effort_log = np.empty((n_samples, n))
-    ws = workspace(n)
-    stage = np.empty((10, n))
-    extra = np.empty(2 * n)
-    q = q_ref[0].copy()
-    qd = qd_ref[0].copy()
-    zero = np.zeros(n)
-    for i in range(n_samples):
-        q_log[i] = q
-        qd_log[i] = qd
-        control_into(u_ff[i], q_ref[i], qd_ref[i], q, qd, zero, kp, kd, nominal, effort_limit,
-                     ws, u_log[i], effort_log[i])
-        if i + 1 < n_samples:
-            rk4_period(q, qd, effort_log[i], period, substeps, plant, nominal, mode, ws, stage,
-                       extra)
-    return q_log, qd_log, u_log, effort_log
-
-
-@njit(cache=True, error_model="numpy")
 def control_inputs(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
                    qd: np.ndarray, kp: np.ndarray, kd: np.ndarray, nominal: tuple,
                    effort_limit: np.ndarray, aborted_at: int, hold_kp: np.ndarray,

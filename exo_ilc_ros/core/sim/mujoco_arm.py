@@ -30,7 +30,7 @@ import numpy as np
 
 from ..arm.build import build_plant, urdf_joint_dynamics
 from ..arm.model import ArmModel
-from ..arm.mujoco_urdf import SmoothFriction
+from ..arm.mujoco_urdf import SmoothFriction, substeps_per_period
 from ..errors import ModelError
 from ..loop.patient import patient_values, rest_positions, spasticity_values
 from ..loop.plant import clamp_counted
@@ -190,11 +190,7 @@ class MujocoArm:
         import mujoco
 
         self._mujoco = mujoco
-        ratio = period / timestep
-        if abs(ratio - round(ratio)) > 1e-9 * ratio:
-            raise ModelError(f"the MuJoCo time step {timestep:g} s must divide the control "
-                             f"period {period:g} s")
-        self.substeps = int(round(ratio))
+        self.substeps = substeps_per_period(period, timestep)
         self.xml = arm_mjcf(model, joint_names, timestep, effects)
         self.model: Any = mujoco.MjModel.from_xml_string(self.xml)
         self.data: Any = mujoco.MjData(self.model)

@@ -419,8 +419,8 @@ def test_param_against_a_running_node(capsys: pytest.CaptureFixture[str]) -> Non
 def test_rerun_note_says_what_happened_in_plain_words() -> None:
     """The note `analyze`/`paper`/`run` print for a trial that was run again."""
     from exo_ilc_ros.bag.reader import PROTOCOL_STEPS, rerun_note
-    from exo_ilc_ros.core.protocol.graph import Phase
     from exo_ilc_ros.core.protocol.timing import STEP_TIMEOUT
+    from exo_ilc_ros.core.protocol.trial_protocol import Phase
 
     assert STEP_TIMEOUT == 30.0
     assert {p.value for p in Phase} - {"finished"} <= set(PROTOCOL_STEPS)

@@ -15,7 +15,6 @@ from exo_ilc_ros.core import Experiment, load_config, run_trials
 from exo_ilc_ros.core.errors import ConfigError
 from exo_ilc_ros.core.loop.controller import GuardedControlStep
 from exo_ilc_ros.core.loop.stepper import PlantStepper
-from exo_ilc_ros.core.protocol.graph import Phase
 from exo_ilc_ros.core.protocol.homing import (
     ControllerMode,
     Homing,
@@ -28,6 +27,7 @@ from exo_ilc_ros.core.protocol.homing import (
     homing_duration,
 )
 from exo_ilc_ros.core.protocol.homing_protocol import HomingProtocol
+from exo_ilc_ros.core.protocol.trial_protocol import Phase
 from exo_ilc_ros.core.session.learning_session import TrialConclusion
 
 SHORT = {"trajectory.duration": 1.0, "protocol": "homing"}

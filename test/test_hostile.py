@@ -37,24 +37,24 @@ def test_only_the_contracts_publisher_is_trusted_and_others_are_counted() -> Non
     check = PublisherCheck(topics.EFFORT_COMMANDS, "/computed_torque_controller")
     controller, teleop, impostor = b"c" * 16, b"t" * 16, b"i" * 16
     assert check.admit(controller) == UNKNOWN  # no census yet
-    check.census([Endpoint("/computed_torque_controller", controller)])
+    check.set_publishers([Endpoint("/computed_torque_controller", controller)])
     assert check.admit(controller) == TRUSTED and check.fault() == (0, "")
-    check.census([Endpoint("/computed_torque_controller", controller),
+    check.set_publishers([Endpoint("/computed_torque_controller", controller),
                   Endpoint("/teleop", teleop)])
     assert check.admit(teleop) == "refused" and check.admit(teleop) == "refused"
     level, text = check.fault()
     assert level == 2 and "2 publishers on /effort_controller/commands" in text
     assert "/teleop x2" in text and "trusted: /computed_torque_controller" in text
     # A second node taking the controller's name later does not take over.
-    check.census([Endpoint("/computed_torque_controller", controller),
+    check.set_publishers([Endpoint("/computed_torque_controller", controller),
                   Endpoint("/computed_torque_controller", impostor)])
     assert check.admit(controller) == TRUSTED and check.admit(impostor) == "refused"
     # The trusted one gone, two of that name: ambiguous, neither trusted.
-    check.census([Endpoint("/computed_torque_controller", impostor),
+    check.set_publishers([Endpoint("/computed_torque_controller", impostor),
                   Endpoint("/computed_torque_controller", b"j" * 16)])
     assert check.trusted_gid is None and check.admit(impostor) == "refused"
     # A restart: the one new publisher of the name is trusted.
-    check.census([Endpoint("/computed_torque_controller", b"n" * 16)])
+    check.set_publishers([Endpoint("/computed_torque_controller", b"n" * 16)])
     assert check.admit(b"n" * 16) == TRUSTED
     assert check.fault()[0] == 1, "refused messages stay a warning once the others left"
     # A writer no census listed: refused as unknown after a census.
@@ -70,15 +70,15 @@ def test_a_writer_the_graph_cannot_name_yet_is_looked_at_again_not_refused_for_g
     acknowledgements refused for good once stalled a trial for 30 s twice)."""
     check = PublisherCheck(topics.DIAGNOSTICS, "/computed_torque_controller")
     gid = b"c" * 16
-    check.census([Endpoint("/_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_", gid)])
+    check.set_publishers([Endpoint("/_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_", gid)])
     assert check.admit(gid) == UNKNOWN and check.fault() == (0, "")
     assert not check.admit_after_census(gid)  # this one message is refused, as unknown
-    check.census([Endpoint("/computed_torque_controller", gid)])
+    check.set_publishers([Endpoint("/computed_torque_controller", gid)])
     assert check.admit(gid) == TRUSTED
 
 
 def test_a_writer_not_yet_listed_is_a_warning_another_node_an_error() -> None:
-    """Admission (nodes/identified.py) over a stand-in graph: a message from a writer the graph
+    """Admission (nodes/sender_check.py) over a stand-in graph: a message from a writer the graph
     does not list even after a fresh look is refused as ``unlisted_publisher`` and logged as a
     warning (a free-running plant's first samples at start-up); once the graph names another
     node for that writer, its messages are ``foreign_publisher`` errors; the contract's
@@ -86,7 +86,7 @@ def test_a_writer_not_yet_listed_is_a_warning_another_node_an_error() -> None:
     from types import SimpleNamespace
 
     from exo_ilc_ros.nodes.guard import Rejections
-    from exo_ilc_ros.nodes.identified import Admission
+    from exo_ilc_ros.nodes.sender_check import Admission
 
     graph: list[Any] = []
     logged: list[tuple[str, str]] = []
@@ -129,7 +129,7 @@ import rclpy
 from rclpy.experimental import EventsExecutor
 from std_msgs.msg import Float64MultiArray
 from exo_ilc_ros.nodes.common import SAMPLES_QOS
-from exo_ilc_ros.nodes.identified import IdentifiedSubscription
+from exo_ilc_ros.nodes.sender_check import IdentifiedSubscription
 rclpy.init()
 node = rclpy.create_node("handler_test")
 delivered = []
@@ -479,7 +479,7 @@ def test_junk_after_the_profile_evicts_it_from_a_depth_1_reader_but_not_from_our
     from trajectory_msgs.msg import JointTrajectory
 
     from exo_ilc_ros.nodes.common import LATCHED_QOS
-    from exo_ilc_ros.nodes.identified import FEEDFORWARD_READER_QOS, IdentifiedSubscription
+    from exo_ilc_ros.nodes.sender_check import FEEDFORWARD_READER_QOS, IdentifiedSubscription
 
     context = rclpy.Context()
     rclpy.init(context=context)

@@ -452,7 +452,7 @@ class _Plant:
 
 
 def test_protocol_waits_for_the_true_samples_and_reruns_a_trial_that_lost_one() -> None:
-    from exo_ilc_ros.core.protocol.graph import Phase, TrialProtocol
+    from exo_ilc_ros.core.protocol.trial_protocol import Phase, TrialProtocol
 
     config = _config("sensor", max_trials=3)
     plant = _Plant(config)

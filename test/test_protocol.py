@@ -15,8 +15,8 @@ import pytest
 from exo_ilc_ros.core import Experiment, load_config, run_trials
 from exo_ilc_ros.core.params.config import config_dir, scenario_path
 from exo_ilc_ros.core.persistence.store import RunStore
-from exo_ilc_ros.core.protocol.graph import Phase, TrialProtocol
 from exo_ilc_ros.core.protocol.timing import STEP_TIMEOUT
+from exo_ilc_ros.core.protocol.trial_protocol import Phase, TrialProtocol
 from exo_ilc_ros.core.session.learning_session import TrialConclusion
 
 SHORT = {"trajectory.duration": 1.0}

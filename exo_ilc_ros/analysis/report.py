@@ -138,7 +138,8 @@ def format_long_run(runs: Sequence[RunSummary], joint_names: Sequence[str],
              "max |effort|, N m)"]
     for r in runs:
         exercise = exercise_of(r)
-        head = (f"{exercise}: " if exercise else "") + f"{law_of(r):<8}{r.mass_uncertainty:>7.3f}  "
+        head = ((f"{exercise}: " if exercise else "")
+                + f"{law_label(r):<8}{r.mass_uncertainty:>7.3f}  ")
         if r.max_abs_feedforward is None or len(r.max_abs_feedforward) == 0:
             lines.append(head + "no feed-forward recorded")
             continue
@@ -181,7 +182,7 @@ def format_iterations(runs: Sequence[RunSummary], joint_names: Sequence[str],
                         for f, s in zip(its.first, its.settled, strict=True))
         paper = PAPER_FIRST_JOINT1.get(round(r.mass_uncertainty, 4))
         label = labels[i] if labels is not None else ""
-        lines.append(f"{label:<{first}}{law_of(r):<{w}}{r.mass_uncertainty:>7.3f}  {cells}"
+        lines.append(f"{label:<{first}}{law_label(r):<{w}}{r.mass_uncertainty:>7.3f}  {cells}"
                      + (f"{_fmt(paper):>15}" if paper_column else ""))
     lines.append("('-': never within the bound / not within at the last trial)")
     if any("spread" in r.extra for r in runs):
@@ -194,7 +195,7 @@ def format_iterations(runs: Sequence[RunSummary], joint_names: Sequence[str],
     return "\n".join(lines)
 
 
-def law_of(run: RunSummary) -> str:
+def law_label(run: RunSummary) -> str:
     """The law, or ``sign->linear`` when a live change switched it (``extra["laws"]``)."""
     laws = run.extra.get("laws")
     if not laws:

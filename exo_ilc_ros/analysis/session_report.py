@@ -42,8 +42,8 @@ from ..core.programs.therapy import IDENTIFICATION
 from ..core.reference.build import build_reference
 from ..core.reference.exercise import PAPER_EXERCISE
 from .identified import format_value, trend
-from .therapy import DEGREES, DISPLAY, share_note, shown
-from .wording import counted
+from .therapy import DEGREES, DISPLAY, display_value, share_note
+from .wording import count_phrase
 
 
 @dataclass
@@ -215,7 +215,7 @@ def _joint_rows(run: ExerciseRun) -> str:
         for which, m in ((f"trial {first.trial}", first), (f"trial {last.trial}", last)):
             why = m.spasticity_reasons() if name == "spasticity" else [""] * len(run.joint_names)
             cells = "".join(
-                f"<td>{shown(name, x)}{'' if not np.isfinite(x) else ' ' + _e(unit)}"
+                f"<td>{display_value(name, x)}{'' if not np.isfinite(x) else ' ' + _e(unit)}"
                 + (f"<br><span class=note>{_e(w)}</span>" if w else "") + "</td>"
                 for x, w in zip(getattr(m, name), why, strict=True))
             rows.append(f"<tr><td class=l>{_e(label)}</td><td class=l>{which}</td>{cells}</tr>")
@@ -414,7 +414,8 @@ def render_session(runs: Sequence[ExerciseRun], book: ProfileBook | None = None)
             "from no stored profile"
         aan = ", assist-as-needed" if run.assist else ""
         sections.append(
-            f"<h2>{_e(run.exercise)}</h2><p>{counted(len(run.metrics), 'trial')}, learning law "
+            f"<h2>{_e(run.exercise)}</h2><p>{count_phrase(len(run.metrics), 'trial')}, "
+            "learning law "
             f"{_e(run.law)}{aan}, started {start}"
             + (f", saved as profile v{_e(run.profile_version)}" if run.profile_version else "")
             + f". Error bound {run.error_bound * DEGREES:.2g}°. "

@@ -27,7 +27,7 @@ DISPLAY = {
 NOT_MEASURABLE = "not measurable"
 
 
-def shown(name: str, value: float) -> str:
+def display_value(name: str, value: float) -> str:
     """One value of metric ``name`` in the unit a therapist reads (no unit text)."""
     if not np.isfinite(value):
         return NOT_MEASURABLE
@@ -69,7 +69,7 @@ def format_metrics(metrics: Sequence[TrialMetrics], joint_names: Sequence[str],
     for name, (label, unit, _) in DISPLAY.items():
         text = f"{label} ({unit})"
         for which, m in ((f"trial {first.trial}", first), (f"trial {last.trial}", last)):
-            cells = "".join(f"{shown(name, x):>{cell}}" for x in getattr(m, name))
+            cells = "".join(f"{display_value(name, x):>{cell}}" for x in getattr(m, name))
             lines.append(f"{text:<{width}} {which:>9} {cells}")
             text = ""
     lines.append(f"{'patient share, whole arm (%)':<{width}} first "

@@ -5,7 +5,7 @@ from __future__ import annotations
 IRREGULAR = {"uncertainty": "uncertainties", "process": "processes", "patient's": "patients'"}
 
 
-def counted(count: int, noun: str, plural: str = "") -> str:
+def count_phrase(count: int, noun: str, plural: str = "") -> str:
     """``count`` and ``noun``, plural unless ``count`` is 1 (``plural`` for an irregular one)."""
     many = plural or IRREGULAR.get(noun) or noun + "s"
     return f"{count} {noun if count == 1 else many}"

@@ -13,7 +13,7 @@ from typing import Any
 from ..analysis import figures
 from ..analysis.identified import format_table
 from ..analysis.report import format_iterations, format_run_events, format_trial_table, write_json
-from ..analysis.wording import counted
+from ..analysis.wording import count_phrase
 from ..bag import BagReadError, BagRun, read_bag
 from ..core.programs.identified import Identified
 from ..core.session.summary import RunSummary
@@ -62,7 +62,7 @@ def describe(run: BagRun) -> str:
     lines = [f"bag {run.path} ({run.storage}): {run.law}, mass uncertainty "
              f"{run.mass_uncertainty:g}; recorded by {prov.recorded_by or 'unknown'}"
              + (f" (exo_ilc_ros {prov.version})" if prov.version else "")
-             + f"; {counted(len(run.completed), 'trial')} completed"
+             + f"; {count_phrase(len(run.completed), 'trial')} completed"
              + (f", incomplete: {run.incomplete}" if run.incomplete else "")]
     if prov.options:
         lines.append("  options: " + ", ".join(f"{k}={v}" for k, v in prov.options.items()))

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from ..analysis.therapy import DEGREES
-from ..analysis.wording import counted
+from ..analysis.wording import count_phrase
 from ..core.persistence.profiles import ProfileBook, export_profile
 from ..core.programs.therapy import profiles_root
 from .arguments import directory, integer, output_file
@@ -49,7 +49,7 @@ def _version_line(entry: dict[str, Any], current: int | None) -> str:
     share = (entry.get("metrics") or {}).get("patient_share_total")
     share_text = "" if share is None else f", patient share {100.0 * share:.3g} %"
     return (f" {mark} v{entry['version']:<3} {entry.get('updated', entry.get('created', '?'))}  "
-            f"{entry.get('status', '?'):<11} {counted(entry.get('trials', 0), 'trial'):>10} "
+            f"{entry.get('status', '?'):<11} {count_phrase(entry.get('trials', 0), 'trial'):>10} "
             f"({entry.get('trials_total', 0)} in all), law {entry.get('law', '?')}"
             f"{', assist-as-needed' if entry.get('assist_as_needed') else ''}, "
             f"final max |e| {error} deg{share_text}, from "
@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
         for exercise in book.exercises(args.patient):
             index = book.require_index(args.patient, exercise)
             entry = index["versions"][index["current"] - 1] if index["current"] else None
-            versions = counted(len(index["versions"]), "version")
+            versions = count_phrase(len(index["versions"]), "version")
             print(f"{exercise}: {versions}, current v{index['current']}"
                   + ("" if entry is None else f" ({entry.get('trials_total', 0)} trials "
                      f"learned, {entry.get('status')})"))

@@ -13,7 +13,7 @@ from tqdm import tqdm
 from ..analysis import figures
 from ..analysis.study import format_study_table, run_cells, write_study_json
 from ..analysis.study_figure import study_figure
-from ..analysis.wording import counted
+from ..analysis.wording import count_phrase
 from ..core.errors import ConfigError
 from ..core.params.redact import redact
 from ..core.programs.study import (
@@ -79,10 +79,10 @@ def study(args: argparse.Namespace) -> int:
     workers = args.workers or default_jobs()
     where = f"the Dask cluster at {redact(args.dask)}" if args.dask else \
         f"{min(workers, len(cells))} local process(es)"
-    print(f"study: {counted(len(laws), 'law')} x {counted(len(scenarios), 'scenario')} x "
-          f"{counted(len(args.mass_uncertainty), 'uncertainty')} x "
-          f"{counted(len(seeds), 'seed')} = {counted(len(cells), 'cell')} of "
-          f"{counted(args.trials, 'trial')} on {where}", file=sys.stderr)
+    print(f"study: {count_phrase(len(laws), 'law')} x {count_phrase(len(scenarios), 'scenario')} x "
+          f"{count_phrase(len(args.mass_uncertainty), 'uncertainty')} x "
+          f"{count_phrase(len(seeds), 'seed')} = {count_phrase(len(cells), 'cell')} of "
+          f"{count_phrase(args.trials, 'trial')} on {where}", file=sys.stderr)
     for law in laws:
         print(f"  law {law.describe()}", file=sys.stderr)
     with tqdm(total=len(cells), desc="study", unit="cell", file=sys.stderr,

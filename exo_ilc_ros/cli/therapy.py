@@ -13,7 +13,7 @@ from tqdm import tqdm
 
 from ..analysis import session_report as keys
 from ..analysis.therapy import format_session_metrics
-from ..analysis.wording import counted
+from ..analysis.wording import count_phrase
 from ..bag import run_name, unique_path, write_run
 from ..core.errors import ConfigError
 from ..core.loop.patient import PatientModel
@@ -104,7 +104,7 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
         start = "from zero" if item.start is None else \
             f"from profile v{item.start.version} ({item.start.provenance.get('trials_total')} " \
             "trials learned)"
-        print(f"patient {args.patient}, exercise {name}: {counted(count, 'trial')}, {start}",
+        print(f"patient {args.patient}, exercise {name}: {count_phrase(count, 'trial')}, {start}",
               file=sys.stderr)
         with tqdm(total=count, desc=f"{args.patient} {name}", unit="trial", file=sys.stderr,
                   disable=None) as bar:
@@ -220,7 +220,7 @@ def _exercise_through_graph(args: argparse.Namespace, step: Step, order: int,
     cfg = writer.config
     start = "from zero" if item.start is None else f"from profile v{item.start.version}"
     again = f" (resuming v{writer.version})" if step.reopen else ""
-    print(f"patient {args.patient}, exercise {name}: {counted(count, 'trial')} through the "
+    print(f"patient {args.patient}, exercise {name}: {count_phrase(count, 'trial')} through the "
           f"graph, {start}, session {writer.version}{again}, session id {session}, store "
           f"{store_root}", file=sys.stderr, flush=True)
     summary: RunSummary | None = None
@@ -249,7 +249,7 @@ def _exercise_through_graph(args: argparse.Namespace, step: Step, order: int,
                                writer.version, order)
         if done is not None:
             print(f"profile: {writer.directory} v{writer.version} "
-                  f"({counted(len(done), 'trial')})", file=sys.stderr)
+                  f"({count_phrase(len(done), 'trial')})", file=sys.stderr)
     return summary
 
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..analysis.wording import counted
+from ..analysis.wording import count_phrase
 from ..core.errors import ProfileError
 from ..core.params.config import Config
 from ..core.persistence.profiles import ProfileBook
@@ -52,7 +52,7 @@ class Unfinished:
         e = self.entry
         start = "zero" if e.get("started_from") is None else f"v{e['started_from']}"
         return (f"{self.exercise} v{e['version']} ({e.get('status')}, "
-                f"{counted(e.get('trials', 0), 'trial')}, from {start}, begun "
+                f"{count_phrase(e.get('trials', 0), 'trial')}, from {start}, begun "
                 f"{e.get('created', '?')})")
 
 

@@ -14,7 +14,7 @@ import optuna
 from tqdm import tqdm
 
 from ..analysis.tuning import RunScore, TuningProblem, TuningResult, best_result, optimize
-from ..analysis.wording import counted
+from ..analysis.wording import count_phrase
 from ..core.errors import ConfigError
 from ..core.params.config import load_config
 from ..core.params.redact import redact
@@ -132,10 +132,10 @@ def tune(args: argparse.Namespace) -> int:
     problem = TuningProblem.from_config(config, args.mass_uncertainty, trials,
                                         args.peak_weight, args.aggregate, args.law)
     name = args.study_name or problem.default_study_name()
-    more = counted(args.budget, "more trial")
-    deltas = counted(len(problem.mass_uncertainties), "uncertainty")
-    print(f"study {name} in {redact(args.storage)}: {more} on {counted(args.jobs, 'job')}, "
-          f"{counted(trials, 'trial')} x {deltas}"
+    more = count_phrase(args.budget, "more trial")
+    deltas = count_phrase(len(problem.mass_uncertainties), "uncertainty")
+    print(f"study {name} in {redact(args.storage)}: {more} on {count_phrase(args.jobs, 'job')}, "
+          f"{count_phrase(trials, 'trial')} x {deltas}"
           " each")
     with tqdm(total=args.budget, desc="tune", unit="trial", file=sys.stderr,
               disable=None) as bar:

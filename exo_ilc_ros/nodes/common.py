@@ -25,8 +25,8 @@ from rclpy.signals import SignalHandlerOptions
 from ..core.errors import ExoIlcError
 from ..wire import topics
 from . import parameters, realtime
-from .identified import IdentifiedSubscription
 from .raw_take import RawTaker
+from .sender_check import IdentifiedSubscription
 
 RCLError = rclpy_implementation.RCLError
 

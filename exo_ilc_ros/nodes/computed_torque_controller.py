@@ -40,16 +40,16 @@ from .common import DIAGNOSTICS_QOS, SAMPLES_QOS, CountingPublisher, spin, wall_
 from .diagnostics import diagnostic_array, stamp_ns, status
 from .guard import Health, JointStateGate, Rejections, rejections_check
 from .homing_control import HomingControl
-from .identified import (
+from .parameters import SchemaParameters
+from .realtime import LoopPriority
+from .sender_check import (
     FEEDFORWARD_READER_QOS,
     TRUSTED_READER_QOS,
     TrustedInput,
-    decoded,
     decodes,
+    deserializing_callback,
     gate_classifier,
 )
-from .parameters import SchemaParameters
-from .realtime import LoopPriority
 
 NAME = schema.CONTROLLER
 LATENCY_WINDOW = 100_000
@@ -106,7 +106,8 @@ class ComputedTorqueController(Node):
             trusted=config["joint_states_publisher"])
         self.feedforward_sub = TrustedInput(  # the supervisor's profiles only
             self, JointTrajectory, topics.FEEDFORWARD, FEEDFORWARD_READER_QOS,
-            decoded(JointTrajectory, self.on_feedforward, self.rejections, topics.FEEDFORWARD),
+            deserializing_callback(JointTrajectory, self.on_feedforward, self.rejections,
+                                   topics.FEEDFORWARD),
             self.rejections, max_bytes(topics.FEEDFORWARD, joints, samples),
             decodes(JointTrajectory, self.rejections, topics.FEEDFORWARD))
         self.create_timer(0.05, self.on_ack_timer, clock=wall_clock())

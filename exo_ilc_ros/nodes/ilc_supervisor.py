@@ -28,8 +28,8 @@ from trajectory_msgs.msg import JointTrajectory
 
 from ..core.params import schema
 from ..core.programs.identified import Identified
-from ..core.protocol.graph import TrialProtocol
 from ..core.protocol.homing_protocol import HomingProtocol
+from ..core.protocol.trial_protocol import TrialProtocol
 from ..core.session.learning_session import TrialConclusion
 from ..wire import topics
 from ..wire.protocol import int_value
@@ -45,9 +45,9 @@ from .common import (
 )
 from .diagnostics import diagnostic_array, status, values_of
 from .guard import Health, JointStateGate, Rejections, rejections_check
-from .identified import STATUS_READER_QOS, Admission, StatusAdmission, gate_classifier
 from .messages import feedforward_message, trial_metrics_message, trial_summary
 from .parameters import SchemaParameters
+from .sender_check import STATUS_READER_QOS, Admission, StatusAdmission, gate_classifier
 
 NAME = schema.SUPERVISOR
 PLANT_PARAMETERS = [p.name for p in schema.PARAMETERS if p.section == schema.PLANT]

@@ -29,8 +29,8 @@ from ..wire.publishers import max_bytes
 from .common import CLOCK_QOS, DIAGNOSTICS_QOS, SAMPLES_QOS, CountingPublisher, wall_clock
 from .diagnostics import diagnostic_array
 from .guard import Health, Rejections, effort_limit_reasons, rejections_check
-from .identified import TRUSTED_READER_QOS, TrustedInput, effort_classifier
 from .parameters import SchemaParameters
+from .sender_check import TRUSTED_READER_QOS, TrustedInput, effort_classifier
 
 NAME = schema.PLANT
 """Every plant runs under this node name (one parameter section, whichever plant it is)."""

@@ -35,14 +35,14 @@ from ..wire.protocol import trial_of_frame
 from ..wire.publishers import max_bytes
 from .common import SAMPLES_QOS, CountingPublisher, spin, wall_clock
 from .diagnostics import diagnostic_array, stamp_ns, status
-from .identified import (
-    FEEDFORWARD_READER_QOS,
-    TrustedInput,
-    decoded,
-    decodes,
-)
 from .plant_base import NAME, PlantNode
 from .realtime import plant_scheduling
+from .sender_check import (
+    FEEDFORWARD_READER_QOS,
+    TrustedInput,
+    decodes,
+    deserializing_callback,
+)
 
 
 class PlantSimulator(PlantNode):
@@ -71,7 +71,8 @@ class PlantSimulator(PlantNode):
             publisher_class=CountingPublisher) if self.patient.measures else None
         self.feedforward_sub = TrustedInput(  # the supervisor's profiles only: their trial
             self, JointTrajectory, topics.FEEDFORWARD, FEEDFORWARD_READER_QOS,
-            decoded(JointTrajectory, self.on_feedforward, self.rejections, topics.FEEDFORWARD),
+            deserializing_callback(JointTrajectory, self.on_feedforward, self.rejections,
+                                   topics.FEEDFORWARD),
             self.rejections, max_bytes(topics.FEEDFORWARD, config.joints,
                                        self.experiment.reference.position.shape[0]),
             decodes(JointTrajectory, self.rejections, topics.FEEDFORWARD)) \

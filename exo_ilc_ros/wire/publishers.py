@@ -1,4 +1,4 @@
-"""Who may publish what the nodes act on: the rule, ROS-free (``nodes/identified.py`` binds it).
+"""Who may publish what the nodes act on: the rule, ROS-free (``nodes/sender_check.py`` binds it).
 
 In lock-step a plant cannot tell a command from its controller by its content: one well-formed
 ``Float64MultiArray`` from a forgotten teleop once changed every later trial. So every input
@@ -78,7 +78,7 @@ class PublisherCheck:
         self.refused: dict[str, int] = {}
         """Sending node (or ``unknown``) -> messages refused."""
 
-    def census(self, endpoints: Iterable[Endpoint]) -> None:
+    def set_publishers(self, endpoints: Iterable[Endpoint]) -> None:
         """The graph's publishers on the topic now. A writer whose node the graph cannot name
         yet (``_NODE_NAME_UNKNOWN_``: its participant's ROS discovery data has not arrived) is
         left out, not judged: its messages stay :data:`UNKNOWN`, so each one looks at the graph

@@ -26,8 +26,8 @@ import numpy as np
 
 from ..loop.record import TrialRecord
 from ..params.config import Config
-from .graph import GraphPort, Phase, TrialProtocol
 from .homing import fill_missing, grid_index
+from .trial_protocol import GraphPort, Phase, TrialProtocol
 
 
 class HomingProtocol(TrialProtocol):

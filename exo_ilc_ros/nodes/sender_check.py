@@ -157,9 +157,9 @@ class IdentifiedSubscription(Waitable):
         _KEPT.append(self)
 
 
-def census(node: Node, check: PublisherCheck) -> None:
+def refresh_publishers(node: Node, check: PublisherCheck) -> None:
     """The graph's publishers on ``check.topic`` into ``check``."""
-    check.census(Endpoint(qualified(info.node_namespace, info.node_name),
+    check.set_publishers(Endpoint(qualified(info.node_namespace, info.node_name),
                           bytes(info.endpoint_gid))
                  for info in node.get_publishers_info_by_topic(check.topic))
 
@@ -184,17 +184,17 @@ class Admission:
                                                      trusted or PUBLISHER_OF[topic]))
         self._tokens = float(CLASSIFY_BURST)
         self._tokens_ns = time.monotonic_ns()
-        self.census()
+        self.refresh_publishers()
 
-    def census(self) -> None:
+    def refresh_publishers(self) -> None:
         """Look at the graph again (every health report, and for an unlisted sender)."""
-        census(self.node, self.check)
+        refresh_publishers(self.node, self.check)
 
     def trusted_known(self) -> bool:
         """The contract's publisher is in the graph, after a fresh census (a trial starts only
         then: its first message is not refused as coming from a writer the graph did not list
         yet)."""
-        self.census()
+        self.refresh_publishers()
         return self.check.trusted_gid is not None
 
     def __call__(self, raw: bytes | None, length: int, gid: bytes) -> bool:
@@ -208,7 +208,7 @@ class Admission:
         if verdict == TRUSTED:
             return True
         if verdict == UNKNOWN:
-            self.census()
+            self.refresh_publishers()
             if self.check.admit_after_census(gid):
                 return True
         now = time.monotonic_ns()
@@ -237,7 +237,7 @@ class Admission:
 
     def health(self) -> tuple[bytes, str, list[tuple[str, str]]]:
         """A :class:`guard.Health` check: ERROR while another publisher is on the topic."""
-        self.census()
+        self.refresh_publishers()
         level, reason = self.check.fault()
         levels = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR)
         return levels[level], reason, self.check.as_values()
@@ -312,7 +312,7 @@ def gate_classifier(gate: Any) -> Callable[[bytes], bool]:
     return classify
 
 
-def decoded(msg_type: Any, callback: Callable[[Any], None], rejections: Rejections,
+def deserializing_callback(msg_type: Any, callback: Callable[[Any], None], rejections: Rejections,
             topic: str) -> Callable[[bytes], None]:
     """A raw callback that deserialises first; undecodable bytes are refused
     (``not_numeric``), never raised out of the executor."""
@@ -334,7 +334,7 @@ def decodes(msg_type: Any, rejections: Rejections, topic: str) -> Callable[[byte
 
     def note(msg: Any) -> None:
         ok.append(True)
-    on_raw = decoded(msg_type, note, rejections, topic)
+    on_raw = deserializing_callback(msg_type, note, rejections, topic)
 
     def classify(raw: bytes) -> bool:
         ok.clear()
@@ -377,7 +377,7 @@ class StatusAdmission:
             return False
         sender = self.check.known.get(gid)
         if sender is None:
-            census(self.node, self.check)
+            refresh_publishers(self.node, self.check)
             sender = self.check.known.get(gid, "")
         namespace = self.node.get_namespace()
         for item in msg.status:

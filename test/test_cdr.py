@@ -142,7 +142,7 @@ def test_gate_fast_path_checks_what_the_full_check_does() -> None:
     """Once the plant's layout is learned, JointStateGate takes messages of that layout by two
     byte compares; non-finite values, stamps that do not increase and other names of the same
     length still get rejected, and reordered names still go through the full check."""
-    from exo_ilc_ros.core.params.validation import Cause
+    from exo_ilc_ros.core.loop.wire_input import Cause
     from exo_ilc_ros.nodes.guard import JointStateGate, Rejections
 
     names = ["j1", "j2", "j3"]
@@ -212,7 +212,7 @@ def test_a_future_stamp_costs_one_message() -> None:
     """A well-formed JointState stamped far in the future, inside a trial: rejected (BAD_STAMP)
     and the trial's next samples still pass (before, it became the 'last stamp' and every later
     sample of the trial was rejected as not increasing)."""
-    from exo_ilc_ros.core.params.validation import Cause
+    from exo_ilc_ros.core.loop.wire_input import Cause
     from exo_ilc_ros.nodes.guard import JointStateGate, Rejections
 
     names = ["j1", "j2", "j3"]

@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from exo_ilc_ros.core.loop.wire_input import Cause
 from exo_ilc_ros.core.params.config import load_config
-from exo_ilc_ros.core.params.validation import Cause
 from exo_ilc_ros.core.session.learning_session import run_trials
 from exo_ilc_ros.wire import topics
 from exo_ilc_ros.wire.publishers import (

@@ -16,9 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from exo_ilc_ros.core.errors import ConfigError
-from exo_ilc_ros.core.params import schema
-from exo_ilc_ros.core.params.config import Config, load_config
-from exo_ilc_ros.core.params.validation import (
+from exo_ilc_ros.core.loop.wire_input import (
     Cause,
     FeedforwardProfile,
     JointSample,
@@ -27,8 +25,10 @@ from exo_ilc_ros.core.params.validation import (
     validate_effort_command,
     validate_feedforward,
     validate_joint_state,
-    validate_update,
 )
+from exo_ilc_ros.core.params import schema
+from exo_ilc_ros.core.params.config import Config, load_config
+from exo_ilc_ros.core.params.validation import validate_update
 
 JOINTS = ["shoulder_flexion", "shoulder_abduction", "elbow_flexion"]
 LIMIT = [40.0, 40.0, 20.0]

@@ -10,7 +10,7 @@ sample whose |e_j| leaves ``safety.error_envelope`` the trial is aborted at once
 (gravity compensation and PD around the pose measured there) is commanded for the rest of it; the
 watchdog (``safety.watchdog_periods`` control periods of wall time without /joint_states during
 a trial) commands the safe hold around the last pose received. Bad /joint_states or
-feed-forward messages are rejected (core.params.validation), logged once per cause and counted; no
+feed-forward messages are rejected (core.loop.wire_input), logged once per cause and counted; no
 effort is ever computed from them. After each trial's last sample the controller reports
 ``done`` (abort index, watchdog trips) on /diagnostics; its health once a second.
 """
@@ -29,8 +29,8 @@ from trajectory_msgs.msg import JointTrajectory
 from ..core.loop.controller import GuardedControlStep
 from ..core.loop.safety import watchdog_for
 from ..core.loop.trial import period_ns, sample_index
+from ..core.loop.wire_input import Cause, Rejection, validate_feedforward
 from ..core.params import schema
-from ..core.params.validation import Cause, Rejection, validate_feedforward
 from ..core.sim.experiment import Experiment
 from ..wire import topics
 from ..wire.cdr import float64_array

@@ -1,10 +1,10 @@
-"""Input gates and health reporting shared by the nodes (thin wrappers of core.params.validation).
+"""Input gates and health reporting shared by the nodes (thin wrappers of core.loop.wire_input).
 
 :class:`JointStateGate` checks every /joint_states message before a node uses it: names (a
 message naming the configured joints in another order is reordered), lengths, finite values,
 stamps strictly increasing. The common case (the plant's own layout) costs a bytes compare and
-one ``isfinite``; anything else goes through :func:`core.params.validation.validate_joint_state`.
-Rejections are counted per cause (:class:`core.params.validation.LogOnce`), logged once per
+one ``isfinite``; anything else goes through :func:`core.loop.wire_input.validate_joint_state`.
+Rejections are counted per cause (:class:`core.loop.wire_input.LogOnce`), logged once per
 cause, and reported on /diagnostics by :class:`Health`.
 """
 
@@ -19,7 +19,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.node import Node
 
-from ..core.params.validation import Cause, LogOnce, Rejection, validate_joint_state
+from ..core.loop.wire_input import Cause, LogOnce, Rejection, validate_joint_state
 from ..wire.cdr import (
     HEADER,
     STAMP,

@@ -22,7 +22,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 
 from ..core.loop.controller import GuardedControlStep
 from ..core.loop.safety import Watchdog
-from ..core.params.validation import FeedforwardProfile
+from ..core.loop.wire_input import FeedforwardProfile
 from ..core.protocol.homing import ControllerEvent, ControllerMode, HomingController, HomingSettings
 from ..wire import topics
 from ..wire.cdr import float64_array

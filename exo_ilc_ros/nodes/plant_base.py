@@ -20,8 +20,8 @@ from std_msgs.msg import Float64MultiArray
 from ..core.loop.controller import GuardedControlStep
 from ..core.loop.safety import watchdog_for
 from ..core.loop.trial import period_ns
+from ..core.loop.wire_input import Cause, Rejection, validate_effort_command
 from ..core.params import schema
-from ..core.params.validation import Cause, Rejection, validate_effort_command
 from ..core.sim.experiment import Experiment
 from ..wire import topics
 from ..wire.cdr import CdrError, JointStateWriter, read_float64_array

@@ -27,7 +27,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.type_support import check_is_valid_msg_type
 from rclpy.waitable import NumberOfEntities, Waitable
 
-from ..core.params.validation import Cause, Rejection, validate_effort_command
+from ..core.loop.wire_input import Cause, Rejection, validate_effort_command
 from ..wire import topics
 from ..wire.cdr import CdrError, read_float64_array
 from ..wire.publishers import (

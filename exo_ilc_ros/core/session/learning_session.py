@@ -43,9 +43,9 @@ from ..learning.qfilter import feedforward_limit_of
 from ..loop.patient import PatientLearning, true_error
 from ..loop.record import TrialRecord, position_velocity_record
 from ..loop.trial import record_from_samples
+from ..loop.wire_input import Rejection, check_feedforward_array
 from ..params import schema
 from ..params.config import Config
-from ..params.validation import Rejection, check_feedforward_array
 from ..persistence.profiles import load_initial
 from ..persistence.store import RunStore, StoredTrial
 from ..reference.build import build_reference

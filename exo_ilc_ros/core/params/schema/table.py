@@ -1,226 +1,33 @@
-"""The parameter schema: every parameter's name, ROS section, type and rule, in one list.
-
-Names are the dotted ROS parameter names (nested YAML keys joined by '.'). ``section`` says where
-the parameter lives in the ROS parameter YAML: ``/**`` (read by every node) or one node's name.
-Values come from the YAML in ``config/``; this module holds no defaults, only the rules.
+"""The parameter table: every parameter's name, ROS section, type and rule, in one list
+(:data:`PARAMETERS`, :data:`BY_NAME`). New keys go here, in the section they belong to.
 Longer than ~450 lines on purpose: one table of every parameter is the point (the one schema
-YAML loading, ROS declaration, validation and the bags' provenance all read).
-"""
+YAML loading, ROS declaration, validation and the bags' provenance all read)."""
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
-from enum import Enum
+from collections.abc import Mapping
 from typing import Any
 
-from ..errors import ConfigError
-from .hold_rule import hold_gain_problem, homing_gain_problem
-
-AXIS_VECTORS: dict[str, tuple[float, float, float]] = {
-    "x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0),
-    "-x": (-1.0, 0.0, 0.0), "-y": (0.0, -1.0, 0.0), "-z": (0.0, 0.0, -1.0),
-}
-"""Joint axis names accepted in the config, as unit vectors of the link frame."""
-
-MODEL_SOURCES = ("cones", "urdf")
-URDF_JOINT_DYNAMICS = ("ignore", "apply")
-"""``model.urdf_joint_dynamics``: the URDF's ``<dynamics damping friction>`` left out of the
-plant, or applied as explicit joint torques (core/arm/build.py, :func:`urdf_joint_dynamics`)."""
-CONE_KEYS = ("model.link_masses", "model.link_lengths", "model.radius_proximal",
-             "model.radius_distal", "model.joint_axes")
-"""The arm of ``model.source: cones`` (unused, and not checked per joint, for a URDF arm)."""
-URDF_KEYS = ("model.source", "model.urdf", "model.base_link", "model.tip_link",
-             "model.locked_joints")
-"""What names a URDF arm (left out of every digest of a cone arm: its keys stay as they were)."""
-URDF_PLANT_KEYS = ("model.urdf_joint_dynamics",)
-"""What a URDF arm's plant adds to its rigid body (not its nominal model; left out of every
-digest of a cone arm, as :data:`URDF_KEYS`)."""
-
-
-PERSON_SEGMENTS = ("upper_arm", "forearm", "hand")
-"""The person's segments (core/arm/body_segments.py): shoulder -> elbow, elbow -> wrist, wrist
--> third metacarpal head."""
-PERSON_KEYS = ("person.enabled", "person.in_nominal", "person.body_mass", "person.height",
-               "person.sex", *(f"person.{segment}.{what}" for segment in PERSON_SEGMENTS
-                               for what in ("link", "length", "origin", "direction",
-                                            "sagittal_axis")))
-"""A person in the exoskeleton (left out of every digest while ``person.enabled`` is false:
-a run without a person keeps the keys it had before they existed)."""
-PATIENT_JOINTS = "patient.joints"
-
-
-def _name_map_entries(text: str, key: str, form: str) -> list[tuple[str, str]]:
-    """('name', 'value') of every entry of a ``name: value, name: value`` string ('=' works
-    too; ROS parameters have no map type), or ConfigError naming the entry."""
-    out: list[tuple[str, str]] = []
-    for entry in (e.strip() for e in text.strip().strip("{}").split(",")):
-        if not entry:
-            continue
-        name, sep, value = entry.replace("=", ":").rpartition(":")
-        name, value = name.strip().strip("'\""), value.strip().strip("'\"")
-        if not sep or not name or not value:
-            raise ConfigError(key, f"entry {entry!r} is not {form}")
-        if any(name == seen for seen, _ in out):
-            raise ConfigError(key, f"joint {name!r} is given twice")
-        out.append((name, value))
-    return out
-
-
-def parse_locked_joints(text: str) -> dict[str, float]:
-    """``model.locked_joints`` ('name: value, name: value') as a dict, or ConfigError naming
-    the entry."""
-    form = "'joint_name: value' (a finite number)"
-    out: dict[str, float] = {}
-    for name, value in _name_map_entries(text, "model.locked_joints", form):
-        try:
-            number = float(value)
-        except ValueError:
-            number = math.nan
-        if not math.isfinite(number):
-            raise ConfigError("model.locked_joints", f"entry '{name}: {value}' is not {form}")
-        out[name] = number
-    return out
-
-
-def parse_patient_joints(text: str) -> dict[str, tuple[str, float]]:
-    """``patient.joints`` ('patient_joint: arm_joint, ...'; '-arm_joint': the patient's angle
-    grows as the arm joint's falls) as {patient joint: (arm joint, +1 or -1)} in the order
-    given, or ConfigError naming the entry (an arm joint given twice too)."""
-    out = {}
-    for patient, arm in _name_map_entries(text, PATIENT_JOINTS,
-                                          "'patient_joint: arm_joint' or '-arm_joint'"):
-        sign = -1.0 if arm.startswith("-") else 1.0
-        out[patient] = (arm.lstrip("+-").strip(), sign)
-    targets = [arm for arm, _ in out.values()]
-    twice = next((t for t in targets if targets.count(t) > 1), None)
-    if twice is not None:
-        raise ConfigError(PATIENT_JOINTS, f"arm joint {twice!r} is given to two of the "
-                          "patient's joints (one patient joint per arm joint)")
-    return out
-
-
-def patient_joint_names(values: Mapping[str, Any]) -> list[str]:
-    """The joints every ``patient.*`` per-joint list is for, in its order: the patient's
-    (``patient.joints``), or the arm's ``joint_names`` when it is empty."""
-    return list(parse_patient_joints(values[PATIENT_JOINTS])) or list(values["joint_names"])
-
-
-def _parse_problem(parse: Callable[[str], object]) -> Callable[[Any], str | None]:
-    """An ``extra_rule`` from a parser: its ConfigError's rule, or None when it parses."""
-    def problem(value: Any) -> str | None:
-        try:
-            parse(value)
-        except ConfigError as exc:
-            return exc.rule
-        return None
-    return problem
-
-
-_locks_problem = _parse_problem(parse_locked_joints)
-_patient_joints_problem = _parse_problem(parse_patient_joints)
-
-
-def _vector_rule(value: Any) -> str | None:
-    return None if len(value) == 3 else f"must be [x, y, z] (3 numbers), got {value!r}"
-
-
-def _direction_rule(value: Any) -> str | None:
-    if len(value) != 3:
-        return _vector_rule(value)
-    return None if any(value) else "must not be zero (a direction)"
-
-
-SHARED = "/**"
-PLANT = "plant_simulator"
-CONTROLLER = "computed_torque_controller"
-SUPERVISOR = "ilc_supervisor"
-SECTIONS = (SHARED, PLANT, CONTROLLER, SUPERVISOR)
-ROS_BUILTIN = frozenset({"use_sim_time", "start_type_description_service"})
-"""Parameters every rclpy node owns; accepted in any section, not part of the schema."""
-
-
-class Kind(Enum):
-    """ROS parameter types used by the schema."""
-
-    DOUBLE = "double"
-    INTEGER = "integer"
-    BOOL = "bool"
-    STRING = "string"
-    DOUBLE_ARRAY = "double_array"
-    STRING_ARRAY = "string_array"
-
-
-@dataclass(frozen=True)
-class Parameter:
-    """One parameter: name, section, type, meaning and the rule its value must follow."""
-
-    name: str
-    section: str
-    kind: Kind
-    description: str
-    per_joint: bool = False
-    """An array with one entry per joint (or one value for every joint: validation repeats it)."""
-    patient_joint: bool = False
-    """Per joint of the patient (:func:`patient_joint_names`), not of the arm."""
-    minimum: float | None = None
-    strictly_positive: bool = False
-    choices: tuple[str, ...] = ()
-    live: bool = False
-    """May change while the graph runs (takes effect at the next trial boundary)."""
-    extra_rule: Callable[[Any], str | None] | None = field(default=None, compare=False)
-
-
-def _axes_rule(value: Any) -> str | None:
-    bad = [v for v in value if v not in AXIS_VECTORS]
-    return f"unknown joint axis {bad[0]!r}; use one of {sorted(AXIS_VECTORS)}" if bad else None
-
-
-def _range_rule(value: Any) -> str | None:
-    if len(value) != 2 or value[0] > value[1]:
-        return f"must be [low, high] with low <= high, got {value!r}"
-    return None
-
-
-def _margin_rule(value: Any) -> str | None:
-    return None if value < 1.0 else f"must be < 1 (a share of the limit), got {value!r}"
-
-
-def _priority_rule(value: Any) -> str | None:
-    return None if value <= 99 else f"must be 0..99 (SCHED_FIFO priorities), got {value!r}"
-
-
-def _forgetting_rule(value: Any) -> str | None:
-    return None if 0.0 < value <= 1.0 else f"must be in (0, 1] (1: no forgetting), got {value!r}"
-
-
-def _averaging_memory_rule(value: Any) -> str | None:
-    return None if value == 0.0 or value >= 2.0 else \
-        f"must be 0 (off) or >= 2 trials (lambda = 1 - 1 / memory), got {value!r}"
-
-
-def _node_name_rule(value: Any) -> str | None:
-    ok = bool(value) and not value[0].isdigit() and all(c.isalnum() or c == "_" for c in value)
-    return None if ok else f"must be a ROS node name (letters, digits and _), got {value!r}"
-
-
-def _name_rule(value: Any) -> str | None:
-    ok = bool(value) and all(c.isalnum() or c in "_-" for c in value)
-    return None if ok else f"must be a name of letters, digits, _ and -, got {value!r}"
-
-
-MAS_GRADES = ("custom", "0", "1", "1+", "2", "3")
-"""``patient.spasticity.mas_grade``: ``custom`` (the spasticity values given) or a Modified
-Ashworth grade (its preset, core/loop/patient.py ``MAS_PRESETS``)."""
-
-
-def _fraction_rule(value: Any) -> str | None:
-    return None if value <= 1.0 else f"must be <= 1 (a share of the gain), got {value!r}"
-
-
-def _retention_rule(value: Any) -> str | None:
-    return None if value <= 1.0 else f"must be <= 1 (a share kept per trial), got {value!r}"
+from .key_groups import MODEL_SOURCES, PATIENT_JOINTS, PERSON_SEGMENTS, URDF_JOINT_DYNAMICS
+from .parameter import CONTROLLER, PLANT, SHARED, SUPERVISOR, Kind, Parameter
+from .rules import (
+    MAS_GRADES,
+    _averaging_memory_rule,
+    _axes_rule,
+    _direction_rule,
+    _forgetting_rule,
+    _fraction_rule,
+    _locks_problem,
+    _margin_rule,
+    _name_rule,
+    _node_name_rule,
+    _patient_joints_problem,
+    _priority_rule,
+    _range_rule,
+    _retention_rule,
+    _share_rule,
+    _vector_rule,
+)
 
 
 def _patient_parameters() -> list[Parameter]:
@@ -348,10 +155,6 @@ def _person_parameters() -> list[Parameter]:
                       "normal to its direction", extra_rule=_direction_rule),
         ]
     return out
-
-
-def _share_rule(value: Any) -> str | None:
-    return None if value <= 1.0 else f"must be <= 1 (a share of the periods), got {value!r}"
 
 
 def _schedule_parameters() -> list[Parameter]:
@@ -702,187 +505,3 @@ BY_NAME: Mapping[str, Parameter] = {p.name: p for p in PARAMETERS}
 def parameters_of(node: str) -> tuple[Parameter, ...]:
     """The parameters a node declares: the shared ones and its own section's."""
     return tuple(p for p in PARAMETERS if p.section in (SHARED, node))
-
-
-def coerce(param: Parameter, value: Any) -> Any:
-    """``value`` converted to the parameter's type, or ConfigError naming the rule."""
-    kind = param.kind
-    if kind is Kind.DOUBLE:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(param.name, f"must be a number, got {value!r}")
-        return float(value)
-    if kind is Kind.INTEGER:
-        if isinstance(value, bool) or not isinstance(value, int):
-            if isinstance(value, float) and value.is_integer():
-                return int(value)
-            raise ConfigError(param.name, f"must be an integer, got {value!r}")
-        return int(value)
-    if kind is Kind.BOOL:
-        if not isinstance(value, bool):
-            raise ConfigError(param.name, f"must be true or false, got {value!r}")
-        return value
-    if kind is Kind.STRING:
-        if param.choices and isinstance(value, int) and not isinstance(value, bool) \
-                and str(value) in param.choices:
-            return str(value)  # a choice YAML reads as a number: mas_grade: 2
-        if not isinstance(value, str):
-            raise ConfigError(param.name, f"must be a string, got {value!r}")
-        return value
-    if param.per_joint and kind is Kind.DOUBLE_ARRAY and isinstance(value, (int, float)) \
-            and not isinstance(value, bool):
-        return float(value)  # one value for every joint: validate() repeats it per joint
-    if param.per_joint and kind is Kind.STRING_ARRAY and isinstance(value, str):
-        return value
-    if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
-        raise ConfigError(param.name, f"must be a list, got {value!r}")
-    items = list(value)
-    if kind is Kind.DOUBLE_ARRAY:
-        if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in items):
-            raise ConfigError(param.name, f"must be a list of numbers, got {items!r}")
-        return [float(v) for v in items]
-    if any(not isinstance(v, str) for v in items):
-        raise ConfigError(param.name, f"must be a list of strings, got {items!r}")
-    return items
-
-
-def check_value(param: Parameter, value: Any, joints: int,
-                joint_names: Sequence[str] = ()) -> None:
-    """Raise ConfigError if an already coerced ``value`` breaks ``param``'s own rule (a
-    per-joint value's error names the joint, from ``joint_names`` where given)."""
-    numbers: list[float] = []
-    if param.kind in (Kind.DOUBLE, Kind.INTEGER):
-        numbers = [float(value)]
-    elif param.kind is Kind.DOUBLE_ARRAY:
-        numbers = list(value) if isinstance(value, list) else [float(value)]
-
-    def fail(bad: Callable[[float], bool], rule: str) -> None:
-        index = next((i for i, x in enumerate(numbers) if bad(x)), None)
-        if index is None:
-            return
-        if param.per_joint and isinstance(value, list):
-            name = joint_names[index] if index < len(joint_names) else str(index + 1)
-            raise ConfigError(param.name, f"joint {name!r}: {rule}, got {numbers[index]!r}")
-        raise ConfigError(param.name, f"{rule}, got {value!r}")
-
-    fail(lambda x: not math.isfinite(x), "must be finite (no NaN or inf)")
-    if param.per_joint and isinstance(value, list) and len(value) != joints:
-        names = f": {', '.join(joint_names)}" if joint_names else ""
-        whose = f" of the patient (the patient's joints: {PATIENT_JOINTS} maps them onto the " \
-            "arm's)" if param.patient_joint else ""
-        raise ConfigError(param.name, f"must have one entry per joint{whose} ({joints}{names}) "
-                          f"or one value for every joint, got {len(value)} entries")
-    if param.minimum is not None:
-        minimum = param.minimum
-        fail(lambda x: x < minimum, f"must be >= {minimum:g}")
-    if param.strictly_positive:
-        fail(lambda x: x <= 0.0, "must be > 0")
-    if param.choices and value not in param.choices:
-        raise ConfigError(param.name, f"must be one of {', '.join(param.choices)}; got {value!r}")
-    if param.extra_rule is not None:
-        problem = param.extra_rule(value)
-        if problem:
-            raise ConfigError(param.name, problem)
-
-
-def check_consistency(values: Mapping[str, Any]) -> None:
-    """Rules between parameters: monotonic thresholds, a whole number of sub-steps, ..."""
-    names = values["joint_names"]
-    for term in ("position", "velocity", "acceleration"):
-        low = values[f"schedule.{term}.threshold_low"]
-        high = values[f"schedule.{term}.threshold_high"]
-        for j, (lo, hi) in enumerate(zip(low, high, strict=True)):
-            if not lo < hi:
-                raise ConfigError(f"schedule.{term}.threshold_low",
-                                  f"thresholds must increase: joint {names[j]!r} has "
-                                  f"threshold_low {lo:g} >= threshold_high {hi:g}")
-    period = values["control.period"]
-    step = values["integration_step"]
-    ratio = period / step
-    if step > period or abs(ratio - round(ratio)) > 1e-9 * ratio:
-        raise ConfigError("integration_step",
-                          f"must divide control.period ({period:g} s) a whole number of times")
-    steps = values["trajectory.duration"] / period
-    if abs(steps - round(steps)) > 1e-9 * max(steps, 1.0):
-        raise ConfigError("trajectory.duration",
-                          f"must be a whole number of control periods ({period:g} s)")
-    if values["model.source"] == "cones":
-        _check_cones(values)
-        if values["model.urdf_joint_dynamics"] != "ignore":
-            raise ConfigError("model.urdf_joint_dynamics",
-                              "a cone arm has no URDF <dynamics>: only with model.source urdf")
-    elif not values["model.urdf"] or not values["model.base_link"] or \
-            not values["model.tip_link"]:
-        empty = next(k for k in ("model.urdf", "model.base_link", "model.tip_link")
-                     if not values[k])
-        raise ConfigError(empty, "model.source urdf needs the URDF file, its base link and its "
-                          "tip link")
-    nyquist = 0.5 / period
-    if values["q_filter.cutoff_hz"] >= nyquist:
-        raise ConfigError("q_filter.cutoff_hz",
-                          f"must be below the Nyquist frequency {nyquist:g} Hz of "
-                          f"control.period {period:g} s")
-    if values["patient.spasticity.mas_grade"] != "custom":
-        for key in ("stiffness", "damping", "reflex_gain", "reflex_threshold", "reflex_max"):
-            if any(values[f"patient.spasticity.{key}"]):
-                raise ConfigError(f"patient.spasticity.{key}",
-                                  "give either a mas_grade (its preset) or the custom values, "
-                                  "not both (set mas_grade: custom)")
-
-    _check_person(values)
-    hold = hold_gain_problem(values)
-    if hold is not None:
-        raise ConfigError(*hold)
-    homing = homing_gain_problem(values)
-    if homing is not None:
-        raise ConfigError(*homing)
-    if len(set(values["joint_names"])) != len(values["joint_names"]):
-        raise ConfigError("joint_names", "joint names must be unique")
-    if any(not name for name in values["joint_names"]):
-        raise ConfigError("joint_names", "joint names must not be empty")
-
-
-def _check_cones(values: Mapping[str, Any]) -> None:
-    """The cone arm's rules (model.source: cones)."""
-    masses = values["model.link_masses"]
-    lengths = values["model.link_lengths"]
-    radii = zip(values["model.radius_proximal"], values["model.radius_distal"], strict=True)
-    for j, (m, length, (r1, r2)) in enumerate(zip(masses, lengths, radii, strict=True)):
-        if m > 0.0 and length > 0.0 and r1 == 0.0 and r2 == 0.0:
-            raise ConfigError("model.radius_proximal",
-                              f"link {j + 1} ({values['joint_names'][j]!r}) has mass and "
-                              "length, so it needs a positive radius")
-    if all(m == 0.0 for m in masses):
-        raise ConfigError("model.link_masses", "at least one link must have mass")
-
-
-def check_patient_joints(values: Mapping[str, Any]) -> None:
-    """Every arm joint ``patient.joints`` names is one of ``joint_names`` (checked once they
-    are known to be the arm's: a URDF arm's after the URDF's)."""
-    arm = list(values["joint_names"])
-    for patient, (target, _) in parse_patient_joints(values[PATIENT_JOINTS]).items():
-        if target not in arm:
-            raise ConfigError(PATIENT_JOINTS, f"the patient's joint {patient!r} acts on "
-                              f"{target!r}, which is not a joint of the arm ({', '.join(arm)})")
-
-
-def _check_person(values: Mapping[str, Any]) -> None:
-    """A person only on a URDF arm, each segment's sagittal axis normal to its direction."""
-    if not values["person.enabled"]:
-        return
-    if values["model.source"] != "urdf":
-        raise ConfigError("person.enabled", "the paper's arm (model.source cones) is the "
-                          "person's arm itself: its links are the upper arm and forearm "
-                          "(model.link_masses); a person's segments are added to a URDF "
-                          "exoskeleton (model.source urdf)")
-    linked = [s for s in PERSON_SEGMENTS if values[f"person.{s}.link"]]
-    if not linked:
-        raise ConfigError("person.enabled", "no segment is strapped to a link (give "
-                          "person.upper_arm.link, person.forearm.link or person.hand.link)")
-    for segment in linked:
-        along = values[f"person.{segment}.direction"]
-        axis = values[f"person.{segment}.sagittal_axis"]
-        dot = sum(a * b for a, b in zip(along, axis, strict=True))
-        norms = math.sqrt(sum(a * a for a in along) * sum(b * b for b in axis))
-        if abs(dot) > 1e-9 * norms:
-            raise ConfigError(f"person.{segment}.sagittal_axis", f"must be normal to "
-                              f"person.{segment}.direction {along}, got {axis}")

@@ -1,0 +1,198 @@
+"""The validator: a value coerced to its parameter's type and checked against its rule, and
+the checks across parameters."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+from ...errors import ConfigError
+from ..hold_rule import hold_gain_problem, homing_gain_problem
+from .key_groups import PATIENT_JOINTS, PERSON_SEGMENTS
+from .parameter import Kind, Parameter
+from .string_maps import parse_patient_joints
+
+
+def coerce(param: Parameter, value: Any) -> Any:
+    """``value`` converted to the parameter's type, or ConfigError naming the rule."""
+    kind = param.kind
+    if kind is Kind.DOUBLE:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(param.name, f"must be a number, got {value!r}")
+        return float(value)
+    if kind is Kind.INTEGER:
+        if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, float) and value.is_integer():
+                return int(value)
+            raise ConfigError(param.name, f"must be an integer, got {value!r}")
+        return int(value)
+    if kind is Kind.BOOL:
+        if not isinstance(value, bool):
+            raise ConfigError(param.name, f"must be true or false, got {value!r}")
+        return value
+    if kind is Kind.STRING:
+        if param.choices and isinstance(value, int) and not isinstance(value, bool) \
+                and str(value) in param.choices:
+            return str(value)  # a choice YAML reads as a number: mas_grade: 2
+        if not isinstance(value, str):
+            raise ConfigError(param.name, f"must be a string, got {value!r}")
+        return value
+    if param.per_joint and kind is Kind.DOUBLE_ARRAY and isinstance(value, (int, float)) \
+            and not isinstance(value, bool):
+        return float(value)  # one value for every joint: validate() repeats it per joint
+    if param.per_joint and kind is Kind.STRING_ARRAY and isinstance(value, str):
+        return value
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
+        raise ConfigError(param.name, f"must be a list, got {value!r}")
+    items = list(value)
+    if kind is Kind.DOUBLE_ARRAY:
+        if any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in items):
+            raise ConfigError(param.name, f"must be a list of numbers, got {items!r}")
+        return [float(v) for v in items]
+    if any(not isinstance(v, str) for v in items):
+        raise ConfigError(param.name, f"must be a list of strings, got {items!r}")
+    return items
+
+
+def check_value(param: Parameter, value: Any, joints: int,
+                joint_names: Sequence[str] = ()) -> None:
+    """Raise ConfigError if an already coerced ``value`` breaks ``param``'s own rule (a
+    per-joint value's error names the joint, from ``joint_names`` where given)."""
+    numbers: list[float] = []
+    if param.kind in (Kind.DOUBLE, Kind.INTEGER):
+        numbers = [float(value)]
+    elif param.kind is Kind.DOUBLE_ARRAY:
+        numbers = list(value) if isinstance(value, list) else [float(value)]
+
+    def fail(bad: Callable[[float], bool], rule: str) -> None:
+        index = next((i for i, x in enumerate(numbers) if bad(x)), None)
+        if index is None:
+            return
+        if param.per_joint and isinstance(value, list):
+            name = joint_names[index] if index < len(joint_names) else str(index + 1)
+            raise ConfigError(param.name, f"joint {name!r}: {rule}, got {numbers[index]!r}")
+        raise ConfigError(param.name, f"{rule}, got {value!r}")
+
+    fail(lambda x: not math.isfinite(x), "must be finite (no NaN or inf)")
+    if param.per_joint and isinstance(value, list) and len(value) != joints:
+        names = f": {', '.join(joint_names)}" if joint_names else ""
+        whose = f" of the patient (the patient's joints: {PATIENT_JOINTS} maps them onto the " \
+            "arm's)" if param.patient_joint else ""
+        raise ConfigError(param.name, f"must have one entry per joint{whose} ({joints}{names}) "
+                          f"or one value for every joint, got {len(value)} entries")
+    if param.minimum is not None:
+        minimum = param.minimum
+        fail(lambda x: x < minimum, f"must be >= {minimum:g}")
+    if param.strictly_positive:
+        fail(lambda x: x <= 0.0, "must be > 0")
+    if param.choices and value not in param.choices:
+        raise ConfigError(param.name, f"must be one of {', '.join(param.choices)}; got {value!r}")
+    if param.extra_rule is not None:
+        problem = param.extra_rule(value)
+        if problem:
+            raise ConfigError(param.name, problem)
+
+
+def check_consistency(values: Mapping[str, Any]) -> None:
+    """Rules between parameters: monotonic thresholds, a whole number of sub-steps, ..."""
+    names = values["joint_names"]
+    for term in ("position", "velocity", "acceleration"):
+        low = values[f"schedule.{term}.threshold_low"]
+        high = values[f"schedule.{term}.threshold_high"]
+        for j, (lo, hi) in enumerate(zip(low, high, strict=True)):
+            if not lo < hi:
+                raise ConfigError(f"schedule.{term}.threshold_low",
+                                  f"thresholds must increase: joint {names[j]!r} has "
+                                  f"threshold_low {lo:g} >= threshold_high {hi:g}")
+    period = values["control.period"]
+    step = values["integration_step"]
+    ratio = period / step
+    if step > period or abs(ratio - round(ratio)) > 1e-9 * ratio:
+        raise ConfigError("integration_step",
+                          f"must divide control.period ({period:g} s) a whole number of times")
+    steps = values["trajectory.duration"] / period
+    if abs(steps - round(steps)) > 1e-9 * max(steps, 1.0):
+        raise ConfigError("trajectory.duration",
+                          f"must be a whole number of control periods ({period:g} s)")
+    if values["model.source"] == "cones":
+        _check_cones(values)
+        if values["model.urdf_joint_dynamics"] != "ignore":
+            raise ConfigError("model.urdf_joint_dynamics",
+                              "a cone arm has no URDF <dynamics>: only with model.source urdf")
+    elif not values["model.urdf"] or not values["model.base_link"] or \
+            not values["model.tip_link"]:
+        empty = next(k for k in ("model.urdf", "model.base_link", "model.tip_link")
+                     if not values[k])
+        raise ConfigError(empty, "model.source urdf needs the URDF file, its base link and its "
+                          "tip link")
+    nyquist = 0.5 / period
+    if values["q_filter.cutoff_hz"] >= nyquist:
+        raise ConfigError("q_filter.cutoff_hz",
+                          f"must be below the Nyquist frequency {nyquist:g} Hz of "
+                          f"control.period {period:g} s")
+    if values["patient.spasticity.mas_grade"] != "custom":
+        for key in ("stiffness", "damping", "reflex_gain", "reflex_threshold", "reflex_max"):
+            if any(values[f"patient.spasticity.{key}"]):
+                raise ConfigError(f"patient.spasticity.{key}",
+                                  "give either a mas_grade (its preset) or the custom values, "
+                                  "not both (set mas_grade: custom)")
+
+    _check_person(values)
+    hold = hold_gain_problem(values)
+    if hold is not None:
+        raise ConfigError(*hold)
+    homing = homing_gain_problem(values)
+    if homing is not None:
+        raise ConfigError(*homing)
+    if len(set(values["joint_names"])) != len(values["joint_names"]):
+        raise ConfigError("joint_names", "joint names must be unique")
+    if any(not name for name in values["joint_names"]):
+        raise ConfigError("joint_names", "joint names must not be empty")
+
+
+def _check_cones(values: Mapping[str, Any]) -> None:
+    """The cone arm's rules (model.source: cones)."""
+    masses = values["model.link_masses"]
+    lengths = values["model.link_lengths"]
+    radii = zip(values["model.radius_proximal"], values["model.radius_distal"], strict=True)
+    for j, (m, length, (r1, r2)) in enumerate(zip(masses, lengths, radii, strict=True)):
+        if m > 0.0 and length > 0.0 and r1 == 0.0 and r2 == 0.0:
+            raise ConfigError("model.radius_proximal",
+                              f"link {j + 1} ({values['joint_names'][j]!r}) has mass and "
+                              "length, so it needs a positive radius")
+    if all(m == 0.0 for m in masses):
+        raise ConfigError("model.link_masses", "at least one link must have mass")
+
+
+def check_patient_joints(values: Mapping[str, Any]) -> None:
+    """Every arm joint ``patient.joints`` names is one of ``joint_names`` (checked once they
+    are known to be the arm's: a URDF arm's after the URDF's)."""
+    arm = list(values["joint_names"])
+    for patient, (target, _) in parse_patient_joints(values[PATIENT_JOINTS]).items():
+        if target not in arm:
+            raise ConfigError(PATIENT_JOINTS, f"the patient's joint {patient!r} acts on "
+                              f"{target!r}, which is not a joint of the arm ({', '.join(arm)})")
+
+
+def _check_person(values: Mapping[str, Any]) -> None:
+    """A person only on a URDF arm, each segment's sagittal axis normal to its direction."""
+    if not values["person.enabled"]:
+        return
+    if values["model.source"] != "urdf":
+        raise ConfigError("person.enabled", "the paper's arm (model.source cones) is the "
+                          "person's arm itself: its links are the upper arm and forearm "
+                          "(model.link_masses); a person's segments are added to a URDF "
+                          "exoskeleton (model.source urdf)")
+    linked = [s for s in PERSON_SEGMENTS if values[f"person.{s}.link"]]
+    if not linked:
+        raise ConfigError("person.enabled", "no segment is strapped to a link (give "
+                          "person.upper_arm.link, person.forearm.link or person.hand.link)")
+    for segment in linked:
+        along = values[f"person.{segment}.direction"]
+        axis = values[f"person.{segment}.sagittal_axis"]
+        dot = sum(a * b for a, b in zip(along, axis, strict=True))
+        norms = math.sqrt(sum(a * a for a in along) * sum(b * b for b in axis))
+        if abs(dot) > 1e-9 * norms:
+            raise ConfigError(f"person.{segment}.sagittal_axis", f"must be normal to "
+                              f"person.{segment}.direction {along}, got {axis}")

@@ -38,6 +38,8 @@ class RunSummary:
         summary.extra.update(live_changes(result.applied, result.law))
         if result.aborted:
             summary.extra["aborted_trials"] = list(result.aborted)
+        if result.stop_message:
+            summary.extra["abort_stop"] = result.stop_message
         return summary
 
     @property

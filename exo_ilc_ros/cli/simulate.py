@@ -24,6 +24,7 @@ from ..core.params.config import Config
 from ..core.programs.identified import Identified
 from ..core.programs.metrics import config_metrics
 from ..core.programs.spread import iteration_spread
+from ..core.session.abort import ABORT_STOP_KEY
 from ..core.session.learning_session import run_trials
 from ..core.session.result import RunResult
 from ..core.session.summary import RunSummary
@@ -232,7 +233,7 @@ def aborted_exit(runs: list[RunSummary], command: str) -> int:
               f"error envelope (safety.error_envelope; the robot held the arm there; each was "
               f"learned from up to its abort): trial{'s' if len(aborted) > 1 else ''} "
               f"{_spans(aborted)}", file=sys.stderr)
-        message = run.extra.get("abort_stop")
+        message = run.extra.get(ABORT_STOP_KEY)
         if message:
             stopped = True
             print(f"exo-ilc {command}: {run_title(run)}: {message}", file=sys.stderr)

@@ -30,6 +30,7 @@ from ..core.params import schema
 from ..core.programs.identified import Identified
 from ..core.protocol.graph import TrialProtocol
 from ..core.protocol.homing_protocol import HomingProtocol
+from ..core.session.abort import ABORT_STOP_KEY
 from ..core.session.learning_session import TrialConclusion
 from ..wire import topics
 from ..wire.protocol import int_value
@@ -268,6 +269,8 @@ class IlcSupervisor(Node):
             summary.values += status("", "", [
                 (k, self.protocol.plant_report.get(k, "")) for k in (
                     "late_commands", "periods", "first_late")]).values
+        if conclusion.stop_message:  # the one message of a run stopped by aborts
+            summary.values.append(KeyValue(key=ABORT_STOP_KEY, value=conclusion.stop_message))
         self.summary_pub.publish(diagnostic_array(self, [summary], end_ns))
         self.metrics_pub.publish(trial_metrics_message(summary, self.joint_names))
         self.event("end", [(kv.key, kv.value) for kv in summary.values], end_ns)

@@ -391,9 +391,11 @@ class TrialProtocol:
                           f"{changed}")
         for note in conclusion.update.notes if conclusion.learned else ():
             self.port.log(False, f"learning from trial {record.trial}: {note}")
-        if record.aborted:
-            self.port.log(True, f"trial {record.trial} aborted by the error envelope at "
-                          f"sample {aborted}; not learned from")
+        if conclusion.trip is not None:
+            self.port.log(True, f"{conclusion.trip.describe()}: aborted, learned from up to "
+                          f"sample {aborted}")
+        if conclusion.stop_message:
+            self.port.log(True, conclusion.stop_message)
         self.port.publish_conclusion(conclusion, self.end_ns)
         self.unsaved, self.unsaved_since = conclusion, self.clock()
         if self.config["wait_for_recorder"] and not self.recorder_lost \

@@ -47,6 +47,12 @@ STIFFNESS_CAUSE = ("the patient's stiffness or friction exceeds what the nominal
                    "wider safety.error_envelope only if it is safe)")
 DIVERGED_CAUSE = ("the plant diverged (a non-finite state: a joint's damping or stiffness too "
                   "stiff for the integration step)")
+ABORT_STOP_KEY = "abort_stop"
+"""The key of the stop message in the last trial's summary (the graph's ``/ilc/trial_summary``)
+and in a run's JSON."""
+MODEL_CAUSE = ("the nominal model's error (mass_uncertainty) or the gains take the arm out of "
+               "the envelope faster than learning closes the error (smaller learning gains; a "
+               "wider safety.error_envelope only if it is safe)")
 NOTHING_LEARNED_CAUSE = ("nothing was measured before the abort, so nothing could be learned "
                          "(the arm starts outside the envelope?)")
 
@@ -121,18 +127,23 @@ def pass_length_record(record: TrialRecord) -> TrialRecord:
     a = record.aborted_at
     if a is None:
         return record
-    valid = np.arange(record.position.shape[0])[:, None] <= a
+    rows = np.arange(record.position.shape[0])[:, None]
+    finite_at_abort = bool(np.all(np.isfinite(record.position[a])) and
+                           np.all(np.isfinite(record.velocity[a])))
+    valid = rows <= a if finite_at_abort else rows < a  # a diverged plant's sample a is not
     ref = record.reference
 
-    def measured(values: np.ndarray | None, reference: np.ndarray) -> np.ndarray | None:
-        return None if values is None else np.where(valid, values, reference)
+    def measured(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
+        return np.where(valid, values, reference)
 
     return dataclasses.replace(
         record, position=measured(record.position, ref.position),
         velocity=measured(record.velocity, ref.velocity),
         control_input=np.where(valid, record.control_input, record.feedforward),
-        true_position=measured(record.true_position, ref.position),
-        true_velocity=measured(record.true_velocity, ref.velocity), aborted_at=None)
+        true_position=None if record.true_position is None
+        else measured(record.true_position, ref.position),
+        true_velocity=None if record.true_velocity is None
+        else measured(record.true_velocity, ref.velocity), aborted_at=None)
 
 
 def partial_update(update: FeedforwardUpdate, record: TrialRecord, tripped: Sequence[int],
@@ -152,10 +163,13 @@ def partial_update(update: FeedforwardUpdate, record: TrialRecord, tripped: Sequ
     return dataclasses.replace(update, feedforward=feedforward)
 
 
-def stop_message(trip: AbortTrip, consecutive: int, nothing_learned: bool = False) -> str:
+def stop_message(trip: AbortTrip, consecutive: int, nothing_learned: bool = False,
+                 patient: bool = True) -> str:
     """The one message of a session stopped by aborts: the last abort's joint, time and value,
-    and its likely cause."""
+    and its likely cause (``patient``: a virtual patient's forces act on the arm, else the
+    nominal model's error is what computed torque does not cancel)."""
     cause = DIVERGED_CAUSE if trip.diverged else \
-        NOTHING_LEARNED_CAUSE if nothing_learned else STIFFNESS_CAUSE
+        NOTHING_LEARNED_CAUSE if nothing_learned else \
+        STIFFNESS_CAUSE if patient else MODEL_CAUSE
     count = f"{consecutive} aborted trials in a row" if consecutive > 1 else "an aborted trial"
     return f"stopped after {count}: {trip.describe()}; likely cause: {cause}"

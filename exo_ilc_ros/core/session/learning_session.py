@@ -45,7 +45,7 @@ from ..learning.norm_optimal_model import PatientLinearisation
 from ..learning.patient_model import JointForceModel, JointForceStep
 from ..learning.progress_gain import progress_gain_of
 from ..learning.qfilter import feedforward_limit_of
-from ..loop.patient import PatientLearning, true_error
+from ..loop.patient import PatientLearning, PatientModel, true_error
 from ..loop.record import TrialRecord, position_velocity_record
 from ..loop.trial import record_from_samples
 from ..params import schema
@@ -276,7 +276,8 @@ class LearningSession:
         nothing_learned = bool(np.array_equal(update.feedforward, record.feedforward))
         if trip.diverged or nothing_learned or \
                 self.consecutive_aborts >= self.config["abort.max_consecutive"]:
-            self.stop_message = stop_message(trip, self.consecutive_aborts, nothing_learned)
+            self.stop_message = stop_message(trip, self.consecutive_aborts, nothing_learned,
+                                             PatientModel(self.config).enabled)
         return nothing_learned
 
     def rehearse(self, experiment: Experiment) -> None:

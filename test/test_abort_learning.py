@@ -4,6 +4,8 @@ row (in-process and through the CLI, exit 5), resume == uninterrupted, graph == 
 
 from __future__ import annotations
 
+import itertools
+import json
 import subprocess
 import sys
 from dataclasses import replace
@@ -87,7 +89,7 @@ def test_trial_one_abort_learns_and_no_aborted_feedforward_repeats() -> None:
     result = run_trials(config)
     records = result.records
     assert records[0].aborted
-    for before, after in zip(records, records[1:], strict=False):
+    for before, after in itertools.pairwise(records):
         if before.aborted:
             assert not np.array_equal(before.feedforward, after.feedforward), after.trial
     assert result.stop is StopReason.ABORTS and len(records) == 3
@@ -185,7 +187,6 @@ def test_simulate_cli_stops_with_the_message_and_exit_5(tmp_path: Path) -> None:
     assert result.returncode == 5, result.stderr[-3000:]
     assert result.stderr.count("stopped after 3 aborted trials in a row") == 1, result.stderr
     assert "exit 5" in result.stderr
-    import json
     run = json.loads(out.read_text())["runs"][0]
     assert len(run["trials"]) == 3 and run["aborted_trials"] == [1, 2, 3]
     assert run[ABORT_STOP_KEY].startswith("stopped after 3 aborted trials in a row")

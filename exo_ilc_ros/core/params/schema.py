@@ -439,7 +439,7 @@ PARAMETERS: tuple[Parameter, ...] = (
               "|effort| limit per joint (N m)", per_joint=True, strictly_positive=True),
     Parameter("safety.error_envelope", SHARED, Kind.DOUBLE_ARRAY,
               "|e_j| above it aborts the trial at once: safe hold, trial marked aborted, "
-              "nothing learned from it (rad, per joint)", per_joint=True,
+              "learned from up to the abort only (abort.*; rad, per joint)", per_joint=True,
               strictly_positive=True, live=True),
     Parameter("safety.hold_kp", SHARED, Kind.DOUBLE_ARRAY,
               "K_P of the safe hold (s^-2, through a_N(q) as control.kp): its stiffness about "

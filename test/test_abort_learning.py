@@ -206,3 +206,46 @@ def test_graph_equals_in_process_through_aborts() -> None:
                                rtol=0.0, atol=1e-9)
     assert graph.summary.extra.get("aborted_trials") == local.aborted
     assert graph.summary.extra.get(ABORT_STOP_KEY) == local.stop_message
+
+
+def test_a_therapy_session_stops_with_the_exercise(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """``simulate --patient --session``: the first exercise stops after three aborts in a row
+    (saved to the profile with its partial learning), the second is not run, exit 5."""
+    from exo_ilc_ros.cli.main import main
+    from exo_ilc_ros.core.persistence.profiles import ProfileBook
+
+    exercises = tmp_path / "exercises.yaml"
+    exercises.write_text(
+        "exercises:\n  up: {points: [[0, 0, 0], [0.6, 0.4, 0.4]], durations: [0.5]}\n"
+        "  down: {points: [[0.6, 0.4, 0.4], [0, 0, 0]], durations: [0.5]}\n"
+        "sessions:\n  short: [{exercise: up, trials: 6}, {exercise: down, trials: 2}]\n")
+    config = tmp_path / "c.yaml"
+    config.write_text(f'"/**":\n  ros__parameters:\n    exercise:\n      file: "{exercises}"\n'
+                      '    safety:\n      error_envelope: 0.005\n')
+    assert main(["simulate", "--config", str(config), "--profiles", str(tmp_path / "p"),
+                 "--quiet", "--patient", "p1", "--new-patient", "--session", "short"]) == 5
+    err = capsys.readouterr().err
+    assert err.count("stopped after 3 aborted trials in a row") == 1, err
+    assert "the session stops here" in err and "1 exercise not run" in err
+    book = ProfileBook(tmp_path / "p")
+    assert book.exercises("p1") == ["up"]
+    assert book.load("p1", "up").provenance["trials"] == 3
+
+
+@pytest.mark.graph
+def test_run_cli_through_the_graph_stops_with_the_message_and_exit_5(tmp_path: Path) -> None:
+    config_file = tmp_path / "tight.yaml"
+    config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n'
+                           '    safety:\n      error_envelope: 0.05\n')
+    out = tmp_path / "run.json"
+    result = subprocess.run([sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--no-bag",
+                             "--config", str(config_file), "--trials", "20", "--quiet",
+                             "--json", str(out)], text=True, capture_output=True,
+                            timeout=300, check=False, cwd=tmp_path)
+    assert result.returncode == 5, result.stderr[-3000:]
+    local = run_trials(_config(**TIGHT, max_trials=20))
+    assert result.stderr.count(local.stop_message) == 1, result.stderr[-3000:]
+    run = json.loads(out.read_text())["runs"][0]
+    assert run["aborted_trials"] == local.aborted == [1, 2, 3]
+    assert run[ABORT_STOP_KEY] == local.stop_message

@@ -44,7 +44,7 @@ def _linear(**overrides: Any) -> Config:
 
 def test_partial_update_by_hand() -> None:
     """The law's update on [0, a), the aborted feed-forward from a on, the tripping joint's
-    change times the back-off (b^1 after one abort)."""
+    change times the back-off."""
     config = _linear(**{"abort.backoff": 0.5})
     session = LearningSession(config)
     experiment = Experiment(config)
@@ -152,7 +152,7 @@ def test_a_diverged_plant_stops_at_once_with_its_cause() -> None:
 
 
 def test_resume_after_aborts_equals_the_uninterrupted_run(tmp_path: Path) -> None:
-    """Stopped after trial 2 (two aborts: the back-off's count) and resumed: the same trials,
+    """Stopped after trial 2 (two aborts: the count towards the stop) and resumed: the same trials,
     feed-forwards and stop, bit for bit."""
     config = _config(**TIGHT, max_trials=20, **{"abort.max_consecutive": 4})
     whole = run_trials(config, store=tmp_path / "whole")
@@ -173,6 +173,22 @@ def test_resume_after_aborts_equals_the_uninterrupted_run(tmp_path: Path) -> Non
     again = run_trials(config, store=tmp_path / "whole", resume=True)
     assert again.resumed == 4 and len(again.records) == 4
     assert again.stop_message == whole.stop_message
+
+
+def test_raising_the_limit_and_resuming_continues_as_if_never_stopped(tmp_path: Path) -> None:
+    """A run stopped after 3 aborts in a row, resumed with ``abort.max_consecutive`` 5 (not in
+    the store's key): the trials of an uninterrupted run with 5, bit for bit."""
+    config = _config(**TIGHT, max_trials=20)
+    stopped = run_trials(config, store=tmp_path)
+    assert len(stopped.records) == 3 and stopped.stop is StopReason.ABORTS
+    raised = config.replace({"abort.max_consecutive": 5})
+    resumed = run_trials(raised, store=tmp_path, resume=True)
+    whole = run_trials(raised)
+    assert resumed.resumed == 3 and len(resumed.records) == len(whole.records) == 5
+    for a, b in zip(resumed.records, whole.records, strict=True):
+        np.testing.assert_array_equal(a.feedforward, b.feedforward)
+        np.testing.assert_array_equal(a.position, b.position)
+    assert resumed.stop_message == whole.stop_message != stopped.stop_message
 
 
 def test_simulate_cli_stops_with_the_message_and_exit_5(tmp_path: Path) -> None:

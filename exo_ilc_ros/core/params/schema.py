@@ -559,7 +559,8 @@ PARAMETERS: tuple[Parameter, ...] = (
     # --- learning through an abort (core/session/abort.py, docs/safety.md) ---
     Parameter("abort.backoff", SUPERVISOR, Kind.DOUBLE,
               "after an aborted trial, the learned change on the joints that left the error "
-              "envelope is scaled by backoff ** (aborts in a row) (0 < b <= 1; 1: no back-off)",
+              "envelope is scaled by backoff for the update learned from that trial (0 < b <= 1; "
+              "1: no back-off)",
               strictly_positive=True, live=True,
               extra_rule=lambda v: None if v <= 1.0 else
               f"must be in (0, 1] (1: no back-off; 0.5 halves the step), got {v!r}"),

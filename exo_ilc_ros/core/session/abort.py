@@ -15,14 +15,18 @@ measured. Laws that read sums over the trial (the sign law's schedule, eq (13)) 
 samples 0..a; laws with a model (norm-optimal) see a zero error after a.
 
 **Back-off** (``abort.backoff``, b in (0, 1]): on the joints outside the envelope at the abort
-sample (the tripping joints) the learned change is scaled by b^n, n the aborts in a row counting
-this one: u_next = u_ff + b^n (u_law - u_ff) there, the other joints take the law's update as it
-is. A smaller step on the joint that left the envelope keeps the next trial closer to the input
-that stayed inside it up to sample a (the learning gain of that joint halved for the update after
-one abort with b = 0.5, quartered after two, ...); the samples from a on keep the aborted trial's
-input either way. We chose it over restarting from the last completed trial's input: that input
-is the one the abort was learned from, so a restart would drop the partial learning, and a
-trial-1 abort has no completed trial to restart from.
+sample (the tripping joints) the learned change is scaled by b in the update learned from the
+aborted trial: u_next = u_ff + b (u_law - u_ff) there; the other joints take the law's update
+as it is, and a completed trial is learned from at the law's full gain. With b = 0.5 the
+tripping joint's learning gain is halved for that update: the next trial stays closer to the
+input that kept it inside the envelope up to sample a; the samples from a on keep the aborted
+trial's input either way. The factor does not compound over aborts in a row: b^n (n the aborts
+in a row) shrank the step so fast that learning stalled before the abort moved (a 5 cm envelope
+under PD: abort sample 19, 20, 21, 21, 22, 22, ... for 30 trials with the sign law, while a
+constant 0.5 reached the end of the trial after 18 aborts; docs/safety.md). We chose it over
+restarting from the last completed trial's input: that input is the one the abort was learned
+from, so a restart would drop the partial learning, and a trial-1 abort has no completed trial
+to restart from.
 
 **Stop** (``abort.max_consecutive``, N): N aborted trials in a row end the session (or one abort
 whose learned feed-forward equals the aborted one: nothing was measured before the abort, a
@@ -150,7 +154,7 @@ def partial_update(update: FeedforwardUpdate, record: TrialRecord, tripped: Sequ
                    backoff: float) -> FeedforwardUpdate:
     """The feed-forward after aborted ``record`` (module docstring): the law's ``update`` on
     samples [0, a), the aborted trial's feed-forward from a on; on the ``tripped`` joints the
-    change scaled by ``backoff`` (b^n, the caller's)."""
+    change scaled by ``backoff``."""
     a = record.aborted_at
     if a is None:
         raise ValueError(f"trial {record.trial} was not aborted")

@@ -10,7 +10,7 @@ The rules, in the order :meth:`LearningSession.conclude` applies them at a trial
 2. A completed trial is learned from with the law, eq (11). A trial the error envelope aborted
    at sample a is kept, marked and learned from over the samples it has (variable pass length,
    :mod:`.abort`): the law's update on [0, a), the aborted feed-forward kept from a on, the change
-   on the tripping joints scaled by ``abort.backoff`` ** (aborts in a row). An aborted
+   on the tripping joints scaled by ``abort.backoff``. An aborted
    feed-forward is never run again unchanged: ``abort.max_consecutive`` aborts in a row, or an
    abort that left nothing to learn, or a plant that diverged, stop the session
    (:attr:`StopReason.ABORTS`, :attr:`LearningSession.stop_message` says why, once). A learned
@@ -125,7 +125,7 @@ class LearningSession:
     retried: list[tuple[int, str]] = field(default_factory=list)
     stop: StopReason | None = None
     consecutive_aborts: int = 0
-    """Aborted trials in a row up to the last concluded one (the back-off's n)."""
+    """Aborted trials in a row up to the last concluded one (``abort.max_consecutive``)."""
     stop_message: str = ""
     """Why aborts stopped the session (rule 2; empty: they did not)."""
     _custom_law: bool = field(default=False, init=False, repr=False)
@@ -259,11 +259,11 @@ class LearningSession:
     def _learn_through_abort(self, record: TrialRecord, trip: AbortTrip) -> FeedforwardUpdate:
         """Rule 2 for aborted ``record``: the law's update from its valid samples
         (:func:`.abort.pass_length_record`) on [0, a), the rest kept, the back-off on the
-        tripping joints (``abort.backoff`` ** the aborts in a row)."""
+        tripping joints (``abort.backoff``)."""
         law_record = pass_length_record(record)
         if self.config["learning_velocity"] == "position":
             law_record = position_velocity_record(law_record, np.asarray(self.config["control.kd"]))
-        backoff = float(self.config["abort.backoff"]) ** self.consecutive_aborts
+        backoff = float(self.config["abort.backoff"])
         return partial_update(self.active_law.update(law_record), record, trip.tripped, backoff)
 
     def _abort_stop(self, record: TrialRecord, trip: AbortTrip | None,

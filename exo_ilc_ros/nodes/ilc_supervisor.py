@@ -316,6 +316,8 @@ class IlcSupervisor(Node):
         reasons = []
         if aborted:
             reasons.append(f"trials aborted by the error envelope: {aborted}")
+        if session is not None and session.stop_message:
+            reasons.append(session.stop_message)
         if retried:
             reasons.append(f"{len(retried)} trials run again")
         level = DiagnosticStatus.WARN if reasons else DiagnosticStatus.OK

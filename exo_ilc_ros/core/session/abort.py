@@ -23,14 +23,15 @@ input that kept it inside the envelope up to sample a; the samples from a on kee
 trial's input either way. The factor does not compound over aborts in a row: b^n (n the aborts
 in a row) shrank the step so fast that learning stalled before the abort moved (a 5 cm envelope
 under PD: abort sample 19, 20, 21, 21, 22, 22, ... for 30 trials with the sign law, while a
-constant 0.5 reached the end of the trial after 18 aborts; docs/safety.md). We chose it over
-restarting from the last completed trial's input: that input is the one the abort was learned
-from, so a restart would drop the partial learning, and a trial-1 abort has no completed trial
-to restart from.
+constant 0.5 completed the trials after 18 aborts; docs/safety.md). We chose it over
+restarting from the last completed trial's input: a restart drops what the aborted trials taught
+(their partial learning) and runs again the input the law learned the aborting one from; and a
+trial-1 abort has no completed trial to restart from.
 
-**Stop** (``abort.max_consecutive``, N): N aborted trials in a row end the session (or one abort
-whose learned feed-forward equals the aborted one: nothing was measured before the abort, a
-deterministic plant would abort the same way again). :func:`stop_message` says it once, naming
+**Stop** (``abort.max_consecutive``, N): N aborted trials in a row end the session; so does one
+abort of a plant that diverged (a non-finite state: learning cannot help), or one whose learned
+feed-forward equals the aborted one (nothing was measured before the abort: a deterministic
+plant would abort the same way again). :func:`stop_message` says it once, naming
 the joint, the time, the error against the envelope and the likely cause.
 """
 

@@ -265,3 +265,20 @@ def test_run_cli_through_the_graph_stops_with_the_message_and_exit_5(tmp_path: P
     run = json.loads(out.read_text())["runs"][0]
     assert run["aborted_trials"] == local.aborted == [1, 2, 3]
     assert run[ABORT_STOP_KEY] == local.stop_message
+
+
+@pytest.mark.graph
+def test_graph_resume_of_a_stopped_run_stops_again_with_the_message(tmp_path: Path) -> None:
+    """A store whose last trials stopped the run (in-process), resumed through the graph: no
+    trial runs, the run carries the same stop message (``exo-ilc run`` exits 5 on it)."""
+    from exo_ilc_ros.orchestration.graph import run_graph
+
+    config = _config(**TIGHT, max_trials=20)
+    local = run_trials(config, store=tmp_path)
+    assert local.stop is StopReason.ABORTS
+    resumed = run_graph(config.replace({"store.directory": str(tmp_path),
+                                        "store.resume": True}), timeout=300.0)
+    assert [s.trial for s in resumed.summaries] == [1, 2, 3]
+    assert resumed.summary.extra.get(ABORT_STOP_KEY) == local.stop_message
+    np.testing.assert_allclose(resumed.summary.max_abs_error, local.max_abs_errors,
+                               rtol=0.0, atol=1e-12)

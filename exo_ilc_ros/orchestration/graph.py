@@ -311,6 +311,9 @@ def run_graph(config: Config, domain_id: int | None = None, extra: Sequence[Node
             wall = session.finished_at - session.started_at
         summaries = merge_with_store(session.summaries, config)
         summary = summaries_to_run(summaries, config)
+        stopped = [v.get(ABORT_STOP_KEY) for m, v, _ in session.events if m == "finished"]
+        if stopped and stopped[-1]:  # a resumed run the store's aborts had already stopped
+            summary.extra[ABORT_STOP_KEY] = stopped[-1]
         again = reruns(session.events)
         if again:
             summary.extra["reruns"] = again

@@ -26,6 +26,7 @@ from ..loop.trial import record_from_samples
 from ..params.config import Config
 from ..persistence.store import RunStore
 from ..reference.build import build_reference
+from ..session.abort import ABORT_STOP_KEY
 from ..session.learning_session import LIVE, LearningSession, TrialConclusion
 from ..sim.experiment import Experiment
 from .samples import TrialSamples
@@ -449,6 +450,8 @@ class TrialProtocol:
                 values: Sequence[tuple[str, str]] = ()) -> None:
         trials = self.completed if completed is None else completed
         self._enter(Phase.FINISHED)
+        if self.session is not None and self.session.stop_message:  # also on a resumed stop
+            values = [*values, (ABORT_STOP_KEY, self.session.stop_message)]
         self.port.event("finished", [("trials", str(trials)), *values], self.end_ns or None)
         self.port.log(False, f"finished after {trials} trials")
 

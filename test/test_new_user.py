@@ -209,12 +209,13 @@ def test_a_run_whose_trials_abort_says_so_and_exits_4(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     tight = tmp_path / "tight.yaml"
     tight.write_text(SHORT + "    safety:\n      error_envelope: [0.01, 0.01, 0.01]\n")
-    assert exo_ilc(["simulate", "--config", str(tight), "--trials", "3", "--quiet",
+    # two aborts: fewer than abort.max_consecutive (3), which would stop the run (exit 5)
+    assert exo_ilc(["simulate", "--config", str(tight), "--trials", "2", "--quiet",
                     "--json", str(tmp_path / "r.json")]) == 4
     err = capsys.readouterr().err
-    assert "ALL trials ABORTED by the error envelope" in err and "trials 1-3" in err
+    assert "ALL trials ABORTED by the error envelope" in err and "trials 1-2" in err
     run = json.loads((tmp_path / "r.json").read_text())["runs"][0]
-    assert run["aborted_trials"] == [1, 2, 3]
+    assert run["aborted_trials"] == [1, 2]
 
 
 # --- point 6: live changes and re-run trials --------------------------------------------------

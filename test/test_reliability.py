@@ -340,9 +340,9 @@ def test_plant_watchdog_in_real_time_mode_stops_holding_the_last_command(tmp_pat
 
 # --- the error envelope in the graph ----------------------------------------------------------
 def test_envelope_abort_in_the_graph_equals_in_process_and_sigterm_stops_cleanly() -> None:
-    """A tight envelope aborts every trial at the same sample: the graph gives exactly
-    run_trials' table, marks each trial aborted (event and summary), learns nothing (the
-    feed-forward stays), reports it on /diagnostics; SIGTERM then stops every node (exit 0)."""
+    """A tight envelope aborts every trial: the graph gives exactly run_trials' table, marks
+    each trial aborted (event and summary), learns up to each abort as in-process, reports it
+    on /diagnostics; SIGTERM then stops every node (exit 0)."""
     from exo_ilc_ros.orchestration.graph import GraphSession
 
     config = _config(max_trials=3, **{"safety.error_envelope": [0.01, 0.01, 0.01]})
@@ -363,7 +363,7 @@ def test_envelope_abort_in_the_graph_equals_in_process_and_sigterm_stops_cleanly
                    v["reason"] == "error_envelope"]
         assert [v["trial"] for v in aborted] == ["1", "2", "3"]
         ff = _table(session.summaries, config, "max_abs_feedforward")
-        np.testing.assert_array_equal(ff, np.zeros_like(ff))  # nothing learned
+        np.testing.assert_allclose(ff, local.max_abs_feedforward, rtol=0.0, atol=1e-9)
         controller = health["computed_torque_controller/health"]
         assert controller.level >= controller.WARN
         assert _values(controller)["aborted_trials"] == "1 2 3"

@@ -67,7 +67,7 @@ def test_safety_events_are_explained() -> None:
                       reruns=[(3, "watchdog"), (3, "lost")])
     text = render_session([run])
     assert "trial 2 stopped at t = 1.50 s" in text and "0.2 rad" in text
-    assert "held the arm where it was" in text and "nothing was learned from it" in text
+    assert "held the arm where it was" in text and "learned from up to where it stopped" in text
     assert "1 watchdog trip(s)" in text and "10 control periods (0.10 s)" in text
     assert "not something the patient did" in text and "trial 3 (lost)" in text
     assert "assist-as-needed" in text

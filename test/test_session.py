@@ -93,7 +93,9 @@ def test_stage_checks_the_change_now() -> None:
     assert session.staged == {}
 
 
-def test_envelope_abort_keeps_the_feedforward_and_breaks_the_streak() -> None:
+def test_envelope_abort_learns_up_to_the_abort_and_breaks_the_streak() -> None:
+    """Rule 2 (core/session/abort.py): the aborted trial's feed-forward is kept from the abort
+    sample on and learned from before it; test_abort_learning.py computes the update by hand."""
     config = _config(max_trials=10)
     session = LearningSession(config)
     experiment = Experiment(config)
@@ -102,9 +104,12 @@ def test_envelope_abort_keeps_the_feedforward_and_breaks_the_streak() -> None:
     learned = session.feedforward.copy()
     aborted = replace(experiment.run_trial(learned, 2, session.levels), aborted_at=7)
     conclusion = session.conclude(aborted)
-    assert not conclusion.learned and not conclusion.within_bound
-    np.testing.assert_array_equal(session.feedforward, learned)
+    assert conclusion.learned and not conclusion.within_bound
+    assert conclusion.trip is not None and conclusion.trip.sample == 7
+    np.testing.assert_array_equal(session.feedforward[7:], learned[7:])
+    assert not np.array_equal(session.feedforward[:7], learned[:7])
     assert session.trial == 3 and session.aborted_trials == [2] and session.within_streak == 0
+    assert session.consecutive_aborts == 1 and not session.finished
 
 
 def test_discard_runs_the_same_trial_again() -> None:

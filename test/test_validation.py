@@ -241,7 +241,7 @@ def good_value(p: schema.Parameter) -> st.SearchStrategy[Any]:
         return st.floats(1e-3, NYQUIST * 0.999)
     if p.name == "norm_optimal.effort_margin":
         return st.floats(0.0, 0.999)
-    if p.name == "assist_as_needed.forgetting":
+    if p.name in ("assist_as_needed.forgetting", "abort.backoff"):
         return st.floats(1e-3, 1.0)
     if p.kind is schema.Kind.DOUBLE:
         return st.floats(low, 1e3)

@@ -245,8 +245,9 @@ def _events(run: ExerciseRun) -> str:
             "<p class=note>What it means: the arm moved further from the planned movement than "
             "the safety envelope allows (a strong push or pull, a spasm, or assistance that did "
             "not fit). The robot stopped following the movement and held the arm where it was. "
-            "The trial is kept in the record but nothing was learned from it; the next trial "
-            "used the same assistance.</p>")
+            "The trial is kept in the record and was learned from up to where it stopped (with "
+            "a smaller step for the joint that left the envelope), so the next trial used "
+            "changed assistance; a few such trials in a row end the session.</p>")
     else:
         parts.append("<p>No trial was stopped by the safety envelope.</p>")
     trips = [(k, r) for k, r in run.reruns if r == "watchdog"]

@@ -198,7 +198,7 @@ def _trial_events(streams: dict[str, Stream], notes: list[str]) -> _Events:
                 out.aborted_at[k] = -1 if at is None else at
                 notes.append(f"trial {k} was aborted by the error envelope at sample "
                              f"{values.get('aborted_at', '?')} (safe hold from there; kept, "
-                             "not learned from)")
+                             "learned from up to the abort)")
             else:
                 reason = values.get("reason") or values.get("phase") or "?"
                 out.reruns.setdefault(k, []).append(reason)

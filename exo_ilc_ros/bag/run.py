@@ -109,7 +109,8 @@ class BagRun:
 
     @property
     def aborted(self) -> list[int]:
-        """Trials the error envelope aborted (kept, marked, not learned from), in order."""
+        """Trials the error envelope aborted (kept, marked, learned from up to the abort), in
+        order."""
         return sorted(k for k, t in self.trials.items() if t.aborted_at is not None)
 
     @property

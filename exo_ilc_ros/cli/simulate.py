@@ -24,6 +24,7 @@ from ..core.params.config import Config
 from ..core.programs.identified import Identified
 from ..core.programs.metrics import config_metrics
 from ..core.programs.spread import iteration_spread
+from ..core.session.abort import ABORT_STOP_KEY
 from ..core.session.learning_session import run_trials
 from ..core.session.result import RunResult
 from ..core.session.summary import RunSummary
@@ -209,13 +210,18 @@ def _spread(config: Config, delta: float, trials: int, count: int) -> dict[str, 
 
 EXIT_ABORTED = 4
 """Exit code of ``simulate`` and ``run``: every run completed, but the error envelope aborted
-trials (listed on stderr; nothing was learned from them): not a clean run."""
+trials (listed on stderr; each was learned from over the samples it had): not a clean run."""
+EXIT_ABORT_STOP = 5
+"""Exit code of ``simulate`` and ``run``: a run was stopped by aborted trials in a row
+(``abort.max_consecutive``), a diverged plant or an abort that left nothing to learn; one
+message names the joint, the time, the error and the likely cause (core/session/abort.py)."""
 
 
 def aborted_exit(runs: list[RunSummary], command: str) -> int:
-    """Say loudly which trials the error envelope aborted; :data:`EXIT_ABORTED` if any, else
+    """Say loudly which trials the error envelope aborted, and once why a run stopped on them;
+    :data:`EXIT_ABORT_STOP` if one did, else :data:`EXIT_ABORTED` if any trial aborted, else
     0."""
-    any_aborted = False
+    any_aborted = stopped = False
     for run in runs:
         aborted = [int(k) for k in run.extra.get("aborted_trials", [])]
         if not aborted:
@@ -224,9 +230,17 @@ def aborted_exit(runs: list[RunSummary], command: str) -> int:
         count = len(run.max_abs_error)
         share = "ALL" if len(aborted) == count else f"{len(aborted)} of {count}"
         print(f"exo-ilc {command}: WARNING: {run_title(run)}: {share} trials ABORTED by the "
-              f"error envelope (safety.error_envelope; the robot held the arm there and nothing "
-              f"was learned from them): trial{'s' if len(aborted) > 1 else ''} "
+              f"error envelope (safety.error_envelope; the robot held the arm there; each was "
+              f"learned from up to its abort): trial{'s' if len(aborted) > 1 else ''} "
               f"{_spans(aborted)}", file=sys.stderr)
+        message = run.extra.get(ABORT_STOP_KEY)
+        if message:
+            stopped = True
+            print(f"exo-ilc {command}: {run_title(run)}: {message}", file=sys.stderr)
+    if stopped:
+        print(f"exo-ilc {command}: exit {EXIT_ABORT_STOP}: a run was stopped by aborted trials "
+              "(every trial, and what was learned from it, is kept)", file=sys.stderr)
+        return EXIT_ABORT_STOP
     if any_aborted:
         print(f"exo-ilc {command}: exit {EXIT_ABORTED}: trials were aborted (check the mass "
               "uncertainty, the gains and the envelope)", file=sys.stderr)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +32,7 @@ from ..core.programs.therapy import (
 )
 from ..core.reference.build import build_reference
 from ..core.reference.exercise import exercises_path, load_book
+from ..core.session.abort import ABORT_STOP_KEY
 from ..core.session.learning_session import stored_trials
 from ..core.session.summary import RunSummary
 from ..orchestration.launcher import GraphError
@@ -121,12 +122,16 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
         runs.append(summary)
         print(f"profile: {book.directory(args.patient, name)} v{done.version} (the patient's "
               f"session {done.config['patient.session']} of {name})", file=sys.stderr)
+        stopped = bool(done.result.stop_message)
         if args.bag:
             path = unique_path(args.bag, run_name(f"sim_{args.patient}_{name}", done.result.law,
                                                   done.result.mass_uncertainty))
             write_run(path, done.config, done.result, metrics=done.metrics,
                       extra_custom_data=therapy_custom_data(done, session, order))
             print(f"bag: {path}", file=sys.stderr)
+        if stopped:  # the session stops with the exercise (core/session/abort.py)
+            _stopped_by_aborts(args.patient, plan[order:])
+            break
     for done in results:
         print(format_session_metrics(done, list(done.config["joint_names"])))
         print()
@@ -166,6 +171,9 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
                                           store_root, run_one)
         if summary is not None:
             runs.append(summary)
+            if summary.extra.get(ABORT_STOP_KEY):  # the session stops with the exercise
+                _stopped_by_aborts(args.patient, steps[order:])
+                break
     return runs
 
 
@@ -284,3 +292,11 @@ def _write_sidecar(bag: Path, patient: str, exercise: str, session: str,
                                           "session": session, "profile_started_from":
                                           started_from, "profile_version": version,
                                           "exercise_order": order})
+
+
+def _stopped_by_aborts(patient: str, left: Sequence[Any]) -> None:
+    """An exercise stopped by aborted trials ends the therapy session: the exercises ``left``
+    are not run (each one's message is printed with the run's, exit 5)."""
+    if left:
+        print(f"patient {patient}: the session stops here (aborted trials in a row); "
+              f"{counted(len(left), 'exercise')} not run", file=sys.stderr)

@@ -30,6 +30,7 @@ from ..core.params import schema
 from ..core.programs.identified import Identified
 from ..core.protocol.homing_protocol import HomingProtocol
 from ..core.protocol.trial_protocol import TrialProtocol
+from ..core.session.abort import ABORT_STOP_KEY
 from ..core.session.learning_session import TrialConclusion
 from ..wire import topics
 from ..wire.protocol import int_value
@@ -268,6 +269,8 @@ class IlcSupervisor(Node):
             summary.values += status("", "", [
                 (k, self.protocol.plant_report.get(k, "")) for k in (
                     "late_commands", "periods", "first_late")]).values
+        if conclusion.stop_message:  # the one message of a run stopped by aborts
+            summary.values.append(KeyValue(key=ABORT_STOP_KEY, value=conclusion.stop_message))
         self.summary_pub.publish(diagnostic_array(self, [summary], end_ns))
         self.metrics_pub.publish(trial_metrics_message(summary, self.joint_names))
         self.event("end", [(kv.key, kv.value) for kv in summary.values], end_ns)
@@ -313,6 +316,8 @@ class IlcSupervisor(Node):
         reasons = []
         if aborted:
             reasons.append(f"trials aborted by the error envelope: {aborted}")
+        if session is not None and session.stop_message:
+            reasons.append(session.stop_message)
         if retried:
             reasons.append(f"{len(retried)} trials run again")
         level = DiagnosticStatus.WARN if reasons else DiagnosticStatus.OK

@@ -24,6 +24,7 @@ from ..core.params.config import Config
 from ..core.persistence.store import RunStore
 from ..core.programs.identified import Identified
 from ..core.reference.build import build_reference
+from ..core.session.abort import ABORT_STOP_KEY
 from ..core.session.summary import RunSummary, live_changes
 from ..nodes.common import EVENTS_QOS
 from ..wire import topics
@@ -79,6 +80,9 @@ def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSu
     aborted = [s.trial for s in summaries if "aborted_at" in s.values]
     if aborted:
         summary.extra["aborted_trials"] = aborted
+    stopped = summaries[-1].values.get(ABORT_STOP_KEY) if summaries else None
+    if stopped:  # the session's one message (core/session/abort.py), as simulate's
+        summary.extra[ABORT_STOP_KEY] = stopped
     identified = Identified.from_summary(summaries[-1].trial, summaries[-1].values, joints) \
         if summaries else None
     if identified is not None:  # the last estimate, as simulate reports it
@@ -307,6 +311,9 @@ def run_graph(config: Config, domain_id: int | None = None, extra: Sequence[Node
             wall = session.finished_at - session.started_at
         summaries = merge_with_store(session.summaries, config)
         summary = summaries_to_run(summaries, config)
+        stopped = [v.get(ABORT_STOP_KEY) for m, v, _ in session.events if m == "finished"]
+        if stopped and stopped[-1]:  # a resumed run the store's aborts had already stopped
+            summary.extra[ABORT_STOP_KEY] = stopped[-1]
         again = reruns(session.events)
         if again:
             summary.extra["reruns"] = again

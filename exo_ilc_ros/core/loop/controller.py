@@ -5,8 +5,8 @@ Error envelope (``safety.error_envelope``): at every sample the controller compa
 |e_j| = |q_d,j - q_j| with the envelope of joint j (:func:`outside_envelope`, the one check). At
 the first sample where any joint is outside (or the state is not finite) the trial is aborted
 *at that sample*: from it on the effort is the **safe hold** and the trial record carries
-``aborted_at`` = that index; the learning law does not learn from an aborted trial (the next
-trial reuses the same feed-forward).
+``aborted_at`` = that index; the learning session learns from an aborted trial only up to that
+index (core/session/abort.py).
 
 Safe hold: the same computed-torque controller with the reference frozen at the pose measured at
 the abort, zero reference velocity and no feed-forward, with the hold's own gains:

@@ -49,7 +49,7 @@ NOT_KEYED = frozenset({"max_trials", "mode", "real_time_rate", "wait_for_recorde
                        "safety.watchdog_periods", "watchdog_min_timeout",
                        "safety.hold_kp", "safety.hold_kd", "safety.hold_ramp",
                        "store.directory",
-                       "store.resume"})
+                       "store.resume", "abort.max_consecutive"})
 """Non-live parameters that change how a run is driven, not what it learns."""
 
 _ARRAYS = ("position", "velocity", "feedforward", "control_input", "effort")

@@ -26,6 +26,7 @@ from ..loop.trial import record_from_samples
 from ..params.config import Config
 from ..persistence.store import RunStore
 from ..reference.build import build_reference
+from ..session.abort import ABORT_STOP_KEY
 from ..session.learning_session import LIVE, LearningSession, TrialConclusion
 from ..sim.experiment import Experiment
 from .samples import TrialSamples
@@ -391,9 +392,11 @@ class TrialProtocol:
                           f"{changed}")
         for note in conclusion.update.notes if conclusion.learned else ():
             self.port.log(False, f"learning from trial {record.trial}: {note}")
-        if record.aborted:
-            self.port.log(True, f"trial {record.trial} aborted by the error envelope at "
-                          f"sample {aborted}; not learned from")
+        if conclusion.trip is not None:
+            self.port.log(True, f"{conclusion.trip.describe()}: aborted, learned from up to "
+                          f"sample {aborted}")
+        if conclusion.stop_message:
+            self.port.log(True, conclusion.stop_message)
         self.port.publish_conclusion(conclusion, self.end_ns)
         self.unsaved, self.unsaved_since = conclusion, self.clock()
         if self.config["wait_for_recorder"] and not self.recorder_lost \
@@ -447,6 +450,8 @@ class TrialProtocol:
                 values: Sequence[tuple[str, str]] = ()) -> None:
         trials = self.completed if completed is None else completed
         self._enter(Phase.FINISHED)
+        if self.session is not None and self.session.stop_message:  # also on a resumed stop
+            values = [*values, (ABORT_STOP_KEY, self.session.stop_message)]
         self.port.event("finished", [("trials", str(trials)), *values], self.end_ns or None)
         self.port.log(False, f"finished after {trials} trials")
 

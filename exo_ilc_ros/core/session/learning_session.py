@@ -7,13 +7,18 @@ The rules, in the order :meth:`LearningSession.conclude` applies them at a trial
 1. Live parameter changes staged during the trial (:meth:`~LearningSession.stage`) take effect:
    the law is rebuilt from the new values and learns the next feed-forward with them (the first
    trial *run* with them is the next one, the ``effective_trial`` a bag records).
-2. A trial the error envelope aborted is kept and marked but not learned from: the next trial
-   reuses its feed-forward and levels. Any other trial is learned from with the law, eq (11); a
-   learned feed-forward that is not finite or of the wrong shape stops the session
+2. A completed trial is learned from with the law, eq (11). A trial the error envelope aborted
+   at sample a is kept, marked and learned from over the samples it has (variable pass length,
+   :mod:`.abort`): the law's update on [0, a), the aborted feed-forward kept from a on, the change
+   on the tripping joints scaled by ``abort.backoff``. An aborted
+   feed-forward is never run again unchanged: ``abort.max_consecutive`` aborts in a row, or an
+   abort that left nothing to learn, or a plant that diverged, stop the session
+   (:attr:`StopReason.ABORTS`, :attr:`LearningSession.stop_message` says why, once). A learned
+   feed-forward that is not finite or of the wrong shape stops the session
    (:class:`SafetyError`), nothing of it is used.
 3. The "within the bound" streak counts consecutive completed trials with every joint's
-   max |e_j| <= ``error_bound``; the session is finished after ``max_trials`` trials or once the
-   streak reaches ``stop_when_settled`` (> 0).
+   max |e_j| <= ``error_bound``; the session is finished after ``max_trials`` trials, once the
+   streak reaches ``stop_when_settled`` (> 0), or by rule 2's aborts.
 
 A trial that must be run again (a watchdog trip, lost samples, a protocol step that made no
 progress) is :meth:`~LearningSession.discard`-ed: nothing is learned, the same trial number and
@@ -40,7 +45,7 @@ from ..learning.norm_optimal_model import PatientLinearisation
 from ..learning.patient_model import JointForceModel, JointForceStep
 from ..learning.progress_gain import progress_gain_of
 from ..learning.qfilter import feedforward_limit_of
-from ..loop.patient import PatientLearning, true_error
+from ..loop.patient import PatientLearning, PatientModel, true_error
 from ..loop.record import TrialRecord, position_velocity_record
 from ..loop.trial import record_from_samples
 from ..loop.wire_input import Rejection, check_feedforward_array
@@ -50,6 +55,7 @@ from ..persistence.profiles import load_initial
 from ..persistence.store import RunStore, StoredTrial
 from ..reference.build import build_reference
 from ..sim.experiment import Experiment
+from .abort import AbortTrip, partial_update, pass_length_record, stop_message, trip_of
 from .result import RunResult, StopReason
 
 LIVE = frozenset(p.name for p in schema.PARAMETERS if p.live)
@@ -82,7 +88,8 @@ class TrialConclusion:
     update: FeedforwardUpdate
     """The feed-forward (and levels) the next trial uses."""
     learned: bool
-    """False for a trial the error envelope aborted (its feed-forward is reused)."""
+    """False only for an aborted trial that left nothing to learn (then the session stops);
+    an aborted trial is learned from over the samples it has (:mod:`.abort`)."""
     within_bound: bool
     applied: dict[str, Any]
     """Live changes that took effect at this boundary (learned with; empty: none)."""
@@ -93,6 +100,10 @@ class TrialConclusion:
     joint_forces: JointForceStep | None = None
     """The identification of the trial and the joint forces the next trial adds
     (``identification.enabled``; None: off)."""
+    trip: AbortTrip | None = None
+    """Where an aborted trial left the envelope (None: completed)."""
+    stop_message: str = ""
+    """Why aborts stopped the session (``stop`` is ABORTS); empty otherwise."""
 
 
 @dataclass
@@ -113,6 +124,10 @@ class LearningSession:
     aborted_trials: list[int] = field(default_factory=list)
     retried: list[tuple[int, str]] = field(default_factory=list)
     stop: StopReason | None = None
+    consecutive_aborts: int = 0
+    """Aborted trials in a row up to the last concluded one (``abort.max_consecutive``)."""
+    stop_message: str = ""
+    """Why aborts stopped the session (rule 2; empty: they did not)."""
     _custom_law: bool = field(default=False, init=False, repr=False)
     _staged: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
     _patient: PatientLinearisation | None = field(default=None, init=False, repr=False)
@@ -173,6 +188,8 @@ class LearningSession:
         return dict(self._staged)
 
     def _stop_reason(self) -> StopReason | None:
+        if self.stop_message:
+            return StopReason.ABORTS
         if self.completed >= self.config["max_trials"]:
             return StopReason.MAX_TRIALS
         settled = self.config["stop_when_settled"]
@@ -204,16 +221,20 @@ class LearningSession:
                               "one running")
         applied = self._apply_staged()
         learned_from = self._learned_from(record)
+        trip = None
         if record.aborted:
-            update = self.next_update
             self.aborted_trials.append(record.trial)
+            self.consecutive_aborts += 1
+            trip = trip_of(record, self.config)
+            update = self._learn_through_abort(record, trip)
         else:
+            self.consecutive_aborts = 0
             update = self.active_law.update(learned_from)
-            checked = check_feedforward_array(update.feedforward, self.feedforward.shape,
-                                              "learned feed-forward")
-            if isinstance(checked, Rejection):
-                raise SafetyError(f"trial {record.trial}: the learning law produced a bad "
-                                  f"feed-forward ({checked}); it was not stored or used")
+        checked = check_feedforward_array(update.feedforward, self.feedforward.shape,
+                                          "learned feed-forward")
+        if isinstance(checked, Rejection):
+            raise SafetyError(f"trial {record.trial}: the learning law produced a bad "
+                              f"feed-forward ({checked}); it was not stored or used")
         forces = None
         shift = None
         if self.joint_forces is not None:
@@ -229,9 +250,35 @@ class LearningSession:
         self.completed = record.trial
         self.trial = record.trial + 1
         self.next_update = update
+        nothing_learned = self._abort_stop(record, trip, update)
         self.stop = self._stop_reason()
-        return TrialConclusion(record, update, not record.aborted, within, applied,
-                               self.config, self.stop, forces)
+        return TrialConclusion(record, update, not nothing_learned, within, applied,
+                               self.config, self.stop, forces, trip,
+                               self.stop_message if self.stop is StopReason.ABORTS else "")
+
+    def _learn_through_abort(self, record: TrialRecord, trip: AbortTrip) -> FeedforwardUpdate:
+        """Rule 2 for aborted ``record``: the law's update from its valid samples
+        (:func:`.abort.pass_length_record`) on [0, a), the rest kept, the back-off on the
+        tripping joints (``abort.backoff``)."""
+        law_record = pass_length_record(record)
+        if self.config["learning_velocity"] == "position":
+            law_record = position_velocity_record(law_record, np.asarray(self.config["control.kd"]))
+        backoff = float(self.config["abort.backoff"])
+        return partial_update(self.active_law.update(law_record), record, trip.tripped, backoff)
+
+    def _abort_stop(self, record: TrialRecord, trip: AbortTrip | None,
+                    update: FeedforwardUpdate) -> bool:
+        """Rule 2's stop after aborted ``record`` led to ``update``: sets :attr:`stop_message`
+        after ``abort.max_consecutive`` aborts in a row, a diverged plant or an update that left
+        the aborted feed-forward as it was (returned: True, nothing learned)."""
+        if trip is None:
+            return False
+        nothing_learned = bool(np.array_equal(update.feedforward, record.feedforward))
+        if trip.diverged or nothing_learned or \
+                self.consecutive_aborts >= self.config["abort.max_consecutive"]:
+            self.stop_message = stop_message(trip, self.consecutive_aborts, nothing_learned,
+                                             PatientModel(self.config).enabled)
+        return nothing_learned
 
     def rehearse(self, experiment: Experiment) -> None:
         """Run a conclusion's kernels once on a throwaway record (the reference tracked
@@ -258,10 +305,15 @@ class LearningSession:
                 raise StoreError(f"resume: stored trial {item.record.trial} where trial {k} "
                                  "was expected")
             within = self._within(item.record)
+            self.stop_message = ""  # a stop a later stored trial went past (a larger limit)
             self.within_streak = self.within_streak + 1 if within else 0
             if item.record.aborted:
                 self.aborted_trials.append(item.record.trial)
+                self.consecutive_aborts += 1
+                self._abort_stop(item.record, trip_of(item.record, self.config),
+                                 item.next_update)  # the stop is replayed too
             else:  # progress_gain's lowest error so far
+                self.consecutive_aborts = 0
                 self._lowest_error = self._lowest_after(item.record)
             learned_from = self._learned_from(item.record)
             target = None if self._averaging is None or item.record.aborted else \
@@ -501,6 +553,7 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
             on_trial(record)
     result.final = session.next_update
     result.stop = session.stop
+    result.stop_message = session.stop_message
     if patient is not None:
         result.patient_memory = (patient.fast.copy(), patient.slow.copy())
     return result

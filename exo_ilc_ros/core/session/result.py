@@ -19,6 +19,9 @@ class StopReason(Enum):
 
     MAX_TRIALS = "max_trials"
     SETTLED = "settled"
+    ABORTS = "aborts"
+    """Aborted trials in a row (``abort.max_consecutive``), a diverged plant, or an abort
+    that left nothing to learn (:mod:`.abort`)."""
 
 
 @dataclass
@@ -36,7 +39,9 @@ class RunResult:
     resumed: int = 0
     """Trials restored from the store rather than run (0: none)."""
     stop: StopReason | None = None
-    """Why the run ended (max_trials, or settled with ``stop_when_settled``)."""
+    """Why the run ended (max_trials, settled with ``stop_when_settled``, or aborts)."""
+    stop_message: str = ""
+    """The one message of a run stopped by aborts (joint, time, value, likely cause)."""
     applied: dict[int, dict[str, Any]] = field(default_factory=dict)
     """Live changes per effective trial (the first trial run with them)."""
     notes: dict[int, tuple[str, ...]] = field(default_factory=dict)
@@ -47,7 +52,8 @@ class RunResult:
 
     @property
     def aborted(self) -> list[int]:
-        """Trial numbers aborted by the error envelope (nothing learned from them)."""
+        """Trial numbers aborted by the error envelope (learned from over the samples they
+        have, :mod:`.abort`)."""
         return [r.trial for r in self.records if r.aborted]
 
     @property

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..convergence.bound import IterationsToBound, iterations_to_bound
+from .abort import ABORT_STOP_KEY
 from .result import RunResult
 
 
@@ -38,6 +39,8 @@ class RunSummary:
         summary.extra.update(live_changes(result.applied, result.law))
         if result.aborted:
             summary.extra["aborted_trials"] = list(result.aborted)
+        if result.stop_message:
+            summary.extra[ABORT_STOP_KEY] = result.stop_message
         return summary
 
     @property

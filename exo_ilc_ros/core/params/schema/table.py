@@ -242,7 +242,7 @@ PARAMETERS: tuple[Parameter, ...] = (
               "|effort| limit per joint (N m)", per_joint=True, strictly_positive=True),
     Parameter("safety.error_envelope", SHARED, Kind.DOUBLE_ARRAY,
               "|e_j| above it aborts the trial at once: safe hold, trial marked aborted, "
-              "nothing learned from it (rad, per joint)", per_joint=True,
+              "learned from up to the abort only (abort.*; rad, per joint)", per_joint=True,
               strictly_positive=True, live=True),
     Parameter("safety.hold_kp", SHARED, Kind.DOUBLE_ARRAY,
               "K_P of the safe hold (s^-2, through a_N(q) as control.kp): its stiffness about "
@@ -359,6 +359,19 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("stop_when_settled", SUPERVISOR, Kind.INTEGER,
               "stop once every joint has stayed within the bound this many trials (0: never)",
               minimum=0.0, live=True),
+    # --- learning through an abort (core/session/abort.py, docs/safety.md) ---
+    Parameter("abort.backoff", SUPERVISOR, Kind.DOUBLE,
+              "after an aborted trial, the learned change on the joints that left the error "
+              "envelope is scaled by backoff for the update learned from that trial (0 < b <= 1; "
+              "1: no back-off)",
+              strictly_positive=True, live=True,
+              extra_rule=lambda v: None if v <= 1.0 else
+              f"must be in (0, 1] (1: no back-off; 0.5 halves the step), got {v!r}"),
+    Parameter("abort.max_consecutive", SUPERVISOR, Kind.INTEGER,
+              "stop the session after this many aborted trials in a row, with one message "
+              "naming the joint, the time, the error and the likely cause (>= 1)",
+              strictly_positive=True),
+    # --- end of learning through an abort ---
     Parameter("memory", SUPERVISOR, Kind.STRING,
               "u_{k-1} of eq (11): total_input (feed-forward + feedback) or feedforward",
               choices=("total_input", "feedforward"), live=True),

@@ -10,6 +10,8 @@ from ..analysis.loop import format_analysis, format_robustness, plot_analysis
 from ..core.convergence.factors import analyze_loop
 from ..core.convergence.norm_optimal_robustness import robustness
 from ..core.convergence.patient_load import patient_load
+from ..core.convergence.patient_ranges import PatientRanges, RangeAnalysis, analyze_patient_ranges
+from ..core.loop.patient import MAS_PRESETS
 from ..core.params.config import Config, load_config
 from .arguments import (
     config_with_flags,
@@ -50,6 +52,22 @@ def register(sub: Any) -> None:
                         "pull; shipped names or files) and say which the law is robust to; "
                         "with the config's identification in the loop its update inverts them "
                         "(taken as identified exactly)")
+    parser.add_argument("--patient-ranges", action="store_true",
+                        help="also the worst factor per joint over ranges of patients with the "
+                        "patient in the loop (passive stiffness 0..--range-stiffness, viscous "
+                        "0..--range-viscous, every MAS preset up to --range-mas, mass error "
+                        "5 and 15 %%), each joint's inertia the lightest along the reference; "
+                        "the law's own update, identification's inverse left out (the robust "
+                        "case)")
+    parser.add_argument("--range-stiffness", type=float, default=PatientRanges.stiffness,
+                        metavar="NM_PER_RAD", help="largest passive stiffness (default "
+                        "%(default)g N m/rad)")
+    parser.add_argument("--range-viscous", type=float, default=PatientRanges.viscous,
+                        metavar="NMS_PER_RAD", help="largest viscous friction (default "
+                        "%(default)g N m s/rad)")
+    parser.add_argument("--range-mas", choices=tuple(MAS_PRESETS), default="3",
+                        help="highest MAS grade (its preset's stiffness and damping; default "
+                        "%(default)s)")
     parser.add_argument("--plot", metavar="OUT.png", type=figure_file, help="plot |F| against "
                         "frequency (PNG); with several uncertainties, one file each "
                         "(OUT_d0.05.png, ...)")
@@ -92,7 +110,36 @@ def run(args: argparse.Namespace) -> int:
     if args.scenarios:
         print()
         print(_patients(args, config, deltas))
+    if args.patient_ranges:
+        grades = tuple(MAS_PRESETS)
+        ranges = PatientRanges(args.range_stiffness, args.range_viscous,
+                               grades[:grades.index(args.range_mas) + 1])
+        print()
+        print(format_ranges(analyze_patient_ranges(config, ranges)))
     return 0
+
+
+def format_ranges(analysis: RangeAnalysis) -> str:
+    """Per joint the worst factor over the ranges with the patient in the loop, its corner."""
+    r = analysis.ranges
+    lines = [f"with the patient in the loop, worst over passive stiffness 0-{r.stiffness:g} "
+             f"N m/rad, viscous 0-{r.viscous:g} N m s/rad, MAS {', '.join(r.mas_grades)}, "
+             f"mass error {', '.join(f'{d:g}' for d in r.mass_uncertainty)} (each joint's "
+             "inertia the lightest along the reference, 1 / max (a_N^-1)_jj; the law's own "
+             "update: identification's inverse, Coulomb friction and the reflex left out):"]
+    for j in analysis.joints:
+        where = (f"K {j.stiffness:g} N m/rad, B {j.damping:g} N m s/rad (MAS {j.mas_grade}), "
+                 f"delta {j.mass_uncertainty:g}") if j.stiffness or j.damping else \
+            f"no patient on this joint, delta {j.mass_uncertainty:g}"
+        lines.append(f"  {j.joint:<20} worst |F| {j.worst:.5f} at {j.frequency_hz:6.2f} Hz "
+                     f"({where}; I >= {1.0 / j.inverse_inertia:.4g} kg m^2; without a patient "
+                     f"{j.nominal:.5f})" + ("" if j.worst < 1.0 else "  the learned input can "
+                                            "grow"))
+    worst = analysis.worst()
+    lines.append(f"worst over the ranges {worst:.5f} -> " + (
+        "learning converges for every patient in the ranges" if worst < 1.0 else
+        "some patient in the ranges makes the learned input grow"))
+    return "\n".join(lines)
 
 
 def _patients(args: argparse.Namespace, config: Config, deltas: list[float]) -> str:

@@ -135,7 +135,7 @@ def analyze_patient_ranges(config: Config, ranges: PatientRanges | None = None,
             damping = (b + spastic_b) * inverse_inertia[j] if on_patient[j] else 0.0
             loop = JointLoop(1.0 / (1.0 + delta), float(kp), float(kd), period, stiffness,
                              damping)
-            factor = _worst_factor(loop, frequency, memory, gains_of[j], progress[j],
+            factor = factor_with_patient(loop, frequency, memory, gains_of[j], progress[j],
                                    averaging, q)
             value, index = float(np.max(factor)), int(np.argmax(factor))
             if stiffness == 0.0 and damping == 0.0:
@@ -152,10 +152,13 @@ def analyze_patient_ranges(config: Config, ranges: PatientRanges | None = None,
     return RangeAnalysis(ranges, out)
 
 
-def _worst_factor(loop: JointLoop, frequency: np.ndarray, memory: Memory,
+def factor_with_patient(loop: JointLoop, frequency: np.ndarray, memory: Memory,
                   gains: tuple[float, float, float], progress: float,
                   averaging: tuple[float, ...], q: np.ndarray) -> np.ndarray:
-    """max over the progress gain off/on and the averaging gains of |(1 - K) + K Q F|."""
+    """|F| of eq (*) on ``loop`` (the patient in it: its ``stiffness`` and ``damping``), at
+    ``frequency`` (Hz), Q-filter response ``q``: the largest of |(1 - K) + K Q F| over the
+    progress gain off and on (``progress`` added to G_p) and the averaging gains K in
+    ``averaging``."""
     w = 2.0 * np.pi * frequency * loop.period
     z = np.exp(1j * w)
     pq, pv = loop.closed_loop(z)

@@ -32,8 +32,10 @@ def register(sub: Any) -> None:
         "control period) around the reference and print, per joint, the worst trial-to-trial "
         "factor |F| of the learning law and the band where |F| > 1 (the learned input grows "
         "there), without and with the Q-filter. See docs/convergence.md.")
-    parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
-                        "shipped config/exo_ilc.yaml (any subset of keys)")
+    parser.add_argument("--config", type=input_file, nargs="+", metavar="FILE",
+                        help="ROS parameter YAML laid over the shipped config/exo_ilc.yaml "
+                        "(any subset of keys); several are laid over in order (an arm file, "
+                        "then a law: config/arms/ur5.yaml config/patient_aware.yaml)")
     parser.add_argument("--law", choices=("sign", "linear", "norm_optimal"),
                         help="learning law (default: the config's law)")
     parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
@@ -80,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
     if args.cutoff is not None:
         flags.update({"q_filter.enabled": ("--cutoff", True),
                       "q_filter.cutoff_hz": ("--cutoff", args.cutoff)})
-    config = config_with_flags(args.config, flags)
+    files = args.config or [None]
+    config = config_with_flags(files[0], flags, files[1:])
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     worst = 0.0
     for i, delta in enumerate(deltas):
@@ -129,7 +132,7 @@ def format_ranges(analysis: RangeAnalysis) -> str:
              "update: identification's inverse, Coulomb friction and the reflex left out):"]
     for j in analysis.joints:
         where = (f"K {j.stiffness:g} N m/rad, B {j.damping:g} N m s/rad (MAS {j.mas_grade}), "
-                 f"delta {j.mass_uncertainty:g}") if j.stiffness or j.damping else \
+                 f"delta {j.mass_uncertainty:g}") if j.patient else \
             f"no patient on this joint, delta {j.mass_uncertainty:g}"
         lines.append(f"  {j.joint:<20} worst |F| {j.worst:.5f} at {j.frequency_hz:6.2f} Hz "
                      f"({where}; I >= {1.0 / j.inverse_inertia:.4g} kg m^2; without a patient "
@@ -153,7 +156,8 @@ def _patients(args: argparse.Namespace, config: Config, deltas: list[float]) -> 
     not_robust: list[str] = []
     for path in args.scenarios:
         label = Path(path).stem
-        load = patient_load(load_config(args.config, overlays=[path]), label)
+        files = args.config or [None]
+        load = patient_load(load_config(files[0], overlays=[*files[1:], path]), label)
         worst = 0.0
         for delta in deltas:
             analysis = analyze_loop(config, args.law, delta, patient=load,

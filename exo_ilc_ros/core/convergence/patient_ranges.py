@@ -88,6 +88,8 @@ class JointWorst:
     nominal: float
     inverse_inertia: float
     """max_t (a_N^-1)_jj of (PR)."""
+    patient: bool = True
+    """A patient's joint acts on this arm joint (``patient.joints``)."""
 
 
 @dataclass(frozen=True)
@@ -148,7 +150,7 @@ def analyze_patient_ranges(config: Config, ranges: PatientRanges | None = None,
         total_k = k + spastic_k if on_patient[j] else 0.0
         total_b = b + spastic_b if on_patient[j] else 0.0
         out.append(JointWorst(name, value, float(frequency[index]), total_k, total_b, grade,
-                              delta, nominal, float(inverse_inertia[j])))
+                              delta, nominal, float(inverse_inertia[j]), bool(on_patient[j])))
     return RangeAnalysis(ranges, out)
 
 

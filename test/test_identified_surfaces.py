@@ -33,7 +33,10 @@ AWARE = str(config_dir() / "patient_aware.yaml")
 @functools.cache
 def _spastic_run() -> tuple[Any, list[TrialConclusion]]:
     """4 trials of patient_aware.yaml with the spastic patient, and their conclusions."""
-    config = load_config(overlays=[AWARE, scenario_path("spastic")])
+    config = load_config(overlays=[AWARE, scenario_path("spastic")], overrides={  # the
+        # paper's PD gains: under patient_aware's stiffer PD the estimate is trusted later
+        "control.kp": [16.0, 10.0, 10.0], "control.kd": [8.0, 5.0, 7.0],
+        "progress_gain.position": [0.0, 0.0, 5.0], "feedforward_limit": 100.0})
     conclusions: list[TrialConclusion] = []
     result = run_trials(config, trials=4, on_conclusion=conclusions.append)
     return result, conclusions
@@ -228,7 +231,10 @@ def test_the_graph_files_the_identification_on_the_summary_and_diagnostics() -> 
 def test_a_resumed_run_files_the_restored_trials_identification(tmp_path: Path) -> None:
     """``RunResult.joint_forces`` holds every trial of a resumed run, the restored ones
     replayed as the first run identified them (a bag of it has the keys in every trial)."""
-    config = load_config(overlays=[AWARE, scenario_path("spastic")])
+    config = load_config(overlays=[AWARE, scenario_path("spastic")], overrides={  # the
+        # paper's PD gains: under patient_aware's stiffer PD the estimate is trusted later
+        "control.kp": [16.0, 10.0, 10.0], "control.kd": [8.0, 5.0, 7.0],
+        "progress_gain.position": [0.0, 0.0, 5.0], "feedforward_limit": 100.0})
     names = list(config["joint_names"])
     first = run_trials(config, trials=2, store=tmp_path)
     resumed = run_trials(config, trials=3, store=tmp_path, resume=True)
@@ -247,7 +253,10 @@ def test_a_graph_sessions_profile_keeps_the_replayed_estimate() -> None:
     from exo_ilc_ros.core.programs.therapy import identified_of_records
 
     result, _ = _spastic_run()
-    config = load_config(overlays=[AWARE, scenario_path("spastic")])
+    config = load_config(overlays=[AWARE, scenario_path("spastic")], overrides={  # the
+        # paper's PD gains: under patient_aware's stiffer PD the estimate is trusted later
+        "control.kp": [16.0, 10.0, 10.0], "control.kd": [8.0, 5.0, 7.0],
+        "progress_gain.position": [0.0, 0.0, 5.0], "feedforward_limit": 100.0})
     names = list(config["joint_names"])
     replayed = identified_of_records(config, result.records)
     assert replayed is not None

@@ -125,7 +125,7 @@ def test_one_value_for_every_joint() -> None:
     with pytest.raises(ConfigError) as info:
         config.replace({"control.kd": [1.0, 2.0]})
     assert "one entry per joint (3: shoulder_flexion" in str(info.value)
-    assert "or one value for every joint" in str(info.value)
+    assert "one value for every joint or a map by joint name" in str(info.value)
     panda = load_config(ARMS / "panda.yaml")
     assert panda.joints == 7 and panda["control.kp"] == [16.0] * 7
     assert panda["safety.error_envelope"] == [1.0] * 7  # the shipped scalar, broadcast

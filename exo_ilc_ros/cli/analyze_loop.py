@@ -10,6 +10,8 @@ from ..analysis.loop import format_analysis, format_robustness, plot_analysis
 from ..core.convergence.factors import analyze_loop
 from ..core.convergence.norm_optimal_robustness import robustness
 from ..core.convergence.patient_load import patient_load
+from ..core.convergence.patient_ranges import PatientRanges, RangeAnalysis, analyze_patient_ranges
+from ..core.loop.patient import MAS_PRESETS
 from ..core.params.config import Config, load_config
 from .arguments import (
     config_with_flags,
@@ -30,8 +32,10 @@ def register(sub: Any) -> None:
         "control period) around the reference and print, per joint, the worst trial-to-trial "
         "factor |F| of the learning law and the band where |F| > 1 (the learned input grows "
         "there), without and with the Q-filter. See docs/convergence.md.")
-    parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
-                        "shipped config/exo_ilc.yaml (any subset of keys)")
+    parser.add_argument("--config", type=input_file, nargs="+", metavar="FILE",
+                        help="ROS parameter YAML laid over the shipped config/exo_ilc.yaml "
+                        "(any subset of keys); several are laid over in order (an arm file, "
+                        "then a law: config/arms/ur5.yaml config/patient_aware.yaml)")
     parser.add_argument("--law", choices=("sign", "linear", "norm_optimal"),
                         help="learning law (default: the config's law)")
     parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
@@ -50,6 +54,22 @@ def register(sub: Any) -> None:
                         "pull; shipped names or files) and say which the law is robust to; "
                         "with the config's identification in the loop its update inverts them "
                         "(taken as identified exactly)")
+    parser.add_argument("--patient-ranges", action="store_true",
+                        help="also the worst factor per joint over ranges of patients with the "
+                        "patient in the loop (passive stiffness 0..--range-stiffness, viscous "
+                        "0..--range-viscous, every MAS preset up to --range-mas, mass error "
+                        "5 and 15 %%), each joint's inertia the lightest along the reference; "
+                        "the law's own update, identification's inverse left out (the robust "
+                        "case)")
+    parser.add_argument("--range-stiffness", type=float, default=PatientRanges.stiffness,
+                        metavar="NM_PER_RAD", help="largest passive stiffness (default "
+                        "%(default)g N m/rad)")
+    parser.add_argument("--range-viscous", type=float, default=PatientRanges.viscous,
+                        metavar="NMS_PER_RAD", help="largest viscous friction (default "
+                        "%(default)g N m s/rad)")
+    parser.add_argument("--range-mas", choices=tuple(MAS_PRESETS), default="3",
+                        help="highest MAS grade (its preset's stiffness and damping; default "
+                        "%(default)s)")
     parser.add_argument("--plot", metavar="OUT.png", type=figure_file, help="plot |F| against "
                         "frequency (PNG); with several uncertainties, one file each "
                         "(OUT_d0.05.png, ...)")
@@ -62,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
     if args.cutoff is not None:
         flags.update({"q_filter.enabled": ("--cutoff", True),
                       "q_filter.cutoff_hz": ("--cutoff", args.cutoff)})
-    config = config_with_flags(args.config, flags)
+    files = args.config or [None]
+    config = config_with_flags(files[0], flags, files[1:])
     deltas = args.mass_uncertainty or [config["mass_uncertainty"]]
     worst = 0.0
     for i, delta in enumerate(deltas):
@@ -93,7 +114,36 @@ def run(args: argparse.Namespace) -> int:
     if args.scenarios:
         print()
         print(_patients(args, config, deltas))
+    if args.patient_ranges:
+        grades = tuple(MAS_PRESETS)
+        ranges = PatientRanges(args.range_stiffness, args.range_viscous,
+                               grades[:grades.index(args.range_mas) + 1])
+        print()
+        print(format_ranges(analyze_patient_ranges(config, ranges)))
     return 0
+
+
+def format_ranges(analysis: RangeAnalysis) -> str:
+    """Per joint the worst factor over the ranges with the patient in the loop, its corner."""
+    r = analysis.ranges
+    lines = [f"with the patient in the loop, worst over passive stiffness 0-{r.stiffness:g} "
+             f"N m/rad, viscous 0-{r.viscous:g} N m s/rad, MAS {', '.join(r.mas_grades)}, "
+             f"mass error {', '.join(f'{d:g}' for d in r.mass_uncertainty)} (each joint's "
+             "inertia the lightest along the reference, 1 / max (a_N^-1)_jj; the law's own "
+             "update: identification's inverse, Coulomb friction and the reflex left out):"]
+    for j in analysis.joints:
+        where = (f"K {j.stiffness:g} N m/rad, B {j.damping:g} N m s/rad (MAS {j.mas_grade}), "
+                 f"delta {j.mass_uncertainty:g}") if j.patient else \
+            f"no patient on this joint, delta {j.mass_uncertainty:g}"
+        lines.append(f"  {j.joint:<20} worst |F| {j.worst:.5f} at {j.frequency_hz:6.2f} Hz "
+                     f"({where}; I >= {1.0 / j.inverse_inertia:.4g} kg m^2; without a patient "
+                     f"{j.nominal:.5f})" + ("" if j.worst < 1.0 else "  the learned input can "
+                                            "grow"))
+    worst = analysis.worst()
+    lines.append(f"worst over the ranges {worst:.5f} -> " + (
+        "learning converges for every patient in the ranges" if worst < 1.0 else
+        "some patient in the ranges makes the learned input grow"))
+    return "\n".join(lines)
 
 
 def _patients(args: argparse.Namespace, config: Config, deltas: list[float]) -> str:
@@ -107,7 +157,8 @@ def _patients(args: argparse.Namespace, config: Config, deltas: list[float]) -> 
     not_robust: list[str] = []
     for path in args.scenarios:
         label = Path(path).stem
-        load = patient_load(load_config(args.config, overlays=[path]), label)
+        files = args.config or [None]
+        load = patient_load(load_config(files[0], overlays=[*files[1:], path]), label)
         worst = 0.0
         for delta in deltas:
             analysis = analyze_loop(config.with_mass_uncertainty(delta), args.law, patient=load,

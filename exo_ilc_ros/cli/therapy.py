@@ -299,4 +299,4 @@ def _stopped_by_aborts(patient: str, left: Sequence[Any]) -> None:
     are not run (each one's message is printed with the run's, exit 5)."""
     if left:
         print(f"patient {patient}: the session stops here (aborted trials in a row); "
-              f"{counted(len(left), 'exercise')} not run", file=sys.stderr)
+              f"{count_phrase(len(left), 'exercise')} not run", file=sys.stderr)

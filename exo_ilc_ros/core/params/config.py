@@ -108,10 +108,12 @@ def flatten_ros_yaml(document: Any, source: str) -> dict[str, Any]:
 
 
 def flatten_tree(tree: Mapping[str, Any], prefix: str = "") -> Iterable[tuple[str, Any]]:
-    """(dotted name, value) of every leaf of a nested ``ros__parameters`` mapping."""
+    """(dotted name, value) of every leaf of a nested ``ros__parameters`` mapping; a per-joint
+    key's mapping is its value (a map by joint name, :func:`.schema.per_joint_values`)."""
     for key, value in tree.items():
         name = f"{prefix}{key}"
-        if isinstance(value, Mapping):
+        param = schema.BY_NAME.get(name)
+        if isinstance(value, Mapping) and not (param is not None and param.per_joint):
             yield from flatten_tree(value, name + ".")
         else:
             yield name, value
@@ -140,8 +142,7 @@ def validate(values: Mapping[str, Any], source: str | None = None) -> dict[str, 
                 continue  # a cone arm's keys: unused
             count, labels = (len(patient_names), patient_names) if param.patient_joint \
                 else (joints, names)
-            if param.per_joint and not isinstance(out[param.name], list):
-                out[param.name] = [out[param.name]] * count  # one value for every joint
+            out[param.name] = schema.per_joint_values(param, out[param.name], labels)
             schema.check_value(param, out[param.name], count, labels)
         schema.check_consistency(out)
         if urdf:

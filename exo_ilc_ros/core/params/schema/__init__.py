@@ -47,10 +47,12 @@ from .table import (
     parameters_of,
 )
 from .validator import (
+    OTHER_JOINTS,
     check_consistency,
     check_patient_joints,
     check_value,
     coerce,
+    per_joint_values,
 )
 
 __all__ = [
@@ -60,6 +62,7 @@ __all__ = [
     "CONTROLLER",
     "MAS_GRADES",
     "MODEL_SOURCES",
+    "OTHER_JOINTS",
     "PARAMETERS",
     "PATIENT_JOINTS",
     "PERSON_KEYS",
@@ -82,4 +85,5 @@ __all__ = [
     "parse_locked_joints",
     "parse_patient_joints",
     "patient_joint_names",
+    "per_joint_values",
 ]

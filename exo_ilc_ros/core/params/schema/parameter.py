@@ -36,7 +36,8 @@ class Parameter:
     kind: Kind
     description: str
     per_joint: bool = False
-    """An array with one entry per joint (or one value for every joint: validation repeats it)."""
+    """An array with one entry per joint, or one value for every joint, or a map by joint name
+    (:func:`.validator.per_joint_values`: the one rule for every per-joint key)."""
     patient_joint: bool = False
     """Per joint of the patient (:func:`patient_joint_names`), not of the arm."""
     minimum: float | None = None

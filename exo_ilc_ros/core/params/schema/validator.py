@@ -11,7 +11,7 @@ from ...errors import ConfigError
 from ..hold_rule import hold_gain_problem, homing_gain_problem
 from .key_groups import PATIENT_JOINTS, PERSON_SEGMENTS
 from .parameter import Kind, Parameter
-from .string_maps import parse_patient_joints
+from .string_maps import _name_map_entries, parse_patient_joints
 
 
 def coerce(param: Parameter, value: Any) -> Any:
@@ -38,11 +38,10 @@ def coerce(param: Parameter, value: Any) -> Any:
         if not isinstance(value, str):
             raise ConfigError(param.name, f"must be a string, got {value!r}")
         return value
-    if param.per_joint and kind is Kind.DOUBLE_ARRAY and isinstance(value, (int, float)) \
-            and not isinstance(value, bool):
-        return float(value)  # one value for every joint: validate() repeats it per joint
-    if param.per_joint and kind is Kind.STRING_ARRAY and isinstance(value, str):
-        return value
+    if param.per_joint:
+        broadcast = _per_joint_broadcast(param, value)
+        if broadcast is not None:
+            return broadcast  # per_joint_values() expands it once the joints are known
     if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
         raise ConfigError(param.name, f"must be a list, got {value!r}")
     items = list(value)
@@ -53,6 +52,72 @@ def coerce(param: Parameter, value: Any) -> Any:
     if any(not isinstance(v, str) for v in items):
         raise ConfigError(param.name, f"must be a list of strings, got {items!r}")
     return items
+
+
+OTHER_JOINTS = "*"
+"""In a per-joint name map, the entry for every joint the map does not name."""
+
+
+def _per_joint_broadcast(param: Parameter, value: Any) -> float | str | dict[str, Any] | None:
+    """A per-joint value given other than as a list, coerced: one value for every joint (a
+    number; a string for a list of strings) or a map by joint name (a YAML mapping, or for a
+    list of numbers the string 'name: value, name: value' ROS parameters can carry), with
+    ``*`` for the joints it does not name. None: a list (coerced as one)."""
+    numeric = param.kind is Kind.DOUBLE_ARRAY
+    if numeric and isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value)
+    if not numeric and isinstance(value, str):
+        return value
+    entries: list[tuple[str, Any]]
+    if isinstance(value, Mapping):
+        entries = [(str(k), v) for k, v in value.items()]
+    elif numeric and isinstance(value, str):
+        form = "'joint_name: value' (a number)"
+        if ":" not in value and "=" not in value:
+            raise ConfigError(param.name, "must be a list, one value for every joint or a map "
+                              f"by joint name ('joint_name: value, ...'), got {value!r}")
+        entries = []
+        for name, text in _name_map_entries(value, param.name, form):
+            try:
+                entries.append((name, float(text)))
+            except ValueError:
+                raise ConfigError(param.name, f"entry '{name}: {text}' is not {form}") from None
+        if not entries:
+            raise ConfigError(param.name, "must be a list, one value for every joint or a map "
+                              "by joint name, got ''")
+    else:
+        return None
+    out: dict[str, Any] = {}
+    for name, item in entries:
+        if numeric and (isinstance(item, bool) or not isinstance(item, (int, float))):
+            raise ConfigError(param.name, f"joint {name!r}: must be a number, got {item!r}")
+        if not numeric and not isinstance(item, str):
+            raise ConfigError(param.name, f"joint {name!r}: must be a string, got {item!r}")
+        out[name] = float(item) if numeric else item
+    return out
+
+
+def per_joint_values(param: Parameter, value: Any, joint_names: Sequence[str]) -> Any:
+    """A coerced per-joint ``value`` as one entry per joint of ``joint_names`` (the arm's, or
+    the patient's for a ``patient_joint`` key): a list as it is (its length is checked by
+    :func:`check_value`), one value repeated for every joint, a map by joint name in the
+    joints' order (``*`` for the joints it does not name). ConfigError naming the key: a map
+    naming a joint that is not one of them, or leaving one out without ``*``."""
+    if not param.per_joint or isinstance(value, list):
+        return value
+    if not isinstance(value, dict):
+        return [value] * len(joint_names)
+    whose = "the patient's" if param.patient_joint else "the arm's"
+    unknown = [name for name in value if name != OTHER_JOINTS and name not in joint_names]
+    if unknown:
+        raise ConfigError(param.name, f"joint {unknown[0]!r} is not one of {whose} joints "
+                          f"({', '.join(joint_names)})")
+    missing = [name for name in joint_names if name not in value]
+    if missing and OTHER_JOINTS not in value:
+        raise ConfigError(param.name, f"the map by joint name leaves out {', '.join(missing)} "
+                          f"(name every one of {whose} joints, or give '{OTHER_JOINTS}' for "
+                          "the rest)")
+    return [value.get(name, value.get(OTHER_JOINTS)) for name in joint_names]
 
 
 def check_value(param: Parameter, value: Any, joints: int,
@@ -79,8 +144,9 @@ def check_value(param: Parameter, value: Any, joints: int,
         names = f": {', '.join(joint_names)}" if joint_names else ""
         whose = f" of the patient (the patient's joints: {PATIENT_JOINTS} maps them onto the " \
             "arm's)" if param.patient_joint else ""
-        raise ConfigError(param.name, f"must have one entry per joint{whose} ({joints}{names}) "
-                          f"or one value for every joint, got {len(value)} entries")
+        raise ConfigError(param.name, f"must have one entry per joint{whose} ({joints}{names}), "
+                          "one value for every joint or a map by joint name, got "
+                          f"{len(value)} entries")
     if param.minimum is not None:
         minimum = param.minimum
         fail(lambda x: x < minimum, f"must be >= {minimum:g}")

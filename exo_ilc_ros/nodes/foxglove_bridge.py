@@ -61,8 +61,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from ..bag.messages import typestore
 from ..bag.view import ArmView
+from ..core.arm.assets import AssetResolver, urdf_packages
 from ..core.errors import ConfigError
-from ..core.params.config import load_config
+from ..core.params.config import load_config, urdf_source
 from ..wire import topics
 from ..wire.relay import DISPLAY_RATE, RelayReceiver, SampleGate
 from ..wire.sim_time import SimClock
@@ -148,6 +149,10 @@ class FoxgloveBridge(Node):
         self.declare_parameter("scheduling", DEFAULT_SCHEDULING)  # applied by main(), first
         config = load_config(config_file or None)
         self.view = ArmView(config)
+        self.assets = AssetResolver(
+            Path(urdf_source(config.values)[1]) if config["model.source"] == "urdf" else None,
+            urdf_packages(self.view.urdf))
+        """The URDF's meshes, served on the client's ``fetchAsset`` (the assets capability)."""
         self.exit_code: int | None = None
         self.sim_clock = SimClock()
         self._lock = threading.Lock()
@@ -159,7 +164,8 @@ class FoxgloveBridge(Node):
         try:
             self.server = foxglove.start_server(
                 name="exo_ilc_ros", host=host, port=port, capabilities=[Capability.Time],
-                server_listener=_Listener(self), message_backlog_size=backlog)
+                server_listener=_Listener(self), message_backlog_size=backlog,
+                asset_handler=self.assets.fetch)
         except Exception as exc:  # the SDK's own error type: a port in use, a bad address
             raise ConfigError("port", f"cannot serve on {host}:{port}: {exc} (another "
                               "program on that port? choose another with --live-port)",

@@ -81,6 +81,11 @@ LATCHED = frozenset({topics.FEEDFORWARD, topics.TRIAL_EVENTS, topics.TRIAL_SUMMA
 REPLAYED = {topics.FEEDFORWARD: 1, topics.TRIAL_EVENTS: None, topics.TRIAL_SUMMARY: None,
             topics.TRIAL_METRICS: None}
 """Topic -> how many of its last messages a new subscriber gets again (None: all)."""
+TRIAL_SAMPLES = 100_000
+"""Per-sample messages of the current trial kept per topic for a late viewer (at most; the
+view's display rate keeps far fewer of a fast lock-step run): a viewer that subscribes within
+a trial gets its samples from its start. A new trial's feed-forward starts the next
+trial's; the run's earlier trials keep only their per-trial data (:data:`REPLAYED`)."""
 READER_DEPTH = 10000
 SCHEDULING = ("idle", "batch", "normal")
 DEFAULT_SCHEDULING = "idle"
@@ -158,6 +163,8 @@ class FoxgloveBridge(Node):
         self._lock = threading.Lock()
         self._kept: dict[str, list[tuple[int, bytes]]] = {
             topic: [(0, raw)] for topic, raw in self.view.descriptions().items()}
+        self._trial: dict[str, list[tuple[int, bytes]]] = {topic: [] for topic in SAMPLED}
+        """The current trial's per-sample messages shown so far (for a late viewer)."""
         self.channels: dict[str, Channel] = {
             topic: ros2_channel(topic, topics.BAG_TYPES[topic])
             for topic in (*FORWARDED, *topics.VIEW_TYPES)}
@@ -189,10 +196,17 @@ class FoxgloveBridge(Node):
         print(json.dumps({"foxglove_port": self.server.port}), flush=True)
 
     def replay(self, topic: str) -> None:
-        """Log ``topic``'s kept messages again (a client just subscribed to it)."""
+        """Log ``topic``'s kept messages again (a client just subscribed to it): the URDFs,
+        the run's per-trial data, and the current trial's samples from its start (/tf
+        computed again from its JointStates)."""
         channel = self.channels.get(topic)
         with self._lock:
-            kept = list(self._kept.get(topic, ()))
+            if topic == TF:
+                kept = [out for out in (self.view.tf(raw) for _, raw in
+                                        self._trial.get(topics.JOINT_STATES, ()))
+                        if out is not None]
+            else:
+                kept = list(self._kept.get(topic, ())) + list(self._trial.get(topic, ()))
         if channel is not None:
             for log_time, raw in kept:
                 channel.log(raw, log_time=log_time)
@@ -209,16 +223,24 @@ class FoxgloveBridge(Node):
                     taken.append((log_time, topic, raw))
         for log_time, topic, raw in taken:
             channel = self.channels[topic]
+            if topic == topics.FEEDFORWARD:  # a new trial: its samples start here
+                with self._lock:
+                    self._load_reference(raw)
+                    for samples in self._trial.values():
+                        samples.clear()
             if topic in REPLAYED:
                 self._keep(topic, log_time, raw)
+            elif topic in SAMPLED:
+                with self._lock:
+                    samples = self._trial[topic]
+                    if len(samples) < TRIAL_SAMPLES:
+                        samples.append((log_time, raw))
             if channel.has_sinks():
                 channel.log(raw, log_time=log_time)
             if topic == topics.JOINT_STATES:
                 self._transforms(raw)
             elif topic == topics.CLOCK:
                 self.server.broadcast_time(log_time)
-            elif topic == topics.FEEDFORWARD:
-                self._load_reference(raw)
         self.forwarded += len(taken)
         return len(taken)
 

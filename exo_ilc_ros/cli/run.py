@@ -286,7 +286,8 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
                 relayed=not args.no_bag,  # the recorder feeds it
                 sample_rate=DISPLAY_RATE if args.live_rate is None else args.live_rate))
             print(f"live view: {live.url} (Foxglove app: Open connection, Foxglove WebSocket; "
-                  "layout config/layouts/foxglove.json)", file=sys.stderr, flush=True)
+                  f"layout made for this arm, kept while it runs: {live.layouts['foxglove']}, "
+                  f"Lichtblick's {live.layouts['lichtblick']})", file=sys.stderr, flush=True)
             extra.append(live.spec)
             relay = live.relay
             rate = live.sample_rate

@@ -122,7 +122,9 @@ function nanoseconds(t: any): number {
   return t.sec * 1e9 + (t.nsec ?? t.nanosec ?? 0);
 }
 
-export default function script(event: Input<"/ilc/feedforward"> | Input<"/joint_states">): Output | undefined {
+export default function script(
+  event: Input<"/ilc/feedforward"> | Input<"/joint_states">,
+): Output | undefined {
   const msg: any = event.message;
   if (event.topic === "/ilc/feedforward") {
     t0 = nanoseconds(msg.header.stamp);
@@ -254,7 +256,7 @@ def plotjuggler_xml(arm: ArmLayout) -> str:
     """PlotJuggler's layout (File > Load layout) for ``arm``: q, qdot, effort and the effort
     commands per joint, and the per-trial numbers (``/ilc/trial_metrics/data[i]``)."""
     root = ET.Element("root")
-    tabs = ET.SubElement(root, "tabbed_widget", name="Main Window", parent="main_window")
+    tabs = ET.SubElement(root, "tabbed_widget", {"name": "Main Window", "parent": "main_window"})
 
     def tab(name: str, areas: list[tuple[str, list[str]]]) -> None:
         container = ET.SubElement(ET.SubElement(tabs, "Tab", containers="1", tab_name=name),

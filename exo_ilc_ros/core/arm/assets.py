@@ -18,6 +18,7 @@ elsewhere on the machine. No ROS import: ``ament_index_python`` is optional.
 
 from __future__ import annotations
 
+import contextlib
 import site
 import sys
 import sysconfig
@@ -36,10 +37,8 @@ MAX_ASSET_BYTES = 256 * 1024 * 1024
 def _site_dirs() -> list[Path]:
     """Where installed wheels are (this interpreter's site-packages)."""
     found: list[str] = [sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]]
-    try:
+    with contextlib.suppress(AttributeError):  # a virtualenv's old site.py has none
         found += site.getsitepackages()
-    except AttributeError:  # a virtualenv's old site.py
-        pass
     found += [p for p in sys.path if p.endswith("site-packages")]
     out: list[Path] = []
     for entry in found:

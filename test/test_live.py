@@ -674,3 +674,46 @@ def test_a_late_viewer_gets_every_trials_metrics_and_the_current_trials_samples(
         list(range(1, 11))
     assert [log for log, _ in decoded[topics.JOINT_STATES]] == sent[11]
     assert [_stamp(m) for _, m in decoded[topics.JOINT_STATES]] == sent[11]
+
+
+@pytest.mark.graph
+def test_live_pace_changes_only_the_wall_time(tmp_path: Path) -> None:
+    """``run --live --live-pace 2``: the lock-step plant steps at most 2 simulated s per wall
+    s. In the bag (publish time = the wall time the recorder received a sample), each 1-s
+    trial's samples span at least 0.5 s of wall time less the first's delivery (a lower
+    bound the pace sets, whatever the machine's speed; unpaced, a 1-s trial takes tens of
+    ms), and every per-trial number equals simulate's (to 1e-9, the graph's rule)."""
+    config_file = tmp_path / "short.yaml"
+    config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n')
+    graph_json, local_json = tmp_path / "graph.json", tmp_path / "local.json"
+    main_args = [sys.executable, "-m", "exo_ilc_ros.cli.main"]
+    result = subprocess.run([*main_args, "run", "--no-store", "--live", "--live-port", "0",
+                             "--live-pace", "2", "--config", str(config_file), "--trials", "2",
+                             "--bag-dir", str(tmp_path / "bags"), "--json", str(graph_json)],
+                            text=True, capture_output=True, timeout=300, cwd=tmp_path,
+                            stdin=subprocess.DEVNULL, check=False)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "foxglove_layout.json" in result.stderr  # the layout made for the run, offered
+    local = subprocess.run([*main_args, "simulate", "--config", str(config_file), "--trials",
+                            "2", "--json", str(local_json)], text=True, capture_output=True,
+                           timeout=120, check=False)
+    assert local.returncode == 0, local.stderr[-3000:]
+    (g,), (r,) = json.loads(graph_json.read_text())["runs"], \
+        json.loads(local_json.read_text())["runs"]
+    assert len(g["trials"]) == len(r["trials"]) == 2
+    for key in ("max_abs_error", "max_abs_feedforward", "max_abs_effort"):
+        np.testing.assert_allclose([t[key] for t in g["trials"]], [t[key] for t in r["trials"]],
+                                   rtol=0.0, atol=1e-9, err_msg=key)
+    (bag,) = list((tmp_path / "bags").iterdir())
+    states = _bag_messages(bag)[topics.JOINT_STATES]
+    trials: dict[int, list[tuple[int, int]]] = {}
+    period = int(load_config()["control.period"] * 1e9)
+    for _, published, msg in states:  # a trial's stamps are consecutive periods
+        stamp = _stamp(msg)
+        key = next((k for k, v in trials.items() if stamp - v[-1][0] == period), stamp)
+        trials.setdefault(key, []).append((stamp, published))
+    spans = [(v[-1][0] - v[0][0], v[-1][1] - v[0][1]) for v in trials.values()]
+    assert len(spans) == 2 and all(sim >= 0.99e9 for sim, _ in spans), spans
+    # paced: >= sim / 2 less the first sample's delivery delay (0.2 s of slack); unpaced
+    # the 100 samples take tens of ms even at 1 000 steps per second
+    assert all(wall >= sim / 2.0 - 0.2e9 for sim, wall in spans), spans

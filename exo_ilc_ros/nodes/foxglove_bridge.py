@@ -17,7 +17,8 @@ the JointState stamp, and the reference pose q_d(t_i) of the trial's feed-forwar
 ``reference/`` tree, placed beside the arm). ``/clock`` drives the app's clock
 (``Capability.Time``). The protocol has no latching: what was logged before a client
 subscribed (the URDFs, the last feed-forward, every trial's summary, metrics and events) is
-logged again when a channel gets a subscriber (its other subscribers then get a copy too).
+logged again to a client that subscribes to a channel (to that client only), and the
+current trial's samples from its start.
 
 Beside ``exo-ilc run``'s recorder it is no DDS reader at all (parameter ``relay``): the
 recorder, which takes every topic for the bag anyway, hands it the messages over a local socket
@@ -127,7 +128,7 @@ class _Listener(ServerListener):
         self.bridge = bridge
 
     def on_subscribe(self, client: Any, channel: Any) -> None:
-        self.bridge.replay(str(channel.topic))
+        self.bridge.replay(str(channel.topic), int(client.id))
 
 
 class FoxgloveBridge(Node):
@@ -195,9 +196,10 @@ class FoxgloveBridge(Node):
                                "Foxglove app")
         print(json.dumps({"foxglove_port": self.server.port}), flush=True)
 
-    def replay(self, topic: str) -> None:
-        """Log ``topic``'s kept messages again (a client just subscribed to it): the URDFs,
-        the run's per-trial data, and the current trial's samples from its start (/tf
+    def replay(self, topic: str, client: int | None = None) -> None:
+        """Log ``topic``'s kept messages again to the ``client`` that just subscribed to it
+        (its id is its sink's: the clients already subscribed get no copy; None: to all): the
+        URDFs, the run's per-trial data, and the current trial's samples from its start (/tf
         computed again from its JointStates)."""
         channel = self.channels.get(topic)
         with self._lock:
@@ -209,7 +211,7 @@ class FoxgloveBridge(Node):
                 kept = list(self._kept.get(topic, ())) + list(self._trial.get(topic, ()))
         if channel is not None:
             for log_time, raw in kept:
-                channel.log(raw, log_time=log_time)
+                channel.log(raw, log_time=log_time, sink_id=client)
 
     def poll(self) -> int:
         """Forward what waits, in receive order; returns how many messages."""

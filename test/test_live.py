@@ -712,3 +712,15 @@ def test_live_pace_changes_only_the_wall_time(tmp_path: Path) -> None:
     # paced: >= sim / 2 less the first sample's delivery delay (0.2 s of slack); unpaced
     # the 200 samples take tens of ms even at 1 000 steps per second
     assert wall >= sim / 2.0 - 0.2e9, (sim, wall)
+
+
+def test_live_pace_needs_live_and_a_rate(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--live-pace`` without ``--live`` is refused, naming the flag; a negative pace too;
+    the pace is not part of the store's key (a paced run resumes an unpaced one's store)."""
+    from exo_ilc_ros.cli.main import main
+    from exo_ilc_ros.core.persistence.store import keyed_values
+
+    assert main(["run", "--live-pace", "1"]) == 2
+    assert "--live-pace: needs --live" in capsys.readouterr().err
+    assert main(["run", "--live", "--live-pace", "-1"]) == 2
+    assert keyed_values(load_config(overrides={"pace": 3.0})) == keyed_values(load_config())

@@ -724,3 +724,25 @@ def test_live_pace_needs_live_and_a_rate(capsys: pytest.CaptureFixture[str]) -> 
     assert "--live-pace: needs --live" in capsys.readouterr().err
     assert main(["run", "--live", "--live-pace", "-1"]) == 2
     assert keyed_values(load_config(overrides={"pace": 3.0})) == keyed_values(load_config())
+
+
+def test_assets_resolve_within_their_roots_only(tmp_path: Path) -> None:
+    """Relative and ``file://`` URIs within the URDF's directory are served; ``..``, an
+    absolute path elsewhere and a symlink inside the directory that points outside it are
+    refused (resolved before the containment check)."""
+    from exo_ilc_ros.core.arm.assets import AssetResolver
+
+    arm = tmp_path / "arm"
+    (arm / "meshes").mkdir(parents=True)
+    (arm / "meshes" / "link.stl").write_bytes(b"solid link")
+    (tmp_path / "secret.txt").write_text("not a mesh")
+    (arm / "meshes" / "escape.stl").symlink_to(tmp_path / "secret.txt")
+    (arm / "meshes" / "inside.stl").symlink_to(arm / "meshes" / "link.stl")
+    resolver = AssetResolver(arm / "arm.urdf")
+    assert resolver.fetch("meshes/link.stl") == b"solid link"
+    assert resolver.fetch((arm / "meshes" / "link.stl").as_uri()) == b"solid link"
+    assert resolver.fetch("meshes/inside.stl") == b"solid link"
+    for refused in ("../secret.txt", "meshes/../../secret.txt", "meshes/escape.stl",
+                    (tmp_path / "secret.txt").as_uri(), "http://example.com/x.stl",
+                    "meshes/missing.stl", "meshes"):
+        assert resolver.fetch(refused) is None, refused

@@ -7,8 +7,10 @@ finds the run's bag in it."""
 from __future__ import annotations
 
 import glob
+import json
 import math
 import socket
+import struct
 import subprocess
 import sys
 import threading
@@ -161,8 +163,7 @@ def test_the_shipped_layout_draws_the_views_channels() -> None:
     panels = layout["configById"]
     names = list(load_config()["joint_names"])
     for panel, row in (("Plot!max_error", "max_abs_error"), ("Plot!rms_error", "rms_error"),
-                       ("Plot!level_M", "level/M"),
-                       ("Plot!identified_damping", "identified/viscous")):
+                       ("Plot!level_M", "level/M")):
         config = panels[panel]
         assert config["xAxisPath"]["value"] == f"{topics.TRIAL_METRICS}.data[0]"
         assert [p["value"] for p in config["paths"]] == \
@@ -178,6 +179,7 @@ def test_the_shipped_layout_draws_the_views_channels() -> None:
     reference = three_d["layers"]["reference"]
     assert (reference["topic"], reference["framePrefix"]) == (ROBOT_DESCRIPTION, REFERENCE_PREFIX)
     assert panels["DiagnosticSummary!diagnostics"]["topicToRender"] == topics.DIAGNOSTICS
+    assert "Plot!identified_damping" not in panels  # the shipped config identifies nothing
 
 
 def _transform_values(msg: Any) -> tuple[Any, ...]:
@@ -440,3 +442,307 @@ def test_port_zero_names_the_port_it_serves() -> None:
         with socket.socket() as probe:  # free: the bridge can bind it
             probe.bind(("127.0.0.1", view.port))
     assert LiveView(load_config(), 8765).port == 8765
+
+
+# ---- the layout made for the arm, meshes, late viewers (issue: the live view of any arm) ----
+
+PANDA = ROOT / "config" / "arms" / "panda.yaml"
+METRIC_IN_TITLE = {"max |e|": "max_abs_error", "RMS e": "rms_error", "step gain M": "level/M",
+                   "damping B": "identified/viscous"}
+"""An independent reading of each per-trial plot's title: the metrics row it must show."""
+
+
+def test_shipped_layouts_are_the_generators() -> None:
+    """config/layouts/ are ``exo-ilc layout``'s output for the shipped (paper) arm."""
+    from exo_ilc_ros.analysis.live_layout import arm_layout, foxglove_json, plotjuggler_xml
+
+    arm = arm_layout(load_config())
+    layouts = ROOT / "config" / "layouts"
+    assert (layouts / "foxglove.json").read_text() == foxglove_json(arm, "foxglove")
+    assert (layouts / "lichtblick.json").read_text() == foxglove_json(arm, "lichtblick")
+    assert (layouts / "plotjuggler.xml").read_text() == plotjuggler_xml(arm)
+    ET.fromstring((layouts / "plotjuggler.xml").read_text())  # well-formed
+
+
+def _metrics_message(names: list[str]) -> Any:
+    """A Float64MultiArray as the supervisor sends it, every entry distinct: value of
+    (row r, joint j) = 100 r + j + 0.5, decoded back through the CDR the server forwards."""
+    values = {"trial": "7"}
+    rows = {"max_abs_error": 0, "metric/rms_error": 1, "level/M": 4, "identified/viscous": 7}
+    for prefix, r in rows.items():
+        for j, n in enumerate(names):
+            values[f"{prefix}/{n}"] = str(100 * r + j + 0.5)
+            values[f"identified/viscous/identifiable/{n}"] = "true"
+    array = trial_metrics(values, names, warn=False)
+    store = typestore()
+    msg_type = store.types["std_msgs/msg/Float64MultiArray"]
+    layout = store.types["std_msgs/msg/MultiArrayLayout"](
+        dim=[store.types["std_msgs/msg/MultiArrayDimension"](label=d.label, size=d.size,
+                                                             stride=d.stride)
+             for d in array.dims], data_offset=array.data_offset)
+    raw = store.serialize_cdr(msg_type(layout=layout, data=np.asarray(array.data)),
+                              "std_msgs/msg/Float64MultiArray")
+    return store.deserialize_cdr(raw, "std_msgs/msg/Float64MultiArray")
+
+
+def _resolve(path: str, messages: dict[str, Any]) -> float:
+    """A Plot series path (``/topic.field[i]``) read the way the app reads it."""
+    topic, _, rest = path.partition(".")
+    field, _, at = rest.partition("[")
+    return float(getattr(messages[topic], field)[int(at.rstrip("]"))])
+
+
+@pytest.mark.parametrize("config_file", [None, PANDA], ids=["paper", "panda"])
+@pytest.mark.parametrize("identification", [False, True])
+def test_generated_layout_names_the_arms_joints_and_draws_each_titled_metric(
+        config_file: Path | None, identification: bool, tmp_path: Path) -> None:
+    """The layout ``exo-ilc layout`` writes, read as the app reads it: per app its title key,
+    every plot's series labelled with the arm's joints in order, each path resolving (against
+    messages decoded from the schemas the server advertises) to the joint's value of the
+    metric the title names; the 3D panel follows the URDF's root link; no B plot without
+    identification."""
+    from exo_ilc_ros.cli.main import main
+
+    given = yaml.safe_load(config_file.read_text()) if config_file is not None else {}
+    supervisor = given.setdefault("ilc_supervisor", {}).setdefault("ros__parameters", {})
+    supervisor.setdefault("identification", {})["enabled"] = identification
+    overlay = tmp_path / "arm.yaml"
+    overlay.write_text(yaml.safe_dump(given))
+    config = load_config(overlay)
+    names = list(config["joint_names"])
+    assert len(names) == (3 if config_file is None else 7)
+    metrics = _metrics_message(names)
+    decoded = decode([d.label for d in metrics.layout.dim], metrics.layout.data_offset,
+                     list(metrics.data))
+    store = typestore()
+    state = store.types["sensor_msgs/msg/JointState"](
+        header=store.types["std_msgs/msg/Header"](
+            stamp=store.types["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=""),
+        name=names, position=np.arange(len(names)) + 0.25, velocity=np.zeros(len(names)),
+        effort=np.zeros(len(names)))
+    for app, key in (("foxglove", "foxglovePanelTitle"), ("lichtblick", "lichtblickPanelTitle")):
+        out = tmp_path / f"{app}.json"
+        assert main(["layout", "--config", str(overlay), "--app", app, "-o", str(out)]) == 0
+        layout = json.loads(out.read_text())
+        panels = layout["configById"]
+        root = ET.fromstring(_urdf_of(config))
+        children = {c.get("link") for c in root.iter("child")}
+        assert panels["3D!arm"]["followTf"] in \
+            {link.get("name") for link in root.findall("link")} - children
+        shown = set()
+        for panel_id, panel in panels.items():
+            assert key in panel, panel_id  # every panel titled for this app
+            if not panel_id.startswith("Plot!"):
+                continue
+            assert [p["label"] for p in panel["paths"]] == names, panel_id
+            title = panel[key]
+            rows = [row for text, row in METRIC_IN_TITLE.items() if text in title]
+            if panel.get("xAxisVal") == "custom":  # per trial, x = the trial
+                assert _resolve(panel["xAxisPath"]["value"], {topics.TRIAL_METRICS: metrics}) \
+                    == 7
+                (row,) = rows
+                shown.add(row)
+                for p in panel["paths"]:
+                    got = _resolve(p["value"], {topics.TRIAL_METRICS: metrics})
+                    assert got == decoded[row][p["label"]], (title, p)  # type: ignore[index]
+            elif panel["paths"][0]["value"].startswith(topics.JOINT_STATES):
+                for j, p in enumerate(panel["paths"]):
+                    assert state.name[j] == p["label"]
+                    assert _resolve(p["value"], {topics.JOINT_STATES: state}) == j + 0.25
+        assert ("identified/viscous" in shown) == identification
+        assert ("level/M" in shown) == (config["law"] == "sign")  # the only law with M
+        assert {"max_abs_error", "rms_error"} <= shown
+
+
+def _urdf_of(config: Any) -> str:
+    from exo_ilc_ros.core.arm.build import view_urdf
+
+    return view_urdf(config)[0]
+
+
+def _bridge(config_file: Path, relay: Path | None = None) -> tuple[subprocess.Popen[str], int]:
+    """foxglove_bridge alone, on a free port (fed by ``relay`` if given)."""
+    args = [sys.executable, "-m", "exo_ilc_ros.nodes.foxglove_bridge", "--ros-args",
+            "-p", "port:=0", "-p", f"config_file:={config_file}", "-p", "scheduling:=normal"]
+    if relay is not None:
+        args += ["-p", f"relay:={relay}", "-p", "sample_rate:=0.0"]
+    process = subprocess.Popen(args, stdout=subprocess.PIPE, text=True)
+    assert process.stdout is not None
+    for line in process.stdout:
+        if line.startswith('{"foxglove_port": '):
+            return process, int(json.loads(line)["foxglove_port"])
+    raise AssertionError(f"the bridge did not start: {process.wait()}")
+
+
+async def _fetch_assets(url: str, uris: list[str]) -> tuple[dict[str, Any], list[Any]]:
+    import websockets
+
+    async with websockets.connect(url, subprotocols=[SUBPROTOCOL],  # type: ignore[list-item]
+                                  max_size=None) as ws:
+        info: dict[str, Any] = {}
+        while not info:
+            frame = await ws.recv()
+            if isinstance(frame, str) and json.loads(frame).get("op") == "serverInfo":
+                info = json.loads(frame)
+        for request, uri in enumerate(uris):
+            await ws.send(json.dumps({"op": "fetchAsset", "uri": uri, "requestId": request}))
+        answers: list[Any] = [None] * len(uris)
+        while any(a is None for a in answers):
+            frame = await ws.recv()
+            if isinstance(frame, bytes) and frame[0] == 0x04:  # fetch asset response
+                request, status, length = struct.unpack_from("<IBI", frame, 1)
+                text = frame[10:10 + length].decode()
+                answers[request] = (status, text, bytes(frame[10 + length:]))
+        return info, answers
+
+
+@pytest.mark.graph
+def test_the_panda_meshes_are_fetched_through_the_protocol_and_traversal_refused() -> None:
+    """fetchAsset of the Panda URDF's own URI returns the mesh file's bytes (the
+    example-robot-data wheel's); a ``..`` out of the package, a file outside the roots and a
+    symlink-free absolute path elsewhere are refused."""
+    import asyncio
+
+    from exo_ilc_ros.core.arm.assets import package_share
+
+    share = package_share("example-robot-data")
+    if share is None:
+        pytest.skip("example-robot-data (the Panda's meshes) is not installed")
+    uri = "package://example-robot-data/robots/panda_description/meshes/visual/link0.dae"
+    assert uri in (ROOT / "urdf" / "panda.urdf").read_text()
+    mesh = (share / "robots/panda_description/meshes/visual/link0.dae").read_bytes()
+    process, port = _bridge(PANDA)
+    try:
+        info, answers = asyncio.run(_fetch_assets(f"ws://127.0.0.1:{port}", [
+            uri, "package://example-robot-data/../../../../../../etc/passwd", "file:///etc/passwd",
+            "../../../../../../etc/passwd", "package://no_such_package/x.dae"]))
+    finally:
+        process.terminate()
+        process.wait(timeout=30)
+    assert "assets" in info["capabilities"]
+    assert answers[0] == (0, "", mesh)
+    assert all(status == 1 and data == b"" for status, _, data in answers[1:])
+
+
+@pytest.mark.graph
+def test_a_late_viewer_gets_every_trials_metrics_and_the_current_trials_samples(
+        tmp_path: Path) -> None:
+    """The bridge fed 10 trials of a run (feed-forward, samples, metrics, as the recorder's
+    relay hands them), then trial 11's first samples: a viewer connecting now receives the
+    10 trials' metrics and trial 11's samples from its first, not the earlier trials'."""
+    from exo_ilc_ros.bag.messages import header, serialize
+    from exo_ilc_ros.wire.cdr import JointStateWriter
+    from exo_ilc_ros.wire.relay import RelaySender
+
+    config = load_config()
+    names = list(config["joint_names"])
+    store = typestore()
+    relay = tmp_path / "relay.sock"
+    process, port = _bridge(ROOT / "config" / "exo_ilc.yaml", relay)
+    writer = JointStateWriter(names)
+    sender = RelaySender(relay, topics.PER_SAMPLE)
+    sent: dict[int, list[int]] = {}
+    try:
+        metrics_type = "std_msgs/msg/Float64MultiArray"
+        for trial in range(1, 12):
+            t0 = trial * 10_000_000_000
+            profile = store.types["trajectory_msgs/msg/JointTrajectory"](
+                header=header(t0), joint_names=names, points=[])
+            messages = [(t0, topics.FEEDFORWARD,
+                         serialize(profile, "trajectory_msgs/msg/JointTrajectory"))]
+            stamps = [t0 + i * 10_000_000 for i in range(50 if trial < 11 else 20)]
+            sent[trial] = stamps
+            messages += [(s, topics.JOINT_STATES, writer.write(s, np.full(3, i * 0.01),
+                                                                np.zeros(3), np.zeros(3)))
+                         for i, s in enumerate(stamps)]
+            if trial < 11:
+                array = store.types[metrics_type](
+                    layout=store.types["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=2),
+                    data=np.array([float(trial), 0.0]))
+                messages.append((stamps[-1], topics.TRIAL_METRICS,
+                                 serialize(array, metrics_type)))
+            sender.send(messages)
+            sender.flush()
+        time.sleep(1.0)  # the bridge takes the feed (a later one would come live: no assert on it)
+        received = collect(f"ws://127.0.0.1:{port}", duration=5.0)
+    finally:
+        sender.close()
+        process.terminate()
+        process.wait(timeout=30)
+    decoded = _decoded(received)
+    assert sorted(int(m.data[0]) for _, m in decoded[topics.TRIAL_METRICS]) == \
+        list(range(1, 11))
+    assert [log for log, _ in decoded[topics.JOINT_STATES]] == sent[11]
+    assert [_stamp(m) for _, m in decoded[topics.JOINT_STATES]] == sent[11]
+
+
+@pytest.mark.graph
+def test_live_pace_changes_only_the_wall_time(tmp_path: Path) -> None:
+    """``run --live --live-pace 2``: the lock-step plant steps at most 2 simulated s per wall
+    s. In the bag (publish time = the wall time the recorder received a sample), the two 1-s
+    trials' samples span at least 1 s of wall time less the first's delivery (a lower
+    bound the pace sets, whatever the machine's speed; unpaced, they take tens of ms), and
+    every per-trial number equals simulate's (to 1e-9, the graph's rule)."""
+    config_file = tmp_path / "short.yaml"
+    config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n')
+    graph_json, local_json = tmp_path / "graph.json", tmp_path / "local.json"
+    main_args = [sys.executable, "-m", "exo_ilc_ros.cli.main"]
+    result = subprocess.run([*main_args, "run", "--no-store", "--live", "--live-port", "0",
+                             "--live-pace", "2", "--config", str(config_file), "--trials", "2",
+                             "--bag-dir", str(tmp_path / "bags"), "--json", str(graph_json)],
+                            text=True, capture_output=True, timeout=300, cwd=tmp_path,
+                            stdin=subprocess.DEVNULL, check=False)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "foxglove_layout.json" in result.stderr  # the layout made for the run, offered
+    local = subprocess.run([*main_args, "simulate", "--config", str(config_file), "--trials",
+                            "2", "--json", str(local_json)], text=True, capture_output=True,
+                           timeout=120, check=False)
+    assert local.returncode == 0, local.stderr[-3000:]
+    (g,), (r,) = json.loads(graph_json.read_text())["runs"], \
+        json.loads(local_json.read_text())["runs"]
+    assert len(g["trials"]) == len(r["trials"]) == 2
+    for key in ("max_abs_error", "max_abs_feedforward", "max_abs_effort"):
+        np.testing.assert_allclose([t[key] for t in g["trials"]], [t[key] for t in r["trials"]],
+                                   rtol=0.0, atol=1e-9, err_msg=key)
+    (bag,) = list((tmp_path / "bags").iterdir())
+    states = sorted((_stamp(m), published) for _, published, m in
+                    _bag_messages(bag)[topics.JOINT_STATES])
+    sim, wall = states[-1][0] - states[0][0], states[-1][1] - states[0][1]
+    assert sim >= 1.99e9  # two 1-s trials (their samples, consecutive in sim time)
+    # paced: >= sim / 2 less the first sample's delivery delay (0.2 s of slack); unpaced
+    # the 200 samples take tens of ms even at 1 000 steps per second
+    assert wall >= sim / 2.0 - 0.2e9, (sim, wall)
+
+
+def test_live_pace_needs_live_and_a_rate(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--live-pace`` without ``--live`` is refused, naming the flag; a negative pace too;
+    the pace is not part of the store's key (a paced run resumes an unpaced one's store)."""
+    from exo_ilc_ros.cli.main import main
+    from exo_ilc_ros.core.persistence.store import keyed_values
+
+    assert main(["run", "--live-pace", "1"]) == 2
+    assert "--live-pace: needs --live" in capsys.readouterr().err
+    assert main(["run", "--live", "--live-pace", "-1"]) == 2
+    assert keyed_values(load_config(overrides={"pace": 3.0})) == keyed_values(load_config())
+
+
+def test_assets_resolve_within_their_roots_only(tmp_path: Path) -> None:
+    """Relative and ``file://`` URIs within the URDF's directory are served; ``..``, an
+    absolute path elsewhere and a symlink inside the directory that points outside it are
+    refused (resolved before the containment check)."""
+    from exo_ilc_ros.core.arm.assets import AssetResolver
+
+    arm = tmp_path / "arm"
+    (arm / "meshes").mkdir(parents=True)
+    (arm / "meshes" / "link.stl").write_bytes(b"solid link")
+    (tmp_path / "secret.txt").write_text("not a mesh")
+    (arm / "meshes" / "escape.stl").symlink_to(tmp_path / "secret.txt")
+    (arm / "meshes" / "inside.stl").symlink_to(arm / "meshes" / "link.stl")
+    resolver = AssetResolver(arm / "arm.urdf")
+    assert resolver.fetch("meshes/link.stl") == b"solid link"
+    assert resolver.fetch((arm / "meshes" / "link.stl").as_uri()) == b"solid link"
+    assert resolver.fetch("meshes/inside.stl") == b"solid link"
+    for refused in ("../secret.txt", "meshes/../../secret.txt", "meshes/escape.stl",
+                    (tmp_path / "secret.txt").as_uri(), "http://example.com/x.stl",
+                    "meshes/missing.stl", "meshes"):
+        assert resolver.fetch(refused) is None, refused

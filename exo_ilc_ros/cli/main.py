@@ -13,7 +13,7 @@ from ..core.errors import ExoIlcError
 from ..core.params.redact import redact, secrets_in
 from .arguments import hide_password
 
-COMMANDS = ("simulate", "urdf", "tune", "compare", "run", "param", "analyze", "paper",
+COMMANDS = ("simulate", "urdf", "layout", "tune", "compare", "run", "param", "analyze", "paper",
             "analyze_loop", "clean", "profiles", "report", "study", "ros2_control")
 """Sub-command modules of this package; each has ``register(subparsers)`` setting ``func``."""
 

@@ -84,6 +84,10 @@ def register(sub: Any) -> None:
                         help="with --live: samples shown per second of wall time, per topic "
                         f"(default {DISPLAY_RATE:g}: every sample of a real-time loop up to "
                         "that rate; a faster lock-step run is shown at it; 0: every sample)")
+    parser.add_argument("--live-pace", type=display_rate, default=None, metavar="RATE",
+                        help="with --live, lock-step: at most RATE simulated seconds per wall "
+                        "second (1: real time, to watch it learn); the numbers do not change "
+                        "(the plant's pace)")
     parser.add_argument("--live-param", action="append", default=[], metavar="NAME:=VALUE",
                         type=bridge_parameter,
                         help="with --live: a foxglove_bridge parameter, e.g. "
@@ -145,13 +149,17 @@ def run(args: argparse.Namespace) -> int:
         given = "--bag-dir" if args.bag_dir is not None else "--isolated-recorder"
         raise ConfigError("--no-bag", f"records nothing: {given} would be ignored; drop one")
     if not args.live and (args.live_port is not None or args.live_host is not None or
-                          args.live_param or args.live_rate is not None):
+                          args.live_param or args.live_rate is not None or
+                          args.live_pace is not None):
         given = "--live-port" if args.live_port is not None else \
             "--live-host" if args.live_host is not None else \
-            "--live-rate" if args.live_rate is not None else "--live-param"
+            "--live-rate" if args.live_rate is not None else \
+            "--live-pace" if args.live_pace is not None else "--live-param"
         raise ConfigError(given, "needs --live")
     args.bag_dir = "bags" if args.bag_dir is None else args.bag_dir
     config = config_from_args(args)  # an invalid YAML fails here, before any node starts
+    if args.live_pace is not None:
+        config = config.replace({"pace": args.live_pace})
     if args.plant == "mujoco" and config["protocol"] != "homing":
         print("exo-ilc run: --plant mujoco offers no reset service: protocol homing",
               file=sys.stderr)
@@ -286,7 +294,8 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
                 relayed=not args.no_bag,  # the recorder feeds it
                 sample_rate=DISPLAY_RATE if args.live_rate is None else args.live_rate))
             print(f"live view: {live.url} (Foxglove app: Open connection, Foxglove WebSocket; "
-                  "layout config/layouts/foxglove.json)", file=sys.stderr, flush=True)
+                  f"layout made for this arm, kept while it runs: {live.layouts['foxglove']}, "
+                  f"Lichtblick's {live.layouts['lichtblick']})", file=sys.stderr, flush=True)
             extra.append(live.spec)
             relay = live.relay
             rate = live.sample_rate

@@ -17,7 +17,8 @@ the JointState stamp, and the reference pose q_d(t_i) of the trial's feed-forwar
 ``reference/`` tree, placed beside the arm). ``/clock`` drives the app's clock
 (``Capability.Time``). The protocol has no latching: what was logged before a client
 subscribed (the URDFs, the last feed-forward, every trial's summary, metrics and events) is
-logged again when a channel gets a subscriber (its other subscribers then get a copy too).
+logged again to a client that subscribes to a channel (to that client only), and the
+current trial's samples from its start.
 
 Beside ``exo-ilc run``'s recorder it is no DDS reader at all (parameter ``relay``): the
 recorder, which takes every topic for the bag anyway, hands it the messages over a local socket
@@ -61,8 +62,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from ..bag.messages import typestore
 from ..bag.view import ArmView
+from ..core.arm.assets import AssetResolver, urdf_packages
 from ..core.errors import ConfigError
-from ..core.params.config import load_config
+from ..core.params.config import load_config, urdf_source
 from ..wire import topics
 from ..wire.relay import DISPLAY_RATE, RelayReceiver, SampleGate
 from ..wire.sim_time import SimClock
@@ -80,6 +82,11 @@ LATCHED = frozenset({topics.FEEDFORWARD, topics.TRIAL_EVENTS, topics.TRIAL_SUMMA
 REPLAYED = {topics.FEEDFORWARD: 1, topics.TRIAL_EVENTS: None, topics.TRIAL_SUMMARY: None,
             topics.TRIAL_METRICS: None}
 """Topic -> how many of its last messages a new subscriber gets again (None: all)."""
+TRIAL_SAMPLES = 100_000
+"""Per-sample messages of the current trial kept per topic for a late viewer (at most; the
+view's display rate keeps far fewer of a fast lock-step run): a viewer that subscribes within
+a trial gets its samples from its start. A new trial's feed-forward starts the next
+trial's; the run's earlier trials keep only their per-trial data (:data:`REPLAYED`)."""
 READER_DEPTH = 10000
 SCHEDULING = ("idle", "batch", "normal")
 DEFAULT_SCHEDULING = "idle"
@@ -121,7 +128,7 @@ class _Listener(ServerListener):
         self.bridge = bridge
 
     def on_subscribe(self, client: Any, channel: Any) -> None:
-        self.bridge.replay(str(channel.topic))
+        self.bridge.replay(str(channel.topic), int(client.id))
 
 
 class FoxgloveBridge(Node):
@@ -148,18 +155,25 @@ class FoxgloveBridge(Node):
         self.declare_parameter("scheduling", DEFAULT_SCHEDULING)  # applied by main(), first
         config = load_config(config_file or None)
         self.view = ArmView(config)
+        self.assets = AssetResolver(
+            Path(urdf_source(config.values)[1]) if config["model.source"] == "urdf" else None,
+            urdf_packages(self.view.urdf))
+        """The URDF's meshes, served on the client's ``fetchAsset`` (the assets capability)."""
         self.exit_code: int | None = None
         self.sim_clock = SimClock()
         self._lock = threading.Lock()
         self._kept: dict[str, list[tuple[int, bytes]]] = {
             topic: [(0, raw)] for topic, raw in self.view.descriptions().items()}
+        self._trial: dict[str, list[tuple[int, bytes]]] = {topic: [] for topic in SAMPLED}
+        """The current trial's per-sample messages shown so far (for a late viewer)."""
         self.channels: dict[str, Channel] = {
             topic: ros2_channel(topic, topics.BAG_TYPES[topic])
             for topic in (*FORWARDED, *topics.VIEW_TYPES)}
         try:
             self.server = foxglove.start_server(
                 name="exo_ilc_ros", host=host, port=port, capabilities=[Capability.Time],
-                server_listener=_Listener(self), message_backlog_size=backlog)
+                server_listener=_Listener(self), message_backlog_size=backlog,
+                asset_handler=self.assets.fetch)
         except Exception as exc:  # the SDK's own error type: a port in use, a bad address
             raise ConfigError("port", f"cannot serve on {host}:{port}: {exc} (another "
                               "program on that port? choose another with --live-port)",
@@ -182,14 +196,22 @@ class FoxgloveBridge(Node):
                                "Foxglove app")
         print(json.dumps({"foxglove_port": self.server.port}), flush=True)
 
-    def replay(self, topic: str) -> None:
-        """Log ``topic``'s kept messages again (a client just subscribed to it)."""
+    def replay(self, topic: str, client: int | None = None) -> None:
+        """Log ``topic``'s kept messages again to the ``client`` that just subscribed to it
+        (its id is its sink's: the clients already subscribed get no copy; None: to all): the
+        URDFs, the run's per-trial data, and the current trial's samples from its start (/tf
+        computed again from its JointStates)."""
         channel = self.channels.get(topic)
         with self._lock:
-            kept = list(self._kept.get(topic, ()))
+            if topic == TF:
+                kept = [out for out in (self.view.tf(raw) for _, raw in
+                                        self._trial.get(topics.JOINT_STATES, ()))
+                        if out is not None]
+            else:
+                kept = list(self._kept.get(topic, ())) + list(self._trial.get(topic, ()))
         if channel is not None:
             for log_time, raw in kept:
-                channel.log(raw, log_time=log_time)
+                channel.log(raw, log_time=log_time, sink_id=client)
 
     def poll(self) -> int:
         """Forward what waits, in receive order; returns how many messages."""
@@ -203,16 +225,24 @@ class FoxgloveBridge(Node):
                     taken.append((log_time, topic, raw))
         for log_time, topic, raw in taken:
             channel = self.channels[topic]
+            if topic == topics.FEEDFORWARD:  # a new trial: its samples start here
+                with self._lock:
+                    self._load_reference(raw)
+                    for samples in self._trial.values():
+                        samples.clear()
             if topic in REPLAYED:
                 self._keep(topic, log_time, raw)
+            elif topic in SAMPLED:
+                with self._lock:
+                    samples = self._trial[topic]
+                    if len(samples) < TRIAL_SAMPLES:
+                        samples.append((log_time, raw))
             if channel.has_sinks():
                 channel.log(raw, log_time=log_time)
             if topic == topics.JOINT_STATES:
                 self._transforms(raw)
             elif topic == topics.CLOCK:
                 self.server.broadcast_time(log_time)
-            elif topic == topics.FEEDFORWARD:
-                self._load_reference(raw)
         self.forwarded += len(taken)
         return len(taken)
 

@@ -10,6 +10,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
 
+from ..analysis.live_layout import APPS, arm_layout, foxglove_json
 from ..core.params.config import Config
 from ..nodes.registry import BRIDGE
 from ..wire.relay import DISPLAY_RATE
@@ -54,6 +55,9 @@ class LiveView:
         self.config_file: Path | None = None
         self.relay: Path | None = None
         """The socket the bridge listens at for the recorder's feed (when :attr:`relayed`)."""
+        self.layouts: dict[str, Path] = {}
+        """App -> the layout made for this run's arm (``exo-ilc layout``), kept while the
+        graph runs: import it in the app."""
 
     def __enter__(self) -> LiveView:
         self._tmp = tempfile.TemporaryDirectory(prefix="exo_ilc_live_")
@@ -61,6 +65,10 @@ class LiveView:
         self.config_file.write_text(self.config.to_ros_yaml("run shown by foxglove_bridge"))
         if self.relayed:
             self.relay = Path(self._tmp.name) / "relay.sock"
+        arm = arm_layout(self.config)
+        for app in APPS:
+            self.layouts[app] = Path(self._tmp.name) / f"{app}_layout.json"
+            self.layouts[app].write_text(foxglove_json(arm, app))
         return self
 
     def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,

@@ -44,7 +44,7 @@ from ..reference.trajectory import SampledReference
 from .files import _atomic, write_json_atomic
 
 STORE_VERSION = 1
-NOT_KEYED = frozenset({"max_trials", "mode", "real_time_rate", "wait_for_recorder",
+NOT_KEYED = frozenset({"max_trials", "mode", "real_time_rate", "pace", "wait_for_recorder",
                        "max_late_commands", "thread_priority",
                        "safety.watchdog_periods", "watchdog_min_timeout",
                        "safety.hold_kp", "safety.hold_kd", "safety.hold_ramp",

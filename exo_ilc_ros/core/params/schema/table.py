@@ -326,6 +326,10 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("real_time_rate", PLANT, Kind.DOUBLE,
               "real_time mode: simulated seconds per wall-clock second (1.0: real time)",
               strictly_positive=True),
+    Parameter("pace", PLANT, Kind.DOUBLE,
+              "lock_step mode: at most this many simulated seconds per wall-clock second "
+              "(1.0: real time, to watch a run live; 0: as fast as it goes); changes no "
+              "number, only the wall time (exo-ilc run --live-pace)", minimum=0.0),
     Parameter("clock_every", PLANT, Kind.INTEGER,
               "publish /clock every this many control periods (and at each trial's first "
               "sample); 1: every period", strictly_positive=True),

@@ -154,6 +154,8 @@ def certificate_figure(cert: Certificate) -> Figure:
     left.axvline(10.5, color="k", ls=":", lw=1)
     if k >= 25:
         left.axvline(25.5, color="k", ls=":", lw=1)
+    ticks = [t for t in (1, 5, 10, 15, 20, 25) if t <= k]
+    left.set_xticks([*ticks, k + 2], [*map(str, ticks), "never"])
     left.set_xlabel("trial from which the patient stays within the bound")
     left.set_ylabel("patients")
     left.set_title(f"{cert.label}: trials to the bound ({len(cert.outcomes)} patients)")

@@ -37,7 +37,7 @@ from exo_ilc_ros.core.population.distributions import (
     draw_population,
     patient_from_unit,
 )
-from exo_ilc_ros.core.programs.study import CellResult, run_cell
+from exo_ilc_ros.core.programs.study import CellResult, run_cell, true_max_abs_error
 from exo_ilc_ros.core.session.learning_session import run_trials
 
 ARMS = {"paper": None, "panda": config_dir() / "arms" / "panda.yaml",
@@ -187,7 +187,7 @@ def test_certify_command_small_population_json_rows_and_resume(
     config = load_config(config_dir() / "robust.yaml", {**first["overrides"],
                          "max_trials": 5, "stop_when_settled": 0},
                          overlays=[_short(tmp_path)])
-    worst = [float(np.max(r.true_max_abs_error)) for r in run_trials(config)]
+    worst = [float(np.max(true_max_abs_error(r))) for r in run_trials(config).records]
     assert np.allclose(worst, first["worst_error_per_trial"], rtol=1e-12)
     assert png.is_file() and png.stat().st_size > 10_000
     rows = tmp_path / "cert.rows.jsonl"
@@ -219,7 +219,7 @@ def test_falsification_finds_a_worse_patient_and_writes_it_loadable(tmp_path: Pa
     assert path.read_text().startswith("# found\n# by a test\n")
     config = load_config(law, {"max_trials": 3, "stop_when_settled": 0},
                          overlays=[short, path])
-    worst = [float(np.max(r.true_max_abs_error)) for r in run_trials(config)]
+    worst = [float(np.max(true_max_abs_error(r))) for r in run_trials(config).records]
     assert np.allclose(worst, found[0].outcome.worst_error_per_trial, rtol=1e-12,
                        equal_nan=True)
 

@@ -59,9 +59,10 @@ def run_population(cells: Sequence[StudyCell], trials: int, workers: int,
     ``rows`` read back, the others run and appended to it one line each as they finish."""
     done = read_rows(rows, setup) if rows is not None else {}
     todo = [c for c in cells if c.seed not in done]
-    if rows is not None and not done:
+    if rows is not None:  # the header and the whole lines read (a line cut short is dropped)
         rows.parent.mkdir(parents=True, exist_ok=True)
-        rows.write_text(json.dumps({"setup": setup}) + "\n")
+        rows.write_text("".join(json.dumps(x) + "\n" for x in [
+            {"setup": setup}, *({"outcome": o.to_json()} for o in done.values())]))
     handle = rows.open("a") if rows is not None else None
 
     def finished(cell: StudyCell, result: CellResult) -> None:

@@ -36,6 +36,7 @@ from exo_ilc_ros.core.population.distributions import (
     draw_patient,
     draw_population,
     patient_from_unit,
+    search_point,
 )
 from exo_ilc_ros.core.programs.study import CellResult, run_cell, true_max_abs_error
 from exo_ilc_ros.core.session.learning_session import run_trials
@@ -237,3 +238,12 @@ def test_scenario_yaml_puts_each_key_in_its_section(tmp_path: Path) -> None:
     loaded = load_config(ARMS["panda"], overlays=[PERSON, path])
     for key, value in patient.overrides.items():
         assert loaded[key] == value, key
+
+
+def test_the_search_reads_a_drawn_patient_as_the_same_patient() -> None:
+    base = load_config()
+    spec = PopulationSpec()
+    for patient in draw_population(base, spec, 40, seed=5):
+        again = patient_from_unit(base, spec, search_point(patient, spec), uniform_grades=True)
+        assert {**again.overrides, "patient.seed": patient.overrides["patient.seed"]} == \
+            patient.overrides

@@ -13,6 +13,7 @@ highest (:data:`NONFINITE_SCORE`). The search starts from the population's worst
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -64,14 +65,17 @@ def falsify(base: Config, spec: PopulationSpec, config_path: str | None,
             dask: str | Any | None = None,
             on_found: Callable[[Found], None] | None = None) -> list[Found]:
     """Every patient the search ran (``budget`` of them), worst first. ``start``: the point
-    of the unit cube CMA-ES starts from (default: the cube's centre); the patient's noise is
-    ``patient.seed`` = ``seed``."""
+    of the unit cube CMA-ES starts from, read with every MAS grade an equal share
+    (:func:`..core.population.distributions.search_point`; default: the cube's centre); the
+    patient's noise is ``patient.seed`` = ``seed``."""
     names = spec.coordinates(schema.patient_joint_names(base.values),
                              bool(base.values["person.enabled"]))
     x0 = {n: float(np.clip((start or {}).get(n, 0.5), 0.0, 1.0)) for n in names}
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    sampler = optuna.samplers.CmaEsSampler(x0=x0, sigma0=SIGMA0, seed=seed,
-                                           warn_independent_sampling=False)
+    with warnings.catch_warnings():  # x0 and sigma0: deprecated in optuna 4.9, removed in 6
+        warnings.simplefilter("ignore", FutureWarning)
+        sampler = optuna.samplers.CmaEsSampler(x0=x0, sigma0=SIGMA0, seed=seed,
+                                               warn_independent_sampling=False)
     study = optuna.create_study(direction="maximize", sampler=sampler)
     batch = max(1, workers)
     found: list[Found] = []

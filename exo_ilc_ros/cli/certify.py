@@ -101,7 +101,11 @@ def certify(args: argparse.Namespace) -> int:
         patient_cell,
         patient_config,
     )
-    from ..core.population.distributions import PopulationSpec, draw_population
+    from ..core.population.distributions import (
+        PopulationSpec,
+        draw_population,
+        search_point,
+    )
     from .tune import default_jobs
 
     if args.dask and args.workers is not None:
@@ -144,7 +148,7 @@ def certify(args: argparse.Namespace) -> int:
     falsification = None
     if args.falsify:
         worst = cert.worst(1)
-        start = by_index[worst[0].index].unit if worst else None
+        start = search_point(by_index[worst[0].index], spec) if worst else None
         with tqdm(total=args.falsify, desc="falsify", unit="patient", file=sys.stderr,
                   disable=None) as bar:
             found = falsify(base, spec, args.config, overlays, label, args.trials,

@@ -288,6 +288,15 @@ def patient_from_unit(base: Config, spec: PopulationSpec, unit: Mapping[str, flo
     return Patient(index, u, overrides)
 
 
+def search_point(patient: Patient, spec: PopulationSpec) -> dict[str, float]:
+    """The patient's point of the unit cube as :func:`patient_from_unit` reads it with
+    ``uniform_grades`` (the MAS coordinate moved to the middle of its grade's equal share)."""
+    grades = [g for g in MAS_ORDER if spec.mas_probabilities.get(g, 0.0) > 0]
+    point = dict(patient.unit)
+    point["mas"] = (grades.index(patient.mas_grade) + 0.5) / len(grades)
+    return point
+
+
 def patient_seed(seed: int, index: int) -> int:
     """The patient's own ``patient.seed`` (its per-trial noise), from (seed, index)."""
     return int(np.random.SeedSequence([seed, index, 1]).generate_state(1)[0])

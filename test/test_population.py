@@ -12,7 +12,7 @@ import pytest
 from exo_ilc_ros.analysis.certificate import read_rows, scenario_yaml, write_scenario
 from exo_ilc_ros.analysis.falsification import ABORT_SCORE, failure_score, falsify
 from exo_ilc_ros.cli.main import main
-from exo_ilc_ros.core.loop.patient import patient_joint_indices, rest_positions
+from exo_ilc_ros.core.loop.patient import MAS_PRESETS, patient_joint_indices, rest_positions
 from exo_ilc_ros.core.params import schema
 from exo_ilc_ros.core.params.config import config_dir, load_config
 from exo_ilc_ros.core.population.certificate import (
@@ -26,6 +26,7 @@ from exo_ilc_ros.core.population.certificate import (
 from exo_ilc_ros.core.population.distributions import (
     COULOMB_MAX,
     ENCODER_RESOLUTION,
+    MAS_ORDER,
     REST_BANDS,
     SOURCES,
     STIFFNESS_BANDS,
@@ -247,3 +248,15 @@ def test_the_search_reads_a_drawn_patient_as_the_same_patient() -> None:
         again = patient_from_unit(base, spec, search_point(patient, spec), uniform_grades=True)
         assert {**again.overrides, "patient.seed": patient.overrides["patient.seed"]} == \
             patient.overrides
+
+
+def test_voluntary_patients_and_every_grade_have_their_schema_keys() -> None:
+    base = load_config()
+    spec = PopulationSpec(voluntary_share=1.0)
+    for patient in draw_population(base, spec, 5, seed=2):
+        config = base.replace(patient.overrides)
+        k = np.asarray(config["patient.voluntary.stiffness"])
+        assert np.all((k >= 0) & (k <= 2.5)) and config["patient.voluntary.timing_sd"] <= 0.05
+    assert set(MAS_ORDER) == set(MAS_PRESETS)
+    with pytest.raises(ValueError, match="encoder_share"):
+        PopulationSpec(encoder_share=1.5)

@@ -57,6 +57,7 @@ setup(
         "mcap>=1.6,<2",  # tested: 1.6.0 (Writer with chunk, data and summary CRCs)
         "mcap-ros2-support>=0.5",
         "optuna>=4",
+        "cmaes>=0.10",  # exo-ilc certify --falsify: optuna's CMA-ES sampler needs it
         "clarabel>=0.9",
         "mujoco>=4",
         "distributed>=2024.1",  # exo-ilc study --dask: cells on a Dask cluster

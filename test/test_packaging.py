@@ -29,6 +29,7 @@ ROSDEP_KEYS: dict[str, str] = {
     "mcap": "python3-mcap-pip",
     "mcap-ros2-support": "mcap-ros2-support",
     "optuna": "python3-optuna-pip",
+    "cmaes": "python3-cmaes-pip",
     "clarabel": "python3-clarabel-pip",
     "mujoco": "python3-mujoco-pip",
     "distributed": "python3-distributed",

@@ -31,6 +31,8 @@ from ..core.programs.study_rows import FLOOR_WINDOW, StudyRow, growth_window
 
 OnDone = Callable[[StudyCell], None]
 """Called in the caller's process once per finished cell (progress)."""
+OnResult = Callable[[StudyCell, CellResult], None]
+"""Called in the caller's process with each cell's result as it finishes (written at once)."""
 
 
 PR_SET_PDEATHSIG = 1
@@ -77,24 +79,31 @@ def _interrupt_deferred() -> Iterator[None]:
 
 
 def run_cells(cells: Sequence[StudyCell], workers: int = 1, dask: str | Any | None = None,
-              on_done: OnDone | None = None) -> list[CellResult]:
+              on_done: OnDone | None = None,
+              on_result: OnResult | None = None) -> list[CellResult]:
     """Every cell's result, in the cells' order: on a Dask cluster when ``dask`` is given (a
     scheduler address such as ``tcp://host:8786``, or a cluster object), else over ``workers``
-    local processes (1: in this process). Ctrl-C stops the workers and raises KeyboardInterrupt."""
+    local processes (1: in this process). ``on_result`` gets each result as it finishes (before
+    ``on_done``). Ctrl-C stops the workers and raises KeyboardInterrupt."""
+    def finished(cell: StudyCell, result: CellResult) -> None:
+        if on_result is not None:
+            on_result(cell, result)
+        if on_done is not None:
+            on_done(cell)
+
     if dask is not None:
-        return _run_on_dask(cells, dask, on_done)
+        return _run_on_dask(cells, dask, finished)
     if workers <= 1 or len(cells) <= 1:
         results = []
         for cell in cells:
             results.append(run_cell(cell))
-            if on_done is not None:
-                on_done(cell)
+            finished(cell, results[-1])
         return results
-    return _run_on_pool(cells, min(workers, len(cells)), on_done)
+    return _run_on_pool(cells, min(workers, len(cells)), finished)
 
 
 def _run_on_pool(cells: Sequence[StudyCell], workers: int,
-                 on_done: OnDone | None) -> list[CellResult]:
+                 finished: OnResult) -> list[CellResult]:
     context = multiprocessing.get_context("spawn")  # no fork of numba's or tqdm's threads
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=context,
                                initializer=_ignore_interrupt)
@@ -107,9 +116,8 @@ def _run_on_pool(cells: Sequence[StudyCell], workers: int,
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in done:
                 index = pending.pop(future)
-                results[index] = future.result()
-                if on_done is not None:
-                    on_done(cells[index])
+                results[index] = result = future.result()
+                finished(cells[index], result)
     except BaseException:  # Ctrl-C or a worker's error: stop every worker now, not after its cell
         processes = list(getattr(pool, "_processes", {}).values())
         for process in processes:
@@ -125,7 +133,7 @@ def _run_on_pool(cells: Sequence[StudyCell], workers: int,
 
 
 def _run_on_dask(cells: Sequence[StudyCell], address: str | Any,
-                 on_done: OnDone | None) -> list[CellResult]:
+                 finished: OnResult) -> list[CellResult]:
     try:
         from distributed import Client, as_completed
     except ImportError as exc:  # pragma: no cover - a dependency of the package
@@ -148,8 +156,7 @@ def _run_on_dask(cells: Sequence[StudyCell], address: str | Any,
                                    f"client {__version__}: install the same version on every "
                                    "worker")
             results[i] = result
-            if on_done is not None:
-                on_done(cells[i])
+            finished(cells[i], result)
         return [r for r in results if r is not None]
     finally:
         if futures:

@@ -14,7 +14,7 @@ from ..core.params.redact import redact, secrets_in
 from .arguments import hide_password
 
 COMMANDS = ("simulate", "urdf", "layout", "tune", "compare", "run", "param", "analyze", "paper",
-            "analyze_loop", "clean", "profiles", "report", "study", "ros2_control")
+            "analyze_loop", "clean", "profiles", "report", "study", "ros2_control", "certify")
 """Sub-command modules of this package; each has ``register(subparsers)`` setting ``func``."""
 
 

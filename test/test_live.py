@@ -454,7 +454,7 @@ METRIC_IN_TITLE = {"max |e|": "max_abs_error", "RMS e": "rms_error", "step gain 
 
 def test_shipped_layouts_are_the_generators() -> None:
     """config/layouts/ are ``exo-ilc layout``'s output for the shipped (paper) arm."""
-    from exo_ilc_ros.analysis.live_layout import arm_layout, foxglove_json, plotjuggler_xml
+    from exo_ilc_ros.orchestration.live_layout import arm_layout, foxglove_json, plotjuggler_xml
 
     arm = arm_layout(load_config())
     layouts = ROOT / "config" / "layouts"

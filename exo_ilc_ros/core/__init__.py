@@ -15,7 +15,7 @@ from typing import Any
 from .. import load_public
 
 ROOMS = ("params", "arm", "reference", "loop", "learning", "convergence", "sim", "persistence",
-         "session", "protocol", "programs")
+         "session", "protocol", "programs", "population")
 """core's subpackages, bottom first: each may import only those before it (and the shared
 modules ``errors`` and ``_numba_cache``)."""
 

@@ -6,6 +6,7 @@ URDF or reference is one clear error line through `exo-ilc simulate`."""
 from __future__ import annotations
 
 import shutil
+import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,13 @@ from exo_ilc_ros.analysis.figures import convergence_figure
 from exo_ilc_ros.bag.view import ArmView
 from exo_ilc_ros.cli.main import main as cli_main
 from exo_ilc_ros.core import run_trials
-from exo_ilc_ros.core.arm.build import build_arm, urdf_chain, urdf_joint_dynamics, view_urdf
+from exo_ilc_ros.core.arm.build import (
+    build_arm,
+    person_segments,
+    urdf_chain,
+    urdf_joint_dynamics,
+    view_urdf,
+)
 from exo_ilc_ros.core.arm.dynamics import inertia_and_bias
 from exo_ilc_ros.core.arm.forward_kinematics import UrdfKinematics
 from exo_ilc_ros.core.arm.joint_forces import REST
@@ -435,3 +442,44 @@ def test_live_view_draws_the_urdf_arm() -> None:
     assert set(kinematics.moving) >= set(panda["joint_names"])
     view = ArmView(panda)  # the live view's and the bag view's arm
     assert view.urdf == text and view.root_link == "panda_link0" and view.fixed_positions == fixed
+
+
+def test_live_view_draws_the_persons_segments_on_their_links() -> None:
+    """With a person strapped to the Panda, the view's URDF carries each segment as a cylinder
+    on the link its ``person.<segment>.link`` names: its axis along the segment's direction from
+    the proximal joint, its length the segment's, its radius sqrt(2 I_long / m); the arm's own
+    links and joints are those of the file."""
+    panda = load_config(ARMS / "panda.yaml", overlays=[ROOT / "config" / "person.yaml"])
+    text, _, root = view_urdf(panda)
+    assert root == "panda_link0"
+    tree = ET.fromstring(text)
+    plain = ET.fromstring((ROOT / "urdf" / "panda.urdf").read_text())
+    assert [j.get("name") for j in tree.iter("joint")] == \
+        [j.get("name") for j in plain.iter("joint")]
+    segments, placements = person_segments(panda)
+    assert set(placements) == {"upper_arm", "forearm", "hand"}
+    for segment in segments:
+        placement = placements[segment.name]
+        link = next(link for link in tree.findall("link") if link.get("name") == placement.link)
+        visual = next(v for v in link.findall("visual")
+                      if v.get("name") == f"person_{segment.name}")
+        cylinder = visual.find("geometry/cylinder")
+        assert cylinder is not None
+        assert float(cylinder.get("length", "0")) == pytest.approx(segment.length, rel=1e-5)
+        radius = np.sqrt(2.0 * segment.inertia_longitudinal / segment.mass)
+        assert float(cylinder.get("radius", "0")) == pytest.approx(radius, rel=1e-5)
+        assert 0.02 < radius < 0.08  # an arm's thickness, not a link's or a torso's
+        origin = visual.find("origin")
+        assert origin is not None
+        roll, pitch, yaw = (float(x) for x in origin.get("rpy", "").split())
+        rz = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+        ry = np.array([[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0],
+                       [-np.sin(pitch), 0, np.cos(pitch)]])
+        assert roll == 0.0
+        direction = np.asarray(placement.direction) / np.linalg.norm(placement.direction)
+        np.testing.assert_allclose(rz @ ry @ [0.0, 0.0, 1.0], direction, atol=1e-5)
+        centre = np.array([float(x) for x in origin.get("xyz", "").split()])
+        np.testing.assert_allclose(centre, np.asarray(placement.origin)
+                                   + 0.5 * segment.length * direction, atol=1e-5)
+    assert UrdfKinematics(text).moving  # the viewer's kinematics read it as before
+    assert "person_" not in view_urdf(load_config(ARMS / "panda.yaml"))[0]  # no person, no segments

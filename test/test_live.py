@@ -714,6 +714,23 @@ def test_live_pace_changes_only_the_wall_time(tmp_path: Path) -> None:
     assert wall >= sim / 2.0 - 0.2e9, (sim, wall)
 
 
+def test_pace_waits_until_each_samples_wall_time() -> None:
+    """The plants' pace (our plant's trials and MuJoCo's free-running plant alike): a sample
+    0.4 simulated s after the one it counts from is published no earlier than 0.1 wall s later
+    at pace 4 (a lower bound: sleeping never ends early); pace 0 never waits (a wait of 1e9
+    simulated s returns)."""
+    from exo_ilc_ros.nodes.plant_base import Pace
+
+    pace = Pace(4.0)
+    pace.start(1_000_000_000)
+    start = time.monotonic_ns()
+    pace.wait(1_400_000_000)
+    assert time.monotonic_ns() - start >= 0.1e9
+    unpaced = Pace(0.0)
+    unpaced.start(0)
+    unpaced.wait(10**18)
+
+
 def test_live_pace_needs_live_and_a_rate(capsys: pytest.CaptureFixture[str]) -> None:
     """``--live-pace`` without ``--live`` is refused, naming the flag; a negative pace too;
     the pace is not part of the store's key (a paced run resumes an unpaced one's store)."""

@@ -663,7 +663,14 @@ def test_a_late_viewer_gets_every_trials_metrics_and_the_current_trials_samples(
                                  serialize(array, metrics_type)))
             sender.send(messages)
             sender.flush()
-        time.sleep(1.0)  # the bridge takes the feed (a later one would come live: no assert on it)
+        # the bridge has taken the whole feed once a probe viewer is sent trial 11's last
+        # sample (whatever the machine's speed); then the late viewer connects
+        deadline = time.monotonic() + 120.0
+        while time.monotonic() < deadline:
+            probe = _decoded(collect(f"ws://127.0.0.1:{port}", duration=1.0))
+            states = probe.get(topics.JOINT_STATES, [])
+            if states and states[-1][0] == sent[11][-1]:
+                break
         received = collect(f"ws://127.0.0.1:{port}", duration=5.0)
     finally:
         sender.close()

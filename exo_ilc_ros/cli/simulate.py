@@ -20,6 +20,7 @@ from ..analysis.report import (
 from ..bag import BagError, read_bag, run_name, unique_path, write_run
 from ..bag.replay import replay
 from ..core.errors import ConfigError
+from ..core.loop.divergence import DIVERGED, first_non_finite, trial_divergence
 from ..core.params.config import Config
 from ..core.programs.identified import Identified
 from ..core.programs.metrics import config_metrics
@@ -27,6 +28,7 @@ from ..core.programs.spread import iteration_spread
 from ..core.session.learning_session import run_trials
 from ..core.session.result import RunResult
 from ..core.session.summary import RunSummary
+from ..core.sim.experiment import Experiment
 from .arguments import (
     add_scenario_argument,
     config_with_flags,
@@ -173,6 +175,7 @@ def simulate(args: argparse.Namespace) -> int:
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
         add_identified(runs[-1], result, config["joint_names"])
+        add_divergences(runs[-1], result, config.with_mass_uncertainty(delta))
         if args.spread:
             runs[-1].extra["spread"] = _spread(config, delta, trials, args.spread)
         if args.json:  # the therapy metrics of every trial (core/programs/metrics.py)
@@ -198,6 +201,16 @@ def add_identified(summary: RunSummary, result: RunResult, names: list[str]) -> 
         summary.extra["identified"] = Identified.from_step(last, names).to_json()
 
 
+def add_divergences(summary: RunSummary, result: RunResult, config: Config) -> None:
+    """The trials whose plant diverged (a non-finite state: core/loop/divergence.py), with the
+    time, joint and likely cause, as ``summary.extra["plant_diverged"]`` (nothing if none)."""
+    if not any(first_non_finite(r.position, r.velocity) is not None for r in result.records):
+        return
+    experiment = Experiment(config)
+    found = [trial_divergence(experiment, r, config["joint_names"]) for r in result.records]
+    summary.extra[DIVERGED] = [d.to_json() for d in found if d is not None]
+
+
 def _spread(config: Config, delta: float, trials: int, count: int) -> dict[str, Any]:
     """--spread: the iterations to the bound of ``count`` perturbed runs, as JSON."""
     with tqdm(total=count, desc=f"spread delta={delta:g}", unit="run", file=sys.stderr,
@@ -213,11 +226,17 @@ trials (listed on stderr; nothing was learned from them): not a clean run."""
 
 
 def aborted_exit(runs: list[RunSummary], command: str) -> int:
-    """Say loudly which trials the error envelope aborted; :data:`EXIT_ABORTED` if any, else
-    0."""
+    """Say loudly which trials the error envelope aborted and which the plant's divergence
+    stopped (those are not called envelope aborts); :data:`EXIT_ABORTED` if any, else 0."""
     any_aborted = False
     for run in runs:
-        aborted = [int(k) for k in run.extra.get("aborted_trials", [])]
+        diverged = run.extra.get(DIVERGED, [])
+        for d in diverged:
+            print(f"exo-ilc {command}: ERROR: {run_title(run)}: {d['message']}",
+                  file=sys.stderr)
+        any_aborted = any_aborted or bool(diverged)
+        gone = {int(d["trial"]) for d in diverged}
+        aborted = [int(k) for k in run.extra.get("aborted_trials", []) if int(k) not in gone]
         if not aborted:
             continue
         any_aborted = True
@@ -228,8 +247,10 @@ def aborted_exit(runs: list[RunSummary], command: str) -> int:
               f"was learned from them): trial{'s' if len(aborted) > 1 else ''} "
               f"{_spans(aborted)}", file=sys.stderr)
     if any_aborted:
-        print(f"exo-ilc {command}: exit {EXIT_ABORTED}: trials were aborted (check the mass "
-              "uncertainty, the gains and the envelope)", file=sys.stderr)
+        what = "the plant diverged" if any(run.extra.get(DIVERGED) for run in runs) else \
+            "trials were aborted"
+        print(f"exo-ilc {command}: exit {EXIT_ABORTED}: {what} (check the mass "
+              "uncertainty, the gains, the envelope and the integration step)", file=sys.stderr)
         return EXIT_ABORTED
     return 0
 

@@ -16,13 +16,20 @@ import numpy as np
 import pytest
 import yaml
 
+from exo_ilc_ros.analysis.loop import format_growth
+from exo_ilc_ros.analysis.report import format_long_run
+from exo_ilc_ros.core.convergence.growth import fit_growth, held_at_limit
+from exo_ilc_ros.core.learning.qfilter import feedforward_limit_of
 from exo_ilc_ros.core.loop.divergence import (
     DIVERGED,
     RK4_REAL_STABILITY,
     damping_stiffness,
     first_non_finite,
 )
+from exo_ilc_ros.core.params.config import load_config
 from exo_ilc_ros.core.programs.metrics import sparc
+from exo_ilc_ros.core.session.learning_session import run_trials
+from exo_ilc_ros.core.session.summary import RunSummary
 
 WRIST_DAMPING = 2.0
 """N m s/rad on the wrist roll, whose link has I = 1.4e-4 kg m^2 about its axis."""
@@ -120,3 +127,40 @@ def test_diverged_plant_named_with_joint_time_and_cause(tmp_path: Path) -> None:
     assert first["joint_name"] == "wrist_roll" and first["reason"] == DIVERGED
     assert 0.0 < first["time"] < 1.0 and "h*b/I" in first["cause"]
     assert first["message"] in proc.stderr
+
+
+def test_held_at_limit_by_hand() -> None:
+    """The last trial's max |u_ff| at feedforward_limit (to 1e-9 relative) is at its limit;
+    below it, or with no limit (inf, None), it is not."""
+    table = np.array([[0.0, 0.0, 0.0], [100.0, 99.0, 5.0], [100.0, 99.9999, 7.0]])
+    assert held_at_limit(table, np.array([100.0, 100.0, np.inf])).tolist() == [True, False,
+                                                                                 False]
+    assert held_at_limit(table, None).tolist() == [False, False, False]
+
+
+def test_a_learned_input_held_at_its_limit_is_reported_at_its_limit_not_bounded() -> None:
+    """12 trials whose max |u_ff| sits at the limit of 100 on joint 1 (rate 0: the fit alone
+    would say "bounded") and converges on joint 2."""
+    k = np.arange(12, dtype=float)
+    table = np.column_stack([np.full(12, 100.0), 5.0 - 4.0 * 0.5 ** k])
+    limit = np.array([100.0, 100.0])
+    line = format_growth(fit_growth(table), ["a", "b"], held_at_limit(table, limit))
+    assert "AT ITS LIMIT on a " in line and "bounded" not in line, line
+    assert "a +0.000" in line and "b " in line
+    plain = format_growth(fit_growth(table), ["a", "b"], held_at_limit(table, None))
+    assert plain.endswith("-> bounded"), plain
+    few = format_growth(fit_growth(table[:3]), ["a", "b"], held_at_limit(table[:3], limit))
+    assert "too few trials" in few and "AT ITS LIMIT on a" in few
+
+
+def test_no_learned_input_above_the_limit_with_the_identified_patient() -> None:
+    """feedforward_limit 0.5 with the identification on (the inverse with the patient and the
+    hand-over are added after the law's clip): every trial's max |u_ff| <= 0.5, and the long-run
+    report says AT ITS LIMIT."""
+    config = load_config(overrides={"feedforward_limit": [0.5, 0.5, 0.5],
+                                    "identification.enabled": True})
+    result = run_trials(config, 0.05, 4)
+    assert np.max(result.max_abs_feedforward) <= 0.5
+    text = format_long_run([RunSummary.from_result(result)], config["joint_names"],
+                           limit=feedforward_limit_of(config))
+    assert "AT ITS LIMIT" in text and "bounded" not in text, text

@@ -20,6 +20,7 @@ from ..analysis.report import (
 from ..bag import BagError, read_bag, run_name, unique_path, write_run
 from ..bag.replay import replay
 from ..core.errors import ConfigError
+from ..core.learning.qfilter import feedforward_limit_of
 from ..core.loop.divergence import DIVERGED, first_non_finite, trial_divergence
 from ..core.params.config import Config
 from ..core.programs.identified import Identified
@@ -286,7 +287,7 @@ def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary
                 print()
     print(format_iterations(runs, names))
     print()
-    print(format_long_run(runs, names))
+    print(format_long_run(runs, names, limit=feedforward_limit_of(config)))
     for run in runs:
         if run.extra.get("identified"):
             print()

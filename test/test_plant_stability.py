@@ -1,7 +1,8 @@
 """A plant that cannot blow up silently (issue 33): a URDF arm whose light last link carries a
-joint damping too stiff for explicit RK4 at 1 ms (h b / I ~ 14, over RK4's ~2.785) stops the trial
-with "the plant diverged at t on joint j" and the cause, in text and JSON, never a traceback or an
-error-envelope abort."""
+joint damping too stiff for explicit RK4 at 1 ms (h b / I ~ 14, over RK4's ~2.785) is integrated
+stably with more sub-steps; one too stiff even for those stops the trial with "the plant diverged
+at t on joint j" and the cause, in text and JSON, never a traceback or an error-envelope abort.
+A learned input held at feedforward_limit is reported at its limit and never exceeds it."""
 
 from __future__ import annotations
 
@@ -30,9 +31,13 @@ from exo_ilc_ros.core.params.config import load_config
 from exo_ilc_ros.core.programs.metrics import sparc
 from exo_ilc_ros.core.session.learning_session import run_trials
 from exo_ilc_ros.core.session.summary import RunSummary
+from exo_ilc_ros.core.sim.experiment import Experiment
 
 WRIST_DAMPING = 2.0
-"""N m s/rad on the wrist roll, whose link has I = 1.4e-4 kg m^2 about its axis."""
+"""N m s/rad on the wrist roll, whose link has I = 1.4e-4 kg m^2 about its axis: h b / I ~ 14 at
+h = 1 ms, over RK4's limit; the plant takes more sub-steps for it (98 per period)."""
+DIVERGING_DAMPING = 200.0
+"""N m s/rad: needs ~9700 sub-steps per period, over the 64 x 10 the plant takes at most."""
 
 
 def _joint(name: str, parent: str, child: str, xyz: str, axis: str, effort: float,
@@ -112,7 +117,7 @@ def test_sparc_of_a_diverged_or_short_speed_does_not_raise() -> None:
 def test_diverged_plant_named_with_joint_time_and_cause(tmp_path: Path) -> None:
     """Text and --json: the divergence is reported (joint wrist_roll, its time, the RK4
     stability cause), not as an error-envelope abort, and no internal error."""
-    config = _light_wrist_arm(tmp_path)
+    config = _light_wrist_arm(tmp_path, DIVERGING_DAMPING)
     out = tmp_path / "run.json"
     proc = _simulate("--config", str(config), "--trials", "2", "--json", str(out))
     assert "internal error" not in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
@@ -127,6 +132,24 @@ def test_diverged_plant_named_with_joint_time_and_cause(tmp_path: Path) -> None:
     assert first["joint_name"] == "wrist_roll" and first["reason"] == DIVERGED
     assert 0.0 < first["time"] < 1.0 and "h*b/I" in first["cause"]
     assert first["message"] in proc.stderr
+
+
+def test_damped_light_wrist_stays_finite_at_1_ms(tmp_path: Path) -> None:
+    """Damping 2 N m s/rad on the 1.4e-4 kg m^2 wrist, integration_step 1 ms: the plant takes
+    ceil(0.01 * max eig(a^-1 B) / 1.4) sub-steps (98; the configured 10 diverged) and the trial
+    stays finite and completes; the arm without damping keeps its 10."""
+    config = load_config(_light_wrist_arm(tmp_path))
+    experiment = Experiment(config)
+    a = experiment.plant.metric_tensor(experiment.reference.position[0])
+    b = np.array([0.0, 0.0, WRIST_DAMPING])
+    assert WRIST_DAMPING / a[2, 2] * 1e-3 > RK4_REAL_STABILITY  # unstable at 1 ms as given
+    assert experiment.substeps == 98
+    record = experiment.run_trial(np.zeros(experiment.reference.position.shape), 1)
+    assert np.all(np.isfinite(record.position)) and np.all(np.isfinite(record.velocity))
+    assert not record.aborted
+    assert damping_stiffness(a, b, experiment.period / experiment.substeps)[0] <= 1.4
+    undamped = Experiment(load_config(_light_wrist_arm(tmp_path, 0.0)))
+    assert undamped.substeps == 10
 
 
 def test_held_at_limit_by_hand() -> None:

@@ -5,8 +5,7 @@ plant state is not finite (:func:`plant.finite_state`); the record then holds Na
 sample on (:attr:`record.TrialRecord.diverged_at`). Such a trial is not an error-envelope
 abort, whatever the envelope saw before: the report says "the plant diverged at t = ... s on
 joint j" with the likely cause (:func:`divergence_message`), never "aborted by the error
-envelope". The learning session stops at one such trial (learning cannot help:
-``core/session/abort.py``, its ``DIVERGED_CAUSE``).
+envelope" (learning cannot help such a trial).
 
 Cause. Classic RK4 is stable on a decaying mode qdd = -(b/I) qd only while h b / I stays
 below about 2.785 (the real-axis limit of its stability region), h the integration sub-step:

@@ -21,15 +21,15 @@ from ..bag import BagError, read_bag, run_name, unique_path, write_run
 from ..bag.replay import replay
 from ..core.errors import ConfigError
 from ..core.learning.qfilter import feedforward_limit_of
-from ..core.loop.divergence import DIVERGED, first_non_finite, trial_divergence
+from ..core.loop.divergence import DIVERGED
 from ..core.params.config import Config
+from ..core.programs.divergences import add_divergences
 from ..core.programs.identified import Identified
 from ..core.programs.metrics import config_metrics
 from ..core.programs.spread import iteration_spread
 from ..core.session.learning_session import run_trials
 from ..core.session.result import RunResult
 from ..core.session.summary import RunSummary
-from ..core.sim.experiment import Experiment
 from .arguments import (
     add_scenario_argument,
     config_with_flags,
@@ -200,16 +200,6 @@ def add_identified(summary: RunSummary, result: RunResult, names: list[str]) -> 
     if result.joint_forces:
         last = result.joint_forces[max(result.joint_forces)]
         summary.extra["identified"] = Identified.from_step(last, names).to_json()
-
-
-def add_divergences(summary: RunSummary, result: RunResult, config: Config) -> None:
-    """The trials whose plant diverged (a non-finite state: core/loop/divergence.py), with the
-    time, joint and likely cause, as ``summary.extra["plant_diverged"]`` (nothing if none)."""
-    if not any(first_non_finite(r.position, r.velocity) is not None for r in result.records):
-        return
-    experiment = Experiment(config)
-    found = [trial_divergence(experiment, r, config["joint_names"]) for r in result.records]
-    summary.extra[DIVERGED] = [d.to_json() for d in found if d is not None]
 
 
 def _spread(config: Config, delta: float, trials: int, count: int) -> dict[str, Any]:

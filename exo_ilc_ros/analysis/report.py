@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core.convergence.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth
+from ..core.convergence.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth, held_at_limit
 from ..core.params.config import load_config
 from ..core.programs.spread import IterationSpread
 from ..core.session.summary import RunSummary
@@ -129,11 +129,12 @@ def format_run_events(runs: Sequence[RunSummary], labels: Sequence[str] | None =
 
 
 def format_long_run(runs: Sequence[RunSummary], joint_names: Sequence[str],
-                    window: int = DEFAULT_WINDOW) -> str:
+                    window: int = DEFAULT_WINDOW, limit: np.ndarray | None = None) -> str:
     """Per run: max |u_ff| and max |effort| at the last trial, and whether the learned input
     keeps growing (:func:`~exo_ilc_ros.core.convergence.growth.fit_growth` over the last ``window``
     trials, at most the second half of the run so that the first trials' learning is not
-    mistaken for growth)."""
+    mistaken for growth); a joint at ``limit`` (``feedforward_limit``, None: none) is reported
+    at its limit (:func:`~exo_ilc_ros.core.convergence.growth.held_at_limit`)."""
     lines = ["Learned input at the last trial and its growth (max |u_ff| per joint, rad/s^2; "
              "max |effort|, N m)"]
     for r in runs:
@@ -149,7 +150,8 @@ def format_long_run(runs: Sequence[RunSummary], joint_names: Sequence[str],
         lines.append(head + f"|u_ff| {uff}{effort}")
         span = min(window, max(len(r.max_abs_feedforward) // 2, MIN_TRIALS))
         lines.append(" " * 17 + format_growth(fit_growth(r.max_abs_feedforward, span),
-                                              joint_names))
+                                              joint_names,
+                                              held_at_limit(r.max_abs_feedforward, limit)))
     return "\n".join(lines)
 
 

@@ -20,7 +20,10 @@ from ..analysis.report import (
 from ..bag import BagError, read_bag, run_name, unique_path, write_run
 from ..bag.replay import replay
 from ..core.errors import ConfigError
+from ..core.learning.qfilter import feedforward_limit_of
+from ..core.loop.divergence import DIVERGED
 from ..core.params.config import Config
+from ..core.programs.divergences import add_divergences
 from ..core.programs.identified import Identified
 from ..core.programs.metrics import config_metrics
 from ..core.programs.spread import iteration_spread
@@ -174,6 +177,7 @@ def simulate(args: argparse.Namespace) -> int:
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
         add_identified(runs[-1], result, config["joint_names"])
+        add_divergences(runs[-1], result, config.with_mass_uncertainty(delta))
         if args.spread:
             runs[-1].extra["spread"] = _spread(config, delta, trials, args.spread)
         if args.json:  # the therapy metrics of every trial (core/programs/metrics.py)
@@ -218,12 +222,19 @@ message names the joint, the time, the error and the likely cause (core/session/
 
 
 def aborted_exit(runs: list[RunSummary], command: str) -> int:
-    """Say loudly which trials the error envelope aborted, and once why a run stopped on them;
-    :data:`EXIT_ABORT_STOP` if one did, else :data:`EXIT_ABORTED` if any trial aborted, else
-    0."""
+    """Say loudly which trials the error envelope aborted and which the plant's divergence
+    stopped (those are not called envelope aborts), and once why a run stopped on them;
+    :data:`EXIT_ABORT_STOP` if one did, else :data:`EXIT_ABORTED` if any trial aborted or
+    diverged, else 0."""
     any_aborted = stopped = False
     for run in runs:
-        aborted = [int(k) for k in run.extra.get("aborted_trials", [])]
+        diverged = run.extra.get(DIVERGED, [])
+        for d in diverged:
+            print(f"exo-ilc {command}: ERROR: {run_title(run)}: {d['message']}",
+                  file=sys.stderr)
+        any_aborted = any_aborted or bool(diverged)
+        gone = {int(d["trial"]) for d in diverged}
+        aborted = [int(k) for k in run.extra.get("aborted_trials", []) if int(k) not in gone]
         if not aborted:
             continue
         any_aborted = True
@@ -242,8 +253,10 @@ def aborted_exit(runs: list[RunSummary], command: str) -> int:
               "(every trial, and what was learned from it, is kept)", file=sys.stderr)
         return EXIT_ABORT_STOP
     if any_aborted:
-        print(f"exo-ilc {command}: exit {EXIT_ABORTED}: trials were aborted (check the mass "
-              "uncertainty, the gains and the envelope)", file=sys.stderr)
+        what = "the plant diverged" if any(run.extra.get(DIVERGED) for run in runs) else \
+            "trials were aborted"
+        print(f"exo-ilc {command}: exit {EXIT_ABORTED}: {what} (check the mass "
+              "uncertainty, the gains, the envelope and the integration step)", file=sys.stderr)
         return EXIT_ABORTED
     return 0
 
@@ -279,7 +292,7 @@ def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary
                 print()
     print(format_iterations(runs, names))
     print()
-    print(format_long_run(runs, names))
+    print(format_long_run(runs, names, limit=feedforward_limit_of(config)))
     for run in runs:
         if run.extra.get("identified"):
             print()

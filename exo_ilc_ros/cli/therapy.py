@@ -20,6 +20,7 @@ from ..core.loop.patient import PatientModel
 from ..core.persistence.files import write_json_atomic
 from ..core.persistence.profiles import ProfileBook
 from ..core.persistence.store import RunStore
+from ..core.programs.divergences import add_divergences
 from ..core.programs.metrics import config_metrics
 from ..core.programs.therapy import (
     IDENTIFICATION,
@@ -117,6 +118,7 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
         results.append(done)
         summary = RunSummary.from_result(done.result)
         summary.extra["therapy"] = done.to_json()
+        add_divergences(summary, done.result, done.config)
         if done.identified:
             summary.extra["identified"] = done.identified[-1].to_json()
         runs.append(summary)

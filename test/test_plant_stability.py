@@ -116,18 +116,22 @@ def test_sparc_of_a_diverged_or_short_speed_does_not_raise() -> None:
 
 def test_diverged_plant_named_with_joint_time_and_cause(tmp_path: Path) -> None:
     """Text and --json: the divergence is reported (joint wrist_roll, its time, the RK4
-    stability cause), not as an error-envelope abort, and no internal error."""
+    stability cause), not as an error-envelope abort, and no internal error; the session stops
+    at once (learning cannot help a plant that diverged: exit 5, with the session's one
+    message)."""
     config = _light_wrist_arm(tmp_path, DIVERGING_DAMPING)
     out = tmp_path / "run.json"
     proc = _simulate("--config", str(config), "--trials", "2", "--json", str(out))
     assert "internal error" not in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
-    assert proc.returncode == 4, proc.stderr
+    assert proc.returncode == 5, proc.stderr
     assert "the plant diverged at t = " in proc.stderr
+    assert "stopped after an aborted trial: trial 1: the plant diverged at t = 0.020 s on " \
+        in proc.stderr
     assert "on joint wrist_roll: explicit-integration stability" in proc.stderr
     assert "ABORTED by the error envelope" not in proc.stderr
     run = json.loads(out.read_text())["runs"][0]
     diverged = run[DIVERGED]
-    assert [d["trial"] for d in diverged] == [1, 2]
+    assert [d["trial"] for d in diverged] == [1]  # the session stopped there
     first = diverged[0]
     assert first["joint_name"] == "wrist_roll" and first["reason"] == DIVERGED
     assert 0.0 < first["time"] < 1.0 and "h*b/I" in first["cause"]

@@ -235,15 +235,14 @@ def aborted_exit(runs: list[RunSummary], command: str) -> int:
         any_aborted = any_aborted or bool(diverged)
         gone = {int(d["trial"]) for d in diverged}
         aborted = [int(k) for k in run.extra.get("aborted_trials", []) if int(k) not in gone]
-        if not aborted:
-            continue
-        any_aborted = True
-        count = len(run.max_abs_error)
-        share = "ALL" if len(aborted) == count else f"{len(aborted)} of {count}"
-        print(f"exo-ilc {command}: WARNING: {run_title(run)}: {share} trials ABORTED by the "
-              f"error envelope (safety.error_envelope; the robot held the arm there; each was "
-              f"learned from up to its abort): trial{'s' if len(aborted) > 1 else ''} "
-              f"{_spans(aborted)}", file=sys.stderr)
+        if aborted:
+            any_aborted = True
+            count = len(run.max_abs_error)
+            share = "ALL" if len(aborted) == count else f"{len(aborted)} of {count}"
+            print(f"exo-ilc {command}: WARNING: {run_title(run)}: {share} trials ABORTED by "
+                  f"the error envelope (safety.error_envelope; the robot held the arm there; "
+                  f"each was learned from up to its abort): trial{'s' if len(aborted) > 1 else ''}"
+                  f" {_spans(aborted)}", file=sys.stderr)
         message = run.extra.get(ABORT_STOP_KEY)
         if message:
             stopped = True

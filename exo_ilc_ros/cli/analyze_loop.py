@@ -6,17 +6,13 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ..analysis.loop import format_analysis, format_robustness, plot_analysis
-from ..core.convergence.factors import analyze_loop
-from ..core.convergence.norm_optimal_robustness import robustness
-from ..core.convergence.patient_load import patient_load
 from ..core.params.config import Config, load_config
 from .arguments import (
+    add_config_argument,
+    add_mass_uncertainty_argument,
     config_with_flags,
     figure_file,
-    input_file,
     integer,
-    mass_uncertainty,
     parameter,
     scenario,
 )
@@ -30,14 +26,11 @@ def register(sub: Any) -> None:
         "control period) around the reference and print, per joint, the worst trial-to-trial "
         "factor |F| of the learning law and the band where |F| > 1 (the learned input grows "
         "there), without and with the Q-filter. See docs/convergence.md.")
-    parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
-                        "shipped config/exo_ilc.yaml (any subset of keys)")
+    add_config_argument(parser)
     parser.add_argument("--law", choices=("sign", "linear", "norm_optimal"),
                         help="learning law (default: the config's law)")
-    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
-                        metavar="D",
-                        help="plant mass uncertainty delta, one analysis each (default: the "
-                        "config's)")
+    add_mass_uncertainty_argument(parser, "plant mass uncertainty delta, one analysis each "
+                                  "(default: the config's)")
     parser.add_argument("--cutoff", type=parameter("q_filter.cutoff_hz"), metavar="HZ",
                         help="analyse with this Q-filter cut-off (Hz) instead of the config's, "
                         "enabling the filter")
@@ -58,6 +51,9 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Analyse, print and plot."""
+    from ..analysis.loop import format_analysis, format_robustness, plot_analysis
+    from ..core.convergence.factors import analyze_loop
+    from ..core.convergence.norm_optimal_robustness import robustness
     flags: dict[str, tuple[str, Any]] = {}
     if args.cutoff is not None:
         flags.update({"q_filter.enabled": ("--cutoff", True),
@@ -98,6 +94,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _patients(args: argparse.Namespace, config: Config, deltas: list[float]) -> str:
     """One line per scenario and delta: the worst factor against that patient's arm."""
+    from ..core.convergence.factors import analyze_loop
+    from ..core.convergence.patient_load import patient_load
     inverted = config["identification.enabled"] and config["identification.in_loop"]
     how = (", the model rebuilt about them" if (args.law or config["law"]) == "norm_optimal"
            else ", the update inverting them") if inverted else ""

@@ -26,8 +26,8 @@ with contextlib.redirect_stdout(out):
     except SystemExit as exc:
         code = exc.code
 print(json.dumps({"code": code, "usage": out.getvalue().startswith("usage: exo-ilc"),
-                  "loaded": [m for m in %r if m in sys.modules]}))
-""" % (HEAVY,)
+                  "loaded": [m for m in HEAVY if m in sys.modules]}))
+""".replace("HEAVY", repr(HEAVY))
 
 
 def _help_of(command: list[str]) -> dict:

@@ -61,6 +61,9 @@ def register(sub: Any) -> None:
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")
     parser.add_argument("--learned", action="store_true", help="also print per-trial tables "
                         "of max |u_ff| (learned feed-forward) and max |effort| per joint")
+    parser.add_argument("--metrics", action="store_true", help="also compute every trial's "
+                        "therapy metrics (required torque, SPARC smoothness ...) into --json's "
+                        "runs[].metrics (a --patient session always computes them)")
     parser.add_argument("--bag-dir", dest="bag", metavar="DIR", type=directory,
                         help="also write each run as a rosbag2 bag DIR/<run-name>/ with the "
                         "graph's topics (what bag_recorder records; the flag of run and paper)")
@@ -167,7 +170,7 @@ def simulate(args: argparse.Namespace) -> int:
         add_identified(runs[-1], result, config["joint_names"])
         if args.spread:
             runs[-1].extra["spread"] = _spread(config, delta, trials, args.spread)
-        if args.json:  # the therapy metrics of every trial (core/programs/metrics.py)
+        if args.metrics:  # the therapy metrics of every trial (core/programs/metrics.py)
 
             measured = config.with_mass_uncertainty(delta)
             runs[-1].extra["metrics"] = [config_metrics(r, measured).to_json()

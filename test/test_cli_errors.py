@@ -388,11 +388,11 @@ def test_param_against_a_running_node(capsys: pytest.CaptureFixture[str]) -> Non
         code, _, err = _param(capsys, "get", "ilc_supervisor", "no_such")
         assert code == 2 and "has no parameter 'no_such'" in err, err
         code, _, err = _param(capsys, "set", "ilc_supervisor", "max_trials", "5")
-        assert code == 1 and "max_trials = 5" in err and "cannot change while" in err, err
+        assert code == 2 and "max_trials = 5" in err and "cannot change while" in err, err
         code, _, err = _param(capsys, "set", "ilc_supervisor", "error_bound", "-1")
-        assert code == 1 and "error_bound = -1" in err and "must be > 0" in err, err
+        assert code == 2 and "error_bound = -1" in err and "must be > 0" in err, err
         code, _, err = _param(capsys, "set", "ilc_supervisor", "law", "[1, 2]")
-        assert code == 1 and "law" in err and "must be a string, got [1, 2]" in err, err
+        assert code == 2 and "law" in err and "must be a string, got [1, 2]" in err, err
         code, out, err = _param(capsys, "set", "ilc_supervisor", "error_bound", "0.004")
         assert code == 0 and "successful" in out, err
     finally:

@@ -105,9 +105,12 @@ def documented_commands(page: Path) -> list[Command]:
                 line = line.rstrip()[:-1] + " " + lines[k].strip()
             k += 1
             text = line.strip().removeprefix("$ ")
-            first = text.split(maxsplit=1)[0] if text else ""
+            words = text.split(maxsplit=2)
+            first = words[0] if words else ""
             if first != "exo-ilc" and not first.endswith("/exo-ilc"):
                 continue
+            if len(words) > 1 and words[1].endswith(":"):
+                continue  # what the command printed ("exo-ilc simulate: ..."), not a command
             said = re.search(r"#\s*exits?\s+(\d+)\s*$", text)
             text = re.sub(r"\[[^\]]*\]", " ", text)  # [optional] parts left out
             try:

@@ -274,7 +274,6 @@ def _spans(trials: list[int]) -> str:
 def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary]) -> None:
     """The per-trial table (unless --quiet; --learned adds max |u_ff| and max |effort|), the
     iterations to the bound, the long-run check, and --json: shared by simulate and run."""
-    from ..core.learning.qfilter import feedforward_limit_of
     from ..analysis.identified import format_final
     from ..analysis.report import (
         format_iterations,
@@ -284,6 +283,7 @@ def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary
         run_title,
         write_json,
     )
+    from ..core.learning.qfilter import feedforward_limit_of
     from ..core.programs.identified import Identified
     names = config["joint_names"]
     if not args.quiet:

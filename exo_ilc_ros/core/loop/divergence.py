@@ -50,19 +50,20 @@ key of :meth:`PlantDivergence.to_json` in a run's JSON."""
 
 
 def first_non_finite(position: np.ndarray, velocity: np.ndarray) -> tuple[int, int] | None:
-    """(sample, joint) of the first sample whose q or qdot is not finite, the joint the one
-    moving fastest at the sample before (at sample 0: the first non-finite one), or None if
-    every sample is finite."""
+    """(sample, joint) of the first sample whose q or qdot is not finite, the joint of those
+    non-finite there the one moving fastest at the sample before (at sample 0: the first
+    non-finite one), or None if every sample is finite."""
     bad = ~(np.isfinite(np.asarray(position)) & np.isfinite(np.asarray(velocity)))
     rows = np.flatnonzero(np.any(bad, axis=1))
     if rows.size == 0:
         return None
     sample = int(rows[0])
+    candidates = np.flatnonzero(bad[sample])
     if sample > 0:  # the joint moving fastest just before: the one that blew up
-        last = np.abs(np.asarray(velocity)[sample - 1])
+        last = np.abs(np.asarray(velocity)[sample - 1, candidates])
         if np.all(np.isfinite(last)):
-            return sample, int(np.argmax(last))
-    return sample, int(np.flatnonzero(bad[sample])[0])
+            return sample, int(candidates[np.argmax(last)])
+    return sample, int(candidates[0])
 
 
 def damping_stiffness(inertia: np.ndarray, damping: np.ndarray,

@@ -44,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..learning.laws import FeedforwardUpdate
+from ..loop.divergence import first_non_finite
 from ..loop.record import TrialRecord
 from ..params.config import Config
 
@@ -120,23 +121,16 @@ def abort_trip(trial: int, aborted_at: int, max_abs_error: Sequence[float] | np.
 
 def trip_of(record: TrialRecord, config: Config) -> AbortTrip:
     """:func:`abort_trip` of aborted ``record``; a plant that diverged names the joint that blew
-    up: of the joints non-finite at its first non-finite sample, the one moving fastest just
-    before (as :func:`..loop.divergence.first_non_finite`)."""
+    up (:func:`..loop.divergence.first_non_finite`), not the first of its NaN joints."""
     if record.aborted_at is None:
         raise ValueError(f"trial {record.trial} was not aborted")
     trip = abort_trip(record.trial, record.aborted_at, record.max_abs_error, config)
     if not trip.diverged:
         return trip
-    velocity = np.asarray(record.velocity, dtype=float)
-    bad = ~(np.isfinite(np.asarray(record.position, dtype=float)) & np.isfinite(velocity))
-    rows = np.flatnonzero(np.any(bad, axis=1))
-    if rows.size == 0:
+    blown = first_non_finite(record.position, record.velocity)
+    if blown is None:
         return trip
-    sample = int(rows[0])  # of the joints non-finite there, the one moving fastest just before
-    candidates = np.flatnonzero(bad[sample])
-    before = np.abs(velocity[sample - 1, candidates]) if sample > 0 else np.zeros(0)
-    joint = int(candidates[np.argmax(before)]) if before.size and np.all(np.isfinite(before)) \
-        else int(candidates[0])
+    joint = blown[1]
     names = list(config["joint_names"])
     return dataclasses.replace(trip, joint=joint, joint_name=names[joint] if joint < len(names)
                                else f"joint {joint}")

@@ -21,7 +21,15 @@ import yaml
 
 from ..errors import ConfigError
 from . import schema
-from .urdf_xml import UrdfError, UrdfJoint, chain_joints, read_urdf_text, resolve_package_uri
+from .urdf_xml import (
+    UrdfError,
+    UrdfJoint,
+    UrdfKeyError,
+    chain_joints,
+    read_urdf_text,
+    resolve_package_uri,
+    resolved_chain,
+)
 
 PACKAGE = "exo_ilc_ros"
 DEFAULT_CONFIG_NAME = "exo_ilc.yaml"
@@ -207,17 +215,25 @@ def _check_urdf_joints(values: Mapping[str, Any]) -> None:
     try:
         names = [j.name for j in urdf_joints(values)]
     except UrdfError as exc:
-        raise ConfigError("model.urdf", str(exc)) from None
+        raise ConfigError(urdf_error_key(exc), str(exc)) from None
     if names != list(values["joint_names"]):
         raise ConfigError("joint_names", f"must be the moving joints of the URDF's chain "
                           f"{values['model.base_link']!r} -> {values['model.tip_link']!r}, "
                           f"[{', '.join(names)}]; got [{', '.join(values['joint_names'])}]")
 
 
+def urdf_error_key(exc: UrdfError) -> str:
+    """The config key a URDF error is about: the one that fixes it (:class:`UrdfKeyError`),
+    else ``model.urdf``."""
+    return exc.key if isinstance(exc, UrdfKeyError) else "model.urdf"
+
+
 def _arm_file(file_values: dict[str, Any], values: dict[str, Any], file: Path) -> None:
     """A file that describes a URDF arm: its relative ``model.urdf`` made absolute (relative to
-    the file), and the ``joint_names`` and ``control.effort_limit`` it does not give taken from
-    the URDF (its moving joints and their ``<limit effort>``)."""
+    the file), an empty ``model.base_link`` or ``model.tip_link`` found in the URDF
+    (:func:`.urdf_xml.chain_ends`: the root, the single tip), and the ``joint_names`` and
+    ``control.effort_limit`` it does not give taken from the URDF (its moving joints and their
+    ``<limit effort>``). A URDF error names the file and the key that fixes it."""
     urdf = file_values.get("model.urdf")
     if isinstance(urdf, str) and urdf and not urdf.startswith("package://") \
             and not Path(urdf).is_absolute():
@@ -229,12 +245,13 @@ def _arm_file(file_values: dict[str, Any], values: dict[str, Any], file: Path) -
     try:
         locked = schema.parse_locked_joints(str(values.get("model.locked_joints", "")))
         text, where, _ = urdf_source(values)
-        joints = chain_joints(text, where, str(values.get("model.base_link", "")),
-                              str(values.get("model.tip_link", "")), locked)
+        base, tip, joints = resolved_chain(text, where, str(values.get("model.base_link", "")),
+                                           str(values.get("model.tip_link", "")), locked)
     except ConfigError as exc:
         raise ConfigError(exc.key, exc.rule, str(file)) from None
     except UrdfError as exc:
-        raise ConfigError("model.urdf", str(exc), str(file)) from None
+        raise ConfigError(urdf_error_key(exc), str(exc), str(file)) from None
+    values["model.base_link"], values["model.tip_link"] = base, tip
     if "joint_names" not in file_values:
         values["joint_names"] = [j.name for j in joints]
     if "control.effort_limit" not in file_values:
@@ -319,8 +336,9 @@ class Config:
         without the URDF keys (its digests stay as they were before they existed), a URDF arm
         without the cone keys and with ``model.urdf`` as the sha256 of the file's contents (not
         its path); ``model.urdf_joint_dynamics`` only when it applies them; the person's keys
-        only with ``person.enabled``, ``patient.joints`` only when given (so, too, for the keys
-        that came before them)."""
+        only with ``person.enabled``, ``patient.joints`` only when given,
+        ``model.gravity_direction`` only when it is not -z (so, too, for the keys that came
+        before them)."""
         urdf = self._values["model.source"] == "urdf"
         left_out = set(schema.CONE_KEYS if urdf else schema.URDF_KEYS + schema.URDF_PLANT_KEYS)
         if self._values["model.urdf_joint_dynamics"] == "ignore":  # keys as before it existed
@@ -329,6 +347,9 @@ class Config:
             left_out.update(schema.PERSON_KEYS)
         if not self._values[schema.PATIENT_JOINTS]:
             left_out.add(schema.PATIENT_JOINTS)
+        down = self._values["model.gravity_direction"]
+        if down[0] == 0.0 and down[1] == 0.0 and down[2] < 0.0:  # -z: as before the key
+            left_out.add("model.gravity_direction")
         out = {k: self[k] for k in (self._values if names is None else names)
                if k not in left_out}
         if urdf and "model.urdf" in out:

@@ -98,7 +98,7 @@ def test_gravity_direction_key_reaches_the_model_the_plant_and_the_digest(
     np.testing.assert_array_equal(build_arm(down).gravity, build_arm(plain).gravity)
     cones = load_config(overrides={"model.gravity_direction": [1.0, 0.0, 0.0]})
     np.testing.assert_array_equal(build_arm(cones).gravity, [G, 0.0, 0.0])
-    with pytest.raises(ConfigError, match="model.gravity_direction"):
+    with pytest.raises(ConfigError, match=r"model\.gravity_direction"):
         load_config(overrides={"model.gravity_direction": [0.0, 0.0, 0.0]})
 
 

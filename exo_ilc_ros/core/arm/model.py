@@ -18,7 +18,11 @@ LINK_DIRECTION = np.array([0.0, 0.0, -1.0])
 """Every link points along -z of its own frame: at q = 0 the arm hangs straight down."""
 
 
-def gravity_vector(gravity: float | Sequence[float]) -> np.ndarray:
+Gravity = float | Sequence[float] | np.ndarray
+"""A gravity acceleration: its magnitude along -z (m/s^2), or its vector."""
+
+
+def gravity_vector(gravity: Gravity) -> np.ndarray:
     """The gravity acceleration vector (m/s^2): (0, 0, -g) of a magnitude g, else the vector
     given."""
     if isinstance(gravity, (int, float)):
@@ -58,7 +62,7 @@ class ArmModel:
     @classmethod
     def from_links(cls, masses: Sequence[float], lengths: Sequence[float],
                    radius_proximal: Sequence[float], radius_distal: Sequence[float],
-                   joint_axes: Sequence[str], gravity: float | Sequence[float] = 9.81
+                   joint_axes: Sequence[str], gravity: Gravity = 9.81
                    ) -> ArmModel:
         """Build the arm from per-link masses, lengths, cone radii and joint axis names;
         ``gravity`` the acceleration along -z (m/s^2), or its vector in Oxyz."""

@@ -40,6 +40,7 @@ import numpy as np
 
 from ..errors import ModelError
 from ..params.urdf_xml import UrdfError, axis_rotation, read_urdf_text, rpy_rotation
+from .model import Gravity
 from .urdf_chain import UrdfChain, read_urdf_chain
 
 STRIPPED = ("visual", "collision")
@@ -114,7 +115,7 @@ def chain_urdf(text: str, chain: UrdfChain, shapes: bool = False) -> str:
 
 def mujoco_model(source: str | Path, base_link: str, tip_link: str,
                  locked: Mapping[str, float] | None = None, timestep: float = 0.001,
-                 damping: bool = False, gravity: float | Sequence[float] = 9.81
+                 damping: bool = False, gravity: Gravity = 9.81
                  ) -> tuple[Any, UrdfChain]:
     """(MuJoCo's compiled model, our chain) of the URDF at ``source`` (module docstring)."""
     import mujoco
@@ -203,7 +204,7 @@ class MujocoUrdfArm:
     def __init__(self, source: str | Path, base_link: str, tip_link: str,
                  locked: Mapping[str, float] | None = None, timestep: float = 0.001,
                  period: float = 0.01, damping: bool = False,
-                 gravity: float | Sequence[float] = 9.81,
+                 gravity: Gravity = 9.81,
                  friction: bool = False, friction_velocity: float = 0.1) -> None:
         import mujoco
 

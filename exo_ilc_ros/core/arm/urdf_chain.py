@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -60,7 +60,7 @@ from ..params.urdf_xml import (
     read_urdf_text,
 )
 from .dynamics import inertia_and_bias
-from .model import gravity_vector
+from .model import Gravity, gravity_vector
 
 SINGULAR_TOLERANCE = 1e-10
 """A Cholesky pivot of the mass matrix below this share of its largest diagonal entry counts as
@@ -199,7 +199,7 @@ def _fixed_transform(joint: UrdfJoint, value: float) -> tuple[np.ndarray, np.nda
 
 def read_urdf_chain(source: str | Path, base_link: str, tip_link: str,
                     locked: Mapping[str, float] | None = None,
-                    gravity: float | Sequence[float] = 9.81) -> UrdfChain:
+                    gravity: Gravity = 9.81) -> UrdfChain:
     """The chain from ``base_link`` to ``tip_link`` of the URDF at ``source`` (a path, a
     ``package://`` URI, or the URDF's text; an empty end found in the URDF,
     :func:`~exo_ilc_ros.core.params.urdf_xml.chain_ends`), ``locked`` joints held at the given

@@ -10,29 +10,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..analysis import figures
-from ..analysis.certificate import (
-    certificate_figure,
-    certificate_json,
-    format_certificate,
-    run_population,
-    write_scenario,
-)
-from ..analysis.falsification import Pool, Search, falsification_json, falsify
-from ..core.errors import ConfigError
-from ..core.params.config import load_config
-from ..core.params.redact import redact
-from ..core.population.certificate import (
-    PatientOutcome,
-    certificate,
-    patient_cell,
-    patient_config,
-)
-from ..core.population.distributions import (
-    PopulationSpec,
-    draw_population,
-    search_point,
-)
 from .arguments import (
     add_scenario_argument,
     figure_path,
@@ -107,6 +84,29 @@ def certify(args: argparse.Namespace) -> int:
     """Draw the population, run it, print the certificate; JSON, figure, falsification."""
     from tqdm import tqdm
 
+    from ..analysis import figures
+    from ..analysis.certificate import (
+        certificate_figure,
+        certificate_json,
+        format_certificate,
+        run_population,
+        write_scenario,
+    )
+    from ..analysis.falsification import Pool, Search, falsification_json, falsify
+    from ..core.errors import ConfigError
+    from ..core.params.config import load_config
+    from ..core.params.redact import redact
+    from ..core.population.certificate import (
+        PatientOutcome,
+        certificate,
+        patient_cell,
+        patient_config,
+    )
+    from ..core.population.distributions import (
+        PopulationSpec,
+        draw_population,
+        search_point,
+    )
 
     if args.dask and args.workers is not None:
         raise ConfigError("--workers", "applies to the local process pool; with --dask the "

@@ -6,8 +6,6 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..core.params.config import load_config
-from ..orchestration.live_layout import arm_layout, foxglove_json, plotjuggler_xml
 from .arguments import input_file, json_file, write_output
 
 APPS = ("foxglove", "lichtblick")
@@ -30,6 +28,9 @@ def register(sub: Any) -> None:
 
 def write_layout(args: argparse.Namespace) -> int:
     """Generate and write."""
+    from ..core.params.config import load_config
+    from ..orchestration.live_layout import arm_layout, foxglove_json, plotjuggler_xml
+
 
     arm = arm_layout(load_config(args.config))
     write_output(plotjuggler_xml(arm) if args.plotjuggler else foxglove_json(arm, args.app),

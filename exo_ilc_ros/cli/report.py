@@ -7,17 +7,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..analysis.session_report import (
-    exercise_run,
-    group_by_session,
-    identification_trends,
-    identified_history,
-    render_session,
-)
-from ..bag import BagError, read_bag
 from ..core.persistence.files import write_bytes_atomic
 from ..core.persistence.profiles import ProfileBook
-from ..core.programs.therapy import profiles_root
 from .analyze import bag_paths
 from .arguments import directory, output_file
 
@@ -42,6 +33,15 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Read, group by session, render and write."""
+    from ..analysis.session_report import (
+        exercise_run,
+        group_by_session,
+        identification_trends,
+        identified_history,
+        render_session,
+    )
+    from ..bag import BagError, read_bag
+    from ..core.programs.therapy import profiles_root
 
     runs = []
     for path in bag_paths(args.bags, "report"):  # bags/* also matches bags/README.md

@@ -4,55 +4,36 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tqdm import tqdm
 
-from ..analysis.identified import format_final
-from ..analysis.report import (
-    format_iterations,
-    format_long_run,
-    format_run_events,
-    format_trial_table,
-    run_title,
-    write_json,
-)
-from ..bag import BagError, read_bag, run_name, unique_path, write_run
-from ..bag.replay import replay
 from ..core.errors import ConfigError
-from ..core.learning.qfilter import feedforward_limit_of
-from ..core.loop.divergence import DIVERGED
 from ..core.params.config import Config
-from ..core.programs.divergences import add_divergences
-from ..core.programs.identified import Identified
-from ..core.programs.metrics import config_metrics
-from ..core.programs.spread import iteration_spread
-from ..core.session.abort import ABORT_STOP_KEY
-from ..core.session.learning_session import run_trials
-from ..core.session.result import RunResult
-from ..core.session.summary import RunSummary
 from .arguments import (
+    add_config_argument,
+    add_mass_uncertainty_argument,
     add_scenario_argument,
     config_with_flags,
     directory,
-    input_file,
     integer,
     json_file,
-    mass_uncertainty,
     parameter,
 )
 from .therapy import add_therapy_arguments, simulate_session, uses_therapy
+
+if TYPE_CHECKING:
+    from ..core.session.result import RunResult
+    from ..core.session.summary import RunSummary
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
     """--config, --scenario, --mass-uncertainty, --trials, --law: shared by simulate and
     run."""
-    parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
-                        "shipped config/exo_ilc.yaml (any subset of keys)")
+    add_config_argument(parser)
     add_scenario_argument(parser)
-    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
-                        metavar="D", help="plant mass uncertainty delta, one run each (default: "
-                        "the config's plant_simulator mass_uncertainty)")
+    add_mass_uncertainty_argument(parser, "plant mass uncertainty delta, one run each (default: "
+                                  "the config's plant_simulator mass_uncertainty)")
     parser.add_argument("--trials", type=parameter("max_trials"),
                         help="trials per run (default: max_trials)")
     parser.add_argument("--law", choices=("sign", "linear", "norm_optimal"), help="learning law "
@@ -80,6 +61,9 @@ def register(sub: Any) -> None:
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")
     parser.add_argument("--learned", action="store_true", help="also print per-trial tables "
                         "of max |u_ff| (learned feed-forward) and max |effort| per joint")
+    parser.add_argument("--metrics", action="store_true", help="also compute every trial's "
+                        "therapy metrics (required torque, SPARC smoothness ...) into --json's "
+                        "runs[].metrics (a --patient session always computes them)")
     parser.add_argument("--bag-dir", dest="bag", metavar="DIR", type=directory,
                         help="also write each run as a rosbag2 bag DIR/<run-name>/ with the "
                         "graph's topics (what bag_recorder records; the flag of run and paper)")
@@ -109,6 +93,9 @@ REPLAY_EXCLUDES = ("config", "scenario", "mass_uncertainty", "trials", "law", "s
 
 def replay_bag(args: argparse.Namespace) -> int:
     """--replay BAG: the recorded run again, the report, and the comparison with the bag."""
+    from ..bag import BagError, read_bag
+    from ..bag.replay import replay
+    from ..core.session.summary import RunSummary
 
     given = [f"--{name.replace('_', '-')}" for name in REPLAY_EXCLUDES
              if getattr(args, name) not in (None, False)]
@@ -143,6 +130,11 @@ def replay_bag(args: argparse.Namespace) -> int:
 
 def simulate(args: argparse.Namespace) -> int:
     """Run and report."""
+    from ..bag import run_name, unique_path, write_run
+    from ..core.programs.divergences import add_divergences
+    from ..core.programs.metrics import config_metrics
+    from ..core.session.learning_session import run_trials
+    from ..core.session.summary import RunSummary
     if args.bag_deprecated is not None:
         if args.bag is not None:
             raise ConfigError("--bag", "is the old name of --bag-dir; give one of them")
@@ -180,7 +172,7 @@ def simulate(args: argparse.Namespace) -> int:
         add_divergences(runs[-1], result, config.with_mass_uncertainty(delta))
         if args.spread:
             runs[-1].extra["spread"] = _spread(config, delta, trials, args.spread)
-        if args.json:  # the therapy metrics of every trial (core/programs/metrics.py)
+        if args.metrics:  # the therapy metrics of every trial (core/programs/metrics.py)
 
             measured = config.with_mass_uncertainty(delta)
             runs[-1].extra["metrics"] = [config_metrics(r, measured).to_json()
@@ -198,6 +190,7 @@ def simulate(args: argparse.Namespace) -> int:
 def add_identified(summary: RunSummary, result: RunResult, names: list[str]) -> None:
     """The identification after the run's last trial as ``summary.extra["identified"]`` (the
     JSON's and the report's; nothing without ``identification.enabled``)."""
+    from ..core.programs.identified import Identified
     if result.joint_forces:
         last = result.joint_forces[max(result.joint_forces)]
         summary.extra["identified"] = Identified.from_step(last, names).to_json()
@@ -205,6 +198,7 @@ def add_identified(summary: RunSummary, result: RunResult, names: list[str]) -> 
 
 def _spread(config: Config, delta: float, trials: int, count: int) -> dict[str, Any]:
     """--spread: the iterations to the bound of ``count`` perturbed runs, as JSON."""
+    from ..core.programs.spread import iteration_spread
     with tqdm(total=count, desc=f"spread delta={delta:g}", unit="run", file=sys.stderr,
               disable=None) as bar:
         spread = iteration_spread(config, delta, trials, count,
@@ -226,6 +220,9 @@ def aborted_exit(runs: list[RunSummary], command: str) -> int:
     stopped (those are not called envelope aborts), and once why a run stopped on them;
     :data:`EXIT_ABORT_STOP` if one did, else :data:`EXIT_ABORTED` if any trial aborted or
     diverged, else 0."""
+    from ..analysis.report import run_title
+    from ..core.loop.divergence import DIVERGED
+    from ..core.session.abort import ABORT_STOP_KEY
     any_aborted = stopped = False
     for run in runs:
         diverged = run.extra.get(DIVERGED, [])
@@ -277,6 +274,17 @@ def _spans(trials: list[int]) -> str:
 def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary]) -> None:
     """The per-trial table (unless --quiet; --learned adds max |u_ff| and max |effort|), the
     iterations to the bound, the long-run check, and --json: shared by simulate and run."""
+    from ..analysis.identified import format_final
+    from ..analysis.report import (
+        format_iterations,
+        format_long_run,
+        format_run_events,
+        format_trial_table,
+        run_title,
+        write_json,
+    )
+    from ..core.learning.qfilter import feedforward_limit_of
+    from ..core.programs.identified import Identified
     names = config["joint_names"]
     if not args.quiet:
         print(format_trial_table(runs, names))

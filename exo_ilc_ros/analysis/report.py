@@ -209,7 +209,7 @@ def law_label(run: RunSummary) -> str:
 
 def format_spread(runs: Sequence[RunSummary], joint_names: Sequence[str]) -> str:
     """The iterations to the bound of each run's perturbed runs (``extra["spread"]``, from
-    :func:`~exo_ilc_ros.core.spread.iteration_spread`): median [min-max] per joint."""
+    :func:`~exo_ilc_ros.core.programs.spread.iteration_spread`): median [min-max] per joint."""
     spreads = [r.extra["spread"] for r in runs if "spread" in r.extra]
     count = {s["count"] for s in spreads}
     size = {s["perturbation"] for s in spreads}

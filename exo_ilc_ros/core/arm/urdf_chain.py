@@ -1,5 +1,5 @@
-"""A serial arm from its URDF: the arrays the compiled kernels of :mod:`exo_ilc_ros.core.dynamics`
-take, read with the standard library's XML parser.
+"""A serial arm from its URDF: the arrays the compiled kernels of
+:mod:`exo_ilc_ros.core.arm.dynamics` take, read with the standard library's XML parser.
 
 The chain runs from ``base_link`` to ``tip_link``. Its moving joints are the revolute and
 continuous joints on that path that are not locked; every other link is merged, rigidly, into
@@ -18,7 +18,7 @@ An empty ``base_link`` is the URDF's root link, an empty ``tip_link`` the last l
 longest chain below the base passes through (the single leaf, or where only fixed, locked or
 prismatic joints branch off), or an error saying why the URDF does not tell.
 
-The kernels' convention (:mod:`exo_ilc_ros.core.dynamics`) is that all link frames are parallel
+The kernels' convention (:mod:`exo_ilc_ros.core.arm.dynamics`) is that all link frames are parallel
 to the base frame at q = 0. A URDF's joint frames are rotated by their ``origin rpy``; with R0_i
 the orientation of joint i's frame at q = 0 (in the base frame), the kernel's arrays are
 ``axes[i] = R0_i a_i``, ``offsets[i] = R0_i-1 p_i`` (joint i's origin from joint i-1's),
@@ -70,7 +70,7 @@ singular."""
 @dataclass(frozen=True, eq=False)
 class UrdfChain:
     """The moving chain from ``base_link`` to ``tip_link``: the kernels' arrays
-    (:attr:`kernel_args`, as :attr:`exo_ilc_ros.core.model.ArmModel.kernel_args`) and what the
+    (:attr:`kernel_args`, as :attr:`exo_ilc_ros.core.arm.model.ArmModel.kernel_args`) and what the
     URDF says of each moving joint."""
 
     robot_name: str

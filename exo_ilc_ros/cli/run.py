@@ -16,6 +16,7 @@ from tqdm import tqdm
 
 from ..core.errors import ConfigError
 from ..core.params.config import Config
+from ..orchestration.launcher import exported_domain_id
 from ..orchestration.live import DEFAULT_HOST, DEFAULT_PORT, LiveView
 from ..wire import topics
 from ..wire.relay import DISPLAY_RATE
@@ -243,16 +244,7 @@ def _with_deltas(argv: list[str], deltas: list[float]) -> list[str]:
 def graph_domain(requested: int | None) -> int | None:
     """The domain id a graph runs on: ``--domain-id``, else an exported ``ROS_DOMAIN_ID`` (a ROS
     user's choice is honoured), else None (a free one is claimed)."""
-    if requested is not None:
-        return requested
-    exported = os.environ.get("ROS_DOMAIN_ID", "").strip()
-    if not exported:
-        return None
-    try:
-        return domain_id(exported)
-    except argparse.ArgumentTypeError as exc:
-        raise ConfigError("ROS_DOMAIN_ID", f"the exported value is not a domain id: {exc}") \
-            from None
+    return requested if requested is not None else exported_domain_id()
 
 
 def announce_graph(bar: Any, bag: Path | None) -> Callable[[Any], None]:

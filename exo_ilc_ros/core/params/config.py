@@ -7,6 +7,7 @@ against :mod:`schema`. Nodes read the same files as ROS parameters.
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import json
 import math
@@ -77,23 +78,51 @@ def load_ros_yaml(text: str) -> Any:
     return yaml.load(text, Loader=RosYamlLoader)
 
 
-def flatten_ros_yaml(document: Any, source: str) -> dict[str, Any]:
-    """Flat ``{dotted name: value}`` from a ROS parameter YAML (``node: ros__parameters: ...``).
+def unknown_parameter(key: str, known: Iterable[str] | None = None) -> str:
+    """The rule an unknown parameter breaks, with the closest known name (``known``; default:
+    every parameter) when one is close: ``unknown parameter; did you mean 'law'?``."""
+    close = difflib.get_close_matches(key, list(schema.BY_NAME if known is None else known),
+                                      n=1, cutoff=0.75)
+    return "unknown parameter" + (f"; did you mean {close[0]!r}?" if close else "")
 
-    Unknown sections and unknown keys are errors naming the file and key; a key in the wrong
-    section is an error too (it would silently not reach its node under ROS).
+
+def _is_section(key: Any, body: Any) -> bool:
+    """A top-level key of a ROS parameter YAML that names a node section."""
+    name = str(key).lstrip("/") if key != schema.SHARED else key
+    return name in schema.SECTIONS or (isinstance(body, dict) and "ros__parameters" in body)
+
+
+def flatten_ros_yaml(document: Any, source: str) -> dict[str, Any]:
+    """Flat ``{dotted name: value}`` from a ROS parameter YAML (``node: ros__parameters: ...``),
+    or from a file of parameters only (no node section at all: ``max_trials: 20``,
+    ``model: {gravity: 9.81}``; each goes to its node's section).
+
+    Unknown sections and unknown keys are errors naming the file and key (with the closest
+    known name); a key in the wrong section is an error too (it would silently not reach its
+    node under ROS), and so is a parameter beside node sections.
     """
     if document is None:
         return {}
     if not isinstance(document, dict):
         raise ConfigError("<file>", "must be a mapping of node names to ros__parameters",
                           source)
+    if not any(_is_section(key, body) for key, body in document.items()):
+        return _flat_parameters(document, source)
     flat: dict[str, Any] = {}
     for section, body in document.items():
         name = str(section).lstrip("/") if section != schema.SHARED else section
         if name not in schema.SECTIONS:
+            params = dict(flatten_tree({str(section): body}))
+            known = [k for k in params if k in schema.BY_NAME]
+            if known:
+                raise ConfigError(str(section), f"is a parameter, not a node section: put "
+                                  f"{known[0]} under {schema.BY_NAME[known[0]].section}: "
+                                  "ros__parameters:, or give no node section at all (a file "
+                                  "of parameters only)", source)
+            close = difflib.get_close_matches(name, list(schema.SECTIONS), n=1, cutoff=0.75)
             raise ConfigError(str(section), "unknown node section; expected one of "
-                              + ", ".join(schema.SECTIONS), source)
+                              + ", ".join(schema.SECTIONS)
+                              + (f" (did you mean {close[0]!r}?)" if close else ""), source)
         if not isinstance(body, dict) or set(body) != {"ros__parameters"}:
             raise ConfigError(str(section), "must contain exactly one key, ros__parameters",
                               source)
@@ -105,13 +134,27 @@ def flatten_ros_yaml(document: Any, source: str) -> dict[str, Any]:
                 continue
             param = schema.BY_NAME.get(key)
             if param is None:
-                raise ConfigError(key, "unknown parameter", source)
+                raise ConfigError(key, unknown_parameter(key), source)
             if param.section != name:
                 raise ConfigError(key, f"belongs in section {param.section!r}, not {section!r}",
                                   source)
             if key in flat:
                 raise ConfigError(key, "given twice", source)
             flat[key] = value
+    return flat
+
+
+def _flat_parameters(document: Mapping[str, Any], source: str) -> dict[str, Any]:
+    """The parameters of a file without node sections (:func:`flatten_ros_yaml`)."""
+    flat: dict[str, Any] = {}
+    for key, value in flatten_tree(document, ""):
+        if key in schema.ROS_BUILTIN:
+            continue
+        if key not in schema.BY_NAME:
+            raise ConfigError(key, unknown_parameter(key), source)
+        if key in flat:
+            raise ConfigError(key, "given twice", source)
+        flat[key] = value
     return flat
 
 
@@ -134,7 +177,7 @@ def validate(values: Mapping[str, Any], source: str | None = None) -> dict[str, 
         raise ConfigError(missing[0], "missing (every parameter needs a value)", source)
     unknown = [k for k in values if k not in schema.BY_NAME]
     if unknown:
-        raise ConfigError(unknown[0], "unknown parameter", source)
+        raise ConfigError(unknown[0], unknown_parameter(unknown[0]), source)
     out: dict[str, Any] = {}
     try:
         for param in schema.PARAMETERS:
@@ -315,7 +358,7 @@ class Config:
         """A new Config with ``overrides`` (dotted names) applied and validated."""
         unknown = [k for k in overrides if k not in schema.BY_NAME]
         if unknown:
-            raise ConfigError(unknown[0], "unknown parameter")
+            raise ConfigError(unknown[0], unknown_parameter(unknown[0]))
         merged = dict(self._values)
         merged.update(overrides)
         return Config(merged, self.source)

@@ -17,7 +17,6 @@ from tqdm import tqdm
 from ..core.errors import ConfigError
 from ..core.params.config import Config
 from ..orchestration.launcher import exported_domain_id
-from ..orchestration.live import DEFAULT_HOST, DEFAULT_PORT, LiveView
 from ..wire import topics
 from ..wire.relay import DISPLAY_RATE
 from .arguments import directory, domain_id, shown_command
@@ -274,6 +273,7 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
              trials: int) -> RunSummary:
     """One graph run (one mass uncertainty), with the live view beside it (``--live``)."""
     from ..orchestration.launcher import graph_nodes
+    from ..orchestration.live import DEFAULT_HOST, DEFAULT_PORT, LiveView
 
     config = run_config
     nodes = graph_nodes(args.plant, config["protocol"])

@@ -4,6 +4,8 @@ FILE, and FILE itself the index linking them (before, FILE was never written).""
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -18,8 +20,11 @@ def test_two_sessions_give_two_pages_and_the_index_at_the_file_asked_for(
     common = ["--config", str(short), "--patient", "p1", "--profiles", str(tmp_path / "prof"),
               "--exercise", "paper_quintic", "--trials", "2", "--quiet"]
     bags = tmp_path / "bags"
-    assert exo_ilc(["simulate", *common, "--new-patient", "--bag-dir", str(bags / "s1")]) == 0
-    assert exo_ilc(["simulate", *common, "--bag-dir", str(bags / "s2")]) == 0
+    # two processes: a session is named by its start (to the second) and its process
+    for extra in (["--new-patient", "--bag-dir", str(bags / "s1")], ["--bag-dir",
+                                                                     str(bags / "s2")]):
+        subprocess.run([sys.executable, "-m", "exo_ilc_ros.cli.main", "simulate", *common,
+                        *extra], check=True, capture_output=True, cwd=tmp_path)
     out = tmp_path / "r.html"
     both = [str(p) for p in sorted(bags.glob("s*/*"))]
     assert exo_ilc(["report", *both, "--html", str(out), "--profiles",

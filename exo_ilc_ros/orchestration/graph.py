@@ -1,8 +1,9 @@
 """Run the node graph for one configuration and collect its trial summaries.
 
 :class:`GraphSession` starts the processes of :data:`launcher.GRAPH_NODES` (plus any ``extra``)
-on a domain of their own (the one given, else an exported ``ROS_DOMAIN_ID``, else a free one
-claimed) and a monitor node in this process that follows
+on a domain of their own (the one given, else a free one claimed: a caller that honours an
+exported ``ROS_DOMAIN_ID`` passes :func:`launcher.exported_domain_id`, as ``exo-ilc run`` and
+the benches do) and a monitor node in this process that follows
 ``/ilc/trial_summary`` and ``/ilc/trial_events``; :func:`run_graph` runs it to the end and
 returns a :class:`report.RunSummary`, the same as ``exo-ilc simulate`` reports.
 """
@@ -37,7 +38,6 @@ from .launcher import (
     GraphProcesses,
     NodeSpec,
     claim_domain_id,
-    exported_domain_id,
     graph_environment,
 )
 
@@ -147,8 +147,6 @@ class GraphSession:
                  on_summary: Callable[[TrialSummary], None] | None = None,
                  nodes: Sequence[NodeSpec] = GRAPH_NODES) -> None:
         self.config = config
-        if domain_id is None:  # an exported ROS_DOMAIN_ID, else a free one claimed
-            domain_id = exported_domain_id()
         self._claim: DomainClaim = claim_domain_id(domain_id)
         self.domain_id = self._claim.domain_id
         self._tmp = tempfile.TemporaryDirectory(prefix="exo_ilc_run_")

@@ -14,6 +14,14 @@ Measured once (a shared 2-core machine, load average 2-3, other jobs running; ``
 loading the experiment); per trial run_trials 12.3 ms, simulate 17.1 ms (1.40x, a fixed cost
 per run spread over 20 trials: config, report), simulate --json 16.8 ms, simulate --metrics
 --json 31.2 ms (2.54x: the therapy metrics cost ~14 ms per trial).
+
+Measured again (2026-12-05, load average 2.5-3.2) after ``exo-ilc run`` stopped importing the
+live view's layout (and with it numba) at start-up and scipy.signal became a first-use import:
+``--help`` 0.66 s, ``simulate --help`` 0.61-0.62 s, ``simulate --trials 1`` 2.63-2.71 s (was
+3.9 s under the same load; its module imports 1.5 s, were 2.8 s); per trial with ``--trials 20
+--repeats 5`` run_trials 13.5 ms, simulate 18.3 ms (1.35x), ``--metrics --json`` 41.7 ms; with
+``--trials 100 --repeats 3`` run_trials 14.8 ms, simulate 13.6 ms (0.92x), ``--json`` 13.7 ms,
+``--metrics --json`` 29.1 ms (1.97x). A bare ``python -c "import numpy"`` took 0.29-0.31 s then.
 """
 
 from __future__ import annotations

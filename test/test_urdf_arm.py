@@ -32,13 +32,13 @@ from exo_ilc_ros.core.arm.forward_kinematics import UrdfKinematics
 from exo_ilc_ros.core.arm.joint_forces import REST
 from exo_ilc_ros.core.arm.mujoco_urdf import MujocoUrdfArm
 from exo_ilc_ros.core.arm.urdf import arm_urdf
+from exo_ilc_ros.core.arm.urdf_chain import read_urdf_chain
 from exo_ilc_ros.core.convergence.growth import fit_growth
 from exo_ilc_ros.core.errors import ConfigError
 from exo_ilc_ros.core.learning.norm_optimal_model import MODEL_KEYS, _key
 from exo_ilc_ros.core.loop.patient import PatientModel
 from exo_ilc_ros.core.loop.stepper import PlantStepper
 from exo_ilc_ros.core.params.config import load_config
-from exo_ilc_ros.core.params.urdf_xml import UrdfError
 from exo_ilc_ros.core.persistence.profile_format import model_values
 from exo_ilc_ros.core.persistence.store import learning_key
 from exo_ilc_ros.core.reference.build import build_reference
@@ -150,9 +150,10 @@ def test_locked_joints_and_joint_names_rules() -> None:
         panda.replace({"model.locked_joints": "panda_finger_joint1 0.02"})
     assert "model.locked_joints" in str(info.value) and "'panda_finger_joint1 0.02'" in str(
         info.value)
-    with pytest.raises(UrdfError) as urdf_info:  # found when the arm is built
-        build_arm(panda.replace({"model.locked_joints": "panda_finger_joint1: 0.02"}))
-    assert "panda_finger_joint2" in str(urdf_info.value) and "lock it" in str(urdf_info.value)
+    with pytest.raises(ConfigError) as info:  # found when the config is made, with the key
+        panda.replace({"model.locked_joints": "panda_finger_joint1: 0.02"})
+    assert info.value.key == "model.tip_link"
+    assert "panda_finger_joint2" in str(info.value) and "lock it" in str(info.value)
     with pytest.raises(ConfigError) as info:
         panda.replace({"joint_names": [f"j{i}" for i in range(7)]})
     assert "joint_names: must be the moving joints" in str(info.value)
@@ -174,7 +175,8 @@ def test_shipped_arm_learns_within_10_trials_at_10_percent(arm: str) -> None:
 def test_mujoco_plant_of_a_urdf_arm_equals_our_dynamics(tmp_path: Path) -> None:
     """MuJoCo's model of the arm (core/sim/mujoco_arm.py, from the kernels' arrays) of the
     Panda: mass matrix and bias forces equal ours (measured: 1.4e-15); `exo-ilc urdf` gives the
-    arm's own URDF back."""
+    chain the package uses (the fingers fixed at their locked values), whose arrays are the
+    model's."""
     config = load_config(ARMS / "panda.yaml")
     plant = MujocoArm.from_config(config.with_mass_uncertainty(0.0))
     arm = build_arm(config)
@@ -187,7 +189,10 @@ def test_mujoco_plant_of_a_urdf_arm_equals_our_dynamics(tmp_path: Path) -> None:
         np.testing.assert_allclose(bias, c, rtol=0, atol=1e-9 * np.abs(c).max())
     out = tmp_path / "panda.urdf"
     assert cli_main(["urdf", "--config", str(ARMS / "panda.yaml"), "--out", str(out)]) == 0
-    assert out.read_text() == (ROOT / "urdf" / "panda.urdf").read_text()
+    assert "prismatic" not in out.read_text()
+    back = read_urdf_chain(out, "panda_link0", "panda_hand")
+    for ours, read in zip(arm.kernel_args, back.kernel_args, strict=True):
+        np.testing.assert_allclose(read, ours, rtol=0, atol=1e-12)
 
 
 ONE_KHZ = {"law": "norm_optimal", "control.period": 0.001, "integration_step": 0.001,

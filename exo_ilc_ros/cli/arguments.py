@@ -22,13 +22,11 @@ from typing import Any
 from ..core.errors import ConfigError, ExoIlcError
 from ..core.params import schema
 from ..core.params.config import Config, load_config, scenario_names, scenario_path
+from ..orchestration.launcher import MAX_DOMAIN_ID
 
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".jpg", ".jpeg", ".tif", ".tiff", ".webp",
                    ".eps", ".ps", ".pgf", ".raw", ".rgba")
 """File types matplotlib writes (the figure's format comes from the suffix)."""
-
-MAX_DOMAIN_ID = 232
-"""The largest ROS domain id the DDS port mapping allows (ROS recommends 0-101 on Linux)."""
 
 
 class FlagError(ExoIlcError):

@@ -31,7 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 class RedactingStream:
     """A text stream that writes through another with every URL's password as ``***``
-    (core/redact.py): what the command prints (its own lines, tqdm, a library's log or
+    (core/params/redact.py): what the command prints (its own lines, tqdm, a library's log or
     message) never shows a credential."""
 
     def __init__(self, stream: TextIO, secrets: Sequence[str] = ()) -> None:

@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from ..core.errors import ConfigError
 from ..core.params.config import Config
-from ..orchestration.live import DEFAULT_HOST, DEFAULT_PORT, LiveView
+from ..orchestration.launcher import exported_domain_id
 from ..wire import topics
 from ..wire.relay import DISPLAY_RATE
 from .arguments import directory, domain_id, shown_command
@@ -243,16 +243,7 @@ def _with_deltas(argv: list[str], deltas: list[float]) -> list[str]:
 def graph_domain(requested: int | None) -> int | None:
     """The domain id a graph runs on: ``--domain-id``, else an exported ``ROS_DOMAIN_ID`` (a ROS
     user's choice is honoured), else None (a free one is claimed)."""
-    if requested is not None:
-        return requested
-    exported = os.environ.get("ROS_DOMAIN_ID", "").strip()
-    if not exported:
-        return None
-    try:
-        return domain_id(exported)
-    except argparse.ArgumentTypeError as exc:
-        raise ConfigError("ROS_DOMAIN_ID", f"the exported value is not a domain id: {exc}") \
-            from None
+    return requested if requested is not None else exported_domain_id()
 
 
 def announce_graph(bar: Any, bag: Path | None) -> Callable[[Any], None]:
@@ -282,6 +273,7 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
              trials: int) -> RunSummary:
     """One graph run (one mass uncertainty), with the live view beside it (``--live``)."""
     from ..orchestration.launcher import graph_nodes
+    from ..orchestration.live import DEFAULT_HOST, DEFAULT_PORT, LiveView
 
     config = run_config
     nodes = graph_nodes(args.plant, config["protocol"])

@@ -29,7 +29,14 @@ def build_arm(config: Config) -> ArmModel:
         return _urdf_arm(config, 0.0, bool(config["person.in_nominal"]))
     return ArmModel.from_links(config["model.link_masses"], config["model.link_lengths"],
                                config["model.radius_proximal"], config["model.radius_distal"],
-                               config["model.joint_axes"], config["model.gravity"])
+                               config["model.joint_axes"], gravity_in_root(config))
+
+
+def gravity_in_root(config: Config) -> np.ndarray:
+    """The gravity acceleration (m/s^2) in the URDF root link's frame (a cone arm's Oxyz):
+    ``model.gravity`` along ``model.gravity_direction`` (normalised)."""
+    direction = np.array(config["model.gravity_direction"], dtype=float)
+    return float(config["model.gravity"]) * (direction / float(np.linalg.norm(direction)))
 
 
 def build_plant(config: Config) -> ArmModel:
@@ -84,12 +91,13 @@ def urdf_chain(config: Config) -> UrdfChain:
     """The URDF chain of a ``model.source: urdf`` config (read once per file contents, links and
     locks)."""
     locked = schema.parse_locked_joints(config["model.locked_joints"])
+    gravity = gravity_in_root(config)
     key = (config.urdf_digest, config["model.base_link"], config["model.tip_link"],
-           tuple(sorted(locked.items())), config["model.gravity"])
+           tuple(sorted(locked.items())), tuple(gravity.tolist()))
     chain = _CHAINS.get(key)
     if chain is None:
         chain = read_urdf_chain(urdf_path(config["model.urdf"]), config["model.base_link"],
-                                config["model.tip_link"], locked, config["model.gravity"])
+                                config["model.tip_link"], locked, gravity)
         _CHAINS[key] = chain
     return chain
 

@@ -193,12 +193,15 @@ def _trial_events(streams: dict[str, Stream], notes: list[str]) -> _Events:
             notes.append(f"trial event {status.message!r} at {stamp} ns without a trial number")
             continue
         if status.message == "aborted":
-            if values.get("reason") == topics.ENVELOPE_REASON:
+            if values.get("reason") in topics.KEPT_REASONS:
                 at = protocol.int_value(values, "aborted_at")
                 out.aborted_at[k] = -1 if at is None else at
                 notes.append(f"trial {k} was aborted by the error envelope at sample "
                              f"{values.get('aborted_at', '?')} (safe hold from there; kept, "
-                             "learned from up to the abort)")
+                             "learned from up to the abort)"
+                             if values.get("reason") == topics.ENVELOPE_REASON else
+                             f"trial {k}: the plant diverged at sample "
+                             f"{values.get('aborted_at', '?')} (kept; the run stopped there)")
             else:
                 reason = values.get("reason") or values.get("phase") or "?"
                 out.reruns.setdefault(k, []).append(reason)

@@ -11,6 +11,7 @@ summaries and key the store).
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Sequence
 
@@ -26,6 +27,7 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from ..core.loop.divergence import DIVERGED
 from ..core.params import schema
 from ..core.programs.identified import Identified
 from ..core.protocol.homing_protocol import HomingProtocol
@@ -208,6 +210,9 @@ class IlcSupervisor(Node):
             if item.name == topics.PLANT_TRIAL_STATUS and item.message == "done":
                 self.protocol.on_plant_done(int_value(values, "t0_ns") or -1, values)
                 continue
+            if item.name == topics.PLANT_TRIAL_STATUS and item.message == "diverged":
+                self.protocol.on_plant_diverged(values)
+                continue
             trial, t0 = int_value(values, "trial"), int_value(values, "t0_ns")
             if trial is None or t0 is None:
                 continue
@@ -256,8 +261,11 @@ class IlcSupervisor(Node):
         """Summary and ``end`` event (``aborted`` first for an envelope abort)."""
         record = conclusion.record
         if record.aborted:
+            diverged = self.protocol.divergence is not None and \
+                self.protocol.divergence.sample == record.aborted_at
             self.event("aborted", [("trial", str(record.trial)),
-                                   ("reason", topics.ENVELOPE_REASON),
+                                   ("reason", topics.DIVERGED_REASON if diverged
+                                    else topics.ENVELOPE_REASON),
                                    ("aborted_at", str(record.aborted_at))], end_ns)
         summary = trial_summary(conclusion, self.joint_names)
         if conclusion.joint_forces is not None:  # on /diagnostics too (the health)
@@ -269,6 +277,9 @@ class IlcSupervisor(Node):
             summary.values += status("", "", [
                 (k, self.protocol.plant_report.get(k, "")) for k in (
                     "late_commands", "periods", "first_late")]).values
+        if self.protocol.divergence is not None:  # the plant diverged: when, where, why
+            summary.values.append(KeyValue(key=DIVERGED, value=json.dumps(
+                self.protocol.divergence.to_json())))
         if conclusion.stop_message:  # the one message of a run stopped by aborts
             summary.values.append(KeyValue(key=ABORT_STOP_KEY, value=conclusion.stop_message))
         self.summary_pub.publish(diagnostic_array(self, [summary], end_ns))

@@ -15,6 +15,13 @@ instead, until commands come again.
 :class:`FreeRunningPlant` is the node with any stepper; ``free_running_plant`` runs it with our
 own simulator's RK4 (``core/loop/plant.py``): our simulator as any arm, for ``protocol: homing``.
 Commands are checked and clamped as in ``plant_simulator``.
+
+A state that stops being finite (our RK4 too stiff for a joint damping, or MuJoCo finding the
+state bad: it resets its simulation to the rest pose then, which this node never passes on)
+stops the plant: no sample of it is sent, ``diverged`` on /diagnostics says when, on which
+joint and why (MuJoCo's cause, :func:`exo_ilc_ros.core.arm.mujoco_urdf.bad_state`), and the
+supervisor ends the trial there (or, while homing, the run). The node runs on without stepping,
+its health ERROR: a plant without reset has no state to go back to.
 """
 
 from __future__ import annotations
@@ -24,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from ..core.loop.divergence import PlantDivergence, state_divergence
+from ..core.loop.plant import finite_state
 from ..core.loop.stepper import PlantStepper
 from ..core.sim.mujoco_arm import MujocoArm, effects_not_simulated
 from .common import spin, wall_clock
@@ -50,6 +59,7 @@ class FreeRunningPlant(PlantNode):
         self.stepper: Any = self.make_stepper()
         ref = self.experiment.reference
         self.stepper_state(ref.position[0], ref.velocity[0])
+        finite_state(ref.position[0], ref.velocity[0])  # compiled now, not at the first step
         self.now_ns = self.step_ns
         self.index = 0
         self.started = False
@@ -86,6 +96,8 @@ class FreeRunningPlant(PlantNode):
         if effort.shape != self.held.shape or not np.isfinite(effort).all():
             self.reject_effort(effort)
             return
+        if self.diverged is not None:  # stopped: nothing is stepped, nothing sent
+            return
         self.commands += 1
         if np.any(np.abs(effort) > self.limit):
             self.over_limit += 1
@@ -108,6 +120,8 @@ class FreeRunningPlant(PlantNode):
         again while no command ever came. Real time: one period with the held command, the
         safe hold once the watchdog (core.loop.safety) saw no command for its timeout."""
         now = time.monotonic_ns()
+        if self.diverged is not None:
+            return
         if not self.started:
             if self.state_pub.get_subscription_count() >= 1 and \
                     self.command_sub.get_publisher_count() >= 1 and \
@@ -135,11 +149,22 @@ class FreeRunningPlant(PlantNode):
             self._advance(self.held)
 
     def _advance(self, effort: np.ndarray) -> None:
+        before = (np.array(self.stepper.position), np.array(self.stepper.velocity))
         self.stepper.step(effort, self.saturated)
         self.index += 1
         self.now_ns += self.step_ns
+        if not finite_state(self.stepper.position, self.stepper.velocity):
+            self.report_divergence(self.divergence(*before), self.now_ns)
+            return
         self.pace.wait(self.now_ns)
         self._publish()
+
+    def divergence(self, position: np.ndarray, velocity: np.ndarray) -> PlantDivergence:
+        """The divergence of our RK4 stepper (its state before the step given): the joint and
+        cause by the in-process rule (:func:`state_divergence`; the sample is the plant's own
+        count, the supervisor places it by its stamp)."""
+        return state_divergence(self.experiment, 0, self.index, position, velocity,
+                                self.params.config["joint_names"])
 
     def _publish(self) -> None:
         stepper = self.stepper
@@ -157,7 +182,7 @@ class FreeRunningPlant(PlantNode):
 
 class MujocoPlant(FreeRunningPlant):
     """The arm in MuJoCo (core/sim/mujoco_arm.py): masses scaled by (1 + mass_uncertainty), RK4 at
-    ``integration_step``."""
+    ``integration_step`` (``implicitfast`` where the joint damping needs it)."""
 
     engine = "mujoco"
 
@@ -178,6 +203,15 @@ class MujocoPlant(FreeRunningPlant):
     def stepper_state(self, q: np.ndarray, qd: np.ndarray) -> None:
         """At rest at q_d(0) when the node starts."""
         self.stepper.set_state(q, qd)
+
+    def divergence(self, position: np.ndarray, velocity: np.ndarray) -> PlantDivergence:
+        """MuJoCo's own word on the bad state (the DOF it named, why: its warning, its
+        integrator, h b / I), not our RK4's rule."""
+        arm = self.stepper
+        names = self.params.config["joint_names"]
+        joint = arm.diverged_joint if 0 <= arm.diverged_joint < len(names) else 0
+        return PlantDivergence(0, self.index, self.index * self.experiment.period, joint,
+                               str(names[joint]), arm.diverged or "MuJoCo's state is not finite")
 
 
 def main(args: list[str] | None = None) -> int:

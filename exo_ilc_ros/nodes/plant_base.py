@@ -2,7 +2,10 @@
 samples and ``/clock`` it publishes, the controller's effort commands it trusts (checked: a
 command that is not one finite value per joint is refused, counted, never applied), saturation
 counts, the watchdog of :func:`exo_ilc_ros.core.loop.safety.watchdog_for` with the controller's
-safe hold it commands after a trip, and its health on ``/diagnostics``. ``plant_simulator`` (our
+safe hold it commands after a trip, a state that stopped being finite
+(:meth:`PlantNode.report_divergence`: no sample of it is sent; ``diverged`` on ``/diagnostics``
+for the supervisor, with the time, the joint and the cause) and its health on
+``/diagnostics``. ``plant_simulator`` (our
 simulator, with the trial protocol's services) and the free-running plants (``mujoco_plant``,
 ``free_running_plant``) add how and when they step."""
 
@@ -19,6 +22,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from ..core.loop.controller import GuardedControlStep
+from ..core.loop.divergence import PlantDivergence
 from ..core.loop.safety import watchdog_for
 from ..core.loop.trial import period_ns
 from ..core.loop.wire_input import Cause, Rejection, validate_effort_command
@@ -28,7 +32,7 @@ from ..wire import topics
 from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
 from ..wire.publishers import max_bytes
 from .common import CLOCK_QOS, DIAGNOSTICS_QOS, SAMPLES_QOS, CountingPublisher, wall_clock
-from .diagnostics import diagnostic_array
+from .diagnostics import diagnostic_array, status
 from .guard import Health, Rejections, effort_limit_reasons, rejections_check
 from .parameters import SchemaParameters
 from .sender_check import TRUSTED_READER_QOS, TrustedInput, effort_classifier
@@ -83,6 +87,9 @@ class PlantNode(Node):
         self.watchdog = watchdog_for(config)  # the controller's rule too (core.loop.safety)
         self.hold_pose: np.ndarray | None = None
         """Real time: the pose the plant's safe hold keeps after a watchdog trip."""
+        self.diverged: PlantDivergence | None = None
+        """The plant's state stopped being finite (until the next trial's reset; a plant
+        without reset stays so): no sample is sent."""
         self.safe_hold = GuardedControlStep(self.experiment)
         """The controller's safe hold (its gains and ramp, core/loop/hold.py), latched at the
         trip."""
@@ -131,6 +138,26 @@ class PlantNode(Node):
                                 f"{why}")
         self.on_health_timer()
 
+    def report_divergence(self, divergence: PlantDivergence, stamp_ns: int,
+                          t0_ns: int = -1) -> None:
+        """The state is not finite at the sample stamped ``stamp_ns`` (of the trial that
+        started at ``t0_ns``, -1: not known here): said once in the log, and as
+        ``plant_simulator/trial`` ``diverged`` on /diagnostics (``stamp_ns``, ``t0_ns``,
+        ``joint``, ``joint_name``, ``time`` (s of simulated time), ``cause``) for the
+        supervisor, which ends the trial there; the health is ERROR until a reset."""
+        self.diverged = divergence
+        self.get_logger().error(
+            f"the plant diverged at simulated time {stamp_ns / 1e9:.3f} s on joint "
+            f"{divergence.joint_name}: {divergence.cause}; no sample of it is sent, the trial "
+            "is stopped there")
+        self.diagnostics_pub.publish(diagnostic_array(self, [status(
+            topics.PLANT_TRIAL_STATUS, "diverged",
+            [("stamp_ns", str(stamp_ns)), ("t0_ns", str(t0_ns)),
+             ("joint", str(divergence.joint)), ("joint_name", divergence.joint_name),
+             ("time", repr(stamp_ns / 1e9)), ("cause", divergence.cause)],
+            hardware_id=NAME)]))
+        self.on_health_timer()
+
     def publish_clock(self, now_ns: int) -> None:
         """``/clock`` at ``now_ns`` of simulated time."""
         self.clock.clock.sec, self.clock.clock.nanosec = divmod(now_ns, 1_000_000_000)
@@ -159,6 +186,10 @@ class PlantNode(Node):
         if self.hold_pose is not None:
             level = DiagnosticStatus.ERROR
             reasons.append(self.hold_reason)
+        if self.diverged is not None:
+            level = DiagnosticStatus.ERROR
+            reasons.append(f"the plant diverged on joint {self.diverged.joint_name}: "
+                           f"{self.diverged.cause}")
         limit_level, limit_reasons = effort_limit_reasons(names, self.saturated,
                                                           self.over_limit)
         return max(level, limit_level), "; ".join(reasons + limit_reasons), values

@@ -14,6 +14,13 @@ limit are counted per joint (saturation, on /diagnostics). In real-time mode a w
 (``safety.watchdog_periods`` periods of wall time without a command during a trial) stops holding
 the last command and applies the safe hold (nominal gravity compensation and PD around the pose
 at the trip) instead, until the next trial.
+
+A state that stops being finite (the plant diverged: a joint damping too stiff even for the
+sub-steps, a non-finite model) stops the trial at that sample, as the in-process trial kernel
+does: no sample of it goes out; ``diverged`` on /diagnostics names the sample's stamp, the joint
+and the cause (:func:`exo_ilc_ros.core.loop.divergence.state_divergence`, the in-process
+report's rule), and the supervisor ends the trial there. The node runs on; the next reset puts
+the arm back at x_d(0).
 """
 
 from __future__ import annotations
@@ -26,7 +33,8 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from ..core.loop.plant import clamp_counted
+from ..core.loop.divergence import state_divergence
+from ..core.loop.plant import clamp_counted, finite_state
 from ..core.loop.safety import LateCommands
 from ..core.loop.stepper import PlantStepper
 from ..wire import topics
@@ -65,6 +73,8 @@ class PlantSimulator(PlantNode):
         self.patient = self.experiment.patient
         self.next_trial: tuple[int, int] | None = None
         """(trial k, t0) of the last /ilc/feedforward: the patient's draws are trial k's."""
+        self.before = (np.empty(config.joints), np.empty(config.joints))
+        """The true state at the sample before the one being stepped to (for a divergence)."""
         self.truth = JointStateWriter(config["joint_names"])
         self.truth_pub = self.create_publisher(
             JointState, topics.TRUE_JOINT_STATES, SAMPLES_QOS,
@@ -91,6 +101,7 @@ class PlantSimulator(PlantNode):
             self.stepper.measure()
             self.stepper.step(self.held)
         self.stepper.reset()
+        finite_state(self.stepper.position, self.stepper.velocity)  # compiled now too
         self.scheduler = plant_scheduling(self, config["thread_priority"], self.lock_step)
         self.get_logger().info(
             f"{config['mode']} plant, mass uncertainty {self.experiment.mass_uncertainty:g}, "
@@ -103,6 +114,7 @@ class PlantSimulator(PlantNode):
         self.stepper.reset()
         self.held[:] = 0.0
         self.hold_pose = None
+        self.diverged = None
         self.t0_ns = self.now_ns + self.step_ns
         self.armed = True
         response.success = True
@@ -165,6 +177,7 @@ class PlantSimulator(PlantNode):
             self.reject_effort(effort)
             return
         if self.lock_step and self.running:  # the hot path: check, count, clamp, step at once
+            self._keep_state()
             beyond = self.stepper.step(effort, self.saturated)
         else:  # real time: the command to hold; lock-step between trials: only checked
             beyond = clamp_counted(effort, self.limit, self.saturated,
@@ -207,16 +220,32 @@ class PlantSimulator(PlantNode):
         return [*self.late.as_values(), ("scheduler", self.scheduler)]
 
     def _advance(self, effort: np.ndarray) -> None:
+        self._keep_state()
         self.stepper.step(effort)
         self._stepped()
+
+    def _keep_state(self) -> None:
+        np.copyto(self.before[0], self.stepper.position)
+        np.copyto(self.before[1], self.stepper.velocity)
 
     def _stepped(self) -> None:
         self.index += 1
         self.now_ns += self.step_ns
+        if not finite_state(self.stepper.position, self.stepper.velocity):
+            self._diverged()
+            return
         self.pace.wait(self.now_ns)
         self._publish()
         if self.index >= self.last_index:
             self._stop()
+
+    def _diverged(self) -> None:
+        """The state at this sample is not finite: the trial stops here, reported (not sent)."""
+        self._stop()
+        trial = self.next_trial[0] if self.next_trial is not None else 0
+        self.report_divergence(state_divergence(
+            self.experiment, trial, self.index, self.before[0], self.before[1],
+            self.params.config["joint_names"]), self.now_ns, self.t0_ns)
 
     def _stop(self) -> None:
         self.running = False

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.loop.divergence import DIVERGED
 from ..core.params.config import Config
 from ..core.persistence.store import RunStore
 from ..core.programs.identified import Identified
@@ -82,6 +83,9 @@ def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSu
     aborted = [s.trial for s in summaries if "aborted_at" in s.values]
     if aborted:
         summary.extra["aborted_trials"] = aborted
+    diverged = [json.loads(s.values[DIVERGED]) for s in summaries if s.values.get(DIVERGED)]
+    if diverged:  # the plant's state stopped being finite (simulate's plant_diverged)
+        summary.extra[DIVERGED] = diverged
     stopped = summaries[-1].values.get(ABORT_STOP_KEY) if summaries else None
     if stopped:  # the session's one message (core/session/abort.py), as simulate's
         summary.extra[ABORT_STOP_KEY] = stopped
@@ -93,11 +97,12 @@ def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSu
 
 
 def reruns(events: Sequence[tuple[str, dict[str, str], float]]) -> list[dict[str, Any]]:
-    """The trials run again (an ``aborted`` event for another reason than the error envelope:
-    a watchdog trip, lost samples, a timeout), each with its reason, in order."""
+    """The trials run again (an ``aborted`` event for another reason than the error envelope
+    or a plant that diverged: a watchdog trip, lost samples, a timeout), each with its
+    reason, in order."""
     out: list[dict[str, Any]] = []
     for message, values, _ in events:
-        if message == "aborted" and values.get("reason") != topics.ENVELOPE_REASON:
+        if message == "aborted" and values.get("reason") not in topics.KEPT_REASONS:
             trial = int_value(values, "trial")
             if trial is not None:
                 out.append({"trial": trial,

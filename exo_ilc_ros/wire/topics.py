@@ -86,9 +86,17 @@ PLANT_TRIAL_STATUS = "plant_simulator/trial"
 ``done``, values ``t0_ns``, ``periods`` (stepped), ``late_commands`` (periods run with the
 previous command held because this period's had not arrived) and ``first_late`` (the first
 such period, 1-based; -1: none). The supervisor ends a real-time
-trial only with it, and runs it again when too many were late (``max_late_commands``)."""
+trial only with it, and runs it again when too many were late (``max_late_commands``).
+Sent by every plant node whose state stopped being finite, instead of that sample: message
+``diverged``, values ``stamp_ns`` (of the sample), ``t0_ns`` (-1: a plant without trials),
+``joint``, ``joint_name``, ``time`` and ``cause``; the supervisor ends the trial there."""
 SUPERVISOR_HEALTH_STATUS = "ilc_supervisor/health"
 T0_PREFIX = "t0_ns="
 ENVELOPE_REASON = "error_envelope"
 """``reason`` of the ``aborted`` event of a trial the error envelope aborted (kept, not learned
 from); other reasons (``watchdog``, ``lost``, ``timeout``) mean the trial was run again."""
+DIVERGED_REASON = "plant_diverged"
+"""``reason`` of the ``aborted`` event of a trial whose plant diverged (kept, ``aborted_at`` the
+first non-finite sample; ``core.loop.divergence.DIVERGED``): not run again, the run stops."""
+KEPT_REASONS = (ENVELOPE_REASON, DIVERGED_REASON)
+"""``aborted`` events of trials that were kept (not run again)."""

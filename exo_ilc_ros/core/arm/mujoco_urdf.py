@@ -10,6 +10,8 @@ locked joints made fixed at their locked value. Then, on the spec:
 * one motor per moving joint (``<joint>_motor``: force = ctrl, unlimited), in the chain's order;
 * RK4 at the given time step (``integration_step``, the method and step of our plant), contacts
   off, gravity the chain's (the root's, (0, 0, -g) or a vector, in the base link's frame);
+  MuJoCo's ``implicitfast`` instead where the joint damping is too stiff for RK4 at that step
+  (:func:`stable_integrator`);
 * joint limits off (our plant has none; references are to be checked against the URDF's limits
   before a run);
 * joint effects handled explicitly, as our model handles them: the rigid-body dynamics only.
@@ -23,6 +25,25 @@ locked joints made fixed at their locked value. Then, on the spec:
   ``frictionloss`` (a constraint, not a smooth torque). Both are what our plant adds with
   ``model.urdf_joint_dynamics: apply`` (core/loop/patient.py's passive forces), so one period
   equals ours to rounding (tested on the Panda).
+
+**Stiff joint damping** (both MuJoCo plants, :func:`stable_integrator`). MuJoCo's RK4, like
+ours, is explicit in the damping term: stable on a decaying mode qdd = -(b/I) qd only while
+h b / I stays under ~2.785; a URDF damping of 2 N m s/rad on a 1.4e-4 kg m^2 wrist link at
+h = 1 ms gives 14, and MuJoCo, finding a huge acceleration, reset its simulation to the model's
+rest pose without a word but a warning (the graph saw it as "homing failed"). Where
+h max eig(M(q)^-1 B) at the given poses (B = diag(``dof_damping``), M MuJoCo's own mass matrix,
+armature included) is over :data:`IMPLICIT_ABOVE`, the model integrates with MuJoCo's
+``implicitfast`` instead: semi-implicit Euler with the damping (and every velocity-dependent
+force but the Coriolis and centrifugal ones) taken implicitly, so the stiff decaying mode is
+stable at any b / I, with the symmetric factorisation (``implicit`` adds the Coriolis
+derivatives and an LU solve: nothing here needs them, the stiffness is in the damping). We
+chose the implicit integrator over sub-steps (as our plant takes,
+``core.loop.divergence.stable_substeps``) because MuJoCo has it built in and sub-steps cost
+MuJoCo a Python call each (98 per period on that wrist). Below the threshold the model keeps
+RK4, so every arm whose damping RK4 integrates stably (every shipped arm and scenario) keeps
+its numbers bit for bit; above it, the numbers are first order in h (not RK4's), the price
+of a state that stays finite. A state MuJoCo still finds bad (and resets) is reported, never
+hidden: :func:`bad_state` after each control period, and the plants' state is NaN from then on.
 
 ``mujoco`` is imported only when a model is built.
 """
@@ -46,6 +67,16 @@ from .urdf_chain import UrdfChain, read_urdf_chain
 STRIPPED = ("visual", "collision")
 """Link elements removed before MuJoCo parses the URDF."""
 STRIPPED_TOP = ("gazebo", "transmission")
+IMPLICIT_ABOVE = 1.4
+"""h max eig(M^-1 B) above which a MuJoCo plant integrates with ``implicitfast`` instead of RK4
+(:func:`stable_integrator`): the value our plant keeps its sub-steps to
+(``core.loop.divergence.DAMPING_STEP``, half of RK4's ~2.785), so both plants change their
+integration on the same arms."""
+IMPLICIT = "implicitfast"
+INTEGRATOR_NAMES = ("RK4", "implicitfast", "implicit", "Euler")
+"""MuJoCo's integrators a plant may be given, by their MJCF name."""
+BAD_STATE = {"BADQPOS": "position", "BADQVEL": "velocity", "BADQACC": "acceleration"}
+"""MuJoCo's warnings of a state it found non-finite or huge (and reset), and what was bad."""
 
 
 def _rpy(rotation: np.ndarray) -> tuple[float, float, float]:
@@ -115,9 +146,10 @@ def chain_urdf(text: str, chain: UrdfChain, shapes: bool = False) -> str:
 
 def mujoco_model(source: str | Path, base_link: str, tip_link: str,
                  locked: Mapping[str, float] | None = None, timestep: float = 0.001,
-                 damping: bool = False, gravity: Gravity = 9.81
-                 ) -> tuple[Any, UrdfChain]:
-    """(MuJoCo's compiled model, our chain) of the URDF at ``source`` (module docstring)."""
+                 damping: bool = False, gravity: Gravity = 9.81,
+                 integrator: str | None = None) -> tuple[Any, UrdfChain]:
+    """(MuJoCo's compiled model, our chain) of the URDF at ``source`` (module docstring);
+    ``integrator`` one of :data:`INTEGRATOR_NAMES` (None: RK4)."""
     import mujoco
 
     chain = read_urdf_chain(source, base_link, tip_link, locked, gravity)
@@ -127,7 +159,7 @@ def mujoco_model(source: str | Path, base_link: str, tip_link: str,
     except ValueError as exc:
         raise UrdfError(f"{where}: MuJoCo cannot parse the chain's URDF: {exc}") from None
     spec.option.timestep = float(timestep)
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_RK4
+    spec.option.integrator = _integrators(mujoco)[integrator or "RK4"]
     spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
     spec.option.gravity = chain.gravity
     joints = {j.name: j for j in spec.joints}
@@ -154,6 +186,84 @@ def mujoco_model(source: str | Path, base_link: str, tip_link: str,
                         f"{list(chain.joint_names)}")
     return model, chain
 
+
+
+def _integrators(mujoco: Any) -> dict[str, Any]:
+    """MuJoCo's integrator enum by the MJCF names of :data:`INTEGRATOR_NAMES`."""
+    kinds = mujoco.mjtIntegrator
+    return {"RK4": kinds.mjINT_RK4, "implicitfast": kinds.mjINT_IMPLICITFAST,
+            "implicit": kinds.mjINT_IMPLICIT, "Euler": kinds.mjINT_EULER}
+
+
+def damping_modes(model: Any, poses: Sequence[Sequence[float]]) -> tuple[float, int]:
+    """max eig(M(q)^-1 B) over ``poses`` (1/s), B = diag(``dof_damping``) and M MuJoCo's mass
+    matrix at q (armature included), and the DOF its mode moves most; (0, -1) without damping."""
+    import mujoco
+
+    damping = np.asarray(model.dof_damping, dtype=float)
+    if not np.any(damping > 0.0):
+        return 0.0, -1
+    data = mujoco.MjData(model)
+    mass = np.zeros((model.nv, model.nv))
+    stiffest, joint = 0.0, -1
+    for q in poses:
+        data.qpos[:] = q
+        mujoco.mj_forward(model, data)
+        mujoco.mj_fullM(model, data, mass)
+        modes, shapes = np.linalg.eig(np.linalg.solve(mass, np.diag(damping)))
+        k = int(np.argmax(modes.real))
+        if modes[k].real > stiffest:
+            stiffest, joint = float(modes[k].real), int(np.argmax(np.abs(shapes[:, k])))
+    return stiffest, joint
+
+
+def stable_integrator(model: Any, poses: Sequence[Sequence[float]]) -> str:
+    """``RK4`` where it integrates the joint damping of ``model`` stably at its time step
+    (h max eig(M^-1 B) <= :data:`IMPLICIT_ABOVE` at ``poses``; always without damping), else
+    :data:`IMPLICIT` (module docstring)."""
+    stiffest, _ = damping_modes(model, poses)
+    return "RK4" if float(model.opt.timestep) * stiffest <= IMPLICIT_ABOVE else IMPLICIT
+
+
+def integrator_name(model: Any) -> str:
+    """The MJCF name of ``model``'s integrator."""
+    import mujoco
+
+    return next(name for name, kind in _integrators(mujoco).items()
+                if int(kind) == int(model.opt.integrator))
+
+
+def clear_bad_state(data: Any) -> None:
+    """Forget MuJoCo's warnings of a bad state (before a control period)."""
+    import mujoco
+
+    for name in BAD_STATE:
+        data.warning[int(getattr(mujoco.mjtWarning, "mjWARN_" + name))].number = 0
+
+
+def bad_state(model: Any, data: Any) -> tuple[str, int] | None:
+    """Why MuJoCo reset its simulation since :func:`clear_bad_state` (it does so, with only a
+    warning, when it finds a position, velocity or acceleration non-finite or over 1e10):
+    (the cause for a report, naming the DOF, the integrator, h and h max eig(M^-1 B); the DOF
+    MuJoCo named, -1 if none); None if it did not."""
+    import mujoco
+
+    for name, what in BAD_STATE.items():
+        warning = data.warning[int(getattr(mujoco.mjtWarning, "mjWARN_" + name))]
+        if warning.number:
+            dof = int(warning.lastinfo)
+            joint = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT,
+                                      int(model.dof_jntid[dof])) if 0 <= dof < model.nv \
+                else None
+            h = float(model.opt.timestep)
+            stiffest, _ = damping_modes(model, [model.qpos0])
+            where = f"DOF {dof} ({joint})" if joint else f"DOF {dof}"
+            return (f"MuJoCo found a non-finite or huge {what} at {where} and reset its "
+                    f"simulation ({integrator_name(model)} at h = {h:g} s; h*b/I = "
+                    f"{h * stiffest:.3g} with the joint damping at the rest pose): a joint's "
+                    "damping, stiffness or effort too stiff for the integration step, or a "
+                    "non-finite command"), dof if 0 <= dof < model.nv else -1
+    return None
 
 
 def substeps_per_period(period: float, timestep: float,
@@ -199,40 +309,65 @@ class MujocoUrdfArm:
     """The URDF's chain in MuJoCo (:func:`mujoco_model`), stepped one control period at a time
     with the effort held, and MuJoCo's joint-space inertia and bias for checks. ``damping``,
     ``friction``: the URDF's viscous damping and Coulomb friction applied (module docstring;
-    ``friction_velocity`` v_s of the smooth Coulomb torque)."""
+    ``friction_velocity`` v_s of the smooth Coulomb torque). ``integrator``: one of
+    :data:`INTEGRATOR_NAMES`; None: RK4, or ``implicitfast`` where the applied damping is too
+    stiff for RK4 at ``timestep`` at the rest pose or ``poses`` (:func:`stable_integrator`)."""
 
     def __init__(self, source: str | Path, base_link: str, tip_link: str,
                  locked: Mapping[str, float] | None = None, timestep: float = 0.001,
                  period: float = 0.01, damping: bool = False,
                  gravity: Gravity = 9.81,
-                 friction: bool = False, friction_velocity: float = 0.1) -> None:
+                 friction: bool = False, friction_velocity: float = 0.1,
+                 integrator: str | None = None,
+                 poses: Sequence[Sequence[float]] = ()) -> None:
         import mujoco
 
         self._mujoco = mujoco
         self.substeps = substeps_per_period(period, timestep, UrdfError)
         self.model, self.chain = mujoco_model(source, base_link, tip_link, locked, timestep,
-                                              damping, gravity)
+                                              damping, gravity, integrator)
+        if integrator is None:
+            chosen = stable_integrator(self.model, [self.model.qpos0, *poses])
+            self.model.opt.integrator = _integrators(mujoco)[chosen]
         self.data: Any = mujoco.MjData(self.model)
         self._mass = np.zeros((self.chain.dof, self.chain.dof))
         self.friction: SmoothFriction | None = \
             SmoothFriction(self.chain.friction, friction_velocity) \
             if friction and np.any(self.chain.friction != 0.0) else None
         """The explicit Coulomb torque (None: not applied)."""
+        self.diverged: str | None = None
+        """Why MuJoCo reset the simulation in a step (:func:`bad_state`): the state is NaN from
+        then on, until :meth:`set_state`. None: it did not."""
+        self.diverged_joint = -1
+        """The DOF MuJoCo named then (-1: none)."""
+
+    @property
+    def integrator(self) -> str:
+        """The MJCF name of the integrator MuJoCo steps with."""
+        return integrator_name(self.model)
 
     def set_state(self, q: Sequence[float], qd: Sequence[float]) -> None:
         """Put the arm at (q, qdot), no effort applied."""
         self.data.qpos[:] = q
         self.data.qvel[:] = qd
         self.data.ctrl[:] = 0.0
+        self.diverged = None
         with self._passive():
             self._mujoco.mj_forward(self.model, self.data)
 
     def step(self, effort: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
-        """Hold ``effort`` over one control period; (q, qdot) after it."""
-        self.data.ctrl[:] = effort
-        with self._passive():
-            for _ in range(self.substeps):
-                self._mujoco.mj_step(self.model, self.data)
+        """Hold ``effort`` over one control period; (q, qdot) after it, NaN once MuJoCo found
+        the state bad and reset it (:attr:`diverged` says why)."""
+        if self.diverged is None:
+            self.data.ctrl[:] = effort
+            clear_bad_state(self.data)
+            with self._passive():
+                for _ in range(self.substeps):
+                    self._mujoco.mj_step(self.model, self.data)
+            self.diverged, self.diverged_joint = bad_state(self.model, self.data) or (None, -1)
+        if self.diverged is not None:
+            nan = np.full(self.chain.dof, np.nan)
+            return nan, nan.copy()
         return np.array(self.data.qpos), np.array(self.data.qvel)
 
     def _passive(self) -> contextlib.AbstractContextManager[object]:

@@ -25,7 +25,7 @@ test_plant_stability: 10 -> 98 per 10 ms period).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -165,14 +165,42 @@ def trial_divergence(setup: LoopSetup, record: TrialRecord,
     first = first_non_finite(position, velocity)
     if first is None:
         return None
-    pose = position[first[0] - 1] if first[0] > 0 else record.reference.position[0]
+    start = record.reference.position[0]
+    pose = position[first[0] - 1] if first[0] > 0 else start
+    return _with_cause(setup, record.trial, first, pose, start, names)
+
+
+def state_divergence(setup: LoopSetup, trial: int, sample: int,
+                     position_before: np.ndarray | None, velocity_before: np.ndarray | None,
+                     names: Sequence[str]) -> PlantDivergence:
+    """The :class:`PlantDivergence` of a plant stepped one period at a time (the graph's plant
+    nodes) whose true state is not finite at ``sample``, ``position_before`` and
+    ``velocity_before`` its true state at the sample before (None at sample 0): what
+    :func:`trial_divergence` gives for the trial kernel's record of the same trial, whose every
+    joint is NaN from that sample on (so the same joint, time and cause)."""
+    start = setup.reference.position[0]
+    if position_before is None or velocity_before is None or sample == 0:
+        return _with_cause(setup, trial, (sample, 0), start, start, names)
+    nan = np.full((1, len(names)), np.nan)
+    joint = first_non_finite(np.vstack([np.asarray(position_before, dtype=float)[None], nan]),
+                             np.vstack([np.asarray(velocity_before, dtype=float)[None], nan]))
+    assert joint is not None
+    return _with_cause(setup, trial, (sample, joint[1]), np.asarray(position_before), start,
+                       names)
+
+
+def _with_cause(setup: LoopSetup, trial: int, first: tuple[int, int], pose: np.ndarray,
+                start: np.ndarray, names: Sequence[str]) -> PlantDivergence:
+    """The divergence at (sample, joint) ``first``, its cause from h b / I at ``pose``
+    (``start``, the reference's, if not finite); over the RK4 limit, the stiffest mode's
+    joint."""
     if not np.all(np.isfinite(pose)):
-        pose = record.reference.position[0]
+        pose = start
     damping = plant_damping(setup.patient)
     step = setup.period / setup.substeps
     stiffness, stiff_joint = damping_stiffness(setup.plant.metric_tensor(pose), damping, step)
-    found = plant_divergence(record.trial, position, velocity, setup.period, names,
-                             divergence_cause(stiffness, damping, step))
-    if found is not None and stiffness > RK4_REAL_STABILITY:  # the stiff mode's joint
-        found = replace(found, joint=stiff_joint, joint_name=str(names[stiff_joint]))
-    return found
+    sample, joint = first
+    if stiffness > RK4_REAL_STABILITY:  # the stiff mode's joint
+        joint = stiff_joint
+    return PlantDivergence(int(trial), int(sample), sample * setup.period, int(joint),
+                           str(names[joint]), divergence_cause(stiffness, damping, step))

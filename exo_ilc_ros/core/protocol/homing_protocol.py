@@ -11,7 +11,9 @@ sample 0. The samples are placed on the control grid by their stamps (nearest gr
 and run again with the same feed-forward; fewer are filled by linear interpolation. The end of
 a trial is its last sample or the first sample past it. A ``homing_failed`` report stops the run
 (the arm is in the safe hold, the trial not started, every completed trial stored when the run
-has a store; the message says which).
+has a store; the message says which). A plant that diverged (its ``diverged`` report) ends the
+running trial there as :class:`TrialProtocol` does; while homing, it stops the run with the
+plant's cause, like a failed homing.
 
 Everything else (conclusion, store, recorder, live changes, discards) is :class:`TrialProtocol`'s.
 """
@@ -131,6 +133,41 @@ class HomingProtocol(TrialProtocol):
                     "arm is safe")
         return (f"Every completed trial ({self.completed}) is stored in "
                 f"{self.store.directory}: resume the run once the arm is safe")
+
+    def on_plant_diverged(self, report: Mapping[str, str]) -> None:
+        """The plant's state stopped being finite: within a trial, the trial ends there
+        (:meth:`TrialProtocol.on_plant_diverged`); while homing, the run stops with the
+        plant's cause (the trial not started)."""
+        if self.phase in (Phase.WAIT_ACK, Phase.HOMING):
+            cause = report.get("cause", "the plant's state is not finite")
+            joint = report.get("joint_name", "?")
+            detail = f"the plant diverged while homing, on joint {joint}: {cause}"
+            self.port.event("aborted", [("trial", str(self.trial)), ("reason", "homing"),
+                                        ("detail", detail)])
+            self.fail(f"trial {self.trial} not started: {detail}. {self._kept()}")
+            return
+        super().on_plant_diverged(report)
+
+    def _sample_of(self, stamp_ns: int) -> int | None:
+        """The grid point nearest to ``stamp_ns`` (None: not in the trial)."""
+        i, _ = grid_index(stamp_ns, self.samples.t0_ns, self.samples.step_ns)
+        return i if 0 <= i < self.samples.received.shape[0] else None
+
+    def _samples_before(self, sample: int) -> bool:
+        """The samples before ``sample`` the plant sent are in (its own clock's samples
+        arrive in order, before its report); grid points without one are filled."""
+        s = self.samples
+        before = s.received[:sample]
+        if before.all():
+            return True
+        self.missing += int((~before).sum())
+        if before.any():
+            s.position[:sample] = fill_missing(s.position[:sample], before)
+            s.velocity[:sample] = fill_missing(s.velocity[:sample], before)
+        else:  # none came: nothing is known of the arm before the divergence either
+            s.position[:sample] = np.nan
+            s.velocity[:sample] = np.nan
+        return True
 
     def on_sample(self, stamp_ns: int, position: np.ndarray, velocity: np.ndarray) -> None:
         """A checked sample: placed on the running trial's grid, else kept for a moment (the

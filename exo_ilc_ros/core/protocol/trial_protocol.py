@@ -6,7 +6,11 @@ Per trial: reset the plant (it answers with the stamp t0 of the trial's first sa
 session's feed-forward, wait for the controller's acknowledgement, start the plant, collect the
 N+1 samples (:class:`TrialSamples`), and, once the controller reported the trial ``done``,
 conclude it in the session. A trial with a watchdog trip, lost samples or a step that made no
-progress for :data:`STEP_TIMEOUT` is discarded and run again with the same feed-forward. With a
+progress for :data:`STEP_TIMEOUT` is discarded and run again with the same feed-forward. A plant
+whose state stopped being finite reports ``diverged`` instead of that sample
+(:meth:`TrialProtocol.on_plant_diverged`): the trial ends there as the trial kernel ends it
+in-process (every sample from it on NaN, aborted there unless the envelope aborted it before),
+and the session stops on it with its one message. With a
 recorder (``wait_for_recorder``) a concluded trial is stored only once the recorder filed it;
 the next trial is prepared meanwhile and started after the store (``WAIT_RECORDER``), so a
 stored trial is always in a bag.
@@ -22,7 +26,9 @@ from typing import Any, Protocol
 import numpy as np
 
 from ..errors import ExoIlcError
-from ..loop.trial import record_from_samples
+from ..loop.controller import outside_envelope
+from ..loop.divergence import PlantDivergence
+from ..loop.trial import record_from_samples, sample_index
 from ..params.config import Config
 from ..persistence.store import RunStore
 from ..reference.build import build_reference
@@ -123,6 +129,11 @@ class TrialProtocol:
         """Feed-forwards pushed again for want of an acknowledgement (whole run)."""
         self.error: str | None = None
         self.exit_code: int | None = None
+        self.diverged: tuple[int, Mapping[str, str]] | None = None
+        """The running trial's plant diverged: (the first non-finite sample, the plant's
+        report); the trial ends once every sample before it is in."""
+        self.divergence: PlantDivergence | None = None
+        """The concluded trial's divergence (None: its plant stayed finite), for its summary."""
 
     @property
     def trial(self) -> int:
@@ -244,6 +255,9 @@ class TrialProtocol:
         """A checked sample of the arm; the trial's last one may end it."""
         if not self.samples.add(stamp_ns, position, velocity):
             return
+        if self.diverged is not None:  # a sample before the divergence came after its report
+            self._maybe_end_diverged()
+            return
         if self.phase is Phase.STARTING and self.samples.received[1:].any():
             self._enter(Phase.RUNNING)  # the plant steps: it started, whatever its reply
         self.phase_since = self.clock()  # progress: a slow real-time trial is not stuck
@@ -263,6 +277,9 @@ class TrialProtocol:
         both its measured and its true samples are in."""
         if not self.expects_truth or not self.truth.add(stamp_ns, position, velocity):
             return
+        if self.diverged is not None:
+            self._maybe_end_diverged()
+            return
         if self.truth.last_in and self.samples.last_in and not self.samples.missing:
             self._maybe_end_trial()
 
@@ -280,6 +297,56 @@ class TrialProtocol:
             self.plant_report = report
             self._maybe_end_trial()
 
+    def on_plant_diverged(self, report: Mapping[str, str]) -> None:
+        """The plant's state stopped being finite at the sample stamped ``stamp_ns`` (its
+        report: ``stamp_ns``, ``joint``, ``joint_name``, ``cause``): the plant sent no sample
+        from it on and stopped; the trial ends there once the samples before it are in."""
+        stamp = report.get("stamp_ns", "")
+        if self.phase not in (Phase.STARTING, Phase.RUNNING) or not self.samples.running or \
+                not stamp.lstrip("-").isdigit() or self.diverged is not None:
+            return
+        i = self._sample_of(int(stamp))
+        if i is None:
+            return
+        self.diverged = (i, dict(report))
+        self.port.log(True, f"trial {self.trial}: the plant reported a non-finite state at "
+                      f"sample {i}: {report.get('cause', '')}")
+        self._enter(Phase.RUNNING)
+        self._maybe_end_diverged()
+
+    def _sample_of(self, stamp_ns: int) -> int | None:
+        """The running trial's sample stamped ``stamp_ns`` (None: not one of its samples)."""
+        s = self.samples
+        return sample_index(stamp_ns, s.t0_ns, s.step_ns, s.received.shape[0])
+
+    def _samples_before(self, sample: int) -> bool:
+        """Every sample before ``sample`` is in (measured, and true ones if expected)."""
+        return bool(self.samples.received[:sample].all() and
+                    (not self.expects_truth or self.truth.received[:sample].all()))
+
+    def _maybe_end_diverged(self) -> None:
+        """End the trial whose plant diverged at sample i, as the trial kernel ends it: NaN
+        from i on, aborted at the first sample before i outside the envelope, else at i."""
+        assert self.diverged is not None and self.experiment is not None
+        sample, report = self.diverged
+        if not self._samples_before(sample):
+            return
+        for samples in (self.samples, self.truth) if self.expects_truth else (self.samples,):
+            samples.position[sample:] = np.nan
+            samples.velocity[sample:] = np.nan
+            samples.received[:] = True
+        ref, envelope = self.experiment.reference.position, self.experiment.error_envelope
+        aborted = next((k for k in range(sample)
+                        if outside_envelope(ref[k], self.samples.position[k], envelope)), sample)
+        names = list(self.config["joint_names"])
+        joint = int(report.get("joint", "0")) if report.get("joint", "").isdigit() else 0
+        self.divergence = PlantDivergence(
+            self.trial, sample, sample * self.experiment.period, joint,
+            report.get("joint_name") or names[min(joint, len(names) - 1)],
+            report.get("cause", "the plant's state is not finite"))
+        self.diverged = None
+        self._end_trial(aborted)
+
     def on_recorder_filed(self, trials: int) -> None:
         """The recorder's count of trials filed (in the bag, files closed)."""
         self.recorder_filed = max(self.recorder_filed, trials)
@@ -289,6 +356,7 @@ class TrialProtocol:
     # --- steps ----------------------------------------------------------------------------------
     def _reset(self) -> None:
         self._enter(Phase.RESETTING)
+        self.diverged = None
         self.samples.stop()
         self.truth.stop()
         self.port.reset()
@@ -317,6 +385,8 @@ class TrialProtocol:
 
     def _maybe_end_trial(self) -> None:
         report = self.done_report
+        if self.diverged is not None:  # ends with the samples before it (_maybe_end_diverged)
+            return
         if self.phase is not Phase.RUNNING or not self.samples.running or report is None \
                 or not self.samples.last_in or (self.real_time and self.plant_report is None):
             return
@@ -398,6 +468,7 @@ class TrialProtocol:
         if conclusion.stop_message:
             self.port.log(True, conclusion.stop_message)
         self.port.publish_conclusion(conclusion, self.end_ns)
+        self.divergence = None
         self.unsaved, self.unsaved_since = conclusion, self.clock()
         if self.config["wait_for_recorder"] and not self.recorder_lost \
                 and self.recorder_filed < record.trial:

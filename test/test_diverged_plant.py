@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from test_plant_stability import DIVERGING_DAMPING, _light_wrist_arm
 
+from exo_ilc_ros.core.arm.build import build_plant
 from exo_ilc_ros.core.arm.mujoco_urdf import (
     IMPLICIT,
     IMPLICIT_ABOVE,
@@ -38,7 +39,7 @@ from exo_ilc_ros.core.protocol.trial_protocol import Phase, TrialProtocol
 from exo_ilc_ros.core.session.abort import ABORT_STOP_KEY
 from exo_ilc_ros.core.session.learning_session import TrialConclusion, run_trials
 from exo_ilc_ros.core.sim.experiment import Experiment
-from exo_ilc_ros.core.sim.mujoco_arm import MujocoArm
+from exo_ilc_ros.core.sim.mujoco_arm import MujocoArm, effects_from_config
 from exo_ilc_ros.wire import topics
 
 SHIPPED = (None, "arms/panda.yaml", "arms/ur5.yaml", "arms/panda_1khz_norm_optimal.yaml")
@@ -106,10 +107,9 @@ def test_light_wrist_forced_onto_rk4_diverges_loudly(tmp_path: Path) -> None:
     happened); now the arm's state is NaN from then on, with MuJoCo's cause, and it does not
     move again until set_state."""
     config = load_config(_light_wrist_arm(tmp_path))
-    implicit = MujocoArm.from_config(config)
-    arm = MujocoArm(implicit_model(config), config["joint_names"], config["control.period"],
+    arm = MujocoArm(build_plant(config), config["joint_names"], config["control.period"],
                     config["integration_step"], config["control.effort_limit"],
-                    _effects(config), integrator="RK4")
+                    effects_from_config(config), integrator="RK4")
     ref = Experiment(config).reference
     arm.set_state(ref.position[0], ref.velocity[0])
     steps = 0
@@ -126,18 +126,6 @@ def test_light_wrist_forced_onto_rk4_diverges_loudly(tmp_path: Path) -> None:
     assert arm.time == time  # not stepped again
     arm.set_state(ref.position[0], ref.velocity[0])
     assert arm.diverged is None and np.all(np.isfinite(arm.position))
-
-
-def implicit_model(config: Any) -> Any:
-    from exo_ilc_ros.core.arm.build import build_plant
-
-    return build_plant(config)
-
-
-def _effects(config: Any) -> Any:
-    from exo_ilc_ros.core.sim.mujoco_arm import effects_from_config
-
-    return effects_from_config(config)
 
 
 def test_urdf_arm_in_mujoco_chooses_its_integrator(tmp_path: Path) -> None:
@@ -285,3 +273,48 @@ def test_run_through_the_graph_reports_the_divergence_and_exits_5(tmp_path: Path
     assert message.startswith("trial 1: the plant diverged at t = 0.020 s on joint wrist_roll")
     assert f"ERROR: linear d=0.05: {message}" in graph.stderr
     assert graph.stderr.count(expected[ABORT_STOP_KEY]) == 1
+
+
+@pytest.mark.graph
+def test_a_plant_without_reset_reports_the_divergence_within_a_trial(tmp_path: Path) -> None:
+    """``protocol: homing`` (free_running_plant: our RK4 without services, homed by the
+    controller): the wrist diverges in trial 1, the node reports it, the supervisor ends that
+    trial there, and the run stops with the plant's time, joint and cause (exit 5), never
+    "homing failed" or a stall."""
+    config = _light_wrist_arm(tmp_path, DIVERGING_DAMPING)
+    homing = tmp_path / "homing.yaml"
+    homing.write_text('"/**":\n  ros__parameters:\n    protocol: homing\n')
+    graph = _command("run", "--no-bag", "--no-store", "--config", str(config), "--scenario",
+                     str(homing), "--trials", "3", "--json", str(tmp_path / "graph.json"),
+                     cwd=tmp_path)
+    assert graph.returncode == 5, graph.stderr[-3000:]
+    for bad in ("Traceback", "no progress", "homing failed", "ABORTED by the error envelope",
+                "no trial summary"):
+        assert bad not in graph.stderr, graph.stderr[-3000:]
+    run = json.loads((tmp_path / "graph.json").read_text())["runs"][0]
+    [diverged] = run[DIVERGED]
+    assert diverged["trial"] == 1 and diverged["joint_name"] == "wrist_roll"
+    assert 0.0 < diverged["time"] < 0.1 and "explicit-integration stability" in diverged["cause"]
+    assert diverged["message"] in graph.stderr and run[ABORT_STOP_KEY]
+
+
+@pytest.mark.graph
+def test_mujoco_that_resets_its_simulation_stops_the_run_with_its_cause(
+        tmp_path: Path) -> None:
+    """``--plant mujoco`` with a passive stiffness of 1e7 N m/rad (h sqrt(K/I) far over any
+    explicit integrator's limit): MuJoCo finds a huge acceleration early in trial 1 and resets
+    its simulation to the rest pose; the node no longer goes on from there (the old symptom:
+    "homing failed" against an arm that jumped), it reports the divergence, the supervisor
+    ends the trial there and the run stops with MuJoCo's cause (exit 5)."""
+    stiff = tmp_path / "stiff.yaml"
+    stiff.write_text("plant_simulator:\n  ros__parameters:\n    patient:\n      passive:\n"
+                     "        stiffness: [1.0e7, 1.0e7, 1.0e7]\n")
+    graph = _command("run", "--plant", "mujoco", "--no-bag", "--no-store", "--scenario",
+                     str(stiff), "--trials", "2", cwd=tmp_path)
+    assert graph.returncode == 5, graph.stderr[-3000:]
+    for bad in ("Traceback", "no progress", "homing failed", "ABORTED by the error envelope"):
+        assert bad not in graph.stderr, graph.stderr[-3000:]
+    assert "ERROR: sign d=0.05: trial 1: the plant diverged at t = " in graph.stderr
+    assert "on joint shoulder_flexion: MuJoCo found a non-finite or huge acceleration at DOF 0 " \
+        "(shoulder_flexion) and reset its simulation (RK4 at h = 0.001 s" in graph.stderr
+    assert graph.stderr.count("stopped after an aborted trial: trial 1: the plant diverged") == 1

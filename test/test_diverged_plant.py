@@ -141,7 +141,8 @@ def test_urdf_arm_in_mujoco_chooses_its_integrator(tmp_path: Path) -> None:
     for _ in range(100):
         q, qd = damped.step([0.0, 0.0, 0.001])
     assert np.all(np.isfinite(q)) and qd[2] == pytest.approx(0.001 / 2.0, rel=1e-3)
-    forced = MujocoUrdfArm(urdf, "base_link", "hand", damping=True, integrator="RK4")
+    forced = MujocoUrdfArm(urdf, "base_link", "hand", damping=True)
+    forced.use_integrator("RK4")
     forced.set_state([0.0, 0.3, 0.0], np.zeros(3))
     for _ in range(5):
         q, qd = forced.step([0.0, 0.0, 0.001])

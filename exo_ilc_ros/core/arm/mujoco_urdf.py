@@ -309,26 +309,22 @@ class MujocoUrdfArm:
     """The URDF's chain in MuJoCo (:func:`mujoco_model`), stepped one control period at a time
     with the effort held, and MuJoCo's joint-space inertia and bias for checks. ``damping``,
     ``friction``: the URDF's viscous damping and Coulomb friction applied (module docstring;
-    ``friction_velocity`` v_s of the smooth Coulomb torque). ``integrator``: one of
-    :data:`INTEGRATOR_NAMES`; None: RK4, or ``implicitfast`` where the applied damping is too
-    stiff for RK4 at ``timestep`` at the rest pose or ``poses`` (:func:`stable_integrator`)."""
+    ``friction_velocity`` v_s of the smooth Coulomb torque). It integrates with RK4, or
+    ``implicitfast`` where the applied damping is too stiff for RK4 at ``timestep`` at the
+    URDF's zero pose (:func:`stable_integrator`; :meth:`use_integrator` picks another)."""
 
     def __init__(self, source: str | Path, base_link: str, tip_link: str,
                  locked: Mapping[str, float] | None = None, timestep: float = 0.001,
                  period: float = 0.01, damping: bool = False,
                  gravity: Gravity = 9.81,
-                 friction: bool = False, friction_velocity: float = 0.1,
-                 integrator: str | None = None,
-                 poses: Sequence[Sequence[float]] = ()) -> None:
+                 friction: bool = False, friction_velocity: float = 0.1) -> None:
         import mujoco
 
         self._mujoco = mujoco
         self.substeps = substeps_per_period(period, timestep, UrdfError)
         self.model, self.chain = mujoco_model(source, base_link, tip_link, locked, timestep,
-                                              damping, gravity, integrator)
-        if integrator is None:
-            chosen = stable_integrator(self.model, [self.model.qpos0, *poses])
-            self.model.opt.integrator = _integrators(mujoco)[chosen]
+                                              damping, gravity)
+        self.use_integrator(stable_integrator(self.model, [self.model.qpos0]))
         self.data: Any = mujoco.MjData(self.model)
         self._mass = np.zeros((self.chain.dof, self.chain.dof))
         self.friction: SmoothFriction | None = \
@@ -345,6 +341,12 @@ class MujocoUrdfArm:
     def integrator(self) -> str:
         """The MJCF name of the integrator MuJoCo steps with."""
         return integrator_name(self.model)
+
+    def use_integrator(self, name: str) -> None:
+        """Step with MuJoCo's integrator ``name`` (one of :data:`INTEGRATOR_NAMES`) from now."""
+        if name not in INTEGRATOR_NAMES:
+            raise UrdfError(f"integrator {name!r} is not one of {list(INTEGRATOR_NAMES)}")
+        self.model.opt.integrator = _integrators(self._mujoco)[name]
 
     def set_state(self, q: Sequence[float], qd: Sequence[float]) -> None:
         """Put the arm at (q, qdot), no effort applied."""

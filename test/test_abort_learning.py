@@ -282,3 +282,31 @@ def test_graph_resume_of_a_stopped_run_stops_again_with_the_message(tmp_path: Pa
     assert resumed.summary.extra.get(ABORT_STOP_KEY) == local.stop_message
     np.testing.assert_allclose(resumed.summary.max_abs_error, local.max_abs_errors,
                                rtol=0.0, atol=1e-12)
+
+
+@pytest.mark.graph
+def test_robust_on_the_stiff_patient_through_the_graph_as_in_process() -> None:
+    """robust.yaml on the stiff patient (issue 33, point 1), the supervisor's session over real
+    DDS: no aborted trial runs its feed-forward again (every learned profile after an abort
+    differs from the aborted one), and the run stops after 3 aborts in a row with the same
+    trials, errors, aborts and message as in-process (21 trials, aborts 16, 17, 19, 20, 21)."""
+    from exo_ilc_ros.core.params.config import config_dir
+    from exo_ilc_ros.orchestration.graph import run_graph
+
+    config = load_config(config_dir() / "robust.yaml", {"max_trials": 60},
+                         overlays=[config_dir() / "scenarios" / "stiff.yaml"])
+    local = run_trials(config)
+    records = local.records
+    assert local.stop is StopReason.ABORTS and local.aborted == [16, 17, 19, 20, 21]
+    for before, after in itertools.pairwise(records):
+        if before.aborted:
+            assert not np.array_equal(before.feedforward, after.feedforward), after.trial
+    graph = run_graph(config, timeout=600.0)
+    assert [s.trial for s in graph.summaries] == [r.trial for r in records]
+    np.testing.assert_allclose(graph.summary.max_abs_error, local.max_abs_errors,
+                               rtol=0.0, atol=1e-9)
+    np.testing.assert_allclose(graph.summary.max_abs_feedforward,
+                               local.max_abs_feedforward, rtol=0.0, atol=1e-9)
+    assert graph.summary.extra.get("aborted_trials") == local.aborted
+    assert graph.summary.extra.get(ABORT_STOP_KEY) == local.stop_message
+    assert "reruns" not in graph.summary.extra

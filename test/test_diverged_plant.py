@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from collections.abc import Sequence
@@ -259,6 +260,7 @@ def test_run_through_the_graph_reports_the_divergence_and_exits_5(tmp_path: Path
     local = _command("simulate", "--config", str(config), "--trials", "3", "--metrics",
                      "--json", str(tmp_path / "local.json"), cwd=tmp_path)
     assert local.returncode == 5, local.stderr[-3000:]
+    assert "IndexError" not in local.stderr and "Traceback" not in local.stderr
     graph = _command("run", "--no-bag", "--no-store", "--config", str(config), "--trials",
                      "3", "--json", str(tmp_path / "graph.json"), cwd=tmp_path)
     assert graph.returncode == 5, graph.stderr[-3000:]
@@ -319,3 +321,45 @@ def test_mujoco_that_resets_its_simulation_stops_the_run_with_its_cause(
     assert "on joint shoulder_flexion: MuJoCo found a non-finite or huge acceleration at DOF 0 " \
         "(shoulder_flexion) and reset its simulation (RK4 at h = 0.001 s" in graph.stderr
     assert graph.stderr.count("stopped after an aborted trial: trial 1: the plant diverged") == 1
+
+
+@pytest.mark.graph
+def test_no_table_or_json_shows_a_learned_input_above_its_limit(tmp_path: Path) -> None:
+    """feedforward_limit 0.5 (reached from trial 2): ``simulate`` and ``run`` (--learned,
+    --json) never print or write a max |u_ff| above it, and both say AT ITS LIMIT."""
+    config = tmp_path / "limit.yaml"
+    config.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n'
+                      "ilc_supervisor:\n  ros__parameters:\n"
+                      "    feedforward_limit: [0.5, 0.5, 0.5]\n")
+    for command in ("simulate", "run"):
+        extra = ("--no-bag", "--no-store") if command == "run" else ()
+        out = tmp_path / f"{command}.json"
+        done = _command(command, *extra, "--config", str(config), "--trials", "4", "--learned",
+                        "--json", str(out), cwd=tmp_path)
+        assert done.returncode == 0, done.stderr[-3000:]
+        trials = json.loads(out.read_text())["runs"][0]["trials"]
+        learned = np.array([t["max_abs_feedforward"] for t in trials])
+        assert learned.max() == 0.5 and np.all(learned <= 0.5), learned
+        printed = _printed_learned_inputs(done.stdout)
+        assert len(printed) == 3 * 4 + 3 and max(printed) <= 0.5, done.stdout
+        assert "AT ITS LIMIT on shoulder_flexion, shoulder_abduction, elbow_flexion" \
+            in done.stdout
+
+
+def _printed_learned_inputs(text: str) -> list[float]:
+    """Every max |u_ff| a report prints: the per-trial table's rows (``--learned``) and the
+    long-run line's ``|u_ff| a b c``."""
+    values: list[float] = []
+    in_table = False
+    for line in text.splitlines():
+        if line.startswith("max |u_ff| ("):
+            in_table = True
+            continue
+        if in_table and re.match(r"^\s*\d+ \|", line):
+            values += [float(x.rstrip("*")) for x in line.split("|")[1].split()]
+        elif in_table and not line.strip():
+            in_table = False
+        found = re.search(r"\|u_ff\| ([-+.\de ]+) \|effort\|", line)
+        if found:
+            values += [float(x) for x in found.group(1).split()]
+    return values

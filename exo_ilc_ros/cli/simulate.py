@@ -293,10 +293,10 @@ def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary
     if events:
         print(events)
         print()
-        if args.learned:
-            for quantity in ("feedforward", "effort"):
-                print(format_trial_table(runs, names, quantity))
-                print()
+    if args.learned:
+        for quantity in ("feedforward", "effort"):
+            print(format_trial_table(runs, names, quantity))
+            print()
     print(format_iterations(runs, names))
     print()
     print(format_long_run(runs, names, limit=feedforward_limit_of(config)))

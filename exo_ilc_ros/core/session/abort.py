@@ -44,9 +44,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..learning.laws import FeedforwardUpdate
-from ..loop.divergence import first_non_finite
+from ..loop.divergence import first_non_finite, trial_divergence
 from ..loop.record import TrialRecord
 from ..params.config import Config
+from ..sim.experiment import Experiment
 
 STIFFNESS_CAUSE = ("the patient's stiffness or friction exceeds what the nominal model cancels "
                    "(a patient model, identification.enabled, or config/patient_aware.yaml; a "
@@ -120,18 +121,22 @@ def abort_trip(trial: int, aborted_at: int, max_abs_error: Sequence[float] | np.
 
 
 def trip_of(record: TrialRecord, config: Config) -> AbortTrip:
-    """:func:`abort_trip` of aborted ``record``; a plant that diverged names the joint that blew
-    up (:func:`..loop.divergence.first_non_finite`), not the first of its NaN joints."""
+    """:func:`abort_trip` of aborted ``record``; a plant that diverged names the joint the
+    divergence report names (:func:`..loop.divergence.trial_divergence` on the plant of
+    ``config``: the stiffest damping mode's joint over RK4's limit, else the one moving fastest
+    before), not the first of its NaN joints: the stop message and the report agree."""
     if record.aborted_at is None:
         raise ValueError(f"trial {record.trial} was not aborted")
     trip = abort_trip(record.trial, record.aborted_at, record.max_abs_error, config)
     if not trip.diverged:
         return trip
-    blown = first_non_finite(record.position, record.velocity)
-    if blown is None:
+    if first_non_finite(record.position, record.velocity) is None:
         return trip
-    joint = blown[1]
     names = list(config["joint_names"])
+    found = trial_divergence(Experiment(config), record, names)
+    if found is None:
+        return trip
+    joint = found.joint
     return dataclasses.replace(trip, joint=joint, joint_name=names[joint] if joint < len(names)
                                else f"joint {joint}")
 

@@ -102,11 +102,13 @@ def test_light_wrist_on_mujoco_is_implicit_and_finite(tmp_path: Path) -> None:
     assert np.all(worst[:2] < 0.02), worst
 
 
-def test_light_wrist_forced_onto_rk4_diverges_loudly(tmp_path: Path) -> None:
+def test_light_wrist_forced_onto_rk4_diverges_loudly(tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     """The same arm on MuJoCo's RK4 at 1 ms: MuJoCo finds a huge acceleration on the wrist and
     resets its simulation to the rest pose (before, the plant went on from there as if nothing
     happened); now the arm's state is NaN from then on, with MuJoCo's cause, and it does not
     move again until set_state."""
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes its warning to MUJOCO_LOG.TXT here
     config = load_config(_light_wrist_arm(tmp_path))
     arm = MujocoArm(build_plant(config), config["joint_names"], config["control.period"],
                     config["integration_step"], config["control.effort_limit"],
@@ -129,9 +131,11 @@ def test_light_wrist_forced_onto_rk4_diverges_loudly(tmp_path: Path) -> None:
     assert arm.diverged is None and np.all(np.isfinite(arm.position))
 
 
-def test_urdf_arm_in_mujoco_chooses_its_integrator(tmp_path: Path) -> None:
+def test_urdf_arm_in_mujoco_chooses_its_integrator(tmp_path: Path,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
     """MujocoUrdfArm (MuJoCo's own URDF parser): RK4 without damping, implicitfast with the
     wrist's damping applied; forced onto RK4, a NaN state and the cause instead of the reset."""
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes its warning to MUJOCO_LOG.TXT here
     _light_wrist_arm(tmp_path)
     urdf = tmp_path / "light_wrist.urdf"
     plain = MujocoUrdfArm(urdf, "base_link", "hand")

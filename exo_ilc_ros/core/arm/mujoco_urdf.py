@@ -257,13 +257,33 @@ def bad_state(model: Any, data: Any) -> tuple[str, int] | None:
                 else None
             h = float(model.opt.timestep)
             stiffest, _ = damping_modes(model, [model.qpos0])
+            springs = _spring_mode(model)
             where = f"DOF {dof} ({joint})" if joint else f"DOF {dof}"
+            spring = f", h*sqrt(k/I) = {h * springs:.3g} with the joint stiffness" \
+                if springs > 0.0 else ""
             return (f"MuJoCo found a non-finite or huge {what} at {where} and reset its "
                     f"simulation ({integrator_name(model)} at h = {h:g} s; h*b/I = "
-                    f"{h * stiffest:.3g} with the joint damping at the rest pose): a joint's "
-                    "damping, stiffness or effort too stiff for the integration step, or a "
-                    "non-finite command"), dof if 0 <= dof < model.nv else -1
+                    f"{h * stiffest:.3g} with the joint damping{spring}, at the rest pose): a "
+                    "joint's damping, stiffness or effort too stiff for the integration step, "
+                    "or a non-finite command"), dof if 0 <= dof < model.nv else -1
     return None
+
+
+def _spring_mode(model: Any) -> float:
+    """sqrt(max eig(M^-1 K)) at the rest pose (rad/s), K the hinges' joint stiffness: the
+    fastest spring mode (explicit integrators are stable for h times it up to ~2-2.8)."""
+    import mujoco
+
+    stiffness = np.array([float(model.jnt_stiffness[model.dof_jntid[d]])
+                          for d in range(model.nv)])
+    if not np.any(stiffness > 0.0):
+        return 0.0
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    mass = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, mass)
+    modes = np.linalg.eigvals(np.linalg.solve(mass, np.diag(stiffness)))
+    return float(np.sqrt(max(float(np.max(modes.real)), 0.0)))
 
 
 def substeps_per_period(period: float, timestep: float,

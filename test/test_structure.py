@@ -11,18 +11,7 @@ MAX_LINES = 600
 MAX_PARAMETERS = 10
 
 WIDE_TODAY = {
-    "core/loop/patient.py:patient_plant_period",
-    "core/loop/patient.py:patient_period",
-    "core/loop/trial.py:simulate_trial_guarded",
-    "core/loop/trial.py:control_inputs",
     "core/loop/trial.py:record_from_samples",
-    "core/loop/controller.py:guarded_control_into",
-    "core/loop/controller.py:hold_into",
-    "core/loop/controller.py:control_into",
-    "core/loop/plant.py:plant_period_with_joint_forces",
-    "core/loop/plant.py:rk4_period_with_joint_forces",
-    "core/loop/plant.py:plant_period",
-    "core/loop/plant.py:rk4_period",
     "core/loop/wire_input.py:validate_feedforward",
     "core/learning/norm_optimal_recursive.py:solve_constrained_banded",
     "core/learning/norm_optimal_qp.py:_effort_along_kernel",

@@ -14,8 +14,6 @@ WIDE_TODAY = {
     "core/loop/trial.py:record_from_samples",
     "core/loop/wire_input.py:validate_feedforward",
     "core/learning/norm_optimal_recursive.py:solve_constrained_banded",
-    "core/learning/norm_optimal_qp.py:_effort_along_kernel",
-    "core/learning/norm_optimal_model.py:_bias_jacobians_kernel",
     "core/arm/dynamics.py:forward_dynamics_into",
     "core/session/learning_session.py:run_trials",
     "wire/protocol.py:summary_values",

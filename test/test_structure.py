@@ -14,7 +14,6 @@ WIDE_TODAY = {
     "core/loop/trial.py:record_from_samples",
     "core/loop/wire_input.py:validate_feedforward",
     "core/learning/norm_optimal_recursive.py:solve_constrained_banded",
-    "core/arm/dynamics.py:forward_dynamics_into",
     "core/session/learning_session.py:run_trials",
     "wire/protocol.py:summary_values",
 }

@@ -126,14 +126,14 @@ def _acceleration_into(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, plant:
                        nominal: tuple, mode: int, ws: tuple, extra: np.ndarray,
                        out: np.ndarray) -> None:
     if mode == 0:
-        forward_dynamics_into(q, qd, effort, *plant, ws, out)
+        forward_dynamics_into(q, qd, effort, plant, ws, out)
         return
     n = q.shape[0]
     # eta = -a^-1 (c - c_N), eq (18): the plant's answer to zero effort minus the nominal one
     cn = extra[n:2 * n]
     inertia_and_bias_into(q, qd, *nominal, ws, cn)
-    forward_dynamics_into(q, qd, cn, *plant, ws, extra[:n])  # a^-1 (c_N - c)
-    forward_dynamics_into(q, qd, effort, *nominal, ws, out)  # a_N^-1 (Q - c_N)
+    forward_dynamics_into(q, qd, cn, plant, ws, extra[:n])  # a^-1 (c_N - c)
+    forward_dynamics_into(q, qd, effort, nominal, ws, out)  # a_N^-1 (Q - c_N)
     for j in range(n):
         out[j] += extra[j]
 
@@ -152,16 +152,15 @@ def rk4_period_with_joint_forces(q: np.ndarray, qd: np.ndarray, effort: np.ndarr
 
     One body for the paper's plant (:func:`rk4_period`) and the patient's
     (:func:`patient.patient_period`), inlined into both. With the true plant (``mode`` 0) each
-    stage calls :func:`forward_dynamics_into` directly, with ``plant`` unpacked once before the
-    loop (as the ``integration``'s fields): through :func:`_acceleration_into` (or with a
-    ``*plant`` call inside the loop, or a helper function per stage, inlined or not) numba
-    increfs and decrefs every array argument at every stage, about a third of the cost of a
-    plant evaluation.
+    stage calls :func:`forward_dynamics_into` directly with the ``plant`` tuple, the
+    ``integration``'s fields taken once before the loop: through :func:`_acceleration_into` (or
+    with a ``*plant`` call inside the loop, or a helper function per stage, inlined or not)
+    numba increfs and decrefs every array argument at every stage, about a third of the cost of
+    a plant evaluation.
     """
     n = q.shape[0]
     period, substeps, plant, nominal, mode, ws, stage, extra = integration
     h = period / substeps
-    masses, axes, offsets, coms, inertias, gravity = plant
     k1v, k2v, k3v, k4v = stage[0], stage[1], stage[2], stage[3]
     q2, v2, q3, v3, q4, v4 = stage[4], stage[5], stage[6], stage[7], stage[8], stage[9]
     if not passive:
@@ -171,8 +170,7 @@ def rk4_period_with_joint_forces(q: np.ndarray, qd: np.ndarray, effort: np.ndarr
         if passive:
             passive_effort_into(q, qd, effort, joint, inverse_stribeck, total)
         if mode == 0:
-            forward_dynamics_into(q, qd, total, masses, axes, offsets, coms, inertias, gravity,
-                                  ws, k1v)
+            forward_dynamics_into(q, qd, total, plant, ws, k1v)
         else:
             _acceleration_into(q, qd, total, plant, nominal, mode, ws, extra, k1v)
         for j in range(n):
@@ -181,8 +179,7 @@ def rk4_period_with_joint_forces(q: np.ndarray, qd: np.ndarray, effort: np.ndarr
         if passive:
             passive_effort_into(q2, v2, effort, joint, inverse_stribeck, total)
         if mode == 0:
-            forward_dynamics_into(q2, v2, total, masses, axes, offsets, coms, inertias, gravity,
-                                  ws, k2v)
+            forward_dynamics_into(q2, v2, total, plant, ws, k2v)
         else:
             _acceleration_into(q2, v2, total, plant, nominal, mode, ws, extra, k2v)
         for j in range(n):
@@ -191,8 +188,7 @@ def rk4_period_with_joint_forces(q: np.ndarray, qd: np.ndarray, effort: np.ndarr
         if passive:
             passive_effort_into(q3, v3, effort, joint, inverse_stribeck, total)
         if mode == 0:
-            forward_dynamics_into(q3, v3, total, masses, axes, offsets, coms, inertias, gravity,
-                                  ws, k3v)
+            forward_dynamics_into(q3, v3, total, plant, ws, k3v)
         else:
             _acceleration_into(q3, v3, total, plant, nominal, mode, ws, extra, k3v)
         for j in range(n):
@@ -201,8 +197,7 @@ def rk4_period_with_joint_forces(q: np.ndarray, qd: np.ndarray, effort: np.ndarr
         if passive:
             passive_effort_into(q4, v4, effort, joint, inverse_stribeck, total)
         if mode == 0:
-            forward_dynamics_into(q4, v4, total, masses, axes, offsets, coms, inertias, gravity,
-                                  ws, k4v)
+            forward_dynamics_into(q4, v4, total, plant, ws, k4v)
         else:
             _acceleration_into(q4, v4, total, plant, nominal, mode, ws, extra, k4v)
         for j in range(n):

@@ -147,7 +147,9 @@ def record_from_samples(experiment: LoopSetup, trial: int, feedforward: np.ndarr
     hold from ``aborted_at`` on, for a trial the error envelope aborted; ``joint_force``: the
     identified joint forces it added, None: none); ``true_position``,
     ``true_velocity``: the plant's true state when the sensors differ from it. The record owns
-    copies of the arrays (a caller's sample buffers may be reused for the next trial)."""
+    copies of the arrays (a caller's sample buffers may be reused for the next trial). Over 10
+    parameters because each optional part of a :class:`TrialRecord` a graph's trial may carry
+    is one keyword with its default (None: the trial has none)."""
     ref = reference or experiment.reference
     u_ff = np.array(feedforward, dtype=float, order="C")
     q = np.array(position, dtype=float, order="C")

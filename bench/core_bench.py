@@ -20,9 +20,8 @@ from typing import Any
 import numpy as np
 
 from exo_ilc_ros.core import Experiment, load_config, run_trials
-from exo_ilc_ros.core.arm.dynamics import workspace
 from exo_ilc_ros.core.learning.factory import build_law
-from exo_ilc_ros.core.loop.plant import rk4_period
+from exo_ilc_ros.core.loop.plant import plant_integration, rk4_period
 from exo_ilc_ros.core.params.config import Config
 
 
@@ -31,18 +30,18 @@ def plant_step_times(experiment: Experiment, repeats: int = 2000) -> list[float]
     runs), called from Python: RK4 on the sub-steps, 4 plant evaluations each."""
     ref = experiment.reference
     n = ref.position.shape[1]
-    ws, stage, extra = workspace(n), np.empty((10, n)), np.empty(2 * n)
     q, qd = np.empty(n), np.empty(n)
     effort = np.resize([0.5, -1.0, 0.2], n)  # any number of joints
-    args = (experiment.period, experiment.substeps, experiment.plant.kernel_args,
-            experiment.nominal.kernel_args, int(experiment.dynamics), ws, stage, extra)
+    integration = plant_integration(experiment.period, experiment.substeps,
+                                    experiment.plant.kernel_args,
+                                    experiment.nominal.kernel_args, int(experiment.dynamics))
     times = []
     for _ in range(5):
         start = time.perf_counter()
         for _ in range(repeats):
             q[:] = ref.position[1]  # the same state each time: no drift
             qd[:] = ref.velocity[1]
-            rk4_period(q, qd, effort, *args)
+            rk4_period(q, qd, effort, integration)
         times.append((time.perf_counter() - start) / repeats)
     return times
 

@@ -213,13 +213,13 @@ def test_fast_kernels_match_the_reference_path_on_other_chains(n: int) -> None:
         a_ws = dynamics.inertia_and_bias_into(q, qd, *args, ws, bias)
         np.testing.assert_array_equal(a_ws, a)
         np.testing.assert_array_equal(bias, c)
-        dynamics.forward_dynamics_into(q, qd, effort, *args, ws, out)
+        dynamics.forward_dynamics_into(q, qd, effort, args, ws, out)
         expected = np.linalg.solve(a_ref, effort - c_ref)
         np.testing.assert_allclose(out, expected, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(dynamics.solve_spd(a, effort - c), expected, rtol=1e-9,
                                    atol=1e-9)
         aliased = effort.copy()  # out may be the effort array itself
-        dynamics.forward_dynamics_into(q, qd, aliased, *args, ws, aliased)
+        dynamics.forward_dynamics_into(q, qd, aliased, args, ws, aliased)
         np.testing.assert_array_equal(aliased, out)
 
 
@@ -234,7 +234,7 @@ def test_solves_reject_a_matrix_that_is_not_positive_definite(n: int) -> None:
     masses, axes, offsets, coms, inertias, gravity = random_chain(n, np.random.default_rng(n))
     args = (0.0 * masses, axes, offsets, coms, 0.0 * inertias, gravity)
     with pytest.raises(ValueError, match="not positive definite"):
-        dynamics.forward_dynamics_into(np.zeros(n), np.zeros(n), np.ones(n), *args,
+        dynamics.forward_dynamics_into(np.zeros(n), np.zeros(n), np.ones(n), args,
                                        dynamics.workspace(n), np.empty(n))
 
 

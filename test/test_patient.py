@@ -19,11 +19,17 @@ from exo_ilc_ros.core.loop.patient import (
     MAS_PRESETS,
     PatientLearning,
     PatientModel,
+    PatientTrial,
     measure_into,
     patient_period,
     true_error,
 )
-from exo_ilc_ros.core.loop.plant import rk4_period, rk4_period_with_joint_forces
+from exo_ilc_ros.core.loop.plant import (
+    PlantIntegration,
+    plant_integration,
+    rk4_period,
+    rk4_period_with_joint_forces,
+)
 from exo_ilc_ros.core.loop.stepper import PlantStepper
 from exo_ilc_ros.core.params import schema
 from exo_ilc_ros.core.params.config import load_config, scenario_names, scenario_path
@@ -127,21 +133,18 @@ def test_passive_rk4_matches_an_independent_integrator() -> None:
 
     exact = solve_ivp(rhs, (0.0, ex.period), np.concatenate([q0, qd0]), rtol=1e-12,
                       atol=1e-14).y[:, -1]
-    from exo_ilc_ros.core.arm.dynamics import workspace
-
+    integration = plant_integration(ex.period, ex.substeps, ex.plant.kernel_args,
+                                    ex.nominal.kernel_args, 0)
     q, qd = q0.copy(), qd0.copy()
-    rk4_period_with_joint_forces(q, qd, effort, ex.period, ex.substeps, ex.plant.kernel_args,
-                                 ex.nominal.kernel_args, 0, workspace(3), np.empty((10, 3)),
-                                 np.empty(6), True, model.joint, model.scalars[2], np.empty(3))
+    rk4_period_with_joint_forces(q, qd, effort, integration, True, model.joint,
+                                 model.scalars[2], np.empty(3))
     np.testing.assert_allclose(np.concatenate([q, qd]), exact, atol=1e-9)
     # without the joint forces: rk4_period's doubles exactly, whatever the joint array holds
     plain_q, plain_qd = q0.copy(), qd0.copy()
-    rk4_period(plain_q, plain_qd, effort, ex.period, ex.substeps, ex.plant.kernel_args,
-               ex.nominal.kernel_args, 0, workspace(3), np.empty((10, 3)), np.empty(6))
+    rk4_period(plain_q, plain_qd, effort, integration)
     q, qd = q0.copy(), qd0.copy()
-    rk4_period_with_joint_forces(q, qd, effort, ex.period, ex.substeps, ex.plant.kernel_args,
-                                 ex.nominal.kernel_args, 0, workspace(3), np.empty((10, 3)),
-                                 np.empty(6), False, model.joint, model.scalars[2], np.empty(3))
+    rk4_period_with_joint_forces(q, qd, effort, integration, False, model.joint,
+                                 model.scalars[2], np.empty(3))
     assert np.array_equal(q, plain_q) and np.array_equal(qd, plain_qd)
     assert not np.array_equal(q, exact[:3])
 
@@ -168,20 +171,27 @@ def test_held_torque_delay_reflex_and_voluntary_by_hand() -> None:
     q, qd = ref.position[3] + [0.0, -0.01, 0.0], ref.velocity[3].copy()
     trial_scalars = np.array([0.8, 2.0])  # gain 0.8, the patient 2 samples ahead
     q_start = q.copy()
-    patient_period(3, q, qd, np.zeros(3), ref.position, ref.velocity, ex.period, ex.substeps,
-                   ex.plant.kernel_args, ex.nominal.kernel_args, 0, *_scratch(),
-                   model.joint, model.scalars, trial_scalars, np.zeros((0, 0)), history, memory,
-                   held)
+    patient_period(3, q, qd, np.zeros(3), _integration(ex),
+                   _patient(ex, model, trial_scalars, history, memory, held))
     raw = 0.8 * (4.0 * (ref.position[5, 1] - q_start[1]) + 1.0 * (ref.velocity[5, 1]
                                                                      - ref.velocity[3, 1]))
     voluntary = 0.2 + 0.25 * (raw - 0.2)  # a = 0.01 / (0.03 + 0.01)
     np.testing.assert_allclose(held, [1.0 + 1.5 * 0.5, 2.0 + voluntary, 3.0], rtol=1e-12)
 
 
-def _scratch() -> tuple[Any, ...]:
-    from exo_ilc_ros.core.arm.dynamics import workspace
+def _integration(ex: Experiment) -> PlantIntegration:
+    return plant_integration(ex.period, ex.substeps, ex.plant.kernel_args,
+                             ex.nominal.kernel_args, 0)
 
-    return workspace(3), np.empty((10, 3)), np.empty(9)
+
+def _patient(ex: Experiment, model: PatientModel, trial_scalars: np.ndarray,
+             history: np.ndarray, memory: np.ndarray, held: np.ndarray) -> PatientTrial:
+    """A :class:`PatientTrial` on ``ex``'s reference with these arrays (no noise, no offset,
+    no learned torque)."""
+    ref = ex.reference
+    return PatientTrial(ref.position, ref.velocity, model.joint, model.scalars,
+                        np.zeros((2, 0, 0)), np.zeros((2, 0)), trial_scalars, np.zeros((0, 0)),
+                        history, memory, held, np.empty(3))
 
 
 def _reflex_torque(config: Any, velocity: list[float]) -> np.ndarray:
@@ -191,11 +201,9 @@ def _reflex_torque(config: Any, velocity: list[float]) -> np.ndarray:
     model = PatientModel(config)
     ref = ex.reference
     held = np.empty(3)
-    patient_period(0, ref.position[0].copy(), np.array(velocity), np.zeros(3), ref.position,
-                   ref.velocity, ex.period, ex.substeps, ex.plant.kernel_args,
-                   ex.nominal.kernel_args, 0, *_scratch(), model.joint, model.scalars,
-                   np.array([1.0, 0.0]), np.zeros((0, 0)), np.zeros((2, ref.samples, 3)),
-                   np.zeros((3, 3)), held)
+    patient_period(0, ref.position[0].copy(), np.array(velocity), np.zeros(3), _integration(ex),
+                   _patient(ex, model, np.array([1.0, 0.0]), np.zeros((2, ref.samples, 3)),
+                            np.zeros((3, 3)), held))
     return held
 
 

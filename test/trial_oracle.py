@@ -8,8 +8,8 @@ import numpy as np
 from numba import njit
 
 from exo_ilc_ros.core.arm.dynamics import workspace
-from exo_ilc_ros.core.loop.controller import control_into
-from exo_ilc_ros.core.loop.plant import rk4_period
+from exo_ilc_ros.core.loop.controller import ComputedTorque, Setpoint, control_into
+from exo_ilc_ros.core.loop.plant import PlantIntegration, rk4_period
 
 
 @njit(cache=True, error_model="numpy")
@@ -24,18 +24,17 @@ def simulate_trial(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, kp: 
     qd_log = np.empty((n_samples, n))
     u_log = np.empty((n_samples, n))
     effort_log = np.empty((n_samples, n))
-    ws = workspace(n)
-    stage = np.empty((10, n))
-    extra = np.empty(2 * n)
+    torque = ComputedTorque(nominal, effort_limit, workspace(n))
+    integration = PlantIntegration(period, substeps, plant, nominal, mode, workspace(n),
+                                   np.empty((10, n)), np.empty(2 * n))
     q = q_ref[0].copy()
     qd = qd_ref[0].copy()
     zero = np.zeros(n)
     for i in range(n_samples):
         q_log[i] = q
         qd_log[i] = qd
-        control_into(u_ff[i], q_ref[i], qd_ref[i], q, qd, zero, kp, kd, nominal, effort_limit,
-                     ws, u_log[i], effort_log[i])
+        control_into(Setpoint(u_ff[i], q_ref[i], qd_ref[i]), q, qd, zero, kp, kd, torque,
+                     u_log[i], effort_log[i])
         if i + 1 < n_samples:
-            rk4_period(q, qd, effort_log[i], period, substeps, plant, nominal, mode, ws, stage,
-                       extra)
+            rk4_period(q, qd, effort_log[i], integration)
     return q_log, qd_log, u_log, effort_log

@@ -33,7 +33,9 @@ def summary_values(trial: int, mass_uncertainty: float, law: str, names: Sequenc
     ``true_max_abs_error/<joint>`` when the plant's true state differs from the measured one,
     ``learning_notes`` when the law said something about its update (:data:`LEARNING_NOTES`);
     ``level/<M>/<joint>`` = ``nan`` where ``levels`` is None under a law that has levels
-    (``has_levels``; default: the sign law, ``law`` ``sign``), so every trial has the same keys."""
+    (``has_levels``; default: the sign law, ``law`` ``sign``), so every trial has the same keys.
+    Over 10 parameters because each group of summary keys is one argument (the optional ones
+    keywords with defaults), so the one place that spells the keys takes them all."""
     if has_levels is None:
         has_levels = law in LAWS_WITH_LEVELS
     out = [("trial", str(trial)), ("mass_uncertainty", repr(float(mass_uncertainty))),

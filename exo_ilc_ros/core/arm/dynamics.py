@@ -497,16 +497,16 @@ def inertia_and_bias(q: np.ndarray, qd: np.ndarray, masses: np.ndarray, axes: np
 
 
 @njit(cache=True, error_model="numpy")
-def forward_dynamics_into(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, masses: np.ndarray,
-                          axes: np.ndarray, offsets: np.ndarray, coms: np.ndarray,
-                          inertias: np.ndarray, gravity: np.ndarray, ws: tuple,
-                          out: np.ndarray) -> None:
-    """qdd of eq (8), a(q) qdd = Q - c(q, qdot), written into ``out``.
+def forward_dynamics_into(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, arm: tuple,
+                          ws: tuple, out: np.ndarray) -> None:
+    """qdd of eq (8), a(q) qdd = Q - c(q, qdot), written into ``out``; ``arm`` is a model's
+    ``kernel_args`` (masses, axes, offsets, coms, inertias, gravity).
 
     a and c by :func:`_inertia_bias_kernel` (see :func:`inertia_and_bias_into`); the solve is
     the unrolled 3x3 :func:`_solve_spd3` for the arm, the general Cholesky otherwise.
     """
     buf = ws[0]
+    masses, axes, offsets, coms, inertias, gravity = arm
     _inertia_bias_kernel(q, qd, masses, axes, offsets, coms, inertias, gravity, buf, buf[_C, 0])
     n = q.shape[0]
     if n == 3:

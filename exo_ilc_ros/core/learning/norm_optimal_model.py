@@ -119,18 +119,17 @@ def _bias_jacobians(config: Config, reference: SampledReference,
     hv = np.empty((count, n, n))
     _bias_jacobians_kernel(np.ascontiguousarray(reference.position),
                            np.ascontiguousarray(reference.velocity), step,
-                           *build_arm(config).kernel_args, hq, hv)
+                           build_arm(config).kernel_args, hq, hv)
     return hq, hv
 
 
 @njit(cache=True, error_model="numpy")
 def _bias_jacobians_kernel(position: np.ndarray, velocity: np.ndarray, step: float,
-                           masses: np.ndarray, axes: np.ndarray, offsets: np.ndarray,
-                           coms: np.ndarray, inertias: np.ndarray, gravity: np.ndarray,
-                           hq: np.ndarray, hv: np.ndarray) -> None:
+                           nominal: tuple, hq: np.ndarray, hv: np.ndarray) -> None:
     """:func:`_bias_jacobians` compiled: the same central differences as its former Python loop
     (the same doubles on the paper's arm; for more joints numba's LAPACK solve may differ from
-    numpy's in the last bit), 55x faster, which matters at 1 kHz."""
+    numpy's in the last bit), 55x faster, which matters at 1 kHz. ``nominal``: the arm's
+    ``kernel_args``."""
     count, n = position.shape
     for i in range(count):
         for j in range(n):
@@ -143,11 +142,9 @@ def _bias_jacobians_kernel(position: np.ndarray, velocity: np.ndarray, step: flo
                 else:
                     q_plus[j] += step
                     q_minus[j] -= step
-                a, c = inertia_and_bias(q_plus, v_plus, masses, axes, offsets, coms, inertias,
-                                        gravity)
+                a, c = inertia_and_bias(q_plus, v_plus, *nominal)
                 h_plus = np.linalg.solve(a, c)
-                a, c = inertia_and_bias(q_minus, v_minus, masses, axes, offsets, coms,
-                                        inertias, gravity)
+                a, c = inertia_and_bias(q_minus, v_minus, *nominal)
                 h_minus = np.linalg.solve(a, c)
                 out = hv if of_velocity else hq
                 for k in range(n):

@@ -42,23 +42,21 @@ def _effort_along(record: TrialRecord, nominal: tuple[np.ndarray, ...], step: fl
     jacobian = np.empty((count, n, 2 * n))
     _effort_along_kernel(np.ascontiguousarray(record.position),
                          np.ascontiguousarray(record.velocity),
-                         np.ascontiguousarray(record.control_input), step, *nominal, tau,
+                         np.ascontiguousarray(record.control_input), step, nominal, tau,
                          inertia, jacobian)
     return tau, inertia, jacobian
 
 
 @njit(cache=True, error_model="numpy")
 def _effort_along_kernel(position: np.ndarray, velocity: np.ndarray, control: np.ndarray,
-                         step: float, masses: np.ndarray, axes: np.ndarray,
-                         offsets: np.ndarray, coms: np.ndarray, inertias: np.ndarray,
-                         gravity: np.ndarray, tau: np.ndarray, inertia: np.ndarray,
+                         step: float, nominal: tuple, tau: np.ndarray, inertia: np.ndarray,
                          jacobian: np.ndarray) -> None:
-    """:func:`_effort_along` compiled (the same doubles as its former Python loop)."""
+    """:func:`_effort_along` compiled (the same doubles as its former Python loop);
+    ``nominal``: the arm's ``kernel_args``."""
     count, n = position.shape
     for i in range(count):
         u = control[i].copy()
-        a, c = inertia_and_bias(position[i].copy(), velocity[i].copy(), masses, axes, offsets,
-                                coms, inertias, gravity)
+        a, c = inertia_and_bias(position[i].copy(), velocity[i].copy(), *nominal)
         inertia[i] = a
         tau[i] = a @ u + c
         x = np.concatenate((position[i], velocity[i]))
@@ -66,11 +64,9 @@ def _effort_along_kernel(position: np.ndarray, velocity: np.ndarray, control: np
             x_plus, x_minus = x.copy(), x.copy()
             x_plus[m] += step
             x_minus[m] -= step
-            a, c = inertia_and_bias(x_plus[:n].copy(), x_plus[n:].copy(), masses, axes,
-                                    offsets, coms, inertias, gravity)
+            a, c = inertia_and_bias(x_plus[:n].copy(), x_plus[n:].copy(), *nominal)
             e_plus = a @ u + c
-            a, c = inertia_and_bias(x_minus[:n].copy(), x_minus[n:].copy(), masses, axes,
-                                    offsets, coms, inertias, gravity)
+            a, c = inertia_and_bias(x_minus[:n].copy(), x_minus[n:].copy(), *nominal)
             e_minus = a @ u + c
             for k in range(n):
                 jacobian[i, k, m] = (e_plus[k] - e_minus[k]) / (2.0 * step)

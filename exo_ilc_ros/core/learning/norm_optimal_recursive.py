@@ -301,7 +301,9 @@ def solve_constrained_banded(a: np.ndarray, b: np.ndarray, k: np.ndarray,
     margin already applied), abs(u_ff + du) <= ``feedforward_limit`` (inf: none); ``effort``,
     ``inertia``, ``effort_jacobian`` are tau_k, a_N(q_k) and d tau / d x along trial k, as
     ``norm_optimal_qp._effort_along`` gives them. The matrix is the lifted form's, entry for entry,
-    assembled from vectorised block indices."""
+    assembled from vectorised block indices. Over 10 parameters because it takes the QP's data
+    as plain arrays, not the law's matrices, constraints and record, so this module imports
+    nothing of the package but the Cholesky factorisation (module docstring)."""
     import clarabel
     from scipy import sparse
 

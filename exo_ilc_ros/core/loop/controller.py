@@ -26,6 +26,8 @@ plant's own limit never changes it.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -34,6 +36,76 @@ from ..arm.dynamics import inertia_and_bias_into, workspace
 from .hold import hold_gains_into
 from .plant import clamp
 from .setup import LoopSetup
+
+
+class Setpoint(NamedTuple):
+    """What the controller is asked for at one sample: the feed-forward and the reference."""
+
+    u_ff: np.ndarray
+    """u_ff,k at the sample (eq (11))."""
+    q_ref: np.ndarray
+    """q_d at the sample."""
+    qd_ref: np.ndarray
+    """qdot_d at the sample."""
+
+
+class ComputedTorque(NamedTuple):
+    """What the computed torque of eq (16) needs besides the state, as one kernel argument."""
+
+    nominal: tuple
+    """The nominal arm's ``kernel_args``."""
+    effort_limit: np.ndarray
+    """The clamp of every command (:func:`plant.clamp`)."""
+    ws: tuple
+    """A :func:`dynamics.workspace` (scratch)."""
+
+
+class Controller(NamedTuple):
+    """The controller's settings as one kernel argument (:func:`controller_of`)."""
+
+    kp: np.ndarray
+    """K_P of eq (11)."""
+    kd: np.ndarray
+    """K_D of eq (11)."""
+    torque: ComputedTorque
+    """The computed torque of eq (16)."""
+    envelope: np.ndarray
+    """The error envelope per joint (:func:`outside_envelope`)."""
+    hold_kp: np.ndarray
+    """The safe hold's stiffness (:mod:`.hold`)."""
+    hold_kd: np.ndarray
+    """The safe hold's damping."""
+    hold_ramp: int
+    """Samples the hold's gains ramp over."""
+
+
+class Guard(NamedTuple):
+    """What the error envelope and the safe hold keep from sample to sample, as one kernel
+    argument (:func:`guard_of`)."""
+
+    state: np.ndarray
+    """The guard state (:func:`guard_state`: :data:`ABORT`, :data:`HOLD_COUNT`)."""
+    q_hold: np.ndarray
+    """The pose the safe hold keeps."""
+    gains: np.ndarray
+    """(2, n) scratch: the hold's ramped K_P and K_D."""
+
+
+def controller_of(experiment: LoopSetup, envelope: np.ndarray | None = None) -> Controller:
+    """The :class:`Controller` of a configuration, with its own scratch; ``envelope``: the
+    error envelope array to read (None: the configuration's)."""
+    n = experiment.reference.position.shape[1]
+    return Controller(experiment.kp, experiment.kd,
+                      ComputedTorque(experiment.nominal.kernel_args, experiment.effort_limit,
+                                     workspace(n)),
+                      experiment.error_envelope if envelope is None else envelope,
+                      experiment.hold_kp, experiment.hold_kd, int(experiment.hold_ramp))
+
+
+def guard_of(q_hold: np.ndarray) -> Guard:
+    """A fresh :class:`Guard` (not aborted, no hold command yet) around the pose array
+    ``q_hold`` (read and written by the kernels)."""
+    return Guard(guard_state(), q_hold, np.empty((2, q_hold.shape[0])))
 
 
 @njit(cache=True, error_model="numpy")
@@ -46,13 +118,13 @@ def feedback_into(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np
 
 @njit(cache=True, error_model="numpy")
 def computed_torque_into(q: np.ndarray, qd: np.ndarray, u: np.ndarray, tau_p: np.ndarray,
-                         nominal: tuple, effort_limit: np.ndarray, ws: tuple,
-                         out: np.ndarray) -> None:
+                         torque: ComputedTorque, out: np.ndarray) -> None:
     """Q^u = a_N(q) u + c_N(q, qdot) + tau_p, eqs (9)/(16) with eq (6)'s joint forces ``tau_p``
     (the identified patient's, :mod:`exo_ilc_ros.core.learning.patient_model`; zeros: the
     paper's law), clamped to +-effort_limit, into ``out``."""
     n = u.shape[0]
-    an = inertia_and_bias_into(q, qd, *nominal, ws, out)
+    effort_limit = torque.effort_limit
+    an = inertia_and_bias_into(q, qd, *torque.nominal, torque.ws, out)
     for j in range(n):
         out[j] += tau_p[j]
         for k in range(n):
@@ -62,25 +134,23 @@ def computed_torque_into(q: np.ndarray, qd: np.ndarray, u: np.ndarray, tau_p: np
 
 
 @njit(cache=True, error_model="numpy")
-def control_into(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
-                 qd: np.ndarray, tau_p: np.ndarray, kp: np.ndarray, kd: np.ndarray,
-                 nominal: tuple, effort_limit: np.ndarray, ws: tuple, u_out: np.ndarray,
+def control_into(setpoint: Setpoint, q: np.ndarray, qd: np.ndarray, tau_p: np.ndarray,
+                 kp: np.ndarray, kd: np.ndarray, torque: ComputedTorque, u_out: np.ndarray,
                  effort_out: np.ndarray) -> None:
-    """One sample of the controller: u by eq (11) into ``u_out``, then the effort by eq (16)
-    with the joint forces ``tau_p`` (clamped) into ``effort_out``."""
-    feedback_into(u_ff, q_ref, qd_ref, q, qd, kp, kd, u_out)
-    computed_torque_into(q, qd, u_out, tau_p, nominal, effort_limit, ws, effort_out)
+    """One sample of the controller: u by eq (11) with the gains ``kp``, ``kd`` into ``u_out``,
+    then the effort by eq (16) with the joint forces ``tau_p`` (clamped) into ``effort_out``."""
+    feedback_into(setpoint.u_ff, setpoint.q_ref, setpoint.qd_ref, q, qd, kp, kd, u_out)
+    computed_torque_into(q, qd, u_out, tau_p, torque, effort_out)
 
 
 @njit(cache=True, error_model="numpy")
 def safe_hold_into(q_hold: np.ndarray, q: np.ndarray, qd: np.ndarray, kp: np.ndarray,
-                   kd: np.ndarray, nominal: tuple, effort_limit: np.ndarray, ws: tuple,
-                   u_out: np.ndarray, effort_out: np.ndarray) -> None:
+                   kd: np.ndarray, torque: ComputedTorque, u_out: np.ndarray,
+                   effort_out: np.ndarray) -> None:
     """The safe hold around ``q_hold`` (module docstring): :func:`control_into` with the
     reference frozen at ``q_hold``, zero reference velocity and no feed-forward."""
     zero = np.zeros(q.shape[0])
-    control_into(zero, q_hold, zero, q, qd, zero, kp, kd, nominal, effort_limit, ws, u_out,
-                 effort_out)
+    control_into(Setpoint(zero, q_hold, zero), q, qd, zero, kp, kd, torque, u_out, effort_out)
 
 
 @njit(cache=True, error_model="numpy")
@@ -107,46 +177,46 @@ def guard_state() -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
-def hold_into(state: np.ndarray, q_hold: np.ndarray, q: np.ndarray, qd: np.ndarray,
-              kp: np.ndarray, kd: np.ndarray, hold_kp: np.ndarray, hold_kd: np.ndarray,
-              hold_ramp: int, nominal: tuple, effort_limit: np.ndarray, gains: np.ndarray,
-              ws: tuple, u_out: np.ndarray, effort_out: np.ndarray) -> None:
-    """One safe-hold command around ``q_hold``: its gains ramped from the controller's to the
-    hold's over ``hold_ramp`` samples (:func:`hold.hold_gains_into`, counted in
-    ``state[HOLD_COUNT]``), then :func:`safe_hold_into`."""
-    hold_gains_into(state[HOLD_COUNT], hold_ramp, kp, kd, hold_kp, hold_kd, gains)
+def hold_into(guard: Guard, q: np.ndarray, qd: np.ndarray, controller: Controller,
+              u_out: np.ndarray, effort_out: np.ndarray) -> None:
+    """One safe-hold command around ``guard.q_hold``: its gains ramped from the controller's to
+    the hold's over ``hold_ramp`` samples (:func:`hold.hold_gains_into`, counted in
+    ``guard.state[HOLD_COUNT]``), then :func:`safe_hold_into`."""
+    state = guard.state
+    gains = guard.gains
+    hold_gains_into(state[HOLD_COUNT], controller.hold_ramp, controller.kp, controller.kd,
+                    controller.hold_kp, controller.hold_kd, gains)
     state[HOLD_COUNT] += 1
-    safe_hold_into(q_hold, q, qd, gains[0], gains[1], nominal, effort_limit, ws, u_out,
+    safe_hold_into(guard.q_hold, q, qd, gains[0], gains[1], controller.torque, u_out,
                    effort_out)
 
 
 @njit(cache=True, error_model="numpy")
-def guarded_control_into(i: int, state: np.ndarray, holding: bool, u_ff: np.ndarray,
-                         q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray, qd: np.ndarray,
-                         tau_p: np.ndarray, kp: np.ndarray, kd: np.ndarray, nominal: tuple,
-                         effort_limit: np.ndarray, envelope: np.ndarray, hold_kp: np.ndarray,
-                         hold_kd: np.ndarray, hold_ramp: int, q_hold: np.ndarray,
-                         gains: np.ndarray, ws: tuple, u_out: np.ndarray,
-                         effort_out: np.ndarray) -> bool:
+def guarded_control_into(i: int, holding: bool, setpoint: Setpoint, q: np.ndarray,
+                         qd: np.ndarray, tau_p: np.ndarray, controller: Controller,
+                         guard: Guard, u_out: np.ndarray, effort_out: np.ndarray) -> bool:
     """The controller's rule at sample ``i`` of a trial, the one place it is written (the
     in-process trial kernel, the controller node and homing all call it): the first sample
-    outside the error envelope (:func:`outside_envelope`) aborts the trial (``state[ABORT] =
-    i``) and latches the hold pose there; from then on, and while ``holding`` (a watchdog trip,
-    whose pose the caller latched), the safe hold (:func:`hold_into`); otherwise eq (11) and
-    the computed torque of eq (16) with the joint forces ``tau_p`` (:func:`control_into`; the
-    hold never adds them). Returns True at the abort sample."""
+    outside the error envelope (:func:`outside_envelope`) aborts the trial
+    (``guard.state[ABORT] = i``) and latches the hold pose there; from then on, and while
+    ``holding`` (a watchdog trip, whose pose the caller latched), the safe hold
+    (:func:`hold_into`); otherwise eq (11) and the computed torque of eq (16) with the joint
+    forces ``tau_p`` (:func:`control_into`; the hold never adds them). Returns True at the
+    abort sample."""
+    state = guard.state
     aborted_now = False
-    if state[ABORT] < 0 and not holding and outside_envelope(q_ref, q, envelope):
+    if state[ABORT] < 0 and not holding and outside_envelope(setpoint.q_ref, q,
+                                                             controller.envelope):
         state[ABORT] = i
         state[HOLD_COUNT] = 0
+        q_hold = guard.q_hold
         for j in range(q.shape[0]):
             q_hold[j] = q[j]
         aborted_now = True
     if state[ABORT] >= 0 or holding:
-        hold_into(state, q_hold, q, qd, kp, kd, hold_kp, hold_kd, hold_ramp, nominal,
-                  effort_limit, gains, ws, u_out, effort_out)
+        hold_into(guard, q, qd, controller, u_out, effort_out)
     else:
-        control_into(u_ff, q_ref, qd_ref, q, qd, tau_p, kp, kd, nominal, effort_limit, ws,
+        control_into(setpoint, q, qd, tau_p, controller.kp, controller.kd, controller.torque,
                      u_out, effort_out)
     return aborted_now
 
@@ -157,8 +227,8 @@ def computed_torque_kernel(q: np.ndarray, qd: np.ndarray, u: np.ndarray, nominal
     """Q^u = a_N(q) u + c_N(q, qdot), eqs (9)/(16), clamped, as a new array: the allocating
     form of :func:`computed_torque_into`, for tests and interactive use."""
     out = np.empty(u.shape[0])
-    computed_torque_into(q, qd, u, np.zeros(u.shape[0]), nominal, effort_limit,
-                         workspace(u.shape[0]), out)
+    computed_torque_into(q, qd, u, np.zeros(u.shape[0]),
+                         ComputedTorque(nominal, effort_limit, workspace(u.shape[0])), out)
     return out
 
 
@@ -170,7 +240,8 @@ def safe_hold_effort(q_hold: np.ndarray, q: np.ndarray, qd: np.ndarray, kp: np.n
     n = q.shape[0]
     u = np.empty(n)
     out = np.empty(n)
-    safe_hold_into(q_hold, q, qd, kp, kd, nominal, effort_limit, workspace(n), u, out)
+    safe_hold_into(q_hold, q, qd, kp, kd, ComputedTorque(nominal, effort_limit, workspace(n)),
+                   u, out)
     return out
 
 
@@ -179,11 +250,11 @@ class ControlStep:
 
     def __init__(self, experiment: LoopSetup) -> None:
         n = experiment.reference.position.shape[1]
-        self._nominal = experiment.nominal.kernel_args
         self._kp = experiment.kp
         self._kd = experiment.kd
         self._limit = experiment.effort_limit
-        self._ws = workspace(n)
+        self._torque = ComputedTorque(experiment.nominal.kernel_args, experiment.effort_limit,
+                                      workspace(n))
         self._no_force = np.zeros(n)
         self.control_input = np.empty(n)
         """u of eq (11) at the last sample."""
@@ -194,17 +265,17 @@ class ControlStep:
                  qd: np.ndarray, tau_p: np.ndarray | None = None) -> np.ndarray:
         """Effort for the measured (q, qdot) at a sample with these reference values (and the
         joint forces ``tau_p``, None: none)."""
-        control_into(u_ff, q_ref, qd_ref, q, qd, self._no_force if tau_p is None else tau_p,
-                     self._kp, self._kd, self._nominal, self._limit, self._ws,
-                     self.control_input, self.effort)
+        control_into(Setpoint(u_ff, q_ref, qd_ref), q, qd,
+                     self._no_force if tau_p is None else tau_p, self._kp, self._kd,
+                     self._torque, self.control_input, self.effort)
         return self.effort
 
     def with_gains(self, u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray,
                    q: np.ndarray, qd: np.ndarray, kp: np.ndarray, kd: np.ndarray) -> np.ndarray:
         """As :meth:`__call__` (no joint forces) with the gains ``kp``, ``kd`` instead of the
         controller's (homing's own, :mod:`exo_ilc_ros.core.protocol.homing`)."""
-        control_into(u_ff, q_ref, qd_ref, q, qd, self._no_force, kp, kd, self._nominal,
-                     self._limit, self._ws, self.control_input, self.effort)
+        control_into(Setpoint(u_ff, q_ref, qd_ref), q, qd, self._no_force, kp, kd,
+                     self._torque, self.control_input, self.effort)
         return self.effort
 
     def saturated(self) -> bool:
@@ -221,12 +292,13 @@ class GuardedControlStep(ControlStep):
     def __init__(self, experiment: LoopSetup) -> None:
         super().__init__(experiment)
         self.envelope = np.asarray(experiment.error_envelope, dtype=float).copy()
-        self.q_hold = np.empty(experiment.reference.position.shape[1])
-        self._hold_kp = experiment.hold_kp
-        self._hold_kd = experiment.hold_kd
-        self._hold_ramp = experiment.hold_ramp
-        self._hold_gains = np.empty((2, self.q_hold.shape[0]))
-        self.state = guard_state()
+        """The error envelope (changed in place by a live parameter change)."""
+        self._controller = Controller(self._kp, self._kd, self._torque, self.envelope,
+                                      experiment.hold_kp, experiment.hold_kd,
+                                      int(experiment.hold_ramp))
+        self._guard = guard_of(np.empty(experiment.reference.position.shape[1]))
+        self.q_hold = self._guard.q_hold
+        self.state = self._guard.state
         """The trial's guard state (:data:`ABORT`, :data:`HOLD_COUNT`)."""
 
     @property
@@ -250,11 +322,9 @@ class GuardedControlStep(ControlStep):
         :func:`guarded_control_into` (``tau_p``: the joint forces at the sample, None: none);
         True if this sample aborted the trial."""
         return bool(guarded_control_into(
-            i, self.state, holding, u_ff, q_ref, qd_ref, q, qd,
-            self._no_force if tau_p is None else tau_p, self._kp, self._kd,
-            self._nominal, self._limit, self.envelope, self._hold_kp, self._hold_kd,
-            self._hold_ramp, self.q_hold, self._hold_gains, self._ws, self.control_input,
-            self.effort))
+            i, holding, Setpoint(u_ff, q_ref, qd_ref), q, qd,
+            self._no_force if tau_p is None else tau_p, self._controller, self._guard,
+            self.control_input, self.effort))
 
     def outside(self, q_ref: np.ndarray, q: np.ndarray) -> bool:
         """True if any |q_ref_j - q_j| exceeds the envelope (or is not finite)."""
@@ -268,7 +338,5 @@ class GuardedControlStep(ControlStep):
     def hold(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """The safe-hold effort at (q, qdot) around the latched pose (clamped), one call per
         sample: its gains ramp over ``safety.hold_ramp`` (:func:`hold_into`)."""
-        hold_into(self.state, self.q_hold, q, qd, self._kp, self._kd, self._hold_kp,
-                  self._hold_kd, self._hold_ramp, self._nominal, self._limit, self._hold_gains,
-                  self._ws, self.control_input, self.effort)
+        hold_into(self._guard, q, qd, self._controller, self.control_input, self.effort)
         return self.effort

@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -54,7 +55,7 @@ from ..arm.build import urdf_joint_dynamics
 from ..arm.joint_forces import COULOMB, REST, STIFFNESS, VISCOUS
 from ..params import schema
 from ..params.config import Config
-from .plant import clamp_counted, rk4_period_with_joint_forces
+from .plant import PlantIntegration, clamp_counted, rk4_period_with_joint_forces
 from .record import TrialRecord
 
 # Rows of the per-joint parameter array ``joint`` (kernel argument); rows 0-3 (VISCOUS B,
@@ -172,6 +173,48 @@ class TrialDraws:
     """(2, joints): offset of q(0) and qdot(0) from x_d(0)."""
     trial_scalars: np.ndarray
     """[voluntary gain g_k f_k, timing shift s_k in samples]."""
+
+
+class PatientTrial(NamedTuple):
+    """The virtual patient in one trial as one kernel argument (:func:`patient_period`):
+    made by :func:`patient_trial`."""
+
+    q_ref: np.ndarray
+    """(N+1, n): the reference positions the voluntary effort tracks."""
+    qd_ref: np.ndarray
+    """(N+1, n): the reference velocities."""
+    joint: np.ndarray
+    """:attr:`PatientModel.joint` (per-joint parameters)."""
+    scalars: np.ndarray
+    """:attr:`PatientModel.scalars` (empty: the patient is off)."""
+    noise: np.ndarray
+    """The trial's :attr:`TrialDraws.noise`."""
+    initial: np.ndarray
+    """The trial's :attr:`TrialDraws.initial`."""
+    trial_scalars: np.ndarray
+    """The trial's :attr:`TrialDraws.trial_scalars`."""
+    learned: np.ndarray
+    """(N+1, n): the torque a learning patient adds (:class:`PatientLearning`)."""
+    history: np.ndarray
+    """(2, N+1, n) scratch: the true velocities and commands of the trial so far."""
+    memory: np.ndarray
+    """(3, n) zeros at the trial's start: the lagged voluntary torque, the previous measured
+    position and filtered velocity."""
+    held: np.ndarray
+    """(n,): the torque held over the last period."""
+    total: np.ndarray
+    """(n,) scratch: the torque each RK4 stage integrates."""
+
+
+def patient_trial(model: PatientModel, draws: TrialDraws, q_ref: np.ndarray,
+                  qd_ref: np.ndarray, learned: np.ndarray) -> PatientTrial:
+    """The :class:`PatientTrial` of ``model`` with a trial's ``draws``, fresh scratch arrays
+    and zero memory (no history when the patient is off)."""
+    samples, n = q_ref.shape
+    return PatientTrial(q_ref, qd_ref, model.joint, model.scalars, draws.noise, draws.initial,
+                        draws.trial_scalars, learned,
+                        np.empty((2, samples if model.enabled else 0, n)), np.zeros((3, n)),
+                        np.empty(n), np.empty(n))
 
 
 class PatientModel:
@@ -359,18 +402,22 @@ def measure_into(i: int, q: np.ndarray, qd: np.ndarray, scalars: np.ndarray, noi
 
 @njit(cache=True, error_model="numpy")
 def patient_period(i: int, q: np.ndarray, qd: np.ndarray, command: np.ndarray,
-                   q_ref: np.ndarray, qd_ref: np.ndarray, period: float, substeps: int,
-                   plant: tuple, nominal: tuple, mode: int, ws: tuple, stage: np.ndarray,
-                   extra: np.ndarray, joint: np.ndarray, scalars: np.ndarray,
-                   trial_scalars: np.ndarray, learned: np.ndarray, history: np.ndarray,
-                   memory: np.ndarray, held: np.ndarray) -> None:
+                   integration: PlantIntegration, patient: PatientTrial) -> None:
     """In place: the true (q, qdot) of sample ``i`` advanced one period with the patient
-    (module docstring, steps 2 and 3). ``command`` is the clamped effort of sample i;
-    ``history`` (2, N+1, n) keeps the true velocities and commands of the trial so far,
-    ``memory`` row 0 the lagged voluntary torque, ``held`` (n,) receives the torque held over
-    the period (actuator plus reflex plus voluntary plus the ``learned`` (N+1, n) torque of a
-    learning patient, :class:`PatientLearning`), ``extra`` must have 3n entries."""
+    (module docstring, steps 2 and 3). ``command`` is the clamped effort of sample i; the
+    ``patient``'s ``history`` keeps the true velocities and commands of the trial so far,
+    ``memory`` row 0 the lagged voluntary torque, ``held`` receives the torque held over the
+    period (actuator plus reflex plus voluntary plus the ``learned`` torque of a learning
+    patient, :class:`PatientLearning`)."""
     n = q.shape[0]
+    q_ref = patient.q_ref
+    qd_ref = patient.qd_ref
+    joint = patient.joint
+    scalars = patient.scalars
+    trial_scalars = patient.trial_scalars
+    history = patient.history
+    memory = patient.memory
+    held = patient.held
     last = q_ref.shape[0] - 1
     for j in range(n):
         history[0, i, j] = qd[j]
@@ -400,11 +447,11 @@ def patient_period(i: int, q: np.ndarray, qd: np.ndarray, command: np.ndarray,
             memory[0, j] += alpha * (raw - memory[0, j])
             held[j] += memory[0, j]
     if scalars[LEARNING_ON] > 0.0:
+        learned = patient.learned
         for j in range(n):
             held[j] += learned[i, j]
-    rk4_period_with_joint_forces(q, qd, held, period, substeps, plant, nominal, mode, ws, stage,
-                                 extra[:2 * n], scalars[PASSIVE_ON] > 0.0, joint,
-                                 scalars[INVERSE_STRIBECK], extra[2 * n:])
+    rk4_period_with_joint_forces(q, qd, held, integration, scalars[PASSIVE_ON] > 0.0, joint,
+                                 scalars[INVERSE_STRIBECK], patient.total)
 
 
 @njit(cache=True, error_model="numpy")
@@ -418,18 +465,12 @@ def start_state_into(q_ref0: np.ndarray, qd_ref0: np.ndarray, initial: np.ndarra
 
 @njit(cache=True, error_model="numpy")
 def patient_plant_period(i: int, effort: np.ndarray, limit: np.ndarray, saturated: np.ndarray,
-                         q: np.ndarray, qd: np.ndarray, applied: np.ndarray, q_ref: np.ndarray,
-                         qd_ref: np.ndarray, period: float, substeps: int, plant: tuple,
-                         nominal: tuple, mode: int, ws: tuple, stage: np.ndarray,
-                         extra: np.ndarray, joint: np.ndarray, scalars: np.ndarray,
-                         trial_scalars: np.ndarray, learned: np.ndarray, history: np.ndarray,
-                         memory: np.ndarray, held: np.ndarray) -> int:
+                         q: np.ndarray, qd: np.ndarray, applied: np.ndarray,
+                         integration: PlantIntegration, patient: PatientTrial) -> int:
     """:func:`plant.plant_period` with the patient: refuse a non-finite effort (-1, nothing
     changes), count saturation, clamp into ``applied`` (:func:`plant.clamp_counted`), then
     :func:`patient_period` from sample ``i``. Returns the number of joints beyond the limit."""
     beyond = clamp_counted(effort, limit, saturated, applied)
     if beyond >= 0:
-        patient_period(i, q, qd, applied, q_ref, qd_ref, period, substeps, plant, nominal, mode,
-                       ws, stage, extra, joint, scalars, trial_scalars, learned, history, memory,
-                       held)
+        patient_period(i, q, qd, applied, integration, patient)
     return beyond

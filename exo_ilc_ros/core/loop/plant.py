@@ -5,13 +5,14 @@ command with it too, so the plant's own limit never changes a command the contro
 One control period: the effort Q is held (ZOH) while the true plant, a(q) qdd + c(q, qdot) = Q,
 eq (8), is integrated by classic RK4 on ``substeps`` equal sub-steps. ``mode`` selects the plant:
 :class:`PlantDynamics` ``FULL`` (true masses) or ``PAPER_APPROXIMATION`` (eqs (17)-(18)).
-``plant`` and ``nominal`` are the models' ``kernel_args`` tuples.
+``plant`` and ``nominal`` are the models' ``kernel_args`` tuples; the kernels take them, the
+period, the sub-steps, the mode and their scratch arrays as one :class:`PlantIntegration`.
 """
 
 from __future__ import annotations
 
 from enum import IntEnum
-from typing import TYPE_CHECKING
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -19,9 +20,6 @@ from numba import njit
 from .. import _numba_cache  # noqa: F401  (sets numba's cache directory before any kernel)
 from ..arm.dynamics import forward_dynamics_into, inertia_and_bias_into, workspace
 from ..arm.joint_forces import passive_effort_into
-
-if TYPE_CHECKING:
-    pass
 
 
 class PlantDynamics(IntEnum):
@@ -31,6 +29,36 @@ class PlantDynamics(IntEnum):
     """qdd = a(q)^-1 (Q - c(q, qdot)) with the true (uncertain) masses: eq (15) exactly."""
     PAPER_APPROXIMATION = 1
     """qdd = a_N^-1 (Q - c_N) + eta, eta = -a^-1 (c - c_N): eq (17)-(18) with a^-1 a_N ~ I."""
+
+
+class PlantIntegration(NamedTuple):
+    """How the plant is integrated over one control period, as one kernel argument
+    (:func:`rk4_period`): made by :func:`plant_integration`."""
+
+    period: float
+    """T (s): the effort is held over it."""
+    substeps: int
+    """RK4 sub-steps per period."""
+    plant: tuple
+    """The true arm's ``kernel_args``."""
+    nominal: tuple
+    """The nominal arm's ``kernel_args`` (read by ``PAPER_APPROXIMATION`` only)."""
+    mode: int
+    """A :class:`PlantDynamics`."""
+    ws: tuple
+    """A :func:`dynamics.workspace` (scratch)."""
+    stage: np.ndarray
+    """(10, n) scratch: the RK4 stages."""
+    extra: np.ndarray
+    """(2n,) scratch of ``PAPER_APPROXIMATION``."""
+
+
+def plant_integration(period: float, substeps: int, plant: tuple, nominal: tuple,
+                      mode: int) -> PlantIntegration:
+    """A :class:`PlantIntegration` with its own scratch arrays."""
+    n = plant[0].shape[0]
+    return PlantIntegration(float(period), int(substeps), plant, nominal, int(mode),
+                            workspace(n), np.empty((10, n)), np.empty(2 * n))
 
 
 @njit(cache=True, error_model="numpy")
@@ -98,42 +126,41 @@ def _acceleration_into(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, plant:
                        nominal: tuple, mode: int, ws: tuple, extra: np.ndarray,
                        out: np.ndarray) -> None:
     if mode == 0:
-        forward_dynamics_into(q, qd, effort, *plant, ws, out)
+        forward_dynamics_into(q, qd, effort, plant, ws, out)
         return
     n = q.shape[0]
     # eta = -a^-1 (c - c_N), eq (18): the plant's answer to zero effort minus the nominal one
     cn = extra[n:2 * n]
     inertia_and_bias_into(q, qd, *nominal, ws, cn)
-    forward_dynamics_into(q, qd, cn, *plant, ws, extra[:n])  # a^-1 (c_N - c)
-    forward_dynamics_into(q, qd, effort, *nominal, ws, out)  # a_N^-1 (Q - c_N)
+    forward_dynamics_into(q, qd, cn, plant, ws, extra[:n])  # a^-1 (c_N - c)
+    forward_dynamics_into(q, qd, effort, nominal, ws, out)  # a_N^-1 (Q - c_N)
     for j in range(n):
         out[j] += extra[j]
 
 
 @njit(cache=True, error_model="numpy", inline="always")
 def rk4_period_with_joint_forces(q: np.ndarray, qd: np.ndarray, effort: np.ndarray,
-                                 period: float, substeps: int, plant: tuple, nominal: tuple,
-                                 mode: int, ws: tuple, stage: np.ndarray, extra: np.ndarray,
-                                 passive: bool, joint: np.ndarray, inverse_stribeck: float,
+                                 integration: PlantIntegration, passive: bool,
+                                 joint: np.ndarray, inverse_stribeck: float,
                                  total: np.ndarray) -> None:
     """In place: (q, qdot) advanced by one period with ``effort`` held (ZOH), eq (8) integrated
-    by classic 4-stage Runge-Kutta on each of ``substeps`` sub-steps; with ``passive``, the
-    passive joint forces of eq (6) (:func:`joint_forces.passive_effort_into`, the patient's
-    ``joint`` array and 1 / v_s) are added at every stage's state. ``ws`` is a
-    :func:`dynamics.workspace`, ``stage`` a (10, n) and ``extra`` a (2n,) scratch array,
-    ``total`` (n,) receives the torque each stage integrates (without ``passive``: a copy of
-    ``effort``, or ``effort`` itself; ``joint`` is then not read).
+    by classic 4-stage Runge-Kutta on each of the ``integration``'s sub-steps; with
+    ``passive``, the passive joint forces of eq (6) (:func:`joint_forces.passive_effort_into`,
+    the patient's ``joint`` array and 1 / v_s) are added at every stage's state. ``total`` (n,)
+    receives the torque each stage integrates (without ``passive``: a copy of ``effort``, or
+    ``effort`` itself; ``joint`` is then not read).
 
     One body for the paper's plant (:func:`rk4_period`) and the patient's
     (:func:`patient.patient_period`), inlined into both. With the true plant (``mode`` 0) each
-    stage calls :func:`forward_dynamics_into` directly, with ``plant`` unpacked once before the
-    loop: through :func:`_acceleration_into` (or with a ``*plant`` call inside the loop, or a
-    helper function per stage, inlined or not) numba increfs and decrefs every array argument
-    at every stage, about a third of the cost of a plant evaluation.
+    stage calls :func:`forward_dynamics_into` directly with the ``plant`` tuple, the
+    ``integration``'s fields taken once before the loop: through :func:`_acceleration_into` (or
+    with a ``*plant`` call inside the loop, or a helper function per stage, inlined or not)
+    numba increfs and decrefs every array argument at every stage, about a third of the cost of
+    a plant evaluation.
     """
     n = q.shape[0]
+    period, substeps, plant, nominal, mode, ws, stage, extra = integration
     h = period / substeps
-    masses, axes, offsets, coms, inertias, gravity = plant
     k1v, k2v, k3v, k4v = stage[0], stage[1], stage[2], stage[3]
     q2, v2, q3, v3, q4, v4 = stage[4], stage[5], stage[6], stage[7], stage[8], stage[9]
     if not passive:
@@ -143,8 +170,7 @@ def rk4_period_with_joint_forces(q: np.ndarray, qd: np.ndarray, effort: np.ndarr
         if passive:
             passive_effort_into(q, qd, effort, joint, inverse_stribeck, total)
         if mode == 0:
-            forward_dynamics_into(q, qd, total, masses, axes, offsets, coms, inertias, gravity,
-                                  ws, k1v)
+            forward_dynamics_into(q, qd, total, plant, ws, k1v)
         else:
             _acceleration_into(q, qd, total, plant, nominal, mode, ws, extra, k1v)
         for j in range(n):
@@ -153,8 +179,7 @@ def rk4_period_with_joint_forces(q: np.ndarray, qd: np.ndarray, effort: np.ndarr
         if passive:
             passive_effort_into(q2, v2, effort, joint, inverse_stribeck, total)
         if mode == 0:
-            forward_dynamics_into(q2, v2, total, masses, axes, offsets, coms, inertias, gravity,
-                                  ws, k2v)
+            forward_dynamics_into(q2, v2, total, plant, ws, k2v)
         else:
             _acceleration_into(q2, v2, total, plant, nominal, mode, ws, extra, k2v)
         for j in range(n):
@@ -163,8 +188,7 @@ def rk4_period_with_joint_forces(q: np.ndarray, qd: np.ndarray, effort: np.ndarr
         if passive:
             passive_effort_into(q3, v3, effort, joint, inverse_stribeck, total)
         if mode == 0:
-            forward_dynamics_into(q3, v3, total, masses, axes, offsets, coms, inertias, gravity,
-                                  ws, k3v)
+            forward_dynamics_into(q3, v3, total, plant, ws, k3v)
         else:
             _acceleration_into(q3, v3, total, plant, nominal, mode, ws, extra, k3v)
         for j in range(n):
@@ -173,8 +197,7 @@ def rk4_period_with_joint_forces(q: np.ndarray, qd: np.ndarray, effort: np.ndarr
         if passive:
             passive_effort_into(q4, v4, effort, joint, inverse_stribeck, total)
         if mode == 0:
-            forward_dynamics_into(q4, v4, total, masses, axes, offsets, coms, inertias, gravity,
-                                  ws, k4v)
+            forward_dynamics_into(q4, v4, total, plant, ws, k4v)
         else:
             _acceleration_into(q4, v4, total, plant, nominal, mode, ws, extra, k4v)
         for j in range(n):
@@ -183,44 +206,39 @@ def rk4_period_with_joint_forces(q: np.ndarray, qd: np.ndarray, effort: np.ndarr
 
 
 @njit(cache=True, error_model="numpy")
-def rk4_period(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, period: float, substeps: int,
-               plant: tuple, nominal: tuple, mode: int, ws: tuple, stage: np.ndarray,
-               extra: np.ndarray) -> None:
+def rk4_period(q: np.ndarray, qd: np.ndarray, effort: np.ndarray,
+               integration: PlantIntegration) -> None:
     """In place: (q, qdot) advanced by one period with ``effort`` held (ZOH), eq (8) by classic
-    RK4 on the sub-steps: :func:`rk4_period_with_joint_forces` without joint forces (``stage``
-    a (10, n), ``extra`` a (2n,) scratch array)."""
-    rk4_period_with_joint_forces(q, qd, effort, period, substeps, plant, nominal, mode, ws,
-                                 stage, extra, False, stage, 0.0, effort)
+    RK4 on the sub-steps: :func:`rk4_period_with_joint_forces` without joint forces."""
+    rk4_period_with_joint_forces(q, qd, effort, integration, False, integration.stage, 0.0,
+                                 effort)
 
 
 @njit(cache=True, error_model="numpy")
 def plant_period(effort: np.ndarray, limit: np.ndarray, saturated: np.ndarray, q: np.ndarray,
-                 qd: np.ndarray, applied: np.ndarray, period: float, substeps: int,
-                 plant: tuple, nominal: tuple, mode: int, ws: tuple, stage: np.ndarray,
-                 extra: np.ndarray) -> int:
+                 qd: np.ndarray, applied: np.ndarray, integration: PlantIntegration) -> int:
     """The plant's period in one call: refuse a non-finite effort (-1, nothing changes), count
     saturation, clamp to +-limit into ``applied`` (:func:`clamp_counted`), integrate
     (:func:`rk4_period`, eq (8)). Returns the number of joints beyond the limit."""
     beyond = clamp_counted(effort, limit, saturated, applied)
     if beyond >= 0:
-        rk4_period(q, qd, applied, period, substeps, plant, nominal, mode, ws, stage, extra)
+        rk4_period(q, qd, applied, integration)
     return beyond
 
 
 @njit(cache=True, error_model="numpy")
 def plant_period_with_joint_forces(effort: np.ndarray, limit: np.ndarray,
                                    saturated: np.ndarray, q: np.ndarray, qd: np.ndarray,
-                                   applied: np.ndarray, period: float, substeps: int,
-                                   plant: tuple, nominal: tuple, mode: int, ws: tuple,
-                                   stage: np.ndarray, extra: np.ndarray, joint: np.ndarray,
-                                   inverse_stribeck: float, total: np.ndarray) -> int:
+                                   applied: np.ndarray, integration: PlantIntegration,
+                                   joint: np.ndarray, inverse_stribeck: float,
+                                   total: np.ndarray) -> int:
     """:func:`plant_period` with the passive joint forces of ``joint`` at every RK4 stage
     (:func:`rk4_period_with_joint_forces`; a URDF arm's own damping and friction between
     trials). Returns the number of joints beyond the limit (-1: a non-finite effort refused)."""
     beyond = clamp_counted(effort, limit, saturated, applied)
     if beyond >= 0:
-        rk4_period_with_joint_forces(q, qd, applied, period, substeps, plant, nominal, mode, ws,
-                                     stage, extra, True, joint, inverse_stribeck, total)
+        rk4_period_with_joint_forces(q, qd, applied, integration, True, joint, inverse_stribeck,
+                                     total)
     return beyond
 
 
@@ -234,8 +252,9 @@ def integrate_period(q: np.ndarray, qd: np.ndarray, effort: np.ndarray, period: 
     n = q.shape[0]
     q = q.copy()
     qd = qd.copy()
-    rk4_period(q, qd, effort, period, substeps, plant, nominal, mode, workspace(n),
-               np.empty((10, n)), np.empty(2 * n))
+    rk4_period(q, qd, effort, PlantIntegration(period, substeps, plant, nominal, mode,
+                                               workspace(n), np.empty((10, n)),
+                                               np.empty(2 * n)))
     return q, qd
 
 

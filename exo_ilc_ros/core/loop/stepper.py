@@ -7,15 +7,16 @@ from typing import Any
 
 import numpy as np
 
-from ..arm.dynamics import workspace
 from .patient import (
     PatientLearning,
+    PatientTrial,
     TrialDraws,
     measure_into,
     patient_plant_period,
+    patient_trial,
     start_state_into,
 )
-from .plant import plant_period, plant_period_with_joint_forces
+from .plant import plant_integration, plant_period, plant_period_with_joint_forces
 from .setup import LoopSetup
 
 
@@ -34,9 +35,10 @@ class PlantStepper:
         """The true state of the arm."""
         self.applied = np.zeros(n)
         """The effort applied over the last period (after the plant's own limit)."""
-        self._ws = workspace(n)
-        self._stage = np.empty((10, n))
-        self._extra = np.empty(3 * n)
+        self._integration = plant_integration(
+            experiment.period, experiment.substeps, experiment.plant.kernel_args,
+            experiment.nominal.kernel_args, int(experiment.dynamics))
+        self._total = np.empty(n)
         self._limit = experiment.effort_limit
         self._no_count = np.zeros(n, dtype=np.int64)
         self.patient = experiment.patient
@@ -45,9 +47,9 @@ class PlantStepper:
         self.index = 0
         """The sample the arm is at within the trial."""
         self._draws = TrialDraws(np.zeros((2, 0, 0)), np.zeros((2, 0)), np.zeros(2))
-        self._history = np.empty((2, samples, n))
+        self._patient_trial: PatientTrial | None = None
+        """The patient in the trial begun last (:meth:`begin_trial`)."""
         self._memory = np.zeros((3, n))
-        self._held = np.empty(n)
         self._measured_position = np.empty(n)
         self._measured_velocity = np.empty(n)
         self._no_torque = np.zeros((0, 0))
@@ -91,9 +93,11 @@ class PlantStepper:
             return
         ref = self.experiment.reference
         self._draws = self.patient.draws(trial, ref.samples)
+        self._patient_trial = patient_trial(self.patient, self._draws, ref.position,
+                                            ref.velocity, self._learned())
+        self._memory = self._patient_trial.memory
         start_state_into(ref.position[0], ref.velocity[0], self._draws.initial, self.position,
                          self.velocity)
-        self._memory[:] = 0.0
 
     def measure(self) -> tuple[np.ndarray, np.ndarray]:
         """What the sensors read at the current sample (:func:`patient.measure_into`; the true
@@ -124,28 +128,19 @@ class PlantStepper:
             return -1
         e = self.experiment
         counts = self._no_count if saturated is None else saturated
-        if self.patient.enabled and self.trial is not None \
+        if self.patient.enabled and self._patient_trial is not None and self.trial is not None \
                 and self.index + 1 < e.reference.samples:
-            ref = e.reference
             beyond = int(patient_plant_period(
                 self.index, effort, self._limit, counts, self.position, self.velocity,
-                self.applied, ref.position, ref.velocity, e.period, e.substeps,
-                e.plant.kernel_args, e.nominal.kernel_args, int(e.dynamics), self._ws,
-                self._stage, self._extra, self.patient.joint, self.patient.scalars,
-                self._draws.trial_scalars, self._learned(), self._history, self._memory,
-                self._held))
+                self.applied, self._integration, self._patient_trial))
         elif self.patient.arm_forces:  # a URDF arm's own joint forces act between trials too
             beyond = int(plant_period_with_joint_forces(
                 effort, self._limit, counts, self.position, self.velocity, self.applied,
-                e.period, e.substeps, e.plant.kernel_args, e.nominal.kernel_args,
-                int(e.dynamics), self._ws, self._stage, self._extra[:2 * len(self.applied)],
-                self.patient.arm_joint, self.patient.inverse_stribeck,
-                self._extra[2 * len(self.applied):]))
+                self._integration, self.patient.arm_joint, self.patient.inverse_stribeck,
+                self._total))
         else:
             beyond = int(plant_period(effort, self._limit, counts, self.position,
-                                      self.velocity, self.applied, e.period, e.substeps,
-                                      e.plant.kernel_args, e.nominal.kernel_args,
-                                      int(e.dynamics), self._ws, self._stage, self._extra))
+                                      self.velocity, self.applied, self._integration))
         if beyond >= 0:
             self.index += 1
         return beyond

@@ -14,27 +14,29 @@ import numpy as np
 from numba import njit
 
 from .. import _numba_cache  # noqa: F401  (sets numba's cache directory before any kernel)
-from ..arm.dynamics import workspace
 from ..reference.trajectory import SampledReference
-from .controller import control_into, guarded_control_into, hold_into
-from .patient import measure_into, patient_period, start_state_into
-from .plant import clamp, finite_state, rk4_period
+from .controller import (
+    Controller,
+    Guard,
+    Setpoint,
+    control_into,
+    controller_of,
+    guarded_control_into,
+    hold_into,
+)
+from .patient import PatientTrial, measure_into, patient_period, start_state_into
+from .plant import PlantIntegration, clamp, finite_state, rk4_period
 from .record import TrialRecord
 from .setup import LoopSetup
 
 
 @njit(cache=True, error_model="numpy")
-def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray,
-                           kp: np.ndarray, kd: np.ndarray, effort_limit: np.ndarray,
-                           period: float, substeps: int, plant: tuple, nominal: tuple, mode: int,
-                           envelope: np.ndarray, hold_kp: np.ndarray, hold_kd: np.ndarray,
-                           hold_ramp: int, patient_joint: np.ndarray,
-                           patient_scalars: np.ndarray, noise: np.ndarray, initial: np.ndarray,
-                           trial_scalars: np.ndarray, learned: np.ndarray,
-                           joint_force: np.ndarray
+def simulate_trial_guarded(u_ff: np.ndarray, joint_force: np.ndarray, controller: Controller,
+                           integration: PlantIntegration, patient: PatientTrial
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int,
                                       np.ndarray, np.ndarray]:
-    """One trial at the samples t_i = i * period, i = 0..N, guarded by the error envelope.
+    """One trial at the samples t_i = i * period, i = 0..N, of the reference
+    ``patient.q_ref``, ``patient.qd_ref``, guarded by the error envelope.
 
     Starts at x_d(0) (assumption (ii), eq (21)). At each sample the controller reads
     (q, qdot), forms u_i by eq (11) and the effort by eq (16) (:func:`controller.control_into`)
@@ -43,53 +45,47 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
     over [t_i, t_i+1) (eq (8), :func:`plant.rk4_period`). The command at t_N is recorded but
     never applied. At the first sample outside the envelope the trial is aborted: that sample
     and every later one command the safe hold around the pose measured there (the loop keeps
-    integrating so the record shows the hold), with the hold's own gains ``hold_kp``,
-    ``hold_kd`` reached over ``hold_ramp`` samples (:func:`hold.hold_gains_into`).
+    integrating so the record shows the hold), with the hold's own gains reached over
+    ``controller.hold_ramp`` samples (:func:`hold.hold_gains_into`).
 
-    The virtual patient (:mod:`.patient`; off when ``patient_scalars`` is empty, then none of
-    it runs): the trial starts at x_d(0) plus ``initial``, the controller (and the envelope)
-    reads the measured state (:func:`patient.measure_into`) and the plant steps with
-    :func:`patient.patient_period` (``learned``: a learning patient's torque per sample).
-    A plant state that is not finite (the plant diverged, :mod:`.divergence`) stops the trial at
-    the sample it is seen: that sample and every later one are NaN in every log, and the trial
-    counts as aborted there unless the envelope aborted it before
+    The virtual patient (:mod:`.patient`; off when ``patient.scalars`` is empty, then none of
+    it runs): the trial starts at x_d(0) plus ``patient.initial``, the controller (and the
+    envelope) reads the measured state (:func:`patient.measure_into`) and the plant steps with
+    :func:`patient.patient_period` (``patient.learned``: a learning patient's torque per
+    sample). A plant state that is not finite (the plant diverged, :mod:`.divergence`) stops
+    the trial at the sample it is seen: that sample and every later one are NaN in every log,
+    and the trial counts as aborted there unless the envelope aborted it before
     (:func:`divergence.plant_divergence` tells the two apart).
     Returns the measured q, qdot, u, effort, the abort index (-1: not aborted) and the true
     q, qdot (the same arrays as the measured ones when the patient is off).
     """
+    q_ref = patient.q_ref
+    qd_ref = patient.qd_ref
+    effort_limit = controller.torque.effort_limit
     n_samples, n = u_ff.shape
     q_log = np.empty((n_samples, n))
     qd_log = np.empty((n_samples, n))
     u_log = np.empty((n_samples, n))
     effort_log = np.empty((n_samples, n))
-    ws = workspace(n)
-    stage = np.empty((10, n))
-    extra = np.empty(3 * n)
     applied = np.empty(n)
     q = q_ref[0].copy()
     qd = qd_ref[0].copy()
-    patient = patient_scalars.shape[0] > 0
-    if patient:
-        start_state_into(q_ref[0], qd_ref[0], initial, q, qd)
+    on = patient.scalars.shape[0] > 0
+    if on:
+        start_state_into(q_ref[0], qd_ref[0], patient.initial, q, qd)
         q_true = np.empty((n_samples, n))
         qd_true = np.empty((n_samples, n))
-        history = np.empty((2, n_samples, n))
-        memory = np.zeros((3, n))
-        held = np.empty(n)
     else:
         q_true = q_log
         qd_true = qd_log
-        history = np.empty((2, 0, n))
-        memory = np.empty((3, n))
-        held = applied
-    q_hold = q.copy()
-    gains = np.empty((2, n))
-    state = np.array([-1, 0], dtype=np.int64)  # controller.guard_state()
+    guard = Guard(np.array([-1, 0], dtype=np.int64), q.copy(), np.empty((2, n)))
+    state = guard.state  # controller.guard_state()
     for i in range(n_samples):
-        if patient:
+        if on:
             q_true[i] = q
             qd_true[i] = qd
-            measure_into(i, q, qd, patient_scalars, noise, memory, q_log[i], qd_log[i])
+            measure_into(i, q, qd, patient.scalars, patient.noise, patient.memory, q_log[i],
+                         qd_log[i])
         else:
             q_log[i] = q
             qd_log[i] = qd
@@ -104,48 +100,37 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
                     q_true[k, j] = np.nan
                     qd_true[k, j] = np.nan
             break
-        q_seen = q_log[i]
-        qd_seen = qd_log[i]
-        guarded_control_into(i, state, False, u_ff[i], q_ref[i], qd_ref[i], q_seen, qd_seen,
-                             joint_force[i], kp, kd, nominal, effort_limit, envelope, hold_kp,
-                             hold_kd, hold_ramp, q_hold, gains, ws, u_log[i], effort_log[i])
+        guarded_control_into(i, False, Setpoint(u_ff[i], q_ref[i], qd_ref[i]), q_log[i],
+                             qd_log[i], joint_force[i], controller, guard, u_log[i],
+                             effort_log[i])
         if i + 1 < n_samples:
             for j in range(n):
                 applied[j] = clamp(effort_log[i, j], effort_limit[j])
-            if patient:
-                patient_period(i, q, qd, applied, q_ref, qd_ref, period, substeps, plant,
-                               nominal, mode, ws, stage, extra, patient_joint, patient_scalars,
-                               trial_scalars, learned, history, memory, held)
+            if on:
+                patient_period(i, q, qd, applied, integration, patient)
             else:
-                rk4_period(q, qd, applied, period, substeps, plant, nominal, mode, ws, stage,
-                           extra[:2 * n])
+                rk4_period(q, qd, applied, integration)
     return q_log, qd_log, u_log, effort_log, state[0], q_true, qd_true
 
 
 @njit(cache=True, error_model="numpy")
 def control_inputs(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: np.ndarray,
-                   qd: np.ndarray, kp: np.ndarray, kd: np.ndarray, nominal: tuple,
-                   effort_limit: np.ndarray, aborted_at: int, hold_kp: np.ndarray,
-                   hold_kd: np.ndarray, hold_ramp: int, joint_force: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray]:
+                   qd: np.ndarray, joint_force: np.ndarray, controller: Controller,
+                   aborted_at: int) -> tuple[np.ndarray, np.ndarray]:
     """u and effort at every sample of a trial from the sampled states, as the controller
     formed them (one :func:`controller.control_into` per sample, in order, with the joint
-    forces ``joint_force[i]``); from sample
-    ``aborted_at`` on (-1: never) the safe hold around q[aborted_at] with its gains (ramped
-    as :func:`simulate_trial_guarded` does)."""
+    forces ``joint_force[i]``); from sample ``aborted_at`` on (-1: never) the safe hold around
+    q[aborted_at] with its gains (ramped as :func:`simulate_trial_guarded` does)."""
     n_samples, n = q.shape
     u = np.empty((n_samples, n))
     effort = np.empty((n_samples, n))
-    ws = workspace(n)
-    gains = np.empty((2, n))
-    state = np.array([-1, 0], dtype=np.int64)  # controller.guard_state()
+    guard = Guard(np.array([-1, 0], dtype=np.int64), q[aborted_at], np.empty((2, n)))
     for i in range(n_samples):
         if aborted_at < 0 or i < aborted_at:
-            control_into(u_ff[i], q_ref[i], qd_ref[i], q[i], qd[i], joint_force[i], kp, kd,
-                         nominal, effort_limit, ws, u[i], effort[i])
+            control_into(Setpoint(u_ff[i], q_ref[i], qd_ref[i]), q[i], qd[i], joint_force[i],
+                         controller.kp, controller.kd, controller.torque, u[i], effort[i])
         else:
-            hold_into(state, q[aborted_at], q[i], qd[i], kp, kd, hold_kp, hold_kd, hold_ramp,
-                      nominal, effort_limit, gains, ws, u[i], effort[i])
+            hold_into(guard, q[i], qd[i], controller, u[i], effort[i])
     return u, effort
 
 
@@ -162,18 +147,18 @@ def record_from_samples(experiment: LoopSetup, trial: int, feedforward: np.ndarr
     hold from ``aborted_at`` on, for a trial the error envelope aborted; ``joint_force``: the
     identified joint forces it added, None: none); ``true_position``,
     ``true_velocity``: the plant's true state when the sensors differ from it. The record owns
-    copies of the arrays (a caller's sample buffers may be reused for the next trial)."""
+    copies of the arrays (a caller's sample buffers may be reused for the next trial). Over 10
+    parameters because each optional part of a :class:`TrialRecord` a graph's trial may carry
+    is one keyword with its default (None: the trial has none)."""
     ref = reference or experiment.reference
     u_ff = np.array(feedforward, dtype=float, order="C")
     q = np.array(position, dtype=float, order="C")
     qd = np.array(velocity, dtype=float, order="C")
     force = np.zeros(q.shape) if joint_force is None else \
         np.array(joint_force, dtype=float, order="C")
-    u, effort = control_inputs(u_ff, ref.position, ref.velocity, q, qd, experiment.kp,
-                               experiment.kd, experiment.nominal.kernel_args,
-                               experiment.effort_limit, -1 if aborted_at is None
-                               else int(aborted_at), experiment.hold_kp, experiment.hold_kd,
-                               experiment.hold_ramp, force)
+    u, effort = control_inputs(u_ff, ref.position, ref.velocity, q, qd, force,
+                               controller_of(experiment),
+                               -1 if aborted_at is None else int(aborted_at))
     return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels, aborted_at,
                        None if true_position is None
                        else np.array(true_position, dtype=float, order="C"),

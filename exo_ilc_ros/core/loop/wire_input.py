@@ -179,7 +179,9 @@ def validate_feedforward(names: Sequence[str], times_ns: Sequence[int],
     = u_ff, effort = the identified joint forces or empty in every point): ``samples`` points
     at times i * period_ns, one finite value per joint name in each array (reordered to the
     configured order), |u_ff| within ``feedforward_limit`` (0 or None: unbounded), |effort|
-    within ``effort_limit``."""
+    within ``effort_limit``. Over 10 parameters because it takes the message's fields and the
+    configured values they are checked against one by one, as the controller node reads them,
+    so it stays free of message types (the node translates, this module checks)."""
     order = joint_order(names, joint_names, where)
     if isinstance(order, Rejection):
         return order

@@ -509,7 +509,9 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
     ``patient_memory`` (fast, slow) starts a learning patient with what an earlier session left
     (core/programs/therapy.py); ``result.patient_memory`` is what this run leaves. ``patient``: the
     learning patient itself (its state read by ``on_conclusion``: the state after the trial
-    concluded), instead of a new one.
+    concluded), instead of a new one. Over 10 parameters because it is the in-process runner's
+    public entry point: every option is a keyword with a default that leaves the config's
+    behaviour, as the CLI, benches and tests pass them.
     """
     overrides: dict[str, Any] = {}
     if trials is not None:

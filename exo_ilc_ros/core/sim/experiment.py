@@ -7,10 +7,11 @@ import numpy as np
 
 from ..arm.build import build_arm, build_plant
 from ..errors import SafetyError
+from ..loop.controller import controller_of
 from ..loop.divergence import plant_damping, stable_substeps
 from ..loop.hold import ramp_samples
-from ..loop.patient import PatientModel
-from ..loop.plant import PlantDynamics
+from ..loop.patient import PatientModel, patient_trial
+from ..loop.plant import PlantDynamics, plant_integration
 from ..loop.record import TrialRecord
 from ..loop.trial import simulate_trial_guarded
 from ..params.config import Config
@@ -76,12 +77,12 @@ class Experiment:
         patient = self.patient
         draws = patient.draws(trial, ref.samples)
         q, qd, u, effort, abort, q_true, qd_true = simulate_trial_guarded(
-            u_ff, ref.position, ref.velocity, self.kp, self.kd, self.effort_limit, self.period,
-            self.substeps, self.plant.kernel_args, self.nominal.kernel_args, int(self.dynamics),
-            self.error_envelope, self.hold_kp, self.hold_kd, self.hold_ramp, patient.joint,
-            patient.scalars, draws.noise, draws.initial, draws.trial_scalars,
-            learned if learned is not None
-            else np.zeros(ref.position.shape) if patient.learns else _NO_TORQUE, force)
+            u_ff, force, controller_of(self),
+            plant_integration(self.period, self.substeps, self.plant.kernel_args,
+                              self.nominal.kernel_args, int(self.dynamics)),
+            patient_trial(patient, draws, ref.position, ref.velocity,
+                          learned if learned is not None
+                          else np.zeros(ref.position.shape) if patient.learns else _NO_TORQUE))
         measured = patient.measures
         return TrialRecord(trial, ref, q, qd, u_ff, u, effort, levels,
                            None if abort < 0 else int(abort), q_true if measured else None,

@@ -32,16 +32,18 @@ config once (this bench on both, ``--trials 10 --repeats 5``, load average 11-13
 are 3-5x the CPU times): ``--help`` 1.85 s -> 0.46 s wall, CPU 0.45 s -> 0.09 s (no numpy, no
 sub-command module); ``simulate --help`` CPU 0.48 -> 0.45 s (it still loads the config's
 schema, and numpy with it); ``simulate --trials 1`` CPU 2.18 s -> 1.90 s against numba's own
-start's 1.78 s and 1.69 s (the 1.5 s target is under numba's floor at this load; 7 runs of each
+start's 1.78 s and 1.69 s (that floor alone is over the 1.5 s target at this load; 7 runs of each
 tree in turn, ``/usr/bin/time``: CPU median 2.40 s -> 2.21 s, min 2.25 -> 2.10 s); per trial
 CPU run_trials 12.9-13.1 ms, simulate 1.62x -> 1.13x, ``--json`` 1.64x -> 1.14x, ``--metrics
 --json`` 2.73x -> 2.43x; with ``--trials 30 --repeats 3`` (after) simulate 1.04x, ``--json``
-1.05x, ``--metrics --json`` 2.23x (before, in-process at 30 trials: 1.27x and 1.20x). Why a clean clone answered ``--help`` in 2.4 s:
-with ``PYTHONDONTWRITEBYTECODE=1`` in the environment (as on this machine) a clone never gets
-``__pycache__``, and each command compiles every package module it imports; two fresh clones,
-that variable set, load average 11: ``--help`` 2.2-2.9 s before, 0.54-0.57 s after (it imports
-7 of the package's modules, was ~60 and numpy). A clone's first ``simulate`` also recompiles
-the kernels (numba's cache checks each source file's time stamp; 140-150 s at that load).
+1.05x, ``--metrics --json`` 2.23x (before, in-process at 30 trials: 1.27x and 1.20x).
+
+Why a clean clone answered ``--help`` in 2.4 s: with ``PYTHONDONTWRITEBYTECODE=1`` in the
+environment (as on this machine) a clone never gets ``__pycache__``, and each command compiles
+every package module it imports; two fresh clones, that variable set, load average 11:
+``--help`` 2.2-2.9 s before, 0.54-0.57 s after (it imports 7 of the package's modules, was 60
+and numpy). A clone's first ``simulate`` also recompiles the kernels (numba's cache checks each
+source file's time stamp; 140-150 s at that load).
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from typing import Any, TextIO
 
 from ..core.errors import ExoIlcError
-from ..core.params.redact import redact, secrets_in
+from ..core.params.redact import hide_password, redact, secrets_in
 
 COMMANDS: dict[str, str] = {
     "simulate": "run the experiment in-process (no ROS)",
@@ -127,8 +127,6 @@ def _main(argv: Sequence[str] | None = None) -> int:
             raise
         if type(exc).__module__.startswith("sqlalchemy") and \
                 getattr(args, "storage", None) is not None:  # the database of tune --storage
-            from .arguments import hide_password  # loaded already: tune (--storage) ran
-
             reason = str(getattr(exc, "orig", None) or exc).splitlines()[0]
             print(f"exo-ilc {args.command}: error: argument --storage: cannot use the database "
                   f"{hide_password(args.storage)!r}: {reason}", file=sys.stderr)

@@ -1,10 +1,12 @@
 """The README's live change (`exo-ilc param set` from another terminal while `exo-ilc run` runs)
 changes what the run shows: applied in-process from a trial on (what the graph does at that
 trial boundary, the same trials: test_graph.py), the run's table marks that row and its rows
-from there differ from the run without the change. The command is read from the README."""
+from there differ from the run without the change. The command is read from the README, and
+every other page that shows a live change shows the same one."""
 
 from __future__ import annotations
 
+import re
 import shlex
 from pathlib import Path
 
@@ -17,17 +19,38 @@ from exo_ilc_ros.core.session.summary import RunSummary
 
 ROOT = Path(__file__).resolve().parents[1]
 FROM_TRIAL = 4
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+
+
+SET = re.compile(r"^(?:\S*/)?exo-ilc (param set .*)$|`(?:\S*/)?exo-ilc (param set [^`]*)`")
+"""An ``exo-ilc param set`` command: a line of a code block, or inline code in prose."""
+
+
+def live_changes(page: Path) -> list[tuple[str, str, object]]:
+    """(node, parameter, value) of each ``exo-ilc param set`` of ``page``."""
+    found = []
+    for line in page.read_text().splitlines():
+        for match in SET.finditer(line.strip()):
+            words = shlex.split(match.group(1) or match.group(2), comments=True)
+            node, name, text = words[2:5]
+            found.append((node, name, load_ros_yaml(text)))
+    return found
 
 
 def readme_live_change() -> tuple[str, str, object]:
     """(node, parameter, value) of the README's ``exo-ilc param set``."""
-    lines = [line for line in (ROOT / "README.md").read_text().splitlines()
-             if "exo-ilc param set " in line]
-    assert len(lines) == 1, lines
-    words = shlex.split(lines[0].split("exo-ilc ", 1)[1], comments=True)
-    assert words[:2] == ["param", "set"]
-    node, name, text = words[2:5]
-    return node, name, load_ros_yaml(text)
+    (change,) = live_changes(ROOT / "README.md")
+    return change
+
+
+def test_every_page_shows_the_readmes_live_change() -> None:
+    """docs/ros-graph.md showed a threshold change that moved no row of the run: each page's
+    live change is the README's (whose effect the test below sees)."""
+    readme = readme_live_change()
+    shown = {page.name: live_changes(page) for page in PAGES}
+    assert shown["ros-graph.md"], "the graph's page shows no live change"
+    assert {name: changes for name, changes in shown.items()
+            if any(change != readme for change in changes)} == {}
 
 
 def test_the_readmes_live_change_shows_in_the_runs_table() -> None:

@@ -23,11 +23,22 @@ CDR_HEADERS = (b"\x00\x00", b"\x00\x01")
 """The encapsulations a rosbag2 CDR message starts with (big- and little-endian plain CDR)."""
 
 
+def safe_load_yaml(text: str) -> Any:
+    """``yaml.safe_load``, parsed by libyaml when PyYAML has it (a 150-trial bag's
+    metadata.yaml took most of its analysis with the pure-Python parser; the same resolvers and
+    constructor, so the same values); a document libyaml refuses is parsed again by PyYAML's own
+    parser, so an error says what PyYAML says."""
+    try:
+        return yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+    except yaml.YAMLError:
+        return yaml.safe_load(text)
+
+
 def read_metadata(path: Path) -> dict[str, Any]:
     """``rosbag2_bagfile_information`` of the bag at ``path``."""
     meta = path / "metadata.yaml"
     try:
-        document = yaml.safe_load(meta.read_text())
+        document = safe_load_yaml(meta.read_text())
     except OSError as exc:
         raise BagReadError(path, f"no readable metadata.yaml ({exc.strerror}); is it a "
                            "rosbag2 bag directory?") from None

@@ -43,6 +43,13 @@ CHUNK_SIZE = 2**20
 """An MCAP chunk is closed once it holds more than this many bytes (1 MiB, as before)."""
 
 
+CHUNK_COMPRESSION = "ZSTD"
+"""How an MCAP chunk's records are compressed (``mcap``'s ``CompressionType``; rosbag2's MCAP
+storage, rosbags and ``mcap`` read zstd chunks, and the chunk CRC is over the records
+uncompressed): a 501-sample trial's file takes 0.2 MiB, 0.7 MiB uncompressed (the ``/tf`` and
+joint states repeat their names and frames every sample). Every message is kept."""
+
+
 def qos_yaml(profiles: Sequence[dict[str, Any]]) -> str:
     """The ``offered_qos_profiles`` text of an MCAP channel, as rosbag2 Jazzy writes it
     (``serialize_rclcpp_qos_vector``: the version-9 profiles as a YAML block sequence, keys in
@@ -55,10 +62,11 @@ def qos_yaml(profiles: Sequence[dict[str, Any]]) -> str:
 
 class McapFile:
     """One storage file written with ``mcap``'s :class:`~mcap.writer.Writer` (the format's
-    reference implementation): chunked, uncompressed as before, with chunk, data-section and
-    summary CRCs, message and chunk indexes, statistics, and rosbag2's ``ros2`` profile (one
-    ``ros2msg`` schema per type; channels carry ``offered_qos_profiles`` and
-    ``topic_type_hash``; a ``rosbag2`` metadata record holds the file's metadata)."""
+    reference implementation): chunked, each chunk zstd-compressed (:data:`CHUNK_COMPRESSION`),
+    with chunk, data-section and summary CRCs, message and chunk indexes, statistics, and
+    rosbag2's ``ros2`` profile (one ``ros2msg`` schema per type; channels carry
+    ``offered_qos_profiles`` and ``topic_type_hash``; a ``rosbag2`` metadata record holds the
+    file's metadata)."""
 
     def __init__(self, path: Path) -> None:
         from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
@@ -67,7 +75,8 @@ class McapFile:
         self.path = path
         self._handle = open(path, "wb")  # noqa: SIM115  (closed by finish)
         self._writer = Writer(self._handle, chunk_size=CHUNK_SIZE,
-                              compression=CompressionType.NONE, index_types=IndexType.ALL,
+                              compression=CompressionType[CHUNK_COMPRESSION],
+                              index_types=IndexType.ALL,
                               enable_crcs=True, enable_data_crcs=True)
         self._writer.start(profile="ros2",
                            library=f"exo_ilc_ros-{__version__}; {LIBRARY_IDENTIFIER}")

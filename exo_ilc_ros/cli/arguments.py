@@ -22,6 +22,7 @@ from typing import Any
 from ..core.errors import ConfigError, ExoIlcError
 from ..core.params import schema
 from ..core.params.config import Config, load_config, scenario_names, scenario_path
+from ..core.params.redact import hide_password
 from ..orchestration.launcher import MAX_DOMAIN_ID
 
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".jpg", ".jpeg", ".tif", ".tiff", ".webp",
@@ -300,17 +301,6 @@ def storage(text: str) -> str:
     if url.get_backend_name() == "sqlite" and url.database not in (None, "", ":memory:"):
         output_file(make_parents=False)(url.database)  # sqlite makes the file, not its directory
     return text
-
-
-def hide_password(url: str) -> str:
-    """A database URL as it may be printed: its password as ***."""
-    from sqlalchemy.engine import make_url
-    from sqlalchemy.exc import ArgumentError
-
-    try:
-        return make_url(url).render_as_string(hide_password=True)
-    except (ArgumentError, ValueError):
-        return url
 
 
 def shown_command() -> str:

@@ -10,22 +10,63 @@ from collections.abc import Sequence
 from typing import Any, TextIO
 
 from ..core.errors import ExoIlcError
-from ..core.params.redact import redact, secrets_in
-from .arguments import hide_password
+from ..core.params.redact import hide_password, redact, secrets_in
 
-COMMANDS = ("simulate", "urdf", "layout", "tune", "compare", "run", "param", "analyze", "paper",
-            "analyze_loop", "clean", "profiles", "report", "study", "ros2_control", "certify")
-"""Sub-command modules of this package; each has ``register(subparsers)`` setting ``func``."""
+COMMANDS: dict[str, str] = {
+    "simulate": "run the experiment in-process (no ROS)",
+    "urdf": "write the arm's URDF from the config (a URDF arm: the chain the package uses of it)",
+    "layout": "write the live view's layout for the config's arm (Foxglove, Lichtblick or "
+              "PlotJuggler)",
+    "tune": "auto-tune the sign law's thresholds and levels (Optuna)",
+    "compare": "compare the paper's, the tuned sign law and the linear law",
+    "run": "run the experiment through the ROS 2 node graph",
+    "param": "get, set or list a running node's parameters",
+    "analyze": "tables and figures from recorded bags (MCAP or sqlite3)",
+    "paper": "the paper's experiment through the graph: 3 bags, 1 figure, 1 table",
+    "analyze_loop": "trial-to-trial convergence factor per joint and frequency",
+    "clean": "list the bags and stores of past runs with their sizes; delete old ones",
+    "profiles": "list, show, export or roll back patients' learned profiles",
+    "report": "the therapy session report (one HTML page per session)",
+    "study": "robustness study: every law x patient scenario x uncertainty x seed",
+    "ros2_control": "write the ros2_control controllers.yaml for the config's arm (a URDF arm's "
+                    "joints: --config config/arms/...)",
+    "certify": "a law's certificate over a population of patients (+ falsification)",
+}
+"""Sub-command modules of this package (each has ``register(subparsers)`` setting ``func``; the
+command is the module's name with ``-`` for ``_``) and the one-line help each registers: the
+table ``exo-ilc --help`` lists without importing any of them (test_cli_startup.py checks that
+it says what the modules register)."""
+
+DESCRIPTION = ("Iterative learning control for a rehabilitation exoskeleton arm (sgnPDD^2 / PD, "
+               "computed torque).")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The parser with every sub-command registered."""
-    parser = argparse.ArgumentParser(
-        prog="exo-ilc", description="Iterative learning control for a rehabilitation "
-        "exoskeleton arm (sgnPDD^2 / PD, computed torque).")
+def command_name(module: str) -> str:
+    """The sub-command a module of :data:`COMMANDS` registers (``analyze_loop``:
+    ``analyze-loop``)."""
+    return module.replace("_", "-")
+
+
+def chosen_command(argv: Sequence[str]) -> str | None:
+    """The module of :data:`COMMANDS` whose sub-command ``argv`` names (the first word that is
+    not an option: ``exo-ilc`` itself takes only ``-h``), or None."""
+    first = next((word for word in argv if not word.startswith("-")), None)
+    return next((module for module in COMMANDS if command_name(module) == first), None)
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The parser of ``exo-ilc``. Without ``argv``, every sub-command registered (the CLI
+    reference); with it, only the sub-command ``argv`` names is (its module imported), the others
+    listed from :data:`COMMANDS` with their help, so ``exo-ilc --help`` and ``exo-ilc CMD ...``
+    import no other command's module."""
+    parser = argparse.ArgumentParser(prog="exo-ilc", description=DESCRIPTION)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMANDS:
-        importlib.import_module(f"{__package__}.{name}").register(sub)
+    chosen = None if argv is None else chosen_command(argv)
+    for module, line in COMMANDS.items():
+        if argv is None or module == chosen:
+            importlib.import_module(f"{__package__}.{module}").register(sub)
+        else:
+            sub.add_parser(command_name(module), help=line)
     return parser
 
 
@@ -62,12 +103,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _main(argv: Sequence[str] | None = None) -> int:
     """:func:`main` inside the redacting streams."""
-    parser = build_parser()
+    words = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(words)
     try:
-        args = parser.parse_args(argv)
+        args = parser.parse_args(words)
     except SystemExit as exc:  # argparse: --help (0) or a refused value (2, message printed)
         return exc.code if isinstance(exc.code, int) else 2
-    args.argv = list(sys.argv[1:] if argv is None else argv)  # to print commands that resume
+    args.argv = words  # to print commands that resume
     try:
         return int(args.func(args) or 0)
     except ExoIlcError as exc:
@@ -86,7 +128,6 @@ def _main(argv: Sequence[str] | None = None) -> int:
         if type(exc).__module__.startswith("sqlalchemy") and \
                 getattr(args, "storage", None) is not None:  # the database of tune --storage
             reason = str(getattr(exc, "orig", None) or exc).splitlines()[0]
-
             print(f"exo-ilc {args.command}: error: argument --storage: cannot use the database "
                   f"{hide_password(args.storage)!r}: {reason}", file=sys.stderr)
             return 2

@@ -129,10 +129,8 @@ def replay_bag(args: argparse.Namespace) -> int:
 
 
 def simulate(args: argparse.Namespace) -> int:
-    """Run and report."""
-    from ..bag import run_name, unique_path, write_run
+    """Run and report (the bag writer and the therapy metrics imported only when asked for)."""
     from ..core.programs.divergences import add_divergences
-    from ..core.programs.metrics import config_metrics
     from ..core.session.learning_session import run_trials
     from ..core.session.summary import RunSummary
     if args.bag_deprecated is not None:
@@ -159,28 +157,31 @@ def simulate(args: argparse.Namespace) -> int:
     trials = config["max_trials"]
     runs = []
     for delta in deltas:
+        measured = config.with_mass_uncertainty(delta)  # the run's config, validated once
         with tqdm(total=trials, desc=f"{config['law']} delta={delta:g}", unit="trial",
                   file=sys.stderr, disable=None) as bar:
             def progress(record: Any, bar: Any = bar) -> None:
                 bar.update(1)
                 bar.set_postfix_str("max|e| " + " ".join(f"{x:.1e}"
                                                          for x in record.max_abs_error))
-            result = run_trials(config, delta, trials, on_trial=progress, store=args.store,
+            result = run_trials(measured, delta, trials, on_trial=progress, store=args.store,
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
         add_identified(runs[-1], result, config["joint_names"])
-        add_divergences(runs[-1], result, config.with_mass_uncertainty(delta))
+        add_divergences(runs[-1], result, measured)
         if args.spread:
             runs[-1].extra["spread"] = _spread(config, delta, trials, args.spread)
         if args.metrics:  # the therapy metrics of every trial (core/programs/metrics.py)
+            from ..core.programs.metrics import config_metrics
 
-            measured = config.with_mass_uncertainty(delta)
             runs[-1].extra["metrics"] = [config_metrics(r, measured).to_json()
                                          for r in result.records]
         for trial, notes in result.notes.items():
             for note in notes:
                 print(f"delta {delta:g}, learning from trial {trial}: {note}", file=sys.stderr)
         if args.bag:
+            from ..bag import run_name, unique_path, write_run
+
             path = unique_path(args.bag, run_name("sim", result.law, delta))
             print(f"bag: {write_run(path, config, result)}", file=sys.stderr)
     print_report(args, config, runs)
@@ -274,7 +275,6 @@ def _spans(trials: list[int]) -> str:
 def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary]) -> None:
     """The per-trial table (unless --quiet; --learned adds max |u_ff| and max |effort|), the
     iterations to the bound, the long-run check, and --json: shared by simulate and run."""
-    from ..analysis.identified import format_final
     from ..analysis.report import (
         format_iterations,
         format_long_run,
@@ -284,7 +284,6 @@ def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary
         write_json,
     )
     from ..core.learning.qfilter import feedforward_limit_of
-    from ..core.programs.identified import Identified
     names = config["joint_names"]
     if not args.quiet:
         print(format_trial_table(runs, names))
@@ -301,7 +300,10 @@ def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary
     print()
     print(format_long_run(runs, names, limit=feedforward_limit_of(config)))
     for run in runs:
-        if run.extra.get("identified"):
+        if run.extra.get("identified"):  # (the identification's modules only for one)
+            from ..analysis.identified import format_final
+            from ..core.programs.identified import Identified
+
             print()
             print(format_final(Identified.from_json(run.extra["identified"]), run_title(run)))
     if args.json:

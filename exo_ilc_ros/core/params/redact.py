@@ -40,3 +40,15 @@ def redact_values(value: Any) -> Any:
     if isinstance(value, list | tuple):
         return [redact_values(v) for v in value]
     return value
+
+
+def hide_password(url: str) -> str:
+    """A database URL as it may be printed: its password as *** (SQLAlchemy's reading of it,
+    imported here: only ``tune --storage`` needs it)."""
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError
+
+    try:
+        return make_url(url).render_as_string(hide_password=True)
+    except (ArgumentError, ValueError):
+        return url

@@ -434,6 +434,28 @@ class JointForceIdentifier:
         return out
 
 
+def inseparable_pairs(covariance_scaled: np.ndarray, names: tuple[str, ...],
+                      max_correlation: float = 0.99) -> tuple[tuple[str, str, float], ...]:
+    """The pairs of parameters the movement cannot separate: those whose estimates correlate
+    by more than ``max_correlation`` in absolute value under ``covariance_scaled`` (the inverse
+    of the column-scaled information matrix Phi^T Phi, one row per name). Each pair is
+    (name_a, name_b, correlation), the strongest first. Only their combination is determined:
+    e.g. friction F_c tanh(v / v_s) and the constant offset when the joint never reverses
+    (tanh is then nearly constant, so F_c trades one for one against the offset K q_0).
+    A parameter whose variance is not finite (not excited) is in no pair."""
+    c = np.asarray(covariance_scaled, dtype=float)[:len(names), :len(names)]
+    d = np.sqrt(np.abs(np.diag(c)))
+    pairs = []
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            if not (math.isfinite(d[a]) and math.isfinite(d[b]) and d[a] > 0.0 and d[b] > 0.0):
+                continue
+            corr = float(c[a, b] / (d[a] * d[b]))
+            if math.isfinite(corr) and abs(corr) > max_correlation:
+                pairs.append((names[a], names[b], corr))
+    return tuple(sorted(pairs, key=lambda pair: -abs(pair[2])))
+
+
 def _most_correlated(cov_scaled: np.ndarray, k: int, names: tuple[str, ...]) -> str:
     """The parameter whose estimate correlates most with parameter ``k``'s."""
     c = cov_scaled

@@ -11,7 +11,7 @@ STAMP := $(VENV)/.installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export ROS_LOG_DIR ?= $(CURDIR)/.ros_log
 
-.PHONY: venv demo demo-spread test lint docs bench clean
+.PHONY: venv demo demo-spread test lint docs bench soak clean
 
 # The first run in a fresh environment (or after the kernels changed) compiles the numba kernels
 # (~20 s, silent) and caches them (exo_ilc_ros/core/_numba_cache.py).
@@ -55,12 +55,19 @@ docs: $(STAMP)
 
 test: lint docs
 	@$(NUMBA_NOTE)
-	@echo "make: running the whole test suite (10-13 min on 2 cores, most of it real"
+	@echo "make: running the whole test suite (22-25 min on 2 cores, most of it real"
 	@echo "make: ROS 2 graphs over DDS and a colcon build); pytest prints a dot per test"
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)
 	$(BIN)/python -m bench.core_bench
+
+# The recording soak (nightly, not in `make test`): 20 recorded graph runs of 10 trials beside a
+# CPU hog, every message each node published found in its bag (test/test_recording_loss.py;
+# 6-9 min on 2 cores). EXO_ILC_LOSS_RUNS=N runs N instead of 20.
+soak: $(STAMP)
+	@echo "make: the recording soak, 20 graph runs of 10 trials under load (6-9 min)"
+	EXO_ILC_SOAK=1 $(BIN)/python -m pytest -q -s -m slow test/test_recording_loss.py
 
 clean:
 	rm -rf $(VENV) build install log .ros_log docs/_build docs/api

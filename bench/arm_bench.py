@@ -33,7 +33,7 @@ from exo_ilc_ros.core.params.config import Config, load_config
 from exo_ilc_ros.core.session.learning_session import run_trials
 from exo_ilc_ros.core.sim.experiment import Experiment
 from exo_ilc_ros.orchestration.graph import GraphRun, GraphSession, run_graph
-from exo_ilc_ros.orchestration.launcher import graph_nodes
+from exo_ilc_ros.orchestration.launcher import exported_domain_id, graph_nodes
 
 ROBUST = Path(__file__).resolve().parent.parent / "config" / "robust.yaml"
 
@@ -77,7 +77,7 @@ def _graph(config: Config, plant: str, desc: str) -> tuple[GraphRun, list[float]
                                          EVENTS_QOS)
 
     with tqdm(total=config["max_trials"], desc=desc, unit="trial", file=sys.stderr) as bar:
-        run = run_graph(config, nodes=graph_nodes(plant, config["protocol"]),
+        run = run_graph(config, exported_domain_id(), nodes=graph_nodes(plant, config["protocol"]),
                         on_summary=lambda s: bar.update(1), on_start=watch, timeout=7200.0)
     return run, rates
 

@@ -47,6 +47,7 @@ from bench.graph_bench import graph_rate, middleware_floor
 from exo_ilc_ros.bag import read_bag, write_run
 from exo_ilc_ros.core.params.config import Config, load_config
 from exo_ilc_ros.core.session.learning_session import run_trials
+from exo_ilc_ros.orchestration.launcher import exported_domain_id
 
 MODES = {"without": "no recorder", "supervisor": "recorder in the supervisor's process",
          "isolated": "recorder in a process of its own"}
@@ -229,7 +230,7 @@ def graph_cpu_per_step(config: Config, recorded: bool, bag_dir: Path) -> dict[st
         if recorded:
             config = config.replace({"wait_for_recorder": True})
             nodes = stack.enter_context(Recording(config, bag_dir)).graph_nodes()
-        session = stack.enter_context(GraphSession(config, nodes=nodes))
+        session = stack.enter_context(GraphSession(config, exported_domain_id(), nodes=nodes))
         session.spin_until(lambda: len(session.summaries) >= 3, timeout=600.0)
         cpu = _InTrialCpu({name: p.pid for name, p in session.processes.processes.items()})
 

@@ -29,6 +29,7 @@ from exo_ilc_ros.orchestration.launcher import (
     GRAPH_NODES,
     NodeSpec,
     claim_domain_id,
+    exported_domain_id,
     graph_environment,
 )
 from exo_ilc_ros.wire import topics
@@ -64,7 +65,7 @@ def middleware_floor(count: int, raw: bool, listener: bool = False) -> dict[str,
 def graph_rate(config: Config, nodes: Sequence[NodeSpec] = GRAPH_NODES) -> dict[str, float]:
     """(b): control steps per second through the graph (``nodes``: its processes, e.g. with
     the recorder), within trials and overall."""
-    with GraphSession(config, nodes=nodes) as session:
+    with GraphSession(config, exported_domain_id(), nodes=nodes) as session:
         session.spin_until(lambda: session.finished, timeout=1800.0, stall_timeout=120.0)
     return session_rates(session, config)
 
@@ -93,7 +94,7 @@ def session_rates(session: GraphSession, config: Config) -> dict[str, float]:
 def long_run(config: Config) -> dict[str, float]:
     """A full run (e.g. 150 trials) timed from launch to the last summary."""
     start = time.monotonic()
-    result = run_graph(config, timeout=3600.0)
+    result = run_graph(config, exported_domain_id(), timeout=3600.0)
     return {"trials": len(result.summaries), "total_s": time.monotonic() - start,
             "trials_s": result.wall_time or float("nan")}
 
@@ -115,7 +116,7 @@ def real_time_latency(config: Config) -> dict[str, float]:
                                     float(values["latency_p50_us"]),
                                     float(values["latency_p99_us"])))
 
-    with GraphSession(config) as session:
+    with GraphSession(config, exported_domain_id()) as session:
         session.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diagnostics,
                                          DIAGNOSTICS_QOS)
         session.spin_until(lambda: session.finished, timeout=600.0, stall_timeout=120.0)

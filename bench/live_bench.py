@@ -39,6 +39,7 @@ from bench.graph_bench import session_rates
 from exo_ilc_ros.core.params.config import Config, load_config
 from exo_ilc_ros.nodes.registry import BRIDGE, CONTROLLER, PLANT, RECORDER, SUPERVISOR
 from exo_ilc_ros.orchestration.graph import GraphSession
+from exo_ilc_ros.orchestration.launcher import exported_domain_id
 from exo_ilc_ros.orchestration.live import LiveView
 from exo_ilc_ros.orchestration.recording import Recording
 from exo_ilc_ros.wire.relay import DISPLAY_RATE
@@ -83,7 +84,7 @@ def run_once(config: Config, bag_dir: Path, live: bool,
             nodes = list(recording.graph_nodes())
             if view is not None:
                 nodes.append(view.spec)
-            session = stack.enter_context(GraphSession(recorded, nodes=nodes))
+            session = stack.enter_context(GraphSession(recorded, exported_domain_id(), nodes=nodes))
             pids = {name: p.pid for name, p in session.processes.processes.items()}
             if client is not None:
                 pids["client"] = client.pid

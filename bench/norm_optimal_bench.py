@@ -13,8 +13,8 @@ between-trial update; the constrained QP's update with ``--constrained``).
 
 ``--arm FILE --rate HZ`` runs an arm file (e.g. ``config/arms/panda.yaml``) with ``law:
 norm_optimal`` and the control at ``HZ`` (``control.period`` 1 / HZ, ``integration_step``
-min(1 ms, the period); at 1000 Hz this is ``--config FILE --scenario
-config/norm_optimal_1khz.yaml``) through the in-process session, per mass uncertainty
+min(1 ms, the period); at 1000 Hz on the Panda this is the shipped
+``config/arms/panda_1khz_norm_optimal.yaml``) through the in-process session, per mass uncertainty
 (``--mass-uncertainty``, default 0.05 0.10 0.15; ``--trials``, default 10): the first trial with
 every joint within the bound, the time of each trial and of each between-trial update
 (``LearningSession.conclude``: the law's update, the Q-filter and the checks; median and max),

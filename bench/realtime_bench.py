@@ -19,6 +19,7 @@ import time
 
 from exo_ilc_ros.core.params.config import load_config
 from exo_ilc_ros.orchestration.graph import GraphSession
+from exo_ilc_ros.orchestration.launcher import exported_domain_id
 
 START_PERIODS = 10
 """A late command within a trial's first this many periods counts as "at start"."""
@@ -32,7 +33,7 @@ def one_run(rate_hz: float, trials: int, duration: float, priority: int
                                     "max_late_commands": 1.0, "law": "linear",
                                     "thread_priority": priority})
     started = time.monotonic()
-    with GraphSession(config) as session:
+    with GraphSession(config, exported_domain_id()) as session:
         session.spin_until(lambda: session.finished, timeout=60.0 + 4 * trials * duration,
                            stall_timeout=60.0)
         late = [int(s.values.get("late_commands", "-1")) for s in session.summaries]

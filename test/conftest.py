@@ -75,6 +75,26 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     faulthandler.dump_traceback_later(EXIT_GRACE * 2, exit=True)
 
 
+CHECKOUT = Path(__file__).resolve().parents[1]
+LEFT_BEHIND = (CHECKOUT / ".exo-ilc" / "runs", CHECKOUT / "bags")
+"""Where a command run from the checkout leaves its stores and bags (``exo-ilc run``'s
+defaults): a test runs its commands in a directory of its own (``cwd=tmp_path``)."""
+
+
+def _left_behind() -> set[Path]:
+    return {entry for root in LEFT_BEHIND if root.is_dir() for entry in root.iterdir()}
+
+
+@pytest.fixture(autouse=True)
+def _test_leaves_no_run_in_the_checkout() -> Iterator[None]:
+    """No test leaves a store or a bag in the checkout (the suite once left a store in
+    .exo-ilc/runs: a command run without ``cwd``)."""
+    before = _left_behind()
+    yield
+    new = sorted(str(p.relative_to(CHECKOUT)) for p in _left_behind() - before)
+    assert not new, f"the test left {new} in the checkout: run its commands with cwd=tmp_path"
+
+
 @pytest.fixture(autouse=True)
 def _test_process_keeps_the_normal_scheduler() -> Iterator[None]:
     """No test may leave this process at SCHED_FIFO: every graph and command it starts later

@@ -34,7 +34,7 @@ MOVED_SECTIONS: dict[str, tuple[str, str]] = {
     "The virtual patient": (
         "virtual-patient.md", "Modified Ashworth grades -> numbers"),
     "The ROS 2 graph": (
-        "ros-graph.md", "`exo_ilc_ros/wire/topics.py` is the wire contract"),
+        "ros-graph.md", "[The wire contract](wire-contract.md)"),
     "Bags and offline analysis": (
         "bags.md", "Every `exo-ilc run` is recorded"),
     "Therapy sessions": (

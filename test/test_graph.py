@@ -78,7 +78,8 @@ def test_norm_optimal_graph_equals_in_process(tmp_path: Path) -> None:
                            "ilc_supervisor:\n  ros__parameters:\n    law: norm_optimal\n")
     graph_json = tmp_path / "graph.json"
     result = _exo_ilc("run", "--no-bag", "--config", str(config_file), "--trials", "3",
-                      "--mass-uncertainty", "0.15", "--json", str(graph_json), timeout=150)
+                      "--mass-uncertainty", "0.15", "--json", str(graph_json), timeout=150,
+                      cwd=tmp_path)  # its store in tmp_path, not in the checkout
     assert result.returncode == 0, result.stderr[-3000:]
     reference = run_trials(load_config(config_file), 0.15, 3)
     (g,) = json.loads(graph_json.read_text())["runs"]

@@ -6,6 +6,7 @@ handed to the protocol as the nodes would."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -380,6 +381,33 @@ def test_homing_that_cannot_settle_stops_the_run_with_its_reason() -> None:
         in graph.events
     assert graph.driver.mode is ControllerMode.FAILED
     assert protocol.completed == 1 and len(graph.conclusions) == 1
+
+
+@pytest.mark.parametrize("stored", [False, True], ids=["no_store", "store"])
+def test_a_stopped_run_says_whether_its_trials_can_be_resumed(stored: bool,
+                                                              tmp_path: Path) -> None:
+    """Homing fails at trial 2 after one completed trial: with a store the message says the
+    trial is stored there (resume the run); without one (``exo-ilc run --no-store``) it does
+    not claim to have stored anything."""
+    overrides: dict[str, Any] = {"max_trials": 3, "homing.timeout": 0.5}
+    if stored:
+        overrides["store.directory"] = str(tmp_path / "store")
+    graph = ArmGraph(load_config(overrides={**SHORT, **overrides}))
+    protocol = _protocol(graph, **overrides)
+    while len(graph.conclusions) < 1:
+        graph.run(1)
+    graph.push = lambda stamp, q, qd: np.array([0.0, 0.0, 0.5])
+    graph.run(2_000)
+    assert protocol.error is not None and protocol.completed == 1
+    if stored:
+        assert protocol.store is not None and protocol.store.completed == 1
+        assert f"Every completed trial (1) is stored in {protocol.store.directory}: resume " \
+            "the run once the arm is safe" in protocol.error
+        assert str(protocol.store.directory).startswith(str(tmp_path / "store"))
+    else:
+        assert "is stored" not in protocol.error and "resume the run" not in protocol.error
+        assert "No store (store.directory is empty: exo-ilc run --no-store): the 1 completed " \
+            "trial(s) cannot be resumed" in protocol.error
 
 
 def test_an_arm_moved_during_the_dwell_fails_homing() -> None:

@@ -161,10 +161,15 @@ def test_no_import_cycle() -> None:
 
 
 def test_no_own_module_imported_inside_a_function() -> None:
+    """Except a command of ``cli`` importing a lower layer where it runs (its experiment,
+    analysis, optuna ...): the parser is built without them, so ``exo-ilc --help`` answers at
+    once (test_cli_startup.py). A lower layer never imports cli, so this hides no cycle."""
     modules = _modules()
+    cli = PACKAGE / "cli"
     lazy = [f"{path.relative_to(PACKAGE)}:{line} imports {module}"
             for path in modules.values() for module, line, inside in _imports(path)
-            if inside and _owner(module, modules)]
+            if inside and (owner := _owner(module, modules))
+            and not (path.parent == cli and not owner.startswith("exo_ilc_ros.cli"))]
     assert lazy == [], "\n".join(lazy)
 
 

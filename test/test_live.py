@@ -454,7 +454,7 @@ METRIC_IN_TITLE = {"max |e|": "max_abs_error", "RMS e": "rms_error", "step gain 
 
 def test_shipped_layouts_are_the_generators() -> None:
     """config/layouts/ are ``exo-ilc layout``'s output for the shipped (paper) arm."""
-    from exo_ilc_ros.analysis.live_layout import arm_layout, foxglove_json, plotjuggler_xml
+    from exo_ilc_ros.orchestration.live_layout import arm_layout, foxglove_json, plotjuggler_xml
 
     arm = arm_layout(load_config())
     layouts = ROOT / "config" / "layouts"
@@ -663,7 +663,14 @@ def test_a_late_viewer_gets_every_trials_metrics_and_the_current_trials_samples(
                                  serialize(array, metrics_type)))
             sender.send(messages)
             sender.flush()
-        time.sleep(1.0)  # the bridge takes the feed (a later one would come live: no assert on it)
+        # the bridge has taken the whole feed once a probe viewer is sent trial 11's last
+        # sample (whatever the machine's speed); then the late viewer connects
+        deadline = time.monotonic() + 120.0
+        while time.monotonic() < deadline:
+            probe = _decoded(collect(f"ws://127.0.0.1:{port}", duration=1.0))
+            states = probe.get(topics.JOINT_STATES, [])
+            if states and states[-1][0] == sent[11][-1]:
+                break
         received = collect(f"ws://127.0.0.1:{port}", duration=5.0)
     finally:
         sender.close()
@@ -712,6 +719,23 @@ def test_live_pace_changes_only_the_wall_time(tmp_path: Path) -> None:
     # paced: >= sim / 2 less the first sample's delivery delay (0.2 s of slack); unpaced
     # the 200 samples take tens of ms even at 1 000 steps per second
     assert wall >= sim / 2.0 - 0.2e9, (sim, wall)
+
+
+def test_pace_waits_until_each_samples_wall_time() -> None:
+    """The plants' pace (our plant's trials and MuJoCo's free-running plant alike): a sample
+    0.4 simulated s after the one it counts from is published no earlier than 0.1 wall s later
+    at pace 4 (a lower bound: sleeping never ends early); pace 0 never waits (a wait of 1e9
+    simulated s returns)."""
+    from exo_ilc_ros.nodes.plant_base import Pace
+
+    pace = Pace(4.0)
+    pace.start(1_000_000_000)
+    start = time.monotonic_ns()
+    pace.wait(1_400_000_000)
+    assert time.monotonic_ns() - start >= 0.1e9
+    unpaced = Pace(0.0)
+    unpaced.start(0)
+    unpaced.wait(10**18)
 
 
 def test_live_pace_needs_live_and_a_rate(capsys: pytest.CaptureFixture[str]) -> None:

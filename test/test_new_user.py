@@ -148,7 +148,9 @@ def test_session_report_lists_exercises_in_session_order(report: str) -> None:
 
 def test_session_report_compares_with_earlier_sessions_only(report: str) -> None:
     """Session 1's report does not list session 2 (a later one) as an earlier session."""
-    for history in report.split("Compared with earlier sessions")[1:]:
+    histories = report.split("Compared with earlier sessions")[1:]
+    assert histories, "the report has no 'Compared with earlier sessions' part"
+    for history in histories:
         table = history.split("</table>")[0]
         assert re.findall(r"<td class=l>v(\d+)", table) == ["1"]
 

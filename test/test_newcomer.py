@@ -7,6 +7,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -158,7 +160,8 @@ def test_clean_lists_sizes_and_deletes_only_with_yes(
     old_bag = _fake(bags / "graph_sign_d0.1_old", 3 * 2**20, 10)
     mid_bag = _fake(bags / "graph_sign_d0.1_mid", 2 * 2**20, 3)
     new_bag = _fake(bags / "graph_sign_d0.1_new", 2**20, 0.5)
-    live_bag = _fake(bags / "graph_sign_d0.1_live", 10, 0)  # a run still recording
+    live_bag = _fake(bags / "graph_sign_d0.1_live", 10, 0)  # a run still recording:
+    (live_bag / ".splits").mkdir()  # the file of the trial it records is in .splits/
     old_store = _fake(runs / "20261101-120000-1", 2**20, 10, bag=False)
     new_store = _fake(runs / "20261130-120000-2", 2**20, 0.5, bag=False)
     args = ["clean", "--bag-dir", str(bags), "--runs-dir", str(runs)]
@@ -186,3 +189,24 @@ def test_clean_lists_sizes_and_deletes_only_with_yes(
     assert parse_age("12h") == 43200 and parse_age("2") == 2 * 86400
     assert exo_ilc([*args, "--older-than", "soon"]) == 2
     assert "--older-than: 'soon' is not an age" in capsys.readouterr().err
+
+
+def test_clean_calls_only_runs_still_going_in_use(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Written a moment ago: a finished bag (no .splits/) and the store of a run whose process
+    has exited are deleted with --keep 0; a bag still recording and the store of a live process
+    (this one) are in use and stay."""
+    bags, runs = tmp_path / "bags", tmp_path / "runs"
+    finished_bag = _fake(bags / "graph_sign_d0.1_finished", 10, 0)
+    recording = _fake(bags / "graph_sign_d0.1_recording", 10, 0)
+    (recording / ".splits").mkdir()
+    exited = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                            capture_output=True, text=True, check=True)
+    ended_store = _fake(runs / f"20261205-170000-{int(exited.stdout)}", 10, 0, bag=False)
+    live_store = _fake(runs / f"20261205-170100-{os.getpid()}", 10, 0, bag=False)
+    assert exo_ilc(["clean", "--bag-dir", str(bags), "--runs-dir", str(runs), "--keep", "0",
+                    "--yes"]) == 0
+    out = capsys.readouterr().out
+    assert "deleted 2 entries" in out and out.count("in use") == 2
+    assert not finished_bag.exists() and not ended_store.exists()
+    assert recording.exists() and live_store.exists()

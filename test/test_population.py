@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from exo_ilc_ros.analysis.certificate import read_rows, scenario_yaml, write_scenario
-from exo_ilc_ros.analysis.falsification import ABORT_SCORE, failure_score, falsify
+from exo_ilc_ros.analysis.falsification import ABORT_SCORE, Search, failure_score, falsify
 from exo_ilc_ros.cli.main import main
 from exo_ilc_ros.core.loop.patient import MAS_PRESETS, patient_joint_indices, rest_positions
 from exo_ilc_ros.core.params import schema
@@ -213,7 +213,7 @@ def test_falsification_finds_a_worse_patient_and_writes_it_loadable(tmp_path: Pa
     start = patient_from_unit(base, spec, mild, uniform_grades=True)
     start.overrides["patient.seed"] = 0
     start_run = patient_outcome(0, _run(law, [str(short)], start, 3), 3)
-    found = falsify(base, spec, law, [str(short)], "robust", 3, 6, 0, start=mild)
+    found = falsify(base, spec, law, [str(short)], "robust", 3, Search(6, 0, mild))
     assert len(found) == 6 and found[0].score >= found[-1].score
     assert found[0].score > failure_score(start_run)
     # the worst found, written as a scenario, loads and reproduces its outcome

@@ -6,6 +6,7 @@ URDF or reference is one clear error line through `exo-ilc simulate`."""
 from __future__ import annotations
 
 import shutil
+import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
@@ -19,19 +20,25 @@ from exo_ilc_ros.analysis.figures import convergence_figure
 from exo_ilc_ros.bag.view import ArmView
 from exo_ilc_ros.cli.main import main as cli_main
 from exo_ilc_ros.core import run_trials
-from exo_ilc_ros.core.arm.build import build_arm, urdf_chain, urdf_joint_dynamics, view_urdf
+from exo_ilc_ros.core.arm.build import (
+    build_arm,
+    person_segments,
+    urdf_chain,
+    urdf_joint_dynamics,
+    view_urdf,
+)
 from exo_ilc_ros.core.arm.dynamics import inertia_and_bias
 from exo_ilc_ros.core.arm.forward_kinematics import UrdfKinematics
 from exo_ilc_ros.core.arm.joint_forces import REST
 from exo_ilc_ros.core.arm.mujoco_urdf import MujocoUrdfArm
 from exo_ilc_ros.core.arm.urdf import arm_urdf
+from exo_ilc_ros.core.arm.urdf_chain import read_urdf_chain
 from exo_ilc_ros.core.convergence.growth import fit_growth
 from exo_ilc_ros.core.errors import ConfigError
 from exo_ilc_ros.core.learning.norm_optimal_model import MODEL_KEYS, _key
 from exo_ilc_ros.core.loop.patient import PatientModel
 from exo_ilc_ros.core.loop.stepper import PlantStepper
 from exo_ilc_ros.core.params.config import load_config
-from exo_ilc_ros.core.params.urdf_xml import UrdfError
 from exo_ilc_ros.core.persistence.profile_format import model_values
 from exo_ilc_ros.core.persistence.store import learning_key
 from exo_ilc_ros.core.reference.build import build_reference
@@ -143,9 +150,10 @@ def test_locked_joints_and_joint_names_rules() -> None:
         panda.replace({"model.locked_joints": "panda_finger_joint1 0.02"})
     assert "model.locked_joints" in str(info.value) and "'panda_finger_joint1 0.02'" in str(
         info.value)
-    with pytest.raises(UrdfError) as urdf_info:  # found when the arm is built
-        build_arm(panda.replace({"model.locked_joints": "panda_finger_joint1: 0.02"}))
-    assert "panda_finger_joint2" in str(urdf_info.value) and "lock it" in str(urdf_info.value)
+    with pytest.raises(ConfigError) as info:  # found when the config is made, with the key
+        panda.replace({"model.locked_joints": "panda_finger_joint1: 0.02"})
+    assert info.value.key == "model.tip_link"
+    assert "panda_finger_joint2" in str(info.value) and "lock it" in str(info.value)
     with pytest.raises(ConfigError) as info:
         panda.replace({"joint_names": [f"j{i}" for i in range(7)]})
     assert "joint_names: must be the moving joints" in str(info.value)
@@ -167,7 +175,8 @@ def test_shipped_arm_learns_within_10_trials_at_10_percent(arm: str) -> None:
 def test_mujoco_plant_of_a_urdf_arm_equals_our_dynamics(tmp_path: Path) -> None:
     """MuJoCo's model of the arm (core/sim/mujoco_arm.py, from the kernels' arrays) of the
     Panda: mass matrix and bias forces equal ours (measured: 1.4e-15); `exo-ilc urdf` gives the
-    arm's own URDF back."""
+    chain the package uses (the fingers fixed at their locked values), whose arrays are the
+    model's."""
     config = load_config(ARMS / "panda.yaml")
     plant = MujocoArm.from_config(config.with_mass_uncertainty(0.0))
     arm = build_arm(config)
@@ -180,7 +189,10 @@ def test_mujoco_plant_of_a_urdf_arm_equals_our_dynamics(tmp_path: Path) -> None:
         np.testing.assert_allclose(bias, c, rtol=0, atol=1e-9 * np.abs(c).max())
     out = tmp_path / "panda.urdf"
     assert cli_main(["urdf", "--config", str(ARMS / "panda.yaml"), "--out", str(out)]) == 0
-    assert out.read_text() == (ROOT / "urdf" / "panda.urdf").read_text()
+    assert "prismatic" not in out.read_text()
+    back = read_urdf_chain(out, "panda_link0", "panda_hand")
+    for ours, read in zip(arm.kernel_args, back.kernel_args, strict=True):
+        np.testing.assert_allclose(read, ours, rtol=0, atol=1e-12)
 
 
 ONE_KHZ = {"law": "norm_optimal", "control.period": 0.001, "integration_step": 0.001,
@@ -435,3 +447,44 @@ def test_live_view_draws_the_urdf_arm() -> None:
     assert set(kinematics.moving) >= set(panda["joint_names"])
     view = ArmView(panda)  # the live view's and the bag view's arm
     assert view.urdf == text and view.root_link == "panda_link0" and view.fixed_positions == fixed
+
+
+def test_live_view_draws_the_persons_segments_on_their_links() -> None:
+    """With a person strapped to the Panda, the view's URDF carries each segment as a cylinder
+    on the link its ``person.<segment>.link`` names: its axis along the segment's direction from
+    the proximal joint, its length the segment's, its radius sqrt(2 I_long / m); the arm's own
+    links and joints are those of the file."""
+    panda = load_config(ARMS / "panda.yaml", overlays=[ROOT / "config" / "person.yaml"])
+    text, _, root = view_urdf(panda)
+    assert root == "panda_link0"
+    tree = ET.fromstring(text)
+    plain = ET.fromstring((ROOT / "urdf" / "panda.urdf").read_text())
+    assert [j.get("name") for j in tree.iter("joint")] == \
+        [j.get("name") for j in plain.iter("joint")]
+    segments, placements = person_segments(panda)
+    assert set(placements) == {"upper_arm", "forearm", "hand"}
+    for segment in segments:
+        placement = placements[segment.name]
+        link = next(link for link in tree.findall("link") if link.get("name") == placement.link)
+        visual = next(v for v in link.findall("visual")
+                      if v.get("name") == f"person_{segment.name}")
+        cylinder = visual.find("geometry/cylinder")
+        assert cylinder is not None
+        assert float(cylinder.get("length", "0")) == pytest.approx(segment.length, rel=1e-5)
+        radius = np.sqrt(2.0 * segment.inertia_longitudinal / segment.mass)
+        assert float(cylinder.get("radius", "0")) == pytest.approx(radius, rel=1e-5)
+        assert 0.02 < radius < 0.08  # an arm's thickness, not a link's or a torso's
+        origin = visual.find("origin")
+        assert origin is not None
+        roll, pitch, yaw = (float(x) for x in origin.get("rpy", "").split())
+        rz = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+        ry = np.array([[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0],
+                       [-np.sin(pitch), 0, np.cos(pitch)]])
+        assert roll == 0.0
+        direction = np.asarray(placement.direction) / np.linalg.norm(placement.direction)
+        np.testing.assert_allclose(rz @ ry @ [0.0, 0.0, 1.0], direction, atol=1e-5)
+        centre = np.array([float(x) for x in origin.get("xyz", "").split()])
+        np.testing.assert_allclose(centre, np.asarray(placement.origin)
+                                   + 0.5 * segment.length * direction, atol=1e-5)
+    assert UrdfKinematics(text).moving  # the viewer's kinematics read it as before
+    assert "person_" not in view_urdf(load_config(ARMS / "panda.yaml"))[0]  # no person, no segments

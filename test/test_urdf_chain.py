@@ -288,7 +288,7 @@ def test_floating_base() -> None:
 
 def test_branch_that_could_move() -> None:
     message = _error(TWO_JOINTS, locked={})
-    assert "joint 'finger_joint'" in message and "off the chain" in message
+    assert "joint 'finger_joint'" in message and "beyond the tip link 'tool'" in message
     assert "lock it" in message
 
 

@@ -122,7 +122,7 @@ def format_certificate(cert: Certificate, patients: Mapping[int, Patient], worst
         if o.index in patients:
             lines.append(f"      {patients[o.index].describe()}")
     verdict = "PASS" if cert.passes else "FAIL: " + "; ".join(cert.reasons())
-    lines.append(f"Verdict (issue 33's criteria): {verdict}")
+    lines.append(f"Verdict (the criteria above): {verdict}")
     return "\n".join(lines)
 
 

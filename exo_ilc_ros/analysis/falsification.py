@@ -16,7 +16,7 @@ import math
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import optuna
@@ -59,15 +59,35 @@ class Found:
     score: float
 
 
+class Search(NamedTuple):
+    """What the falsification search is given: how many patients it may run, its sampler's
+    seed (also every patient's ``patient.seed``), and the point of the unit cube CMA-ES starts
+    from (read with every MAS grade an equal share, :func:`..core.population.distributions.
+    search_point`; None: the cube's centre)."""
+
+    budget: int
+    seed: int
+    start: Mapping[str, float] | None = None
+
+
+class Pool(NamedTuple):
+    """Where the searched patients run: the local process pool's workers or a Dask cluster
+    (an address or a client), as :func:`.study.run_cells` takes them."""
+
+    workers: int = 1
+    dask: str | Any | None = None
+
+
+LOCAL = Pool()
+"""One local worker."""
+
+
 def falsify(base: Config, spec: PopulationSpec, config_path: str | None,
-            overlays: Sequence[str], label: str, trials: int, budget: int, seed: int,
-            start: Mapping[str, float] | None = None, workers: int = 1,
-            dask: str | Any | None = None,
-            on_found: Callable[[Found], None] | None = None) -> list[Found]:
-    """Every patient the search ran (``budget`` of them), worst first. ``start``: the point
-    of the unit cube CMA-ES starts from, read with every MAS grade an equal share
-    (:func:`..core.population.distributions.search_point`; default: the cube's centre); the
-    patient's noise is ``patient.seed`` = ``seed``."""
+            overlays: Sequence[str], label: str, trials: int, search: Search,
+            pool: Pool = LOCAL, on_found: Callable[[Found], None] | None = None) -> list[Found]:
+    """Every patient the search ran (``search.budget`` of them), worst first."""
+    budget, seed, start = search
+    workers, dask = pool
     names = spec.coordinates(schema.patient_joint_names(base.values),
                              bool(base.values["person.enabled"]))
     x0 = {n: float(np.clip((start or {}).get(n, 0.5), 0.0, 1.0)) for n in names}

@@ -109,11 +109,19 @@ def format_robustness(report: Robustness) -> str:
     return "\n".join(lines)
 
 
-def format_growth(fit: GrowthFit | None, joint_names: Sequence[str]) -> str:
+def format_growth(fit: GrowthFit | None, joint_names: Sequence[str],
+                  at_limit: np.ndarray | None = None) -> str:
     """One line: per joint the fitted factor per trial and, if flagged, GROWING; a joint
-    without enough data says so (never a NaN)."""
+    without enough data says so (never a NaN). A joint whose learned input is held at
+    ``feedforward_limit`` (``at_limit``, :func:`growth.held_at_limit`) is AT ITS LIMIT: the
+    verdict says so, never "bounded" (the limit holds it, not convergence)."""
+    held = [name for name, flag in zip(joint_names, np.zeros(len(joint_names), bool)
+                                       if at_limit is None else at_limit, strict=True) if flag]
+    limit_note = ("" if not held else
+                  f" -> AT ITS LIMIT on {', '.join(held)} (max |u_ff| = feedforward_limit: the "
+                  "limit holds the learned input there, learning did not settle it)")
     if fit is None:
-        return f"growth of max |u_ff|: too few trials (< {MIN_TRIALS}) to tell"
+        return f"growth of max |u_ff|: too few trials (< {MIN_TRIALS}) to tell" + limit_note
     cells = []
     span = fit.last_trial - fit.first_trial + 1
     usable = fit.usable if fit.usable.size else np.full(len(joint_names), span)
@@ -127,12 +135,16 @@ def format_growth(fit: GrowthFit | None, joint_names: Sequence[str]) -> str:
                          f"learned input, needs {MIN_TRIALS})")
         else:
             cells.append(f"{name} {100.0 * r:+.3f}+-{100.0 * s:.3f} %/trial"
-                         + (" GROWING" if flag else
+                         + (" GROWING" if flag else " AT ITS LIMIT" if name in held else
                             " (approaching its limit)" if settling and r > 0 else ""))
-    if not np.any(np.isfinite(fit.rate)):
-        verdict = "not enough data to tell"
+    if fit.any_growing:
+        verdict = " -> LEARNED INPUT KEEPS GROWING (the error may still look fine)" + (
+            limit_note.replace(" -> ", "; ") if held else "")
+    elif held:
+        verdict = limit_note
+    elif not np.any(np.isfinite(fit.rate)):
+        verdict = " -> not enough data to tell"
     else:
-        verdict = ("LEARNED INPUT KEEPS GROWING (the error may still look fine)"
-                   if fit.any_growing else "bounded")
+        verdict = " -> bounded"
     return (f"growth of max |u_ff| over trials {fit.first_trial}-{fit.last_trial}: "
-            + "; ".join(cells) + f" -> {verdict}")
+            + "; ".join(cells) + verdict)

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core.convergence.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth
+from ..core.convergence.growth import DEFAULT_WINDOW, MIN_TRIALS, fit_growth, held_at_limit
 from ..core.params.config import load_config
 from ..core.programs.spread import IterationSpread
 from ..core.session.summary import RunSummary
@@ -43,10 +43,10 @@ def _fmt(x: int | None) -> str:
     return "-" if x is None else str(x)
 
 
-TABLE_QUANTITIES = {"error": ("e", "max |e| (rad)"),
-                    "feedforward": ("uff", "max |u_ff| (rad/s^2, learned feed-forward)"),
-                    "effort": ("Q", "max |effort| (N m)")}
-"""What :func:`format_trial_table` can show: column prefix and title."""
+TABLE_QUANTITIES = {"error": "max |e| (rad)",
+                    "feedforward": "max |u_ff| (rad/s^2, learned feed-forward)",
+                    "effort": "max |effort| (N m)"}
+"""What :func:`format_trial_table` can show, by its title."""
 
 
 def exercise_of(run: RunSummary) -> str | None:
@@ -70,34 +70,35 @@ def _table_of(run: RunSummary, quantity: str) -> np.ndarray | None:
 
 def format_trial_table(runs: Sequence[RunSummary], joint_names: Sequence[str],
                        quantity: str = "error", labels: Sequence[str] | None = None) -> str:
-    """Max |e| (rad) per trial: one column group per run, one column per joint (the true
-    max |e|, titled so, for runs whose sensors measured something else).
+    """Max |e| (rad) per trial: one column group per run, one column per joint headed by its
+    name (the true max |e|, titled so, for runs whose sensors measured something else).
 
     ``quantity`` "feedforward" or "effort" shows max |u_ff| or max |effort| instead. ``labels``
     (e.g. bag names) head the column groups instead of law and uncertainty."""
-    prefix, title_q = TABLE_QUANTITIES[quantity]
+    title_q = TABLE_QUANTITIES[quantity]
     tables = [_table_of(r, quantity) for r in runs]
-    n = len(joint_names)
+    columns = [max(10, len(name)) for name in joint_names]
     head1 = f"{'trial':>5} "
     head2 = f"{'':>5} "
     titles = [labels[i] if labels is not None else run_title(r) for i, r in enumerate(runs)]
-    widths = [max(n * 11, len(title)) for title in titles]  # a whole label over each group
+    # a whole label over each group
+    widths = [max(sum(columns) + len(columns), len(title)) for title in titles]
     for title, width in zip(titles, widths, strict=True):
         head1 += f"| {title:^{width}}"
-        head2 += "| " + "".join(f"{prefix + str(j + 1):>10} " for j in range(n)).ljust(width)
+        head2 += "| " + "".join(f"{name:>{c}} " for name, c in zip(joint_names, columns,
+                                                                    strict=True)).ljust(width)
     if quantity == "error" and any(r.true_max_abs_error is not None for r in runs):
         title_q = ("true max |e| (rad): the plant's state; the controller measured other "
                    "values (max_abs_error in the JSON)")
-    lines = ([title_q] if title_q != TABLE_QUANTITIES["error"][1] else []) + \
-        [head1, head2, "-" * len(head2)]
+    lines = [title_q, head1, head2, "-" * len(head2)]
     count = max(len(r.max_abs_error) for r in runs)
     for k in range(count):
         line = f"{k + 1:>5} "
         for r, table, width in zip(runs, tables, widths, strict=True):
             if table is not None and k < len(table):
                 flag = quantity == "error"
-                cells = [f"{x:10.3e}" + ("*" if flag and x > r.error_bound else " ")
-                         for x in table[k]]
+                cells = [f"{x:{c}.3e}" + ("*" if flag and x > r.error_bound else " ")
+                         for x, c in zip(table[k], columns, strict=True)]
                 line += "| " + "".join(cells).ljust(width)
             else:
                 line += "| " + " " * width
@@ -129,11 +130,12 @@ def format_run_events(runs: Sequence[RunSummary], labels: Sequence[str] | None =
 
 
 def format_long_run(runs: Sequence[RunSummary], joint_names: Sequence[str],
-                    window: int = DEFAULT_WINDOW) -> str:
+                    window: int = DEFAULT_WINDOW, limit: np.ndarray | None = None) -> str:
     """Per run: max |u_ff| and max |effort| at the last trial, and whether the learned input
     keeps growing (:func:`~exo_ilc_ros.core.convergence.growth.fit_growth` over the last ``window``
     trials, at most the second half of the run so that the first trials' learning is not
-    mistaken for growth)."""
+    mistaken for growth); a joint at ``limit`` (``feedforward_limit``, None: none) is reported
+    at its limit (:func:`~exo_ilc_ros.core.convergence.growth.held_at_limit`)."""
     lines = ["Learned input at the last trial and its growth (max |u_ff| per joint, rad/s^2; "
              "max |effort|, N m)"]
     for r in runs:
@@ -149,7 +151,8 @@ def format_long_run(runs: Sequence[RunSummary], joint_names: Sequence[str],
         lines.append(head + f"|u_ff| {uff}{effort}")
         span = min(window, max(len(r.max_abs_feedforward) // 2, MIN_TRIALS))
         lines.append(" " * 17 + format_growth(fit_growth(r.max_abs_feedforward, span),
-                                              joint_names))
+                                              joint_names,
+                                              held_at_limit(r.max_abs_feedforward, limit)))
     return "\n".join(lines)
 
 
@@ -206,7 +209,7 @@ def law_label(run: RunSummary) -> str:
 
 def format_spread(runs: Sequence[RunSummary], joint_names: Sequence[str]) -> str:
     """The iterations to the bound of each run's perturbed runs (``extra["spread"]``, from
-    :func:`~exo_ilc_ros.core.spread.iteration_spread`): median [min-max] per joint."""
+    :func:`~exo_ilc_ros.core.programs.spread.iteration_spread`): median [min-max] per joint."""
     spreads = [r.extra["spread"] for r in runs if "spread" in r.extra]
     count = {s["count"] for s in spreads}
     size = {s["perturbation"] for s in spreads}

@@ -1,7 +1,7 @@
 """Therapy metrics as a therapist reads them: angles in degrees, shares in per cent, an
 indicator the trial cannot measure shown as "not measurable" with the reason (the data files
-keep SI units, rad; core/metrics.py). The terminal table of ``exo-ilc simulate/run --patient``
-and the session report's cells both come from here."""
+keep SI units, rad; core/programs/metrics.py). The terminal table of ``exo-ilc simulate/run
+--patient`` and the session report's cells both come from here."""
 
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ def share_note(metrics: Sequence[TrialMetrics]) -> str:
         return ""
     return (f"patient's share: 0 % means within the measurement's resolution (at most "
             f"+-{100.0 * worst:.2g} % here: the robot's torque is held over each control "
-            "period; core/metrics.py); a passive patient's share is 0 %")
+            "period; core/programs/metrics.py); a passive patient's share is 0 %")
 
 
 def reasons(metrics: Sequence[TrialMetrics], joint_names: Sequence[str]) -> list[str]:

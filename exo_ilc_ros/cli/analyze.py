@@ -8,16 +8,15 @@ import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..analysis import figures
-from ..analysis.identified import format_table
-from ..analysis.report import format_iterations, format_run_events, format_trial_table, write_json
 from ..analysis.wording import count_phrase
-from ..bag import BagReadError, BagRun, read_bag
-from ..core.programs.identified import Identified
-from ..core.session.summary import RunSummary
 from .arguments import figure_path, integer, json_file
+
+if TYPE_CHECKING:
+    from ..bag import BagRun
+    from ..core.programs.identified import Identified
+    from ..core.session.summary import RunSummary
 
 
 def register(sub: Any) -> None:
@@ -76,6 +75,7 @@ def describe(run: BagRun) -> str:
 def identified(run: BagRun) -> list[Identified]:
     """The identification each completed trial's summary carries (empty: none, a run
     without ``identification.enabled`` or a bag of an earlier version)."""
+    from ..core.programs.identified import Identified
     found = (Identified.from_summary(k, run.summaries.get(k, {}), run.joint_names)
              for k in run.completed)
     return [item for item in found if item is not None]
@@ -114,6 +114,7 @@ def bag_paths(paths: Sequence[str], command: str = "analyze") -> list[Path]:
     anything else (``bags/*`` also matches ``bags/README.md``) is skipped with a note. A
     recording killed before its first trial was filed has no ``metadata.yaml`` yet and is
     skipped too."""
+    from ..bag import BagReadError
     found = []
     for given in paths:
         path = Path(given)
@@ -139,6 +140,15 @@ def bag_labels(runs: Sequence[BagRun]) -> list[str]:
 
 def analyze(args: argparse.Namespace) -> int:
     """Read every bag and check every request first, then report, export, plot."""
+    from ..analysis import figures
+    from ..analysis.identified import format_table
+    from ..analysis.report import (
+        format_iterations,
+        format_run_events,
+        format_trial_table,
+        write_json,
+    )
+    from ..bag import BagReadError, read_bag
     bag_runs = [read_bag(path, skip_damaged=args.skip_damaged) for path in bag_paths(args.bags)]
     names = bag_runs[0].joint_names
     for run in bag_runs[1:]:

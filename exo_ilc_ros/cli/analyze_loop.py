@@ -4,21 +4,20 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from ..analysis.loop import format_analysis, format_robustness, plot_analysis
-from ..core.convergence.factors import analyze_loop
-from ..core.convergence.norm_optimal_robustness import robustness
-from ..core.convergence.patient_load import patient_load
-from ..core.convergence.patient_ranges import PatientRanges, RangeAnalysis, analyze_patient_ranges
-from ..core.loop.patient import MAS_PRESETS
+from ..core.params import schema
 from ..core.params.config import Config, load_config
+
+if TYPE_CHECKING:
+    from ..core.convergence.patient_ranges import RangeAnalysis
+
 from .arguments import (
+    add_mass_uncertainty_argument,
     config_with_flags,
     figure_file,
     input_file,
     integer,
-    mass_uncertainty,
     parameter,
     scenario,
 )
@@ -38,10 +37,8 @@ def register(sub: Any) -> None:
                         "then a law: config/arms/ur5.yaml config/patient_aware.yaml)")
     parser.add_argument("--law", choices=("sign", "linear", "norm_optimal"),
                         help="learning law (default: the config's law)")
-    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
-                        metavar="D",
-                        help="plant mass uncertainty delta, one analysis each (default: the "
-                        "config's)")
+    add_mass_uncertainty_argument(parser, "plant mass uncertainty delta, one analysis each "
+                                  "(default: the config's)")
     parser.add_argument("--cutoff", type=parameter("q_filter.cutoff_hz"), metavar="HZ",
                         help="analyse with this Q-filter cut-off (Hz) instead of the config's, "
                         "enabling the filter")
@@ -61,13 +58,11 @@ def register(sub: Any) -> None:
                         "5 and 15 %%), each joint's inertia the lightest along the reference; "
                         "the law's own update, identification's inverse left out (the robust "
                         "case)")
-    parser.add_argument("--range-stiffness", type=float, default=PatientRanges.stiffness,
-                        metavar="NM_PER_RAD", help="largest passive stiffness (default "
-                        "%(default)g N m/rad)")
-    parser.add_argument("--range-viscous", type=float, default=PatientRanges.viscous,
-                        metavar="NMS_PER_RAD", help="largest viscous friction (default "
-                        "%(default)g N m s/rad)")
-    parser.add_argument("--range-mas", choices=tuple(MAS_PRESETS), default="3",
+    parser.add_argument("--range-stiffness", type=float, metavar="NM_PER_RAD",
+                        help="largest passive stiffness (default: the ranges', 4 N m/rad)")
+    parser.add_argument("--range-viscous", type=float, metavar="NMS_PER_RAD",
+                        help="largest viscous friction (default: the ranges', 0.4 N m s/rad)")
+    parser.add_argument("--range-mas", choices=schema.MAS_GRADES[1:], default="3",
                         help="highest MAS grade (its preset's stiffness and damping; default "
                         "%(default)s)")
     parser.add_argument("--plot", metavar="OUT.png", type=figure_file, help="plot |F| against "
@@ -78,6 +73,11 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Analyse, print and plot."""
+    from ..analysis.loop import format_analysis, format_robustness, plot_analysis
+    from ..core.convergence.factors import analyze_loop
+    from ..core.convergence.norm_optimal_robustness import robustness
+    from ..core.convergence.patient_ranges import PatientRanges, analyze_patient_ranges
+    from ..core.loop.patient import MAS_PRESETS
     flags: dict[str, tuple[str, Any]] = {}
     if args.cutoff is not None:
         flags.update({"q_filter.enabled": ("--cutoff", True),
@@ -116,8 +116,10 @@ def run(args: argparse.Namespace) -> int:
         print(_patients(args, config, deltas))
     if args.patient_ranges:
         grades = tuple(MAS_PRESETS)
-        ranges = PatientRanges(args.range_stiffness, args.range_viscous,
-                               grades[:grades.index(args.range_mas) + 1])
+        ranges = PatientRanges(
+            PatientRanges.stiffness if args.range_stiffness is None else args.range_stiffness,
+            PatientRanges.viscous if args.range_viscous is None else args.range_viscous,
+            grades[:grades.index(args.range_mas) + 1])
         print()
         print(format_ranges(analyze_patient_ranges(config, ranges)))
     return 0
@@ -148,6 +150,8 @@ def format_ranges(analysis: RangeAnalysis) -> str:
 
 def _patients(args: argparse.Namespace, config: Config, deltas: list[float]) -> str:
     """One line per scenario and delta: the worst factor against that patient's arm."""
+    from ..core.convergence.factors import analyze_loop
+    from ..core.convergence.patient_load import patient_load
     inverted = config["identification.enabled"] and config["identification.in_loop"]
     how = (", the model rebuilt about them" if (args.law or config["law"]) == "norm_optimal"
            else ", the update inverting them") if inverted else ""

@@ -19,17 +19,14 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ..analysis.tuning import TuningError, check_database_driver
 from ..core.errors import ConfigError, ExoIlcError
 from ..core.params import schema
 from ..core.params.config import Config, load_config, scenario_names, scenario_path
+from ..orchestration.launcher import MAX_DOMAIN_ID
 
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".jpg", ".jpeg", ".tif", ".tiff", ".webp",
                    ".eps", ".ps", ".pgf", ".raw", ".rgba")
 """File types matplotlib writes (the figure's format comes from the suffix)."""
-
-MAX_DOMAIN_ID = 232
-"""The largest ROS domain id the DDS port mapping allows (ROS recommends 0-101 on Linux)."""
 
 
 class FlagError(ExoIlcError):
@@ -224,6 +221,24 @@ def scenario(text: str) -> str:
             f"got {text!r}") from None
 
 
+CONFIG_HELP = "ROS parameter YAML laid over the shipped config/exo_ilc.yaml (any subset of keys)"
+"""The help of ``--config`` where a command says nothing more of it."""
+
+
+def add_config_argument(parser: argparse.ArgumentParser, help: str = CONFIG_HELP) -> None:
+    """``--config FILE``: a ROS parameter YAML laid over the shipped config (every command that
+    reads a config declares it here; ``help`` says what the command does with it)."""
+    parser.add_argument("--config", type=input_file, help=help)
+
+
+def add_mass_uncertainty_argument(parser: argparse.ArgumentParser, help: str,
+                                  default: list[float] | None = None) -> None:
+    """``--mass-uncertainty D [D ...]``: plant mass uncertainties, each checked by
+    :func:`mass_uncertainty` (every command that takes them declares them here)."""
+    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+", metavar="D",
+                        default=default, help=help)
+
+
 def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
     """``--scenario NAME|FILE [NAME|FILE ...]``: virtual patients (or any overlays) laid over
     ``--config``, in order."""
@@ -271,6 +286,7 @@ def storage(text: str) -> str:
     from sqlalchemy.engine import make_url
     from sqlalchemy.exc import ArgumentError
 
+    from ..analysis.tuning import TuningError, check_database_driver
 
     try:
         check_database_driver(text)

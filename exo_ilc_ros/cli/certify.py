@@ -1,5 +1,5 @@
 """``exo-ilc certify``: a law's certificate over a population of patients drawn from published
-distributions (issue 33; docs/every-patient.md), on any arm file, on the local process pool or a
+distributions (docs/every-patient.md), on any arm file, on the local process pool or a
 Dask cluster like ``exo-ilc study``; optionally a falsification search for the worst patient."""
 
 from __future__ import annotations
@@ -21,11 +21,12 @@ from .arguments import (
     parameter,
     seed,
 )
+from .tune import default_jobs
 
 DEFAULT_TRIALS = 25
 DEFAULT_WORST = 5
 FAILED = 6
-"""Exit status of a certificate that fails the issue's criteria (docs/exit-codes.md)."""
+"""Exit status of a certificate that fails its criteria (docs/exit-codes.md)."""
 
 
 def register(sub: Any) -> None:
@@ -36,7 +37,7 @@ def register(sub: Any) -> None:
         "angle, friction, MAS grade, sensors, mass error, body size; docs/every-patient.md), "
         "run the law on each for K trials and print the certificate: shares bounded, within "
         "the bound by trial 10 / 25, with aborts; trials to the bound; the worst patients; "
-        f"pass or fail against issue 33's criteria (exit status {FAILED} on fail). With "
+        f"pass or fail against the certificate's criteria (exit status {FAILED} on fail). With "
         "--falsify, a CMA-ES search over the same ranges for the patient that fails worst.")
     parser.add_argument("--config", type=input_file, metavar="FILE",
                         help="the law or arm file laid over the shipped config (default: the "
@@ -91,7 +92,7 @@ def certify(args: argparse.Namespace) -> int:
         run_population,
         write_scenario,
     )
-    from ..analysis.falsification import falsification_json, falsify
+    from ..analysis.falsification import Pool, Search, falsification_json, falsify
     from ..core.errors import ConfigError
     from ..core.params.config import load_config
     from ..core.params.redact import redact
@@ -106,7 +107,6 @@ def certify(args: argparse.Namespace) -> int:
         draw_population,
         search_point,
     )
-    from .tune import default_jobs
 
     if args.dask and args.workers is not None:
         raise ConfigError("--workers", "applies to the local process pool; with --dask the "
@@ -152,7 +152,7 @@ def certify(args: argparse.Namespace) -> int:
         with tqdm(total=args.falsify, desc="falsify", unit="patient", file=sys.stderr,
                   disable=None) as bar:
             found = falsify(base, spec, args.config, overlays, label, args.trials,
-                            args.falsify, args.seed, start, workers, args.dask,
+                            Search(args.falsify, args.seed, start), Pool(workers, args.dask),
                             lambda f: bar.update(1))
         written = []
         for rank, item in enumerate(found[:args.worst], start=1):

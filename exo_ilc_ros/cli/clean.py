@@ -4,6 +4,7 @@ old ones (``--keep N`` newest, ``--older-than AGE``); a dry run unless ``--yes``
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import shutil
 import time
@@ -16,7 +17,8 @@ from ..core.errors import ConfigError
 DEFAULT_RUNS_DIR = ".exo-ilc/runs"
 """Where ``exo-ilc run`` puts its per-invocation stores (``<date-time>-<pid>/store``)."""
 IN_USE_SECONDS = 120.0
-"""An entry written to this recently may belong to a run still going: never deleted."""
+"""An entry written to this recently may belong to a run still going (:func:`in_use`): never
+deleted."""
 _UNITS = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0, "w": 7 * 86400.0}
 
 
@@ -47,8 +49,9 @@ def register(sub: Any) -> None:
         description="Every `exo-ilc run` keeps a bag (bags/<run-name>/) and a store "
         f"({DEFAULT_RUNS_DIR}/<date-time>-<pid>/). This lists them, newest first, with sizes "
         "and dates, and with --keep and/or --older-than marks the older ones for deletion: a "
-        "dry run unless --yes. Entries written in the last two minutes (a run still going) "
-        "are never deleted; stores named with --store elsewhere are not touched.")
+        "dry run unless --yes. A run still going (its bag still recording, its process "
+        "alive, written in the last two minutes) is never deleted; stores named with --store "
+        "elsewhere are not touched.")
     parser.add_argument("--bag-dir", default="bags", metavar="DIR",
                         help="where the bags are (default: bags)")
     parser.add_argument("--runs-dir", default=DEFAULT_RUNS_DIR, metavar="DIR",
@@ -85,6 +88,31 @@ def _is_bag(path: Path) -> bool:
         any(path.glob("*.mcap")) or any(path.glob("*.db3"))
 
 
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def in_use(entry: Entry, now: float) -> bool:
+    """``entry`` may belong to a run still going: written in the last :data:`IN_USE_SECONDS`
+    and not finished. A bag is finished once it has no ``.splits/`` (its writer moves each
+    finished file out of it and removes it on close); a run's store
+    (``<date-time>-<pid>``) once its process is gone."""
+    from ..bag.writer import SPLITS_DIR
+
+    if now - entry.modified >= IN_USE_SECONDS:
+        return False
+    if entry.kind == "bag":
+        return (entry.path / SPLITS_DIR).is_dir()
+    match = re.fullmatch(r"\d{8}-\d{6}-(\d+)", entry.path.name)
+    return match is None or _process_alive(int(match.group(1)))
+
+
 def find_entries(bag_dir: Path, runs_dir: Path, only: str | None = None) -> list[Entry]:
     """Bags under ``bag_dir`` and run directories under ``runs_dir``, newest first per kind."""
     entries: list[Entry] = []
@@ -101,15 +129,14 @@ def find_entries(bag_dir: Path, runs_dir: Path, only: str | None = None) -> list
 def mark(entries: list[Entry], keep: int | None, older_than: float | None,
          now: float | None = None) -> None:
     """Set ``delete`` on the entries beyond the ``keep`` newest of their kind and/or last
-    written more than ``older_than`` seconds ago; never on one written in the last
-    :data:`IN_USE_SECONDS`."""
+    written more than ``older_than`` seconds ago; never on one in use (:func:`in_use`)."""
     now = time.time() if now is None else now
     rank: dict[str, int] = {}
     for entry in entries:  # newest first per kind
         rank[entry.kind] = rank.get(entry.kind, 0) + 1
         beyond_keep = keep is None or rank[entry.kind] > keep
         old = older_than is None or now - entry.modified > older_than
-        entry.in_use = now - entry.modified < IN_USE_SECONDS
+        entry.in_use = in_use(entry, now)
         entry.delete = beyond_keep and old and not entry.in_use and \
             (keep is not None or older_than is not None)
 

@@ -5,26 +5,27 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tqdm import tqdm
 
-from ..analysis.comparison import Variant, format_comparison, plot_comparison, run_comparison
-from ..analysis.report import write_json
 from ..core.errors import ConfigError
 from ..core.params.config import config_dir, read_yaml
-from ..core.session.summary import RunSummary
 from .arguments import (
+    add_config_argument,
+    add_mass_uncertainty_argument,
     add_scenario_argument,
     config_with_flags,
     figure_file,
     input_file,
     integer,
     json_file,
-    mass_uncertainty,
     parameter,
 )
 from .tune import default_jobs
+
+if TYPE_CHECKING:
+    from ..core.session.summary import RunSummary
 
 TUNED_NAME = "tuned.yaml"
 
@@ -44,16 +45,15 @@ def register(sub: Any) -> None:
         description="Run the paper's hand-tuned sign law, the tuned sign law (from --tuned, or "
         "config/tuned.yaml if there is one), the linear law and the norm-optimal law at each "
         "mass uncertainty; print one table and write one figure.")
-    parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
-                        "shipped config (the paper's law and the linear law run with it)")
+    add_config_argument(parser, "ROS parameter YAML laid over the shipped config (the "
+                        "paper's law and the linear law run with it)")
     add_scenario_argument(parser)
     parser.add_argument("--tuned", type=input_file, help="tuned YAML laid over --config "
                         "(default: config/tuned.yaml if found)")
     parser.add_argument("--no-tuned", action="store_true", help="leave the tuned law out")
     parser.add_argument("--no-norm-optimal", action="store_true",
                         help="leave the norm-optimal law (law: norm_optimal) out")
-    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
-                        metavar="D", default=[0.05, 0.10, 0.15], help="default: 0.05 0.10 0.15")
+    add_mass_uncertainty_argument(parser, "default: 0.05 0.10 0.15", [0.05, 0.10, 0.15])
     parser.add_argument("--trials", type=parameter("max_trials"),
                         help="trials per run (default: max_trials)")
     parser.add_argument("--plot", default="compare.png", type=figure_file,
@@ -67,6 +67,8 @@ def register(sub: Any) -> None:
 
 def compare(args: argparse.Namespace) -> int:
     """Run the variants, print the table, write the figure."""
+    from ..analysis.comparison import Variant, format_comparison, plot_comparison, run_comparison
+    from ..analysis.report import write_json
     if args.no_tuned and args.tuned:
         raise ConfigError("--no-tuned", f"cannot be combined with --tuned {args.tuned}")
     base = config_with_flags(args.config, {} if args.trials is None else

@@ -28,8 +28,9 @@ def register(sub: Any) -> None:
 
 def write_layout(args: argparse.Namespace) -> int:
     """Generate and write."""
-    from ..analysis.live_layout import arm_layout, foxglove_json, plotjuggler_xml
     from ..core.params.config import load_config
+    from ..orchestration.live_layout import arm_layout, foxglove_json, plotjuggler_xml
+
 
     arm = arm_layout(load_config(args.config))
     write_output(plotjuggler_xml(arm) if args.plotjuggler else foxglove_json(arm, args.app),

@@ -31,7 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 class RedactingStream:
     """A text stream that writes through another with every URL's password as ``***``
-    (core/redact.py): what the command prints (its own lines, tqdm, a library's log or
+    (core/params/redact.py): what the command prints (its own lines, tqdm, a library's log or
     message) never shows a credential."""
 
     def __init__(self, stream: TextIO, secrets: Sequence[str] = ()) -> None:
@@ -49,8 +49,8 @@ class RedactingStream:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``exo-ilc``; returns the exit code (README: 0 done; 1 a bug, or a replay
     that differs; 2 a refused input; 3 the graph stopped; 4 trials aborted by the error
-    envelope; 5 a run stopped by aborted trials in a row; 6 a failing certificate; 130 Ctrl-C). Nothing it prints
-    shows a password (:class:`RedactingStream`)."""
+    envelope; 5 a run stopped by aborted trials in a row; 6 a failing certificate; 130
+    Ctrl-C). Nothing it prints shows a password (:class:`RedactingStream`)."""
     out, err = sys.stdout, sys.stderr
     secrets = secrets_in(list(sys.argv[1:] if argv is None else argv))
     sys.stdout, sys.stderr = RedactingStream(out, secrets), RedactingStream(err, secrets)

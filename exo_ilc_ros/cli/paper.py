@@ -10,18 +10,14 @@ from typing import Any
 
 from tqdm import tqdm
 
-from ..bag import run_name, unique_path, write_run
 from ..core.errors import ConfigError
-from ..core.session.learning_session import run_trials
-from ..orchestration.graph import run_graph
-from ..orchestration.recording import Recording
 from .analyze import analyze, analyze_arguments
 from .arguments import (
+    add_config_argument,
     config_with_flags,
     directory,
     domain_id,
     figure_path,
-    input_file,
     json_file,
     parameter,
 )
@@ -37,8 +33,7 @@ def register(sub: Any) -> None:
         description="Run the experiment at 5, 10 and 15 % mass uncertainty through the ROS 2 "
         "graph (each run recorded by bag_recorder), then analyse the three bags: the "
         "per-trial table, iterations to the bound beside the paper's, Figures 5-7.")
-    parser.add_argument("--config", type=input_file,
-                        help="ROS parameter YAML laid over the shipped config")
+    add_config_argument(parser, "ROS parameter YAML laid over the shipped config")
     parser.add_argument("--trials", type=parameter("max_trials"),
                         help="trials per run (default: max_trials)")
     parser.add_argument("--bag-dir", default="bags", metavar="DIR", type=directory,
@@ -59,6 +54,10 @@ def register(sub: Any) -> None:
 
 def paper(args: argparse.Namespace) -> int:
     """Three runs, three bags, then ``analyze`` on them."""
+    from ..bag import run_name, unique_path, write_run
+    from ..core.session.learning_session import run_trials
+    from ..orchestration.graph import run_graph
+    from ..orchestration.recording import Recording
     if args.in_process and args.domain_id is not None:  # an exported ROS_DOMAIN_ID is fine
         raise ConfigError("--in-process", "starts no graph: --domain-id would be ignored; drop "
                           "one")

@@ -120,7 +120,7 @@ def param(args: argparse.Namespace) -> int:
             return 0
         print(f"Setting parameter failed: {args.name} = {args.value}: {outcome.reason}",
               file=sys.stderr)
-        return 1
+        return 2  # the node refused the value: a refused input (docs/exit-codes.md), not a bug
     finally:
         executor.remove_node(node)
         node.destroy_node()

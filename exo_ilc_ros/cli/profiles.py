@@ -7,10 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from ..analysis.therapy import DEGREES
 from ..analysis.wording import count_phrase
 from ..core.persistence.profiles import ProfileBook, export_profile
-from ..core.programs.therapy import profiles_root
 from .arguments import directory, integer, output_file
 
 
@@ -44,6 +42,7 @@ def register(sub: Any) -> None:
 
 
 def _version_line(entry: dict[str, Any], current: int | None) -> str:
+    from ..analysis.therapy import DEGREES
     mark = "*" if entry["version"] == current else " "
     error = " ".join(f"{x * DEGREES:.3g}" for x in entry.get("final_max_abs_error", []))
     share = (entry.get("metrics") or {}).get("patient_share_total")
@@ -80,6 +79,8 @@ def _not_included(entry: dict[str, Any]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Do the action."""
+    from ..analysis.therapy import DEGREES
+    from ..core.programs.therapy import profiles_root
     book = ProfileBook(profiles_root(args.profiles))
     if args.action == "list":
         if args.patient is None:

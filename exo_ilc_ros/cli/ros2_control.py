@@ -8,15 +8,14 @@ import argparse
 from typing import Any
 
 from ..core.params.config import Config, load_config
-from .arguments import input_file, json_file, write_output
+from .arguments import add_config_argument, json_file, write_output
 
 
 def register(sub: Any) -> None:
     """Add the sub-command."""
     parser = sub.add_parser("ros2-control", help="write the ros2_control controllers.yaml for "
                             "the config's arm (a URDF arm's joints: --config config/arms/...)")
-    parser.add_argument("--config", type=input_file,
-                        help="ROS parameter YAML over the shipped config (e.g. an arm file)")
+    add_config_argument(parser, "ROS parameter YAML over the shipped config (e.g. an arm file)")
     parser.add_argument("--out", type=json_file, help="output file (default: standard output)")
     parser.set_defaults(func=write_controllers)
 

@@ -10,26 +10,22 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tqdm import tqdm
 
-from ..analysis.therapy import format_filed_metrics
-from ..bag.run_writer import run_name
 from ..core.errors import ConfigError
 from ..core.params.config import Config
-from ..core.programs.metrics import TrialMetrics
-from ..core.session.learning_session import stored_trials
-from ..core.session.summary import RunSummary
-from ..orchestration.graph import TrialSummary, run_graph
-from ..orchestration.launcher import GraphError, graph_nodes
-from ..orchestration.live import DEFAULT_HOST, DEFAULT_PORT, LiveView
-from ..orchestration.recording import Recording
+from ..orchestration.launcher import exported_domain_id
 from ..wire import topics
 from ..wire.relay import DISPLAY_RATE
 from .arguments import directory, domain_id, shown_command
 from .simulate import aborted_exit, add_config_arguments, config_from_args, print_report
 from .therapy import add_therapy_arguments, run_session_graph, uses_therapy
+
+if TYPE_CHECKING:
+    from ..core.session.summary import RunSummary
+    from ..orchestration.graph import TrialSummary
 
 
 def register(sub: Any) -> None:
@@ -143,6 +139,9 @@ def _store_root(args: argparse.Namespace) -> Path | None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the graph once per mass uncertainty and report."""
+    from ..analysis.therapy import format_filed_metrics
+    from ..core.session.learning_session import stored_trials
+    from ..orchestration.launcher import GraphError
 
 
     if args.no_bag and (args.bag_dir is not None or args.isolated_recorder):
@@ -244,16 +243,7 @@ def _with_deltas(argv: list[str], deltas: list[float]) -> list[str]:
 def graph_domain(requested: int | None) -> int | None:
     """The domain id a graph runs on: ``--domain-id``, else an exported ``ROS_DOMAIN_ID`` (a ROS
     user's choice is honoured), else None (a free one is claimed)."""
-    if requested is not None:
-        return requested
-    exported = os.environ.get("ROS_DOMAIN_ID", "").strip()
-    if not exported:
-        return None
-    try:
-        return domain_id(exported)
-    except argparse.ArgumentTypeError as exc:
-        raise ConfigError("ROS_DOMAIN_ID", f"the exported value is not a domain id: {exc}") \
-            from None
+    return requested if requested is not None else exported_domain_id()
 
 
 def announce_graph(bar: Any, bag: Path | None) -> Callable[[Any], None]:
@@ -273,6 +263,7 @@ def bag_name(args: argparse.Namespace, config: Config) -> str:
     """``graph_<law>_d<delta>_<date>``, or for a therapy exercise
     ``graph_<patient>_<exercise>_<law>_d<delta>_<date>`` (as ``simulate --patient`` names its
     ``sim_<patient>_...`` bags: ``report bags/*_<patient>_*`` finds both)."""
+    from ..bag.run_writer import run_name
     patient = getattr(args, "patient", None)
     source = f"graph_{patient}_{config['exercise.name']}" if patient else "graph"
     return run_name(source, config["law"], config["mass_uncertainty"])
@@ -281,6 +272,8 @@ def bag_name(args: argparse.Namespace, config: Config) -> str:
 def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
              trials: int) -> RunSummary:
     """One graph run (one mass uncertainty), with the live view beside it (``--live``)."""
+    from ..orchestration.launcher import graph_nodes
+    from ..orchestration.live import DEFAULT_HOST, DEFAULT_PORT, LiveView
 
     config = run_config
     nodes = graph_nodes(args.plant, config["protocol"])
@@ -305,6 +298,9 @@ def _run_one(args: argparse.Namespace, run_config: Config, delta: float,
 def _run_graph_once(args: argparse.Namespace, run_config: Config, delta: float, trials: int,
                     nodes: Any, extra: list[Any], relay: Path | None = None,
                     relay_rate: float = DISPLAY_RATE) -> RunSummary:
+    from ..core.programs.metrics import TrialMetrics
+    from ..orchestration.graph import run_graph
+    from ..orchestration.recording import Recording
     config = run_config
     with tqdm(total=trials, desc=f"graph {config['law']} delta={delta:g}", unit="trial",
               file=sys.stderr, disable=None) as bar:

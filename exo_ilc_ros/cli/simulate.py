@@ -4,52 +4,36 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tqdm import tqdm
 
-from ..analysis.identified import format_final
-from ..analysis.report import (
-    format_iterations,
-    format_long_run,
-    format_run_events,
-    format_trial_table,
-    run_title,
-    write_json,
-)
-from ..bag import BagError, read_bag, run_name, unique_path, write_run
-from ..bag.replay import replay
 from ..core.errors import ConfigError
 from ..core.params.config import Config
-from ..core.programs.identified import Identified
-from ..core.programs.metrics import config_metrics
-from ..core.programs.spread import iteration_spread
-from ..core.session.abort import ABORT_STOP_KEY
-from ..core.session.learning_session import run_trials
-from ..core.session.result import RunResult
-from ..core.session.summary import RunSummary
 from .arguments import (
+    add_config_argument,
+    add_mass_uncertainty_argument,
     add_scenario_argument,
     config_with_flags,
     directory,
-    input_file,
     integer,
     json_file,
-    mass_uncertainty,
     parameter,
 )
 from .therapy import add_therapy_arguments, simulate_session, uses_therapy
+
+if TYPE_CHECKING:
+    from ..core.session.result import RunResult
+    from ..core.session.summary import RunSummary
 
 
 def add_config_arguments(parser: argparse.ArgumentParser) -> None:
     """--config, --scenario, --mass-uncertainty, --trials, --law: shared by simulate and
     run."""
-    parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
-                        "shipped config/exo_ilc.yaml (any subset of keys)")
+    add_config_argument(parser)
     add_scenario_argument(parser)
-    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
-                        metavar="D", help="plant mass uncertainty delta, one run each (default: "
-                        "the config's plant_simulator mass_uncertainty)")
+    add_mass_uncertainty_argument(parser, "plant mass uncertainty delta, one run each (default: "
+                                  "the config's plant_simulator mass_uncertainty)")
     parser.add_argument("--trials", type=parameter("max_trials"),
                         help="trials per run (default: max_trials)")
     parser.add_argument("--law", choices=("sign", "linear", "norm_optimal"), help="learning law "
@@ -77,6 +61,9 @@ def register(sub: Any) -> None:
     parser.add_argument("--quiet", action="store_true", help="no per-trial table")
     parser.add_argument("--learned", action="store_true", help="also print per-trial tables "
                         "of max |u_ff| (learned feed-forward) and max |effort| per joint")
+    parser.add_argument("--metrics", action="store_true", help="also compute every trial's "
+                        "therapy metrics (required torque, SPARC smoothness ...) into --json's "
+                        "runs[].metrics (a --patient session always computes them)")
     parser.add_argument("--bag-dir", dest="bag", metavar="DIR", type=directory,
                         help="also write each run as a rosbag2 bag DIR/<run-name>/ with the "
                         "graph's topics (what bag_recorder records; the flag of run and paper)")
@@ -106,6 +93,9 @@ REPLAY_EXCLUDES = ("config", "scenario", "mass_uncertainty", "trials", "law", "s
 
 def replay_bag(args: argparse.Namespace) -> int:
     """--replay BAG: the recorded run again, the report, and the comparison with the bag."""
+    from ..bag import BagError, read_bag
+    from ..bag.replay import replay
+    from ..core.session.summary import RunSummary
 
     given = [f"--{name.replace('_', '-')}" for name in REPLAY_EXCLUDES
              if getattr(args, name) not in (None, False)]
@@ -140,6 +130,11 @@ def replay_bag(args: argparse.Namespace) -> int:
 
 def simulate(args: argparse.Namespace) -> int:
     """Run and report."""
+    from ..bag import run_name, unique_path, write_run
+    from ..core.programs.divergences import add_divergences
+    from ..core.programs.metrics import config_metrics
+    from ..core.session.learning_session import run_trials
+    from ..core.session.summary import RunSummary
     if args.bag_deprecated is not None:
         if args.bag is not None:
             raise ConfigError("--bag", "is the old name of --bag-dir; give one of them")
@@ -174,9 +169,10 @@ def simulate(args: argparse.Namespace) -> int:
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
         add_identified(runs[-1], result, config["joint_names"])
+        add_divergences(runs[-1], result, config.with_mass_uncertainty(delta))
         if args.spread:
             runs[-1].extra["spread"] = _spread(config, delta, trials, args.spread)
-        if args.json:  # the therapy metrics of every trial (core/programs/metrics.py)
+        if args.metrics:  # the therapy metrics of every trial (core/programs/metrics.py)
 
             measured = config.with_mass_uncertainty(delta)
             runs[-1].extra["metrics"] = [config_metrics(r, measured).to_json()
@@ -194,6 +190,7 @@ def simulate(args: argparse.Namespace) -> int:
 def add_identified(summary: RunSummary, result: RunResult, names: list[str]) -> None:
     """The identification after the run's last trial as ``summary.extra["identified"]`` (the
     JSON's and the report's; nothing without ``identification.enabled``)."""
+    from ..core.programs.identified import Identified
     if result.joint_forces:
         last = result.joint_forces[max(result.joint_forces)]
         summary.extra["identified"] = Identified.from_step(last, names).to_json()
@@ -201,6 +198,7 @@ def add_identified(summary: RunSummary, result: RunResult, names: list[str]) -> 
 
 def _spread(config: Config, delta: float, trials: int, count: int) -> dict[str, Any]:
     """--spread: the iterations to the bound of ``count`` perturbed runs, as JSON."""
+    from ..core.programs.spread import iteration_spread
     with tqdm(total=count, desc=f"spread delta={delta:g}", unit="run", file=sys.stderr,
               disable=None) as bar:
         spread = iteration_spread(config, delta, trials, count,
@@ -218,21 +216,30 @@ message names the joint, the time, the error and the likely cause (core/session/
 
 
 def aborted_exit(runs: list[RunSummary], command: str) -> int:
-    """Say loudly which trials the error envelope aborted, and once why a run stopped on them;
-    :data:`EXIT_ABORT_STOP` if one did, else :data:`EXIT_ABORTED` if any trial aborted, else
-    0."""
+    """Say loudly which trials the error envelope aborted and which the plant's divergence
+    stopped (those are not called envelope aborts), and once why a run stopped on them;
+    :data:`EXIT_ABORT_STOP` if one did, else :data:`EXIT_ABORTED` if any trial aborted or
+    diverged, else 0."""
+    from ..analysis.report import run_title
+    from ..core.loop.divergence import DIVERGED
+    from ..core.session.abort import ABORT_STOP_KEY
     any_aborted = stopped = False
     for run in runs:
-        aborted = [int(k) for k in run.extra.get("aborted_trials", [])]
-        if not aborted:
-            continue
-        any_aborted = True
-        count = len(run.max_abs_error)
-        share = "ALL" if len(aborted) == count else f"{len(aborted)} of {count}"
-        print(f"exo-ilc {command}: WARNING: {run_title(run)}: {share} trials ABORTED by the "
-              f"error envelope (safety.error_envelope; the robot held the arm there; each was "
-              f"learned from up to its abort): trial{'s' if len(aborted) > 1 else ''} "
-              f"{_spans(aborted)}", file=sys.stderr)
+        diverged = run.extra.get(DIVERGED, [])
+        for d in diverged:
+            print(f"exo-ilc {command}: ERROR: {run_title(run)}: {d['message']}",
+                  file=sys.stderr)
+        any_aborted = any_aborted or bool(diverged)
+        gone = {int(d["trial"]) for d in diverged}
+        aborted = [int(k) for k in run.extra.get("aborted_trials", []) if int(k) not in gone]
+        if aborted:
+            any_aborted = True
+            count = len(run.max_abs_error)
+            share = "ALL" if len(aborted) == count else f"{len(aborted)} of {count}"
+            print(f"exo-ilc {command}: WARNING: {run_title(run)}: {share} trials ABORTED by "
+                  f"the error envelope (safety.error_envelope; the robot held the arm there; "
+                  f"each was learned from up to its abort): trial{'s' if len(aborted) > 1 else ''}"
+                  f" {_spans(aborted)}", file=sys.stderr)
         message = run.extra.get(ABORT_STOP_KEY)
         if message:
             stopped = True
@@ -242,8 +249,10 @@ def aborted_exit(runs: list[RunSummary], command: str) -> int:
               "(every trial, and what was learned from it, is kept)", file=sys.stderr)
         return EXIT_ABORT_STOP
     if any_aborted:
-        print(f"exo-ilc {command}: exit {EXIT_ABORTED}: trials were aborted (check the mass "
-              "uncertainty, the gains and the envelope)", file=sys.stderr)
+        what = "the plant diverged" if any(run.extra.get(DIVERGED) for run in runs) else \
+            "trials were aborted"
+        print(f"exo-ilc {command}: exit {EXIT_ABORTED}: {what} (check the mass "
+              "uncertainty, the gains, the envelope and the integration step)", file=sys.stderr)
         return EXIT_ABORTED
     return 0
 
@@ -265,6 +274,17 @@ def _spans(trials: list[int]) -> str:
 def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary]) -> None:
     """The per-trial table (unless --quiet; --learned adds max |u_ff| and max |effort|), the
     iterations to the bound, the long-run check, and --json: shared by simulate and run."""
+    from ..analysis.identified import format_final
+    from ..analysis.report import (
+        format_iterations,
+        format_long_run,
+        format_run_events,
+        format_trial_table,
+        run_title,
+        write_json,
+    )
+    from ..core.learning.qfilter import feedforward_limit_of
+    from ..core.programs.identified import Identified
     names = config["joint_names"]
     if not args.quiet:
         print(format_trial_table(runs, names))
@@ -279,7 +299,7 @@ def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary
                 print()
     print(format_iterations(runs, names))
     print()
-    print(format_long_run(runs, names))
+    print(format_long_run(runs, names, limit=feedforward_limit_of(config)))
     for run in runs:
         if run.extra.get("identified"):
             print()

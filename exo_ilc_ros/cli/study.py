@@ -6,27 +6,27 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tqdm import tqdm
 
-from ..analysis import figures
-from ..analysis.study import format_study_table, run_cells, write_study_json
-from ..analysis.study_figure import study_figure
 from ..analysis.wording import count_phrase
 from ..core.errors import ConfigError
 from ..core.params.redact import redact
-from ..core.programs.study import (
-    SHIPPED_LAWS,
-    StudyCell,
-    resolve_law,
-    resolve_scenario,
-    shipped_scenarios,
-    study_cells,
+from ..core.programs.shipped_laws import SHIPPED_LAWS
+from .arguments import (
+    add_mass_uncertainty_argument,
+    figure_path,
+    integer,
+    json_file,
+    nonempty,
+    parameter,
+    seed,
 )
-from ..core.programs.study_rows import study_rows
-from .arguments import figure_path, integer, json_file, mass_uncertainty, nonempty, parameter, seed
 from .tune import default_jobs
+
+if TYPE_CHECKING:
+    from ..core.programs.study import StudyCell
 
 DEFAULT_LAWS = ("sign", "tuned", "linear", "robust", "norm_optimal")
 DEFAULT_TRIALS = 1000
@@ -47,8 +47,7 @@ def register(sub: Any) -> None:
     parser.add_argument("--scenarios", nargs="+", type=nonempty, metavar="SCENARIO",
                         help="shipped scenarios (config/scenarios/NAME.yaml), overlay files, "
                         "or LABEL=FILE (default: every shipped scenario)")
-    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
-                        metavar="D", default=[0.05, 0.10, 0.15], help="default: 0.05 0.10 0.15")
+    add_mass_uncertainty_argument(parser, "default: 0.05 0.10 0.15", [0.05, 0.10, 0.15])
     parser.add_argument("--trials", type=parameter("max_trials"), default=DEFAULT_TRIALS,
                         metavar="K", help=f"trials per cell (default: {DEFAULT_TRIALS})")
     parser.add_argument("--seeds", type=integer(1), default=1, metavar="S",
@@ -69,6 +68,11 @@ def register(sub: Any) -> None:
 
 def study(args: argparse.Namespace) -> int:
     """Build the cells, run them, print the table, write JSON and figure."""
+    from ..analysis import figures
+    from ..analysis.study import format_study_table, run_cells, write_study_json
+    from ..analysis.study_figure import study_figure
+    from ..core.programs.study import resolve_law, resolve_scenario, shipped_scenarios, study_cells
+    from ..core.programs.study_rows import study_rows
     if args.dask and args.workers is not None:
         raise ConfigError("--workers", "applies to the local process pool; with --dask the "
                           "cluster's workers run the cells (start them with --nworkers)")

@@ -7,37 +7,20 @@ import argparse
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tqdm import tqdm
 
-from ..analysis import session_report as keys
-from ..analysis.therapy import format_session_metrics
 from ..analysis.wording import count_phrase
-from ..bag import run_name, unique_path, write_run
 from ..core.errors import ConfigError
-from ..core.loop.patient import PatientModel
 from ..core.persistence.files import write_json_atomic
 from ..core.persistence.profiles import ProfileBook
-from ..core.persistence.store import RunStore
-from ..core.programs.metrics import config_metrics
-from ..core.programs.therapy import (
-    IDENTIFICATION,
-    ExerciseResult,
-    identified_of_records,
-    prepare,
-    profiles_root,
-    run_exercise,
-    session_id,
-)
-from ..core.reference.build import build_reference
-from ..core.reference.exercise import exercises_path, load_book
-from ..core.session.abort import ABORT_STOP_KEY
-from ..core.session.learning_session import stored_trials
-from ..core.session.summary import RunSummary
-from ..orchestration.launcher import GraphError
 from .arguments import directory, nonempty, shown_command
 from .therapy_resume import Step, resume_command, resumed_steps, stored_summary
+
+if TYPE_CHECKING:
+    from ..core.programs.therapy import ExerciseResult
+    from ..core.session.summary import RunSummary
 
 
 def add_therapy_arguments(parser: argparse.ArgumentParser) -> None:
@@ -72,6 +55,7 @@ def uses_therapy(args: argparse.Namespace) -> bool:
 def plan_of(args: argparse.Namespace, config: Any) -> list[tuple[str, int | None]]:
     """(exercise, trials) in order: --session's plan, else --exercise (None: --trials or
     max_trials), else the config's exercise."""
+    from ..core.reference.exercise import exercises_path, load_book
     if args.session and args.exercise:
         raise ConfigError("--session", "cannot be combined with --exercise")
     if args.session:
@@ -86,6 +70,11 @@ def plan_of(args: argparse.Namespace, config: Any) -> list[tuple[str, int | None
 def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[ExerciseResult],
                                                                       list[RunSummary]]:
     """Check everything, then run every exercise; returns the results and their summaries."""
+    from ..analysis.therapy import format_session_metrics
+    from ..bag import run_name, unique_path, write_run
+    from ..core.programs.divergences import add_divergences
+    from ..core.programs.therapy import prepare, profiles_root, run_exercise, session_id
+    from ..core.session.summary import RunSummary
     if args.mass_uncertainty and len(args.mass_uncertainty) > 1:
         raise ConfigError("--mass-uncertainty", "one value with --patient (one patient's arm)")
     if args.resume or args.store or args.replay:
@@ -117,6 +106,7 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
         results.append(done)
         summary = RunSummary.from_result(done.result)
         summary.extra["therapy"] = done.to_json()
+        add_divergences(summary, done.result, done.config)
         if done.identified:
             summary.extra["identified"] = done.identified[-1].to_json()
         runs.append(summary)
@@ -141,6 +131,7 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
 def therapy_custom_data(done: ExerciseResult, session: str, order: int) -> dict[str, str]:
     """The bag's custom data naming the patient, exercise (and its place ``order`` in the
     session), session and profile versions."""
+    from ..analysis import session_report as keys
     return {keys.PATIENT: done.patient, keys.EXERCISE: done.exercise, keys.SESSION: session,
             keys.PROFILE_STARTED_FROM: str(done.started_from or ""),
             keys.PROFILE_VERSION: str(done.version or ""), keys.EXERCISE_ORDER: str(order)}
@@ -154,6 +145,8 @@ def run_session_graph(args: argparse.Namespace, config: Any, store_root: Path,
     was stopped, so a killed session keeps what it learned; it then prints the command that
     resumes exactly this session. ``--resume [SESSION]`` continues it (its unfinished
     versions, the same session numbers, so the same store keys: cli/therapy_resume.py)."""
+    from ..core.programs.therapy import profiles_root, session_id
+    from ..core.session.abort import ABORT_STOP_KEY
     book = ProfileBook(profiles_root(args.profiles))
     invocation = session_id()
     session, steps = _graph_steps(args, config, book, store_root, invocation)
@@ -181,6 +174,9 @@ def _graph_steps(args: argparse.Namespace, config: Any, book: ProfileBook, store
                  invocation: str) -> tuple[str, list[Step]]:
     """The session's id and its exercises (a resumed session's own), every check made
     before any node starts: one arm, no learning virtual patient, no store in the way."""
+    from ..core.loop.patient import PatientModel
+    from ..core.programs.therapy import prepare
+    from ..core.session.learning_session import stored_trials
     if args.mass_uncertainty and len(args.mass_uncertainty) > 1:
         raise ConfigError("--mass-uncertainty", "one value with --patient (one patient's arm)")
     if args.mass_uncertainty:
@@ -214,6 +210,9 @@ def _exercise_through_graph(args: argparse.Namespace, step: Step, order: int,
                             ) -> RunSummary | None:
     """One exercise of the session through the graph, its profile written from the store
     when the graph ends (also when it was stopped: the resume command is attached then)."""
+    from ..core.persistence.store import RunStore
+    from ..core.reference.build import build_reference
+    from ..orchestration.launcher import GraphError
     name = step.name
     item = step.prepared
     count = step.trials or item.config["max_trials"]
@@ -265,6 +264,8 @@ def _profile_from_store(writer: Any, config: Any, stored: list[Any],
                         count: int) -> list[Any] | None:
     """Metrics of the stored trials and the profile version from the last one (None: no trial
     completed, nothing written)."""
+    from ..core.programs.metrics import config_metrics
+    from ..core.programs.therapy import IDENTIFICATION, identified_of_records
 
     if not stored:
         return None

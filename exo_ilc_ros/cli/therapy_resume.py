@@ -16,19 +16,17 @@ import argparse
 import shlex
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..analysis.wording import count_phrase
 from ..core.errors import ProfileError
 from ..core.params.config import Config
 from ..core.persistence.profiles import ProfileBook
-from ..core.persistence.store import RunStore
-from ..core.programs.metrics import config_metrics
-from ..core.programs.therapy import PreparedExercise, prepare
-from ..core.reference.build import build_reference
-from ..core.session.result import RunResult
-from ..core.session.summary import RunSummary
 from .arguments import shown_command
+
+if TYPE_CHECKING:
+    from ..core.programs.therapy import PreparedExercise
+    from ..core.session.summary import RunSummary
 
 RUN_STORE = "run_store"
 """The index entry's key of the run store a graph session saves its trials in (None: an
@@ -173,6 +171,11 @@ def stored_summary(step: Step, store: Path) -> RunSummary | None:
     """The report of an exercise its session completed before it was stopped (``step.done``),
     from the trials its run store holds, as the uninterrupted run reported it (None: the
     store no longer holds them)."""
+    from ..core.persistence.store import RunStore
+    from ..core.programs.metrics import config_metrics
+    from ..core.reference.build import build_reference
+    from ..core.session.result import RunResult
+    from ..core.session.summary import RunSummary
 
     entry = step.done or {}
     cfg = step.prepared.config.replace({
@@ -199,6 +202,7 @@ def resumed_steps(args: argparse.Namespace, config: Config, book: ProfileBook,
     """The session a resume continues and what it does with each exercise of the plan: a
     complete version skipped, an unfinished one continued from the version it began from
     (checked as a new start is), one not begun yet from the latest profile."""
+    from ..core.programs.therapy import prepare
     names = [name for name, _ in plan]
     wanted = args.resume if isinstance(args.resume, str) else None
     key = choose_session(book, args.patient, names, wanted, store, list(args.argv))
@@ -232,6 +236,8 @@ def prepare_from(config: Config, book: ProfileBook, patient: str, exercise: str,
     """The exercise prepared to start from profile version ``version`` (None: from zero), as
     :func:`.core.therapy.prepare` prepares it from the latest: the file checked (sha256), its
     model and reference against the config's."""
+    from ..core.programs.therapy import PreparedExercise
+    from ..core.reference.build import build_reference
     cfg = config.replace({"exercise.name": exercise, "profile.initial": ""})
     start = None
     if version is not None:

@@ -8,22 +8,20 @@ import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import optuna
 from tqdm import tqdm
 
-from ..analysis.tuning import RunScore, TuningProblem, TuningResult, best_result, optimize
 from ..analysis.wording import count_phrase
 from ..core.errors import ConfigError
 from ..core.params.config import load_config
 from ..core.params.redact import redact
 from .arguments import (
+    add_config_argument,
+    add_mass_uncertainty_argument,
     add_scenario_argument,
     at_least_two_trials,
-    input_file,
     integer,
-    mass_uncertainty,
     nonempty,
     number,
     parameter,
@@ -32,6 +30,11 @@ from .arguments import (
     storage,
     yaml_out,
 )
+
+if TYPE_CHECKING:
+    import optuna
+
+    from ..analysis.tuning import RunScore, TuningResult
 
 DEFAULT_STORAGE = ".exo-ilc/tune.journal"
 DEFAULT_OUT_DIR = ".exo-ilc/tuned"
@@ -62,13 +65,11 @@ def register(sub: Any) -> None:
         "the trial from which every joint stays within the bound, worst case over the mass "
         "uncertainties, plus a penalty for peak error. Resumable; several machines can share "
         "one study through --storage.")
-    parser.add_argument("--config", type=input_file, help="ROS parameter YAML laid over the "
-                        "shipped config; its schedules are the starting point (trial 0)")
+    add_config_argument(parser, "ROS parameter YAML laid over the shipped config; its "
+                        "schedules are the starting point (trial 0)")
     add_scenario_argument(parser)
-    parser.add_argument("--mass-uncertainty", type=mass_uncertainty, nargs="+",
-                        metavar="D",
-                        default=[0.05, 0.10, 0.15], help="uncertainties scored at once "
-                        "(default: 0.05 0.10 0.15)")
+    add_mass_uncertainty_argument(parser, "uncertainties scored at once (default: 0.05 0.10 "
+                                  "0.15)", [0.05, 0.10, 0.15])
     parser.add_argument("--trials", type=parameter("max_trials", at_least_two_trials),
                         help="trials per run (default: max_trials)")
     parser.add_argument("--budget", type=integer(0), default=60,
@@ -127,6 +128,7 @@ def format_before_after(result: TuningResult, joint_names: Sequence[str]) -> str
 
 def tune(args: argparse.Namespace) -> int:
     """Run the study, print before/after, write the tuned YAML."""
+    from ..analysis.tuning import TuningProblem, best_result, optimize
     config = load_config(args.config, overlays=args.scenario or [])
     trials = int(args.trials if args.trials is not None else config["max_trials"])
     problem = TuningProblem.from_config(config, args.mass_uncertainty, trials,

@@ -27,7 +27,7 @@ import numpy as np
 from ..core.loop.stepper import PlantStepper
 from ..core.sim.mujoco_arm import MujocoArm, effects_not_simulated
 from .common import spin, wall_clock
-from .plant_base import NAME, PlantNode
+from .plant_base import NAME, Pace, PlantNode
 from .realtime import plant_scheduling
 
 __all__ = ["FIRST_SAMPLE_AGAIN", "NAME", "FreeRunningPlant", "MujocoPlant", "main"]
@@ -57,6 +57,9 @@ class FreeRunningPlant(PlantNode):
         """Periods the plant stepped on its own (the safe hold): no command came in time."""
         self.last_command_ns = 0
         """Lock-step: when the last command (or the first sample sent again) was."""
+        self.pace = Pace(float(config["pace"]) if self.lock_step else 0.0)
+        """Lock-step: simulated s per wall s at most, counted from the start (homing and the
+        trials alike: this plant has no trial start of its own)."""
         wall_period = self.experiment.period / config["real_time_rate"]
         self.create_timer(wall_period if not self.lock_step else 0.05, self.on_tick,
                           clock=wall_clock())
@@ -112,6 +115,7 @@ class FreeRunningPlant(PlantNode):
                 self.started = True
                 self.last_command_ns = now
                 self.watchdog.arm(now)
+                self.pace.start(self.now_ns)
                 self._publish()
             return
         if self.lock_step:
@@ -134,6 +138,7 @@ class FreeRunningPlant(PlantNode):
         self.stepper.step(effort, self.saturated)
         self.index += 1
         self.now_ns += self.step_ns
+        self.pace.wait(self.now_ns)
         self._publish()
 
     def _publish(self) -> None:

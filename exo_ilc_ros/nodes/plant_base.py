@@ -8,6 +8,7 @@ simulator, with the trial protocol's services) and the free-running plants (``mu
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -34,6 +35,30 @@ from .sender_check import TRUSTED_READER_QOS, TrustedInput, effort_classifier
 
 NAME = schema.PLANT
 """Every plant runs under this node name (one parameter section, whichever plant it is)."""
+
+
+class Pace:
+    """A lock-step plant at a pace a person can follow (``pace``, ``exo-ilc run --live-pace``):
+    each sample is published no earlier than its simulated time over ``rate`` after the sample
+    it counts from, in wall time. It only waits: no number changes (0: unpaced)."""
+
+    def __init__(self, rate: float) -> None:
+        self.rate = rate
+        self.wall_ns = 0
+        self.sim_ns = 0
+
+    def start(self, sim_ns: int) -> None:
+        """Count from now, at simulated time ``sim_ns`` (a trial's first sample)."""
+        self.wall_ns, self.sim_ns = time.monotonic_ns(), sim_ns
+
+    def wait(self, sim_ns: int) -> None:
+        """Sleep until the sample at ``sim_ns`` is due."""
+        if self.rate <= 0.0:
+            return
+        due = self.wall_ns + (sim_ns - self.sim_ns) / self.rate
+        wait = (due - time.monotonic_ns()) / 1e9
+        if wait > 0.0:
+            time.sleep(wait)
 
 
 class PlantNode(Node):

@@ -35,7 +35,7 @@ from ..wire.protocol import trial_of_frame
 from ..wire.publishers import max_bytes
 from .common import SAMPLES_QOS, CountingPublisher, spin, wall_clock
 from .diagnostics import diagnostic_array, stamp_ns, status
-from .plant_base import NAME, PlantNode
+from .plant_base import NAME, Pace, PlantNode
 from .realtime import plant_scheduling
 from .sender_check import (
     FEEDFORWARD_READER_QOS,
@@ -79,10 +79,8 @@ class PlantSimulator(PlantNode):
             if self.patient.enabled else None
         self.create_service(Trigger, topics.RESET_SERVICE, self.on_reset)
         self.create_service(Trigger, topics.START_SERVICE, self.on_start)
-        self.pace = float(config["pace"]) if self.lock_step else 0.0
-        """Lock-step: simulated s per wall s at most (0: unpaced); only wall time changes."""
-        self.paced_from = (0, 0)
-        """(wall ns, sim ns) of the trial's sample 0, for the pace."""
+        self.pace = Pace(float(config["pace"]) if self.lock_step else 0.0)
+        """Lock-step: simulated s per wall s at most, from each trial's sample 0."""
         if not self.lock_step:
             wall_period = self.experiment.period / config["real_time_rate"]
             self.timer = self.create_timer(wall_period, self.on_tick, clock=wall_clock(),
@@ -147,7 +145,7 @@ class PlantSimulator(PlantNode):
         self.running = True
         self.index = 0
         self.now_ns = self.t0_ns
-        self.paced_from = (time.monotonic_ns(), self.t0_ns)
+        self.pace.start(self.t0_ns)
         self._publish()
         if self.timer is not None:
             self.watchdog.arm(time.monotonic_ns())
@@ -215,12 +213,7 @@ class PlantSimulator(PlantNode):
     def _stepped(self) -> None:
         self.index += 1
         self.now_ns += self.step_ns
-        if self.pace > 0.0:  # lock-step at a pace: wait for the sample's wall time
-            wall_ns, sim_ns = self.paced_from
-            due = wall_ns + (self.now_ns - sim_ns) / self.pace
-            wait = (due - time.monotonic_ns()) / 1e9
-            if wait > 0.0:
-                time.sleep(wait)
+        self.pace.wait(self.now_ns)
         self._publish()
         if self.index >= self.last_index:
             self._stop()

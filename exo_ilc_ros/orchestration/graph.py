@@ -1,7 +1,9 @@
 """Run the node graph for one configuration and collect its trial summaries.
 
 :class:`GraphSession` starts the processes of :data:`launcher.GRAPH_NODES` (plus any ``extra``)
-on a domain of their own and a monitor node in this process that follows
+on a domain of their own (the one given, else a free one claimed: a caller that honours an
+exported ``ROS_DOMAIN_ID`` passes :func:`launcher.exported_domain_id`, as ``exo-ilc run`` and
+the benches do) and a monitor node in this process that follows
 ``/ilc/trial_summary`` and ``/ilc/trial_events``; :func:`run_graph` runs it to the end and
 returns a :class:`report.RunSummary`, the same as ``exo-ilc simulate`` reports.
 """

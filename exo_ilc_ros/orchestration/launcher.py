@@ -23,7 +23,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import IO
 
-from ..core.errors import ExoIlcError
+from ..core.errors import ConfigError, ExoIlcError
 from ..nodes import registry
 
 DOMAIN_IDS = range(1, 101)
@@ -106,6 +106,26 @@ class DomainClaim:
         if self.handle is not None:
             self.handle.close()
             self.handle = None
+
+
+MAX_DOMAIN_ID = 232
+"""The largest ROS domain id the DDS port mapping allows (ROS recommends 0-101 on Linux)."""
+
+
+def exported_domain_id(environment: Mapping[str, str] | None = None) -> int | None:
+    """An exported ``ROS_DOMAIN_ID`` (a ROS user's choice, honoured), None when none is;
+    :class:`~exo_ilc_ros.core.errors.ConfigError` naming it for a value that is no domain id."""
+    text = (os.environ if environment is None else environment).get("ROS_DOMAIN_ID", "").strip()
+    if not text:
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= MAX_DOMAIN_ID:
+        raise ConfigError("ROS_DOMAIN_ID", f"the exported value {text!r} is not a domain id "
+                          f"(an integer 0-{MAX_DOMAIN_ID}; 0-101 is safe on Linux)")
+    return value
 
 
 def claim_domain_id(requested: int | None = None) -> DomainClaim:

@@ -10,11 +10,11 @@ from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
 
-from ..analysis.live_layout import APPS, arm_layout, foxglove_json
 from ..core.params.config import Config
 from ..nodes.registry import BRIDGE
 from ..wire.relay import DISPLAY_RATE
 from .launcher import NodeSpec
+from .live_layout import APPS, arm_layout, foxglove_json
 
 DEFAULT_PORT = 8765
 DEFAULT_HOST = "127.0.0.1"

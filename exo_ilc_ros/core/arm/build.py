@@ -6,6 +6,7 @@ truncated cones (``cones``) or a URDF's chain (``urdf``, :mod:`.urdf_chain`)."""
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -28,7 +29,14 @@ def build_arm(config: Config) -> ArmModel:
         return _urdf_arm(config, 0.0, bool(config["person.in_nominal"]))
     return ArmModel.from_links(config["model.link_masses"], config["model.link_lengths"],
                                config["model.radius_proximal"], config["model.radius_distal"],
-                               config["model.joint_axes"], config["model.gravity"])
+                               config["model.joint_axes"], gravity_in_root(config))
+
+
+def gravity_in_root(config: Config) -> np.ndarray:
+    """The gravity acceleration (m/s^2) in the URDF root link's frame (a cone arm's Oxyz):
+    ``model.gravity`` along ``model.gravity_direction`` (normalised)."""
+    direction = np.array(config["model.gravity_direction"], dtype=float)
+    return float(config["model.gravity"]) * (direction / float(np.linalg.norm(direction)))
 
 
 def build_plant(config: Config) -> ArmModel:
@@ -83,12 +91,13 @@ def urdf_chain(config: Config) -> UrdfChain:
     """The URDF chain of a ``model.source: urdf`` config (read once per file contents, links and
     locks)."""
     locked = schema.parse_locked_joints(config["model.locked_joints"])
+    gravity = gravity_in_root(config)
     key = (config.urdf_digest, config["model.base_link"], config["model.tip_link"],
-           tuple(sorted(locked.items())), config["model.gravity"])
+           tuple(sorted(locked.items())), tuple(gravity.tolist()))
     chain = _CHAINS.get(key)
     if chain is None:
         chain = read_urdf_chain(urdf_path(config["model.urdf"]), config["model.base_link"],
-                                config["model.tip_link"], locked, config["model.gravity"])
+                                config["model.tip_link"], locked, gravity)
         _CHAINS[key] = chain
     return chain
 
@@ -130,4 +139,39 @@ def view_urdf(config: Config) -> tuple[str, dict[str, float], str]:
     children = {c.get("link") for c in root.iter("child")}
     roots = [link.get("name", "") for link in root.findall("link")
              if link.get("name") not in children]
+    if config["person.enabled"]:
+        text = with_person_visuals(root, *person_segments(config))
     return text, schema.parse_locked_joints(config["model.locked_joints"]), roots[0]
+
+
+PERSON_COLOUR = "0.87 0.68 0.55 0.85"
+"""RGBA of the person's segments in a viewer (skin, slightly transparent)."""
+
+
+def with_person_visuals(urdf: ET.Element, segments: Sequence[Segment],
+                        placements: Mapping[str, SegmentPlacement]) -> str:
+    """The URDF text with each placed segment of the person drawn on its link: a cylinder
+    (``visual`` named ``person_<segment>``) from the proximal joint along the segment's
+    direction, its length the segment's and its radius that of a solid cylinder with the
+    segment's mass and longitudinal moment (r = sqrt(2 I / m)). Visual only: the plant's
+    inertia is :func:`person_segments`' (:func:`.body_segments.with_segments`)."""
+    links = {link.get("name"): link for link in urdf.findall("link")}
+    for segment in segments:
+        placement = placements.get(segment.name)
+        if placement is None or placement.link not in links:
+            continue
+        along = np.asarray(placement.direction, dtype=float)
+        along = along / np.linalg.norm(along)
+        centre = np.asarray(placement.origin, dtype=float) + 0.5 * segment.length * along
+        pitch = float(np.arctan2(np.hypot(along[0], along[1]), along[2]))
+        yaw = float(np.arctan2(along[1], along[0]))  # Rz(yaw) Ry(pitch) takes z onto ``along``
+        radius = float(np.sqrt(2.0 * segment.inertia_longitudinal / segment.mass))
+        visual = ET.SubElement(links[placement.link], "visual", name=f"person_{segment.name}")
+        ET.SubElement(visual, "origin", xyz=" ".join(f"{x:.6g}" for x in centre),
+                      rpy=f"0 {pitch:.6g} {yaw:.6g}")
+        geometry = ET.SubElement(visual, "geometry")
+        ET.SubElement(geometry, "cylinder", radius=f"{radius:.6g}",
+                      length=f"{segment.length:.6g}")
+        material = ET.SubElement(visual, "material", name="person")
+        ET.SubElement(material, "color", rgba=PERSON_COLOUR)
+    return ET.tostring(urdf, encoding="unicode")

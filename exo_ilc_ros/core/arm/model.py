@@ -18,6 +18,21 @@ LINK_DIRECTION = np.array([0.0, 0.0, -1.0])
 """Every link points along -z of its own frame: at q = 0 the arm hangs straight down."""
 
 
+Gravity = float | Sequence[float] | np.ndarray
+"""A gravity acceleration: its magnitude along -z (m/s^2), or its vector."""
+
+
+def gravity_vector(gravity: Gravity) -> np.ndarray:
+    """The gravity acceleration vector (m/s^2): (0, 0, -g) of a magnitude g, else the vector
+    given."""
+    if isinstance(gravity, (int, float)):
+        return np.array([0.0, 0.0, -float(gravity)])
+    vector = np.array([float(v) for v in gravity])
+    if vector.shape != (3,):
+        raise ModelError(f"gravity must be a magnitude or [x, y, z], got {list(gravity)!r}")
+    return vector
+
+
 @dataclass(frozen=True, eq=False)
 class ArmModel:
     """A serial arm of revolute joints, each link a solid truncated cone.
@@ -47,8 +62,10 @@ class ArmModel:
     @classmethod
     def from_links(cls, masses: Sequence[float], lengths: Sequence[float],
                    radius_proximal: Sequence[float], radius_distal: Sequence[float],
-                   joint_axes: Sequence[str], gravity: float = 9.81) -> ArmModel:
-        """Build the arm from per-link masses, lengths, cone radii and joint axis names."""
+                   joint_axes: Sequence[str], gravity: Gravity = 9.81
+                   ) -> ArmModel:
+        """Build the arm from per-link masses, lengths, cone radii and joint axis names;
+        ``gravity`` the acceleration along -z (m/s^2), or its vector in Oxyz."""
         n = len(masses)
         if not (len(lengths) == len(radius_proximal) == len(radius_distal) == len(joint_axes) == n):
             raise ModelError("masses, lengths, radii and joint axes must have one entry per link")
@@ -68,7 +85,7 @@ class ArmModel:
             inertias[i] = cone_inertia_tensor(props, LINK_DIRECTION)
         return cls(np.asarray(masses, dtype=float), np.asarray(lengths, dtype=float),
                    np.asarray(radius_proximal, dtype=float), np.asarray(radius_distal, dtype=float),
-                   axes, offsets, coms, inertias, np.array([0.0, 0.0, -float(gravity)]))
+                   axes, offsets, coms, inertias, gravity_vector(gravity))
 
     @property
     def dof(self) -> int:

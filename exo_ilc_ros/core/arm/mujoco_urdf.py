@@ -9,7 +9,7 @@ locked joints made fixed at their locked value. Then, on the spec:
 
 * one motor per moving joint (``<joint>_motor``: force = ctrl, unlimited), in the chain's order;
 * RK4 at the given time step (``integration_step``, the method and step of our plant), contacts
-  off, gravity the chain's (the root's (0, 0, -g) in the base link's frame);
+  off, gravity the chain's (the root's, (0, 0, -g) or a vector, in the base link's frame);
 * joint limits off (our plant has none; references are to be checked against the URDF's limits
   before a run);
 * joint effects handled explicitly, as our model handles them: the rigid-body dynamics only.
@@ -40,6 +40,7 @@ import numpy as np
 
 from ..errors import ModelError
 from ..params.urdf_xml import UrdfError, axis_rotation, read_urdf_text, rpy_rotation
+from .model import Gravity
 from .urdf_chain import UrdfChain, read_urdf_chain
 
 STRIPPED = ("visual", "collision")
@@ -63,8 +64,10 @@ def _floats(text: str | None, default: str) -> np.ndarray:
     return np.array([float(v) for v in (text or default).split()])
 
 
-def chain_urdf(text: str, chain: UrdfChain) -> str:
-    """The URDF ``text`` cut to ``chain`` (module docstring): what MuJoCo parses."""
+def chain_urdf(text: str, chain: UrdfChain, shapes: bool = False) -> str:
+    """The URDF ``text`` cut to ``chain`` (module docstring): what MuJoCo parses; with
+    ``shapes`` the links keep their ``<visual>`` and ``<collision>`` (what a viewer draws of
+    the chain, ``exo-ilc urdf``)."""
     root = ET.fromstring(text)
     kept = set(chain.link_poses)
     locked = dict(chain.locked)
@@ -75,7 +78,7 @@ def chain_urdf(text: str, chain: UrdfChain) -> str:
         if link.get("name") not in kept:
             root.remove(link)
             continue
-        for tag in STRIPPED:
+        for tag in () if shapes else STRIPPED:
             for element in link.findall(tag):
                 link.remove(element)
     for joint in root.findall("joint"):
@@ -112,7 +115,8 @@ def chain_urdf(text: str, chain: UrdfChain) -> str:
 
 def mujoco_model(source: str | Path, base_link: str, tip_link: str,
                  locked: Mapping[str, float] | None = None, timestep: float = 0.001,
-                 damping: bool = False, gravity: float = 9.81) -> tuple[Any, UrdfChain]:
+                 damping: bool = False, gravity: Gravity = 9.81
+                 ) -> tuple[Any, UrdfChain]:
     """(MuJoCo's compiled model, our chain) of the URDF at ``source`` (module docstring)."""
     import mujoco
 
@@ -199,7 +203,8 @@ class MujocoUrdfArm:
 
     def __init__(self, source: str | Path, base_link: str, tip_link: str,
                  locked: Mapping[str, float] | None = None, timestep: float = 0.001,
-                 period: float = 0.01, damping: bool = False, gravity: float = 9.81,
+                 period: float = 0.01, damping: bool = False,
+                 gravity: Gravity = 9.81,
                  friction: bool = False, friction_velocity: float = 0.1) -> None:
         import mujoco
 

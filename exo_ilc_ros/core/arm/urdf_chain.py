@@ -1,5 +1,5 @@
-"""A serial arm from its URDF: the arrays the compiled kernels of :mod:`exo_ilc_ros.core.dynamics`
-take, read with the standard library's XML parser.
+"""A serial arm from its URDF: the arrays the compiled kernels of
+:mod:`exo_ilc_ros.core.arm.dynamics` take, read with the standard library's XML parser.
 
 The chain runs from ``base_link`` to ``tip_link``. Its moving joints are the revolute and
 continuous joints on that path that are not locked; every other link is merged, rigidly, into
@@ -12,16 +12,21 @@ the moving body it hangs from:
   joint) through a joint that could move is dropped, whole: it is fixed to the ground as far as
   the chain is concerned (its links are listed in :attr:`UrdfChain.dropped_links`);
 * a joint that could move anywhere else (a branch off a moving link, or beyond the tip) is an
-  error naming it: lock it, or choose another tip.
+  error naming it and the config key that fixes it: lock it, or choose another tip.
 
-The kernels' convention (:mod:`exo_ilc_ros.core.dynamics`) is that all link frames are parallel
+An empty ``base_link`` is the URDF's root link, an empty ``tip_link`` the last link every
+longest chain below the base passes through (the single leaf, or where only fixed, locked or
+prismatic joints branch off), or an error saying why the URDF does not tell.
+
+The kernels' convention (:mod:`exo_ilc_ros.core.arm.dynamics`) is that all link frames are parallel
 to the base frame at q = 0. A URDF's joint frames are rotated by their ``origin rpy``; with R0_i
 the orientation of joint i's frame at q = 0 (in the base frame), the kernel's arrays are
 ``axes[i] = R0_i a_i``, ``offsets[i] = R0_i-1 p_i`` (joint i's origin from joint i-1's),
 ``coms[i] = R0_i c_i`` and ``inertias[i] = R0_i I_i R0_i^T`` (I_i about the body's centre of
-mass), which leaves the dynamics unchanged (tested against Pinocchio). Gravity is (0, 0, -g) in
-the URDF's root link, expressed in the base link's frame (the base's fixed or locked joints
-up to the root at their q = 0 or locked values).
+mass), which leaves the dynamics unchanged (tested against Pinocchio). Gravity is given in the
+URDF's root link's frame ((0, 0, -g) by default: URDFs are drawn z up; any vector, e.g. (0, -g,
+0) for a model drawn y up, ``model.gravity_direction``) and expressed in the base link's frame
+(the base's fixed or locked joints up to the root at their q = 0 or locked values).
 
 Errors (:class:`UrdfError`) name the file or the element: missing file, bad XML, a joint that is
 prismatic, floating or planar on the path, a branch that could move, a base or tip link that is
@@ -45,7 +50,9 @@ from ..params.urdf_xml import (
     UrdfError,
     UrdfJoint,
     axis_rotation,
+    chain_ends,
     chain_path,
+    check_moving_bodies,
     checked_locks,
     joint_tree,
     moving_joints,
@@ -53,6 +60,7 @@ from ..params.urdf_xml import (
     read_urdf_text,
 )
 from .dynamics import inertia_and_bias
+from .model import Gravity, gravity_vector
 
 SINGULAR_TOLERANCE = 1e-10
 """A Cholesky pivot of the mass matrix below this share of its largest diagonal entry counts as
@@ -62,7 +70,7 @@ singular."""
 @dataclass(frozen=True, eq=False)
 class UrdfChain:
     """The moving chain from ``base_link`` to ``tip_link``: the kernels' arrays
-    (:attr:`kernel_args`, as :attr:`exo_ilc_ros.core.model.ArmModel.kernel_args`) and what the
+    (:attr:`kernel_args`, as :attr:`exo_ilc_ros.core.arm.model.ArmModel.kernel_args`) and what the
     URDF says of each moving joint."""
 
     robot_name: str
@@ -190,19 +198,23 @@ def _fixed_transform(joint: UrdfJoint, value: float) -> tuple[np.ndarray, np.nda
 
 
 def read_urdf_chain(source: str | Path, base_link: str, tip_link: str,
-                    locked: Mapping[str, float] | None = None, gravity: float = 9.81
-                    ) -> UrdfChain:
+                    locked: Mapping[str, float] | None = None,
+                    gravity: Gravity = 9.81) -> UrdfChain:
     """The chain from ``base_link`` to ``tip_link`` of the URDF at ``source`` (a path, a
-    ``package://`` URI, or the URDF's text), ``locked`` joints held at the given values
-    (module docstring)."""
+    ``package://`` URI, or the URDF's text; an empty end found in the URDF,
+    :func:`~exo_ilc_ros.core.params.urdf_xml.chain_ends`), ``locked`` joints held at the given
+    values; ``gravity`` (m/s^2) along the root link's -z, or its vector in the root link's
+    frame (module docstring)."""
     text, where = read_urdf_text(source)
     robot, links, joints = parse_urdf(text, where)
     locked = checked_locks(dict(locked or {}), joints, where)
     parent_joint, children = joint_tree(links, joints, where)
+    base_link, tip_link = chain_ends(base_link, tip_link, links, parent_joint, children, locked,
+                                     where)
     moving = moving_joints(chain_path(base_link, tip_link, links, parent_joint, where), locked,
-                            base_link, tip_link, where)
-    bodies, frame_of, dropped = _bodies(base_link, tip_link, moving, links, children, locked,
-                                        where)
+                           base_link, tip_link, where)
+    check_moving_bodies(moving, children, locked, base_link, tip_link, where)
+    bodies, frame_of, dropped = _bodies(base_link, moving, links, children, locked)
     masses, axes, offsets, coms, inertias, orientations = _kernel_arrays(moving, bodies,
                                                                          frame_of)
     poses = {}
@@ -210,7 +222,7 @@ def read_urdf_chain(source: str | Path, base_link: str, tip_link: str,
         r0 = orientations[body - 1] if body > 0 else np.eye(3)
         poses[name] = (body - 1, r0 @ rotation, r0 @ origin)
     base_down = _base_orientation(base_link, parent_joint, locked)
-    g = base_down.T @ np.array([0.0, 0.0, -float(gravity)])
+    g = base_down.T @ gravity_vector(gravity)
     chain = UrdfChain(
         robot, base_link, tip_link, tuple(j.name for j in moving),
         tuple(j.child for j in moving), masses, axes, offsets, coms, inertias, g,
@@ -231,9 +243,8 @@ _Frame = tuple[int, np.ndarray, np.ndarray]
 moving joint i's)."""
 
 
-def _bodies(base_link: str, tip_link: str, moving: list[UrdfJoint],
-            links: Mapping[str, Inertial | None], children: Mapping[str, list[UrdfJoint]],
-            locked: Mapping[str, float], where: str
+def _bodies(base_link: str, moving: list[UrdfJoint], links: Mapping[str, Inertial | None],
+            children: Mapping[str, list[UrdfJoint]], locked: Mapping[str, float]
             ) -> tuple[list[_Body], dict[str, _Frame], list[str]]:
     """Every link merged into the rigid body it belongs to, each link's frame in its body, and
     the links dropped (a branch off the base's body that could move)."""
@@ -256,13 +267,8 @@ def _bodies(base_link: str, tip_link: str, moving: list[UrdfJoint],
                     r, p = _fixed_transform(joint, locked.get(joint.name, 0.0))
                     stack.append((joint.child, rotation @ r, rotation @ p + origin))
                     bodies[body].links.append(joint.child)
-                elif body == 0:
+                else:  # off the base's body (check_moving_bodies refused any other)
                     dropped.extend(_subtree(joint.child, children))
-                else:
-                    raise UrdfError(
-                        f"{where}: joint {joint.name!r} ({joint.type}) moves link "
-                        f"{joint.child!r} off the chain {base_link!r} -> {tip_link!r} (it hangs "
-                        f"from link {name!r}, which moves): lock it or choose another tip")
     return bodies, frame_of, dropped
 
 

@@ -16,17 +16,26 @@ class IterationsToBound:
     settled: list[int | None]
 
 
-def iterations_to_bound(max_abs_errors: np.ndarray, bound: float) -> IterationsToBound:
-    """First and settled trial (1-based) per joint from the (K, joints) max |e| table."""
+def iterations_to_bound(max_abs_errors: np.ndarray, bound: float,
+                        known: np.ndarray | None = None) -> IterationsToBound:
+    """First and settled trial (1-based) per joint from the (K, joints) max |e| table (a NaN
+    row: a trial that diverged, out of the bound). ``known`` (K booleans; None: all) leaves
+    out the trials whose max |e| is not known (a bag's trial left out as damaged): they are
+    neither within nor out of the bound, so "settled" is the first known trial after the last
+    known one out of it."""
     within = np.asarray(max_abs_errors) <= bound
+    rows = np.arange(within.shape[0]) if known is None else np.flatnonzero(known)
     first: list[int | None] = []
     settled: list[int | None] = []
     for j in range(within.shape[1]):
-        hits = np.flatnonzero(within[:, j])
+        inside = within[rows, j]
+        hits = rows[inside]
         first.append(int(hits[0]) + 1 if hits.size else None)
-        misses = np.flatnonzero(~within[:, j])
-        if not within[-1, j]:
+        misses = rows[~inside]
+        if not rows.size or not inside[-1]:
             settled.append(None)
+        elif misses.size:
+            settled.append(int(rows[np.searchsorted(rows, misses[-1]) + 1]) + 1)
         else:
-            settled.append(int(misses[-1]) + 2 if misses.size else 1)
+            settled.append(int(rows[0]) + 1)
     return IterationsToBound(first, settled)

@@ -116,3 +116,20 @@ def fit_growth(max_abs_feedforward: np.ndarray, window: int = DEFAULT_WINDOW,
     with np.errstate(invalid="ignore"):
         growing = (rate > min_rate) & (rate > significance * stderr) & ~converging
     return GrowthFit(rate, stderr, growing, first + 1, table.shape[0], usable, converging)
+
+
+AT_LIMIT_TOLERANCE = 1e-9
+"""Relative distance below ``feedforward_limit`` at which a joint's max |u_ff| is at its limit."""
+
+
+def held_at_limit(max_abs_feedforward: np.ndarray, limit: np.ndarray | None) -> np.ndarray:
+    """Per joint: the last trial's max |u_ff| is at ``limit`` (``feedforward_limit``, inf or
+    None: no limit). Such a joint's learned input does not grow because the limit holds it
+    (sat_U), not because learning converged: its growth fit says nothing, and a report calls it
+    "at its limit", never "bounded"."""
+    table = np.asarray(max_abs_feedforward, dtype=float)
+    if limit is None or table.ndim != 2 or table.shape[0] == 0:
+        return np.zeros(table.shape[-1] if table.ndim == 2 else 0, dtype=bool)
+    bound = np.broadcast_to(np.asarray(limit, dtype=float), table.shape[1:])
+    with np.errstate(invalid="ignore"):
+        return np.asarray(np.isfinite(bound) & (table[-1] >= bound * (1.0 - AT_LIMIT_TOLERANCE)))

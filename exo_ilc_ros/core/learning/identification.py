@@ -2,7 +2,7 @@
 friction, joint stiffness, Coulomb friction), which the paper sets to zero, and the stretch reflex,
 per joint, from one trial's commanded effort and measured position, recursive over trials.
 
-The model, per joint j (the virtual patient's, :mod:`exo_ilc_ros.core.patient`), with the arm's
+The model, per joint j (the virtual patient's, :mod:`exo_ilc_ros.core.loop.patient`), with the arm's
 own dynamics of eq (8) written in Lagrange's form so that no acceleration is needed::
 
     u_j(t - d T) = p_j' + w_j + tau_p,j,   p = a_N(q) qdot,

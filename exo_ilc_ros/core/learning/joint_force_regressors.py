@@ -4,16 +4,24 @@ terms, the state-variable filter, the columns, the reflex grid's columns."""
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 from numba import njit
-from scipy import signal
 
 from .. import _numba_cache  # noqa: F401  (sets numba's cache directory before any kernel)
 from ..arm.dynamics import metric_terms
 from ..arm.model import ArmModel
 from .identification_settings import IdentificationSettings
+
+
+def scipy_signal() -> ModuleType:
+    """``scipy.signal``, imported where a filter is first made or run: importing it takes
+    0.3-1 s (scipy.stats with it), which a run without a Q-filter or identification, and every
+    command's start-up, would pay for nothing."""
+    return importlib.import_module("scipy.signal")
 
 
 @njit(cache=True, error_model="numpy")
@@ -53,16 +61,16 @@ class RegressionFilters:
         self.held = self._discrete(h, settings.period, "zoh")
         self.smooth = self._discrete(h, settings.period, "foh")
         self.derivative = self._discrete(dh, settings.period, "foh")
-        self.smoothing = signal.butter(4, settings.smoothing_cutoff, fs=1.0 / settings.period,
-                                       output="sos")
+        self.smoothing = scipy_signal().butter(4, settings.smoothing_cutoff,
+                                               fs=1.0 / settings.period, output="sos")
 
     @staticmethod
     def _discrete(tf: tuple[list[float], list[float]], period: float,
                   method: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        num, den, _ = signal.cont2discrete(tf, period, method=method)
+        num, den, _ = scipy_signal().cont2discrete(tf, period, method=method)
         b = np.asarray(num, dtype=float).ravel()
         a = np.asarray(den, dtype=float).ravel()
-        return b, a, signal.lfilter_zi(b, a)
+        return b, a, scipy_signal().lfilter_zi(b, a)
 
     def start_transients(self, samples: int) -> np.ndarray:
         """(samples, 2), orthonormal columns spanning 1 - (step response of H) under both
@@ -70,8 +78,8 @@ class RegressionFilters:
         was not at rest at the trial's start (its first acceleration is unknown, so each
         trial's amount of it is projected out, not identified)."""
         ones = np.ones(samples)
-        shapes = np.column_stack([ones - signal.lfilter(*self.held[:2], ones),
-                                  ones - signal.lfilter(*self.smooth[:2], ones)])
+        shapes = np.column_stack([ones - scipy_signal().lfilter(*self.held[:2], ones),
+                                  ones - scipy_signal().lfilter(*self.smooth[:2], ones)])
         return np.asarray(np.linalg.qr(shapes)[0])
 
     @staticmethod
@@ -79,7 +87,7 @@ class RegressionFilters:
         """Filter along axis 0, starting at rest at the first sample's value."""
         b, a, zi = filt
         shape = (zi.shape[0],) + (1,) * (x.ndim - 1)
-        out, _ = signal.lfilter(b, a, x, axis=0, zi=zi.reshape(shape) * x[:1])
+        out, _ = scipy_signal().lfilter(b, a, x, axis=0, zi=zi.reshape(shape) * x[:1])
         return np.asarray(out)
 
 
@@ -113,7 +121,7 @@ def trial_regressors(nominal: ArmModel, settings: IdentificationSettings,
     q = np.ascontiguousarray(position, dtype=float)
     u = np.asarray(effort, dtype=float)
     period = settings.period
-    smoothed = signal.sosfiltfilt(filters.smoothing, q, axis=0)
+    smoothed = scipy_signal().sosfiltfilt(filters.smoothing, q, axis=0)
     velocity = np.gradient(smoothed, period, axis=0)
     p, w = lagrangian_terms(np.ascontiguousarray(smoothed), np.ascontiguousarray(velocity),
                             *nominal.kernel_args)
@@ -149,7 +157,7 @@ def _voluntary_columns(settings: IdentificationSettings, filters: RegressionFilt
     if q_ref.shape != q.shape or qd_ref.shape != q.shape:
         raise ValueError(f"the reference must be {q.shape}, got {q_ref.shape}, {qd_ref.shape}")
     a = settings.period / (settings.voluntary_lag + settings.period)
-    lagged = [signal.lfilter([a], [1.0, a - 1.0], x, axis=0)
+    lagged = [scipy_signal().lfilter([a], [1.0, a - 1.0], x, axis=0)
               for x in (q_ref - q, qd_ref - velocity)]
     return [-filters.apply(filters.held, np.asarray(x)) for x in lagged]
 

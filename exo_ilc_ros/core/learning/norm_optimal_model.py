@@ -39,8 +39,8 @@ MODEL_KEYS = ("norm_optimal.model_kind", "norm_optimal.model_mass_uncertainty", 
               "control.kp", "control.kd", "trajectory.start", "trajectory.goal",
               "trajectory.duration", "model.link_masses", "model.link_lengths",
               "model.radius_proximal", "model.radius_distal", "model.joint_axes",
-              "model.gravity", "exercise.name", "exercise.file", *schema.URDF_KEYS,
-              *schema.PERSON_KEYS)
+              "model.gravity", "model.gravity_direction", "exercise.name", "exercise.file",
+              *schema.URDF_KEYS, *schema.PERSON_KEYS)
 """Every config value the lifted model depends on (its cache key; a URDF by its contents, a
 person's segments only with ``person.enabled``)."""
 WEIGHT_KEYS = ("norm_optimal.weight_error", "norm_optimal.weight_input_change",

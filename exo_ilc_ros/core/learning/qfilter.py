@@ -24,15 +24,23 @@ cut-offs (order 4 at 0.05 Hz at 100 Hz); the SOS form is not. See ``test_qfilter
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass, field
+from types import ModuleType
 
 import numpy as np
-from scipy import signal
 
 from ..loop.record import TrialRecord
 from ..params.config import Config
 from ..reference.trajectory import SampledReference
 from .laws import FeedforwardUpdate, LearningLaw
+
+
+def scipy_signal() -> ModuleType:
+    """``scipy.signal``, imported where a filter is first made or run: importing it takes
+    0.3-1 s (scipy.stats with it), which a run without a Q-filter or identification, and every
+    command's start-up, would pay for nothing."""
+    return importlib.import_module("scipy.signal")
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,7 +65,7 @@ class QFilter:
                              f"{self.cutoff_hz:g}")
         if self.order < 1:
             raise ValueError(f"Q-filter order must be >= 1, got {self.order}")
-        sos = signal.butter(self.order, self.cutoff_hz / nyquist, output="sos")
+        sos = scipy_signal().butter(self.order, self.cutoff_hz / nyquist, output="sos")
         object.__setattr__(self, "sos", np.asarray(sos))
 
     def apply(self, x: np.ndarray) -> np.ndarray:
@@ -66,13 +74,13 @@ class QFilter:
         if x.shape[0] < 2:
             return x.copy()
         padlen = min(3 * (2 * len(self.sos) + 1), x.shape[0] - 1)  # scipy's default, or less
-        return np.asarray(signal.sosfiltfilt(self.sos, x, axis=0, padtype="even",
+        return np.asarray(scipy_signal().sosfiltfilt(self.sos, x, axis=0, padtype="even",
                                              padlen=padlen))
 
     def response(self, frequency_hz: np.ndarray) -> np.ndarray:
         """Q(e^jw) = |H(e^jw)|^2 at ``frequency_hz`` (real, in [0, 1])."""
         w = 2.0 * np.pi * np.asarray(frequency_hz, dtype=float) * self.period
-        _, h = signal.sosfreqz(self.sos, worN=w)
+        _, h = scipy_signal().sosfreqz(self.sos, worN=w)
         return np.asarray(np.abs(h) ** 2)
 
 

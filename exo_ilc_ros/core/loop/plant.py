@@ -72,6 +72,16 @@ def clamp_counted(effort: np.ndarray, limit: np.ndarray, saturated: np.ndarray,
 
 
 @njit(cache=True, error_model="numpy")
+def finite_state(q: np.ndarray, qd: np.ndarray) -> bool:
+    """True if every q_j and qdot_j is finite: False means the plant diverged
+    (:mod:`.divergence`)."""
+    for j in range(q.shape[0]):  # noqa: SIM110  (a loop numba compiles)
+        if not (np.isfinite(q[j]) and np.isfinite(qd[j])):
+            return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
 def saturation_counts(effort: np.ndarray, limit: np.ndarray) -> np.ndarray:
     """Per joint, the number of samples of an (N+1, joints) effort log at the limit."""
     n_samples, n = effort.shape

@@ -18,7 +18,7 @@ from ..arm.dynamics import workspace
 from ..reference.trajectory import SampledReference
 from .controller import control_into, guarded_control_into, hold_into
 from .patient import measure_into, patient_period, start_state_into
-from .plant import clamp, rk4_period
+from .plant import clamp, finite_state, rk4_period
 from .record import TrialRecord
 from .setup import LoopSetup
 
@@ -50,6 +50,10 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
     it runs): the trial starts at x_d(0) plus ``initial``, the controller (and the envelope)
     reads the measured state (:func:`patient.measure_into`) and the plant steps with
     :func:`patient.patient_period` (``learned``: a learning patient's torque per sample).
+    A plant state that is not finite (the plant diverged, :mod:`.divergence`) stops the trial at
+    the sample it is seen: that sample and every later one are NaN in every log, and the trial
+    counts as aborted there unless the envelope aborted it before
+    (:func:`divergence.plant_divergence` tells the two apart).
     Returns the measured q, qdot, u, effort, the abort index (-1: not aborted) and the true
     q, qdot (the same arrays as the measured ones when the patient is off).
     """
@@ -89,6 +93,17 @@ def simulate_trial_guarded(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarr
         else:
             q_log[i] = q
             qd_log[i] = qd
+        if not finite_state(q, qd):  # the plant diverged: stop here (plant.finite_state)
+            state[0] = i if state[0] < 0 else state[0]
+            for k in range(i, n_samples):
+                for j in range(n):
+                    q_log[k, j] = np.nan
+                    qd_log[k, j] = np.nan
+                    u_log[k, j] = np.nan
+                    effort_log[k, j] = np.nan
+                    q_true[k, j] = np.nan
+                    qd_true[k, j] = np.nan
+            break
         q_seen = q_log[i]
         qd_seen = qd_log[i]
         guarded_control_into(i, state, False, u_ff[i], q_ref[i], qd_ref[i], q_seen, qd_seen,

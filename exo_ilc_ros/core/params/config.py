@@ -7,6 +7,7 @@ against :mod:`schema`. Nodes read the same files as ROS parameters.
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import json
 import math
@@ -21,7 +22,15 @@ import yaml
 
 from ..errors import ConfigError
 from . import schema
-from .urdf_xml import UrdfError, UrdfJoint, chain_joints, read_urdf_text, resolve_package_uri
+from .urdf_xml import (
+    UrdfError,
+    UrdfJoint,
+    UrdfKeyError,
+    chain_joints,
+    read_urdf_text,
+    resolve_package_uri,
+    resolved_chain,
+)
 
 PACKAGE = "exo_ilc_ros"
 DEFAULT_CONFIG_NAME = "exo_ilc.yaml"
@@ -69,23 +78,51 @@ def load_ros_yaml(text: str) -> Any:
     return yaml.load(text, Loader=RosYamlLoader)
 
 
-def flatten_ros_yaml(document: Any, source: str) -> dict[str, Any]:
-    """Flat ``{dotted name: value}`` from a ROS parameter YAML (``node: ros__parameters: ...``).
+def unknown_parameter(key: str, known: Iterable[str] | None = None) -> str:
+    """The rule an unknown parameter breaks, with the closest known name (``known``; default:
+    every parameter) when one is close: ``unknown parameter; did you mean 'law'?``."""
+    close = difflib.get_close_matches(key, list(schema.BY_NAME if known is None else known),
+                                      n=1, cutoff=0.75)
+    return "unknown parameter" + (f"; did you mean {close[0]!r}?" if close else "")
 
-    Unknown sections and unknown keys are errors naming the file and key; a key in the wrong
-    section is an error too (it would silently not reach its node under ROS).
+
+def _is_section(key: Any, body: Any) -> bool:
+    """A top-level key of a ROS parameter YAML that names a node section."""
+    name = str(key).lstrip("/") if key != schema.SHARED else key
+    return name in schema.SECTIONS or (isinstance(body, dict) and "ros__parameters" in body)
+
+
+def flatten_ros_yaml(document: Any, source: str) -> dict[str, Any]:
+    """Flat ``{dotted name: value}`` from a ROS parameter YAML (``node: ros__parameters: ...``),
+    or from a file of parameters only (no node section at all: ``max_trials: 20``,
+    ``model: {gravity: 9.81}``; each goes to its node's section).
+
+    Unknown sections and unknown keys are errors naming the file and key (with the closest
+    known name); a key in the wrong section is an error too (it would silently not reach its
+    node under ROS), and so is a parameter beside node sections.
     """
     if document is None:
         return {}
     if not isinstance(document, dict):
         raise ConfigError("<file>", "must be a mapping of node names to ros__parameters",
                           source)
+    if not any(_is_section(key, body) for key, body in document.items()):
+        return _flat_parameters(document, source)
     flat: dict[str, Any] = {}
     for section, body in document.items():
         name = str(section).lstrip("/") if section != schema.SHARED else section
         if name not in schema.SECTIONS:
+            params = dict(flatten_tree({str(section): body}))
+            known = [k for k in params if k in schema.BY_NAME]
+            if known:
+                raise ConfigError(str(section), f"is a parameter, not a node section: put "
+                                  f"{known[0]} under {schema.BY_NAME[known[0]].section}: "
+                                  "ros__parameters:, or give no node section at all (a file "
+                                  "of parameters only)", source)
+            close = difflib.get_close_matches(name, list(schema.SECTIONS), n=1, cutoff=0.75)
             raise ConfigError(str(section), "unknown node section; expected one of "
-                              + ", ".join(schema.SECTIONS), source)
+                              + ", ".join(schema.SECTIONS)
+                              + (f" (did you mean {close[0]!r}?)" if close else ""), source)
         if not isinstance(body, dict) or set(body) != {"ros__parameters"}:
             raise ConfigError(str(section), "must contain exactly one key, ros__parameters",
                               source)
@@ -97,13 +134,27 @@ def flatten_ros_yaml(document: Any, source: str) -> dict[str, Any]:
                 continue
             param = schema.BY_NAME.get(key)
             if param is None:
-                raise ConfigError(key, "unknown parameter", source)
+                raise ConfigError(key, unknown_parameter(key), source)
             if param.section != name:
                 raise ConfigError(key, f"belongs in section {param.section!r}, not {section!r}",
                                   source)
             if key in flat:
                 raise ConfigError(key, "given twice", source)
             flat[key] = value
+    return flat
+
+
+def _flat_parameters(document: Mapping[str, Any], source: str) -> dict[str, Any]:
+    """The parameters of a file without node sections (:func:`flatten_ros_yaml`)."""
+    flat: dict[str, Any] = {}
+    for key, value in flatten_tree(document, ""):
+        if key in schema.ROS_BUILTIN:
+            continue
+        if key not in schema.BY_NAME:
+            raise ConfigError(key, unknown_parameter(key), source)
+        if key in flat:
+            raise ConfigError(key, "given twice", source)
+        flat[key] = value
     return flat
 
 
@@ -126,7 +177,7 @@ def validate(values: Mapping[str, Any], source: str | None = None) -> dict[str, 
         raise ConfigError(missing[0], "missing (every parameter needs a value)", source)
     unknown = [k for k in values if k not in schema.BY_NAME]
     if unknown:
-        raise ConfigError(unknown[0], "unknown parameter", source)
+        raise ConfigError(unknown[0], unknown_parameter(unknown[0]), source)
     out: dict[str, Any] = {}
     try:
         for param in schema.PARAMETERS:
@@ -207,17 +258,25 @@ def _check_urdf_joints(values: Mapping[str, Any]) -> None:
     try:
         names = [j.name for j in urdf_joints(values)]
     except UrdfError as exc:
-        raise ConfigError("model.urdf", str(exc)) from None
+        raise ConfigError(urdf_error_key(exc), str(exc)) from None
     if names != list(values["joint_names"]):
         raise ConfigError("joint_names", f"must be the moving joints of the URDF's chain "
                           f"{values['model.base_link']!r} -> {values['model.tip_link']!r}, "
                           f"[{', '.join(names)}]; got [{', '.join(values['joint_names'])}]")
 
 
+def urdf_error_key(exc: UrdfError) -> str:
+    """The config key a URDF error is about: the one that fixes it (:class:`UrdfKeyError`),
+    else ``model.urdf``."""
+    return exc.key if isinstance(exc, UrdfKeyError) else "model.urdf"
+
+
 def _arm_file(file_values: dict[str, Any], values: dict[str, Any], file: Path) -> None:
     """A file that describes a URDF arm: its relative ``model.urdf`` made absolute (relative to
-    the file), and the ``joint_names`` and ``control.effort_limit`` it does not give taken from
-    the URDF (its moving joints and their ``<limit effort>``)."""
+    the file), an empty ``model.base_link`` or ``model.tip_link`` found in the URDF
+    (:func:`.urdf_xml.chain_ends`: the root, the single tip), and the ``joint_names`` and
+    ``control.effort_limit`` it does not give taken from the URDF (its moving joints and their
+    ``<limit effort>``). A URDF error names the file and the key that fixes it."""
     urdf = file_values.get("model.urdf")
     if isinstance(urdf, str) and urdf and not urdf.startswith("package://") \
             and not Path(urdf).is_absolute():
@@ -229,12 +288,13 @@ def _arm_file(file_values: dict[str, Any], values: dict[str, Any], file: Path) -
     try:
         locked = schema.parse_locked_joints(str(values.get("model.locked_joints", "")))
         text, where, _ = urdf_source(values)
-        joints = chain_joints(text, where, str(values.get("model.base_link", "")),
-                              str(values.get("model.tip_link", "")), locked)
+        base, tip, joints = resolved_chain(text, where, str(values.get("model.base_link", "")),
+                                           str(values.get("model.tip_link", "")), locked)
     except ConfigError as exc:
         raise ConfigError(exc.key, exc.rule, str(file)) from None
     except UrdfError as exc:
-        raise ConfigError("model.urdf", str(exc), str(file)) from None
+        raise ConfigError(urdf_error_key(exc), str(exc), str(file)) from None
+    values["model.base_link"], values["model.tip_link"] = base, tip
     if "joint_names" not in file_values:
         values["joint_names"] = [j.name for j in joints]
     if "control.effort_limit" not in file_values:
@@ -298,7 +358,7 @@ class Config:
         """A new Config with ``overrides`` (dotted names) applied and validated."""
         unknown = [k for k in overrides if k not in schema.BY_NAME]
         if unknown:
-            raise ConfigError(unknown[0], "unknown parameter")
+            raise ConfigError(unknown[0], unknown_parameter(unknown[0]))
         merged = dict(self._values)
         merged.update(overrides)
         return Config(merged, self.source)
@@ -319,8 +379,9 @@ class Config:
         without the URDF keys (its digests stay as they were before they existed), a URDF arm
         without the cone keys and with ``model.urdf`` as the sha256 of the file's contents (not
         its path); ``model.urdf_joint_dynamics`` only when it applies them; the person's keys
-        only with ``person.enabled``, ``patient.joints`` only when given (so, too, for the keys
-        that came before them)."""
+        only with ``person.enabled``, ``patient.joints`` only when given,
+        ``model.gravity_direction`` only when it is not -z (so, too, for the keys that came
+        before them)."""
         urdf = self._values["model.source"] == "urdf"
         left_out = set(schema.CONE_KEYS if urdf else schema.URDF_KEYS + schema.URDF_PLANT_KEYS)
         if self._values["model.urdf_joint_dynamics"] == "ignore":  # keys as before it existed
@@ -329,6 +390,9 @@ class Config:
             left_out.update(schema.PERSON_KEYS)
         if not self._values[schema.PATIENT_JOINTS]:
             left_out.add(schema.PATIENT_JOINTS)
+        down = self._values["model.gravity_direction"]
+        if down[0] == 0.0 and down[1] == 0.0 and down[2] < 0.0:  # -z: as before the key
+            left_out.add("model.gravity_direction")
         out = {k: self[k] for k in (self._values if names is None else names)
                if k not in left_out}
         if urdf and "model.urdf" in out:

@@ -26,6 +26,15 @@ class UrdfError(ModelError):
     """The URDF cannot give the chain asked for; the message names the file and the element."""
 
 
+class UrdfKeyError(UrdfError):
+    """A URDF problem one config key fixes: :attr:`key` names it (``model.base_link``,
+    ``model.tip_link``, ``model.locked_joints``)."""
+
+    def __init__(self, key: str, message: str) -> None:
+        super().__init__(message)
+        self.key = key
+
+
 @dataclass(frozen=True)
 class Inertial:
     mass: float
@@ -280,12 +289,109 @@ def moving_joints(path: list[UrdfJoint], locked: Mapping[str, float], base_link:
     return moving
 
 
-def chain_joints(text: str, where: str, base_link: str, tip_link: str,
-                 locked: Mapping[str, float]) -> list[UrdfJoint]:
-    """The moving joints (revolute, continuous, not locked) from ``base_link`` to ``tip_link`` of
-    the URDF ``text`` read from ``where``, in chain order (the errors of :func:`moving_joints`)."""
+def chain_ends(base_link: str, tip_link: str, links: Mapping[str, Inertial | None],
+               parent_joint: Mapping[str, UrdfJoint], children: Mapping[str, list[UrdfJoint]],
+               locked: Mapping[str, float], where: str) -> tuple[str, str]:
+    """(base link, tip link) with an empty ``base_link`` the URDF's root link and an empty
+    ``tip_link`` the last link every chain below the base with the most moving joints passes
+    through: the single leaf, or the link where only fixed, locked or prismatic joints branch
+    off (a gripper's fingers, tool frames). :class:`UrdfKeyError` naming the key when the URDF
+    does not say which (several roots; chains that branch at a moving joint: two arms)."""
+    if not base_link:
+        roots = [name for name in links if name not in parent_joint]
+        if len(roots) != 1:
+            raise UrdfKeyError("model.base_link", f"{where}: model.base_link is empty (the "
+                               f"URDF's root) and the URDF has {len(roots)} root links "
+                               f"({', '.join(map(repr, roots))}): name the base link")
+        base_link = roots[0]
+    if not tip_link and base_link in links:
+        tip_link = _only_tip(base_link, children, locked, where)
+    return base_link, tip_link
+
+
+def _only_tip(base_link: str, children: Mapping[str, list[UrdfJoint]],
+              locked: Mapping[str, float], where: str) -> str:
+    """The tip of :func:`chain_ends` for an empty ``model.tip_link``."""
+    moves = {base_link: 0}  # moving joints from the base to each link
+    paths: list[list[str]] = []  # from the base to each leaf
+    stack = [[base_link]]
+    while stack:
+        path = stack.pop()
+        below = children[path[-1]]
+        if not below:
+            paths.append(path)
+        for joint in below:
+            moving = joint.type in MOVING_TYPES and joint.name not in locked
+            moves[joint.child] = moves[path[-1]] + int(moving)
+            stack.append([*path, joint.child])
+    most = max(moves[path[-1]] for path in paths)
+    if most == 0:
+        raise UrdfKeyError("model.tip_link", f"{where}: model.tip_link is empty and no "
+                           f"revolute or continuous joint (not locked) is below the base link "
+                           f"{base_link!r}")
+    longest = [path for path in paths if moves[path[-1]] == most]
+    shared = longest[0]
+    for path in longest[1:]:
+        common = 0
+        while common < min(len(shared), len(path)) and shared[common] == path[common]:
+            common += 1
+        shared = shared[:common]
+    if moves[shared[-1]] < most:
+        ends = sorted(path[-1] for path in longest)
+        raise UrdfKeyError("model.tip_link", f"{where}: model.tip_link is empty and the URDF "
+                           f"branches below link {shared[-1]!r} into {len(ends)} chains of "
+                           f"{most} moving joints from the base link {base_link!r} (to "
+                           f"{', '.join(map(repr, ends))}): name the tip link")
+    return shared[-1]
+
+
+def check_moving_bodies(moving: list[UrdfJoint], children: Mapping[str, list[UrdfJoint]],
+                        locked: Mapping[str, float], base_link: str, tip_link: str,
+                        where: str) -> None:
+    """:class:`UrdfKeyError` for a joint that could move a link of a moving body: beyond the
+    tip (key ``model.tip_link``), or on a branch off the chain after its first moving joint
+    (``model.locked_joints``). Every such joint must be fixed or locked: the chain has no
+    degree of freedom for it."""
+    on_chain = {j.name for j in moving}
+    for joint in moving:
+        stack = [(joint.child, joint.child == tip_link)]
+        while stack:
+            link, beyond = stack.pop()
+            for below in children[link]:
+                if below.name in on_chain:
+                    continue  # the next moving body
+                if below.type == "fixed" or below.name in locked:
+                    stack.append((below.child, beyond or below.child == tip_link))
+                elif beyond:
+                    raise UrdfKeyError(
+                        "model.tip_link", f"{where}: joint {below.name!r} ({below.type}) moves "
+                        f"link {below.child!r} beyond the tip link {tip_link!r}: lock it "
+                        "(model.locked_joints) or choose a tip beyond it (model.tip_link)")
+                else:
+                    raise UrdfKeyError(
+                        "model.locked_joints", f"{where}: joint {below.name!r} ({below.type}) "
+                        f"moves link {below.child!r} off the chain {base_link!r} -> "
+                        f"{tip_link!r} (it hangs from link {link!r}, which moves): lock it "
+                        "(model.locked_joints) or choose another tip (model.tip_link)")
+
+
+def resolved_chain(text: str, where: str, base_link: str, tip_link: str,
+                   locked: Mapping[str, float]) -> tuple[str, str, list[UrdfJoint]]:
+    """(base link, tip link, moving joints) of the URDF ``text`` read from ``where``: the ends
+    of :func:`chain_ends` (an empty one found in the URDF) and the moving joints (revolute,
+    continuous, not locked) between them in chain order; the errors of :func:`moving_joints`
+    and :func:`check_moving_bodies`."""
     _, links, joints = parse_urdf(text, where)
     locks = checked_locks(dict(locked), joints, where)
-    parent_joint, _ = joint_tree(links, joints, where)
-    return moving_joints(chain_path(base_link, tip_link, links, parent_joint, where), locks,
-                         base_link, tip_link, where)
+    parent_joint, children = joint_tree(links, joints, where)
+    base, tip = chain_ends(base_link, tip_link, links, parent_joint, children, locks, where)
+    moving = moving_joints(chain_path(base, tip, links, parent_joint, where), locks, base, tip,
+                           where)
+    check_moving_bodies(moving, children, locks, base, tip, where)
+    return base, tip, moving
+
+
+def chain_joints(text: str, where: str, base_link: str, tip_link: str,
+                 locked: Mapping[str, float]) -> list[UrdfJoint]:
+    """The moving joints of :func:`resolved_chain`, in chain order."""
+    return resolved_chain(text, where, base_link, tip_link, locked)[2]

@@ -12,7 +12,7 @@ from typing import Any
 
 from ..errors import ConfigError
 from . import schema
-from .config import Config
+from .config import Config, unknown_parameter
 
 
 def validate_update(current: Config, changes: Mapping[str, Any], live_only: bool = True,
@@ -30,7 +30,7 @@ def validate_update(current: Config, changes: Mapping[str, Any], live_only: bool
             continue
         spec = known.get(name)
         if spec is None:
-            return ConfigError(str(name), "unknown parameter")
+            return ConfigError(str(name), unknown_parameter(str(name), known))
         if live_only and not spec.live:
             return ConfigError(name, "cannot change while the graph runs (restart the node "
                                "with the new value)")

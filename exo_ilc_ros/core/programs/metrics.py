@@ -162,6 +162,8 @@ def sparc(speed: np.ndarray, rate_hz: float, pad_level: int = 4, cutoff_hz: floa
     implementation): the arc length of the normalised magnitude spectrum up to the last
     frequency (<= ``cutoff_hz``) where it is above ``amplitude_threshold``."""
     speed = np.asarray(speed, dtype=float)
+    if not np.all(np.isfinite(speed)):
+        return float("nan")  # a diverged plant (core/loop/divergence.py): no spectrum
     if speed.size < 2 or not np.any(speed):
         return 0.0
     nfft = int(2 ** (np.ceil(np.log2(speed.size)) + pad_level))
@@ -171,6 +173,8 @@ def sparc(speed: np.ndarray, rate_hz: float, pad_level: int = 4, cutoff_hz: floa
     keep = frequency <= cutoff_hz
     f_sel, m_sel = frequency[keep], magnitude[keep]
     above = np.flatnonzero(m_sel >= amplitude_threshold)
+    if above.size == 0:  # too short for a bin under the cutoff
+        return 0.0
     f_sel = f_sel[above[0]:above[-1] + 1]
     m_sel = m_sel[above[0]:above[-1] + 1]
     if f_sel.size < 2:

@@ -29,6 +29,7 @@ from ..errors import ConfigError, ExoIlcError
 from ..loop.record import TrialRecord
 from ..params.config import Config, config_dir, load_config, scenario_names, scenario_path
 from ..session.learning_session import run_trials
+from .shipped_laws import SHIPPED_LAWS
 
 SEED_PARAMETER = "patient.seed"
 """The parameter every per-trial random stream of the patient derives from (with the trial)."""
@@ -48,18 +49,6 @@ class LawSpec:
         where = str(self.path) if self.path is not None else "shipped config"
         extra = ", ".join(f"{k}: {v}" for k, v in self.values.items())
         return f"{self.label} ({where}{', ' + extra if extra else ''})"
-
-
-SHIPPED_LAWS: dict[str, tuple[str | None, dict[str, Any]]] = {
-    "sign": (None, {}),
-    "tuned": ("tuned.yaml", {}),
-    "linear": (None, {"law": "linear"}),
-    "robust": ("robust.yaml", {}),
-    "norm_optimal": (None, {"law": "norm_optimal"}),
-}
-"""Short name -> (file of the shipped config directory, values): ``sign`` is the shipped default
-(the paper's law), ``tuned`` its tuned schedules, ``linear`` and ``norm_optimal`` the shipped
-config with that law (and its shipped gains or weights), ``robust`` the Q-filtered linear law."""
 
 
 def resolve_law(text: str) -> LawSpec:

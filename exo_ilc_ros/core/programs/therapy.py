@@ -91,7 +91,11 @@ def prepare(config: Config, book: ProfileBook, patient: str, exercise: str,
     naming the unknown patient or exercise, the corrupt file or what differs."""
     check_name("patient", patient)
     if not new_patient:
-        book.require_patient(patient)
+        try:
+            book.require_patient(patient)
+        except ProfileError as exc:
+            raise ProfileError(f"{exc}; for the patient's first session add --new-patient") \
+                from None
     elif patient in book.patients():
         raise ProfileError(f"patient {patient!r} already has profiles under {book.root}; drop "
                            "--new-patient to continue their therapy")

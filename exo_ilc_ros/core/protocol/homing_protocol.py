@@ -10,7 +10,8 @@ sample 0. The samples are placed on the control grid by their stamps (nearest gr
 ``max_missing_samples`` samples is discarded (:meth:`LearningSession.discard`, reason ``lost``)
 and run again with the same feed-forward; fewer are filled by linear interpolation. The end of
 a trial is its last sample or the first sample past it. A ``homing_failed`` report stops the run
-(the arm is in the safe hold, the trial not started, every completed trial stored).
+(the arm is in the safe hold, the trial not started, every completed trial stored when the run
+has a store; the message says which).
 
 Everything else (conclusion, store, recorder, live changes, discards) is :class:`TrialProtocol`'s.
 """
@@ -116,9 +117,20 @@ class HomingProtocol(TrialProtocol):
             return
         self.port.event("aborted", [("trial", str(trial)), ("reason", "homing"),
                                     ("detail", reason)])
-        self.fail(f"trial {trial} not started: {reason}; the arm is in the safe hold. Every "
-                  f"completed trial ({self.completed}) is stored: resume the run once the arm "
-                  "is safe")
+        self.fail(f"trial {trial} not started: {reason}; the arm is in the safe hold. "
+                  f"{self._kept()}")
+
+    def _kept(self) -> str:
+        """What a stopped run leaves to resume from: the store's trials, or none without one."""
+        if self.store is None:
+            return (f"No store (store.directory is empty: exo-ilc run --no-store): the "
+                    f"{self.completed} completed trial(s) cannot be resumed; run again once "
+                    "the arm is safe")
+        if self.completed == 0:
+            return (f"No trial completed (store {self.store.directory}): run again once the "
+                    "arm is safe")
+        return (f"Every completed trial ({self.completed}) is stored in "
+                f"{self.store.directory}: resume the run once the arm is safe")
 
     def on_sample(self, stamp_ns: int, position: np.ndarray, velocity: np.ndarray) -> None:
         """A checked sample: placed on the running trial's grid, else kept for a moment (the

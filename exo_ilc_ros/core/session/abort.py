@@ -44,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..learning.laws import FeedforwardUpdate
+from ..loop.divergence import first_non_finite
 from ..loop.record import TrialRecord
 from ..params.config import Config
 
@@ -119,10 +120,20 @@ def abort_trip(trial: int, aborted_at: int, max_abs_error: Sequence[float] | np.
 
 
 def trip_of(record: TrialRecord, config: Config) -> AbortTrip:
-    """:func:`abort_trip` of aborted ``record``."""
+    """:func:`abort_trip` of aborted ``record``; a plant that diverged names the joint that blew
+    up (:func:`..loop.divergence.first_non_finite`), not the first of its NaN joints."""
     if record.aborted_at is None:
         raise ValueError(f"trial {record.trial} was not aborted")
-    return abort_trip(record.trial, record.aborted_at, record.max_abs_error, config)
+    trip = abort_trip(record.trial, record.aborted_at, record.max_abs_error, config)
+    if not trip.diverged:
+        return trip
+    blown = first_non_finite(record.position, record.velocity)
+    if blown is None:
+        return trip
+    joint = blown[1]
+    names = list(config["joint_names"])
+    return dataclasses.replace(trip, joint=joint, joint_name=names[joint] if joint < len(names)
+                               else f"joint {joint}")
 
 
 def pass_length_record(record: TrialRecord) -> TrialRecord:

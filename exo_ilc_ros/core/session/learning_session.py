@@ -245,6 +245,7 @@ class LearningSession:
         if not record.aborted:
             update = self._with_averaging(update, record, shift)
             update = self._with_progress(update, record)
+        update = self._within_limit(update)
         within = self._within(record)
         self.within_streak = self.within_streak + 1 if within else 0
         self.completed = record.trial
@@ -440,6 +441,18 @@ class LearningSession:
         if limit is not None:
             feedforward = np.clip(feedforward, -limit, limit)
         return dataclasses.replace(update, feedforward=feedforward)
+
+    def _within_limit(self, update: FeedforwardUpdate) -> FeedforwardUpdate:
+        """The next trial's feed-forward within ``feedforward_limit`` (the law's sat_U), after
+        everything added to the law's update (the inverse with the identified patient, the
+        hand-over, averaging, progress gain) and after a live change of the limit: no learned
+        input runs, is stored or is printed above its limit. The same array when it is
+        within."""
+        limit = feedforward_limit_of(self.config)
+        if limit is None or np.all(np.abs(update.feedforward) <= limit):
+            return update
+        return dataclasses.replace(update, feedforward=np.clip(update.feedforward, -limit,
+                                                               limit))
 
     def _adopt(self, update: FeedforwardUpdate, forces: JointForceStep) -> np.ndarray:
         """The learned feed-forward once the identified forces changed

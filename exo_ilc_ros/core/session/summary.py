@@ -50,8 +50,11 @@ class RunSummary:
             else self.true_max_abs_error
 
     def iterations_to_bound(self) -> IterationsToBound:
-        """First and settled trial per joint, of the true max |e|."""
-        return iterations_to_bound(self.true_errors, self.error_bound)
+        """First and settled trial per joint, of the true max |e|; a trial a bag did not hold
+        (``extra["sources"]`` ``missing``: left out as damaged) counts neither way."""
+        sources = self.extra.get("sources")
+        known = None if sources is None else np.array([s != "missing" for s in sources])
+        return iterations_to_bound(self.true_errors, self.error_bound, known)
 
     def to_json(self) -> dict[str, Any]:
         """The ``runs[]`` entry of the JSON export."""

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..arm.build import build_arm, build_plant
 from ..errors import SafetyError
+from ..loop.divergence import plant_damping, stable_substeps
 from ..loop.hold import ramp_samples
 from ..loop.patient import PatientModel
 from ..loop.plant import PlantDynamics
@@ -44,6 +45,10 @@ class Experiment:
             else PlantDynamics.PAPER_APPROXIMATION
         self.patient = PatientModel(config)
         """The virtual patient's effects (all off by default)."""
+        self.substeps = stable_substeps(self.plant, self.reference.position,
+                                        plant_damping(self.patient), self.period, self.substeps)
+        """RK4 sub-steps per period: ``integration_step``'s, more where a joint damping is too
+        stiff for it (:func:`divergence.stable_substeps`)."""
 
     def run_trial(self, feedforward: np.ndarray, trial: int,
                   levels: np.ndarray | None = None,

@@ -196,8 +196,14 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("model.joint_axes", SHARED, Kind.STRING_ARRAY,
               "joint axis in the parent link's frame: x, y, z, -x, -y or -z", per_joint=True,
               extra_rule=_axes_rule),
-    Parameter("model.gravity", SHARED, Kind.DOUBLE, "gravity acceleration along -z (m/s^2)",
-              minimum=0.0),
+    Parameter("model.gravity", SHARED, Kind.DOUBLE, "gravity acceleration along "
+              "model.gravity_direction (m/s^2)", minimum=0.0),
+    Parameter("model.gravity_direction", SHARED, Kind.DOUBLE_ARRAY,
+              "the direction gravity pulls in, [x, y, z] in the URDF root link's frame (a cone "
+              "arm's: Oxyz), any length (it is normalised; model.gravity is the magnitude): "
+              "[0, 0, -1] the root's -z (URDFs are drawn z up), [0, -1, 0] a model drawn with y "
+              "up; the chain takes it in its base link's frame through the joints above the "
+              "base (fixed, or locked at their values)", extra_rule=_direction_rule),
     Parameter("model.source", SHARED, Kind.STRING,
               "where the arm comes from: cones (the paper's truncated cones, the model.link_*, "
               "radius_* and joint_axes keys) or urdf (the chain of model.urdf from base_link to "

@@ -134,9 +134,8 @@ class JointForceModel:
         for j, joint in enumerate(estimate.joints):
             if not self.used[j]:
                 continue
-            k = max(joint.value("stiffness"), 0.0)
-            b = max(joint.value("viscous"), 0.0)
-            f = max(joint.value("coulomb"), 0.0)
+            k, b, f = (0.0 if name in joint.absorbed else max(joint.value(name), 0.0)
+                       for name in ("stiffness", "viscous", "coulomb"))
             d = b + f / s.stribeck_velocity / np.cosh(v[:, j] / s.stribeck_velocity) ** 2
             if s.voluntary:
                 for name in ("voluntary_stiffness", "voluntary_damping"):

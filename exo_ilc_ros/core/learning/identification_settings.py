@@ -105,10 +105,12 @@ class IdentificationSettings:
     reflex_minimum_torque: float = 0.02
     """N m: a reflex is reported only if its fitted torque at the fastest stretch seen
     exceeds this (and G's interval excludes 0)."""
-    reversal_speed: float = 0.2
-    """rad/s: Coulomb friction is told from the offset only on a joint that moved faster than
-    this in both directions (2 v_s: tanh 0.964, where a smooth and a hard Coulomb law agree
-    within 4 %).
+    reversal_speed: float = 0.0
+    """rad/s: Coulomb friction is fitted only from the samples where the joint moved faster
+    than this (for the filter's memory, at least 1 s of them), and told from the offset only
+    on a joint that moved so in both directions (2 v_s = 0.2: tanh 0.964, where a smooth and
+    a hard Coulomb law agree within 4 %; config/patient_aware.yaml). 0: the tanh law is
+    trusted at every speed (every sample counts).
     Otherwise F_c sgn(qdot) is a constant of the movement wherever the law is known, and what
     separates it from the offset is the slow start and end, where the law is a guess (tanh,
     or MuJoCo's hard ``frictionloss``): the pair is not separately identifiable."""

@@ -78,7 +78,8 @@ class JointForceSettings:
                    IdentificationSettings.from_config(
                        config, forgetting=float(config["identification.forgetting"]),
                        voluntary=bool(config["identification.voluntary"]),
-                       relative_precision=float(config["identification.relative_precision"])))
+                       relative_precision=float(config["identification.relative_precision"]),
+                       reversal_speed=float(config["identification.reversal_speed"])))
 
 
 @dataclass(frozen=True, eq=False)

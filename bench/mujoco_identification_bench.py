@@ -127,7 +127,7 @@ def main() -> None:
         line = f"trial {record.trial:3d} max|e| {np.max(np.abs(record.error)):.2e}"
         if step is not None:
             est = step.estimate
-            for name, value in truth.items():
+            for name in truth:
                 got = est.values(name)
                 line += f"  {name} " + " ".join(f"{v:.3f}" for v in got)
             line += "  used " + "".join("1" if u else "0" for u in step.used)

@@ -47,7 +47,7 @@ def test_one_way_movement_reports_friction_and_offset_inseparable() -> None:
     estimate = _identify(records, config)
     shoulder = estimate.joints[0]
     assert shoulder.absorbed == ("coulomb",)
-    assert ("offset", "coulomb") == shoulder.inseparable[0][:2]
+    assert shoulder.inseparable[0][:2] == ("offset", "coulomb")
     assert math.isnan(shoulder.inseparable[0][2])
     assert not shoulder["coulomb"].identifiable and math.isnan(shoulder.value("coulomb"))
     assert "not separately identifiable from offset" in shoulder["coulomb"].reason
@@ -77,7 +77,7 @@ def test_one_way_movement_reports_friction_and_offset_inseparable() -> None:
 def test_reversing_exercise_separates_friction(scenarios: tuple[str, ...]) -> None:
     """config/patient_aware.yaml (reversal_speed 0.2) on config/exercises
     reach_and_return_identify, which reverses every joint above 0.4 rad/s: every joint used,
-    Coulomb friction in no inseparable pair, B, F_c, K identifiable and within 10 % on every joint (with a 14-bit
+    no pair inseparable, B, F_c, K identifiable and within 10 % on every joint (with a 14-bit
     encoder too)."""
     config = load_config(overlays=[config_dir() / "patient_aware.yaml",
                                    *[scenario_path(s) for s in scenarios]],

@@ -205,7 +205,7 @@ class JointForceIdentifier:
                   ) -> tuple[np.ndarray, tuple[tuple[str, str, float], ...]]:
         """The base columns fitted (``info.fitted`` less those the trials cannot separate from
         another) and the pairs found, (kept, left out, correlation; nan: by the movement's
-        shape). Then, one at a time, the less needed
+        shape). Then (``reversal_speed`` > 0 only), one at a time, the less needed
         (:data:`KEEP_ORDER`) of the most correlated pair above ``max_correlation``
         (:func:`inseparable_pairs`). ``info`` the fast samples of a joint that never reversed
         (:meth:`_information`): Coulomb friction left out, the offset carries it."""
@@ -221,7 +221,7 @@ class JointForceIdentifier:
                 mask[coulomb] = False
             else:  # too slow for either: both reported, neither left out
                 pairs.append(("viscous", "coulomb", math.nan))
-        for _ in range(len(names)):
+        for _ in range(len(names) if s.reversal_speed > 0.0 else 0):
             solution = solve_scaled(info.R, info.b, info.yy, mask)
             found = [pair for pair in inseparable_pairs(solution.covariance_scaled, names,
                                                         s.max_correlation)

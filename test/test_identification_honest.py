@@ -92,6 +92,34 @@ def test_reversing_exercise_separates_friction(scenarios: tuple[str, ...]) -> No
             assert abs(joint.value(name) - true) <= 0.1 * true, (joint.joint, name)
 
 
+def test_the_summary_the_tables_and_the_json_name_what_is_not_separable() -> None:
+    """patient_aware on the paper's movement: the trial summary's
+    ``identified/inseparable/<joint>`` says the offset carries the Coulomb friction, the key
+    reads back from the summary and the profile JSON, and ``exo-ilc analyze``'s table and
+    ``simulate``'s final lines print it."""
+    from exo_ilc_ros.analysis.identified import format_final, format_table
+    from exo_ilc_ros.core.programs.identified import Identified
+
+    config = load_config(overlays=[config_dir() / "patient_aware.yaml",
+                                   scenario_path("friction")])
+    step = run_trials(config, 0.1, 3).joint_forces[3]
+    names = list(config["joint_names"])
+    shown = Identified.from_step(step, names)
+    values = dict(shown.summary_values())
+    text = values[f"identified/inseparable/{names[0]}"]
+    assert text.startswith("offset carries coulomb (never reversed)"), text
+    assert "viscous ~ coulomb (too slow for the friction law)" in \
+        values[f"identified/inseparable/{names[2]}"]
+    again = Identified.from_summary(3, values, names)
+    assert again is not None and again.joints[0].inseparable == text
+    assert Identified.from_json(json.loads(json.dumps(shown.to_json()))).joints[0] \
+        .inseparable == text
+    assert f"not separately identifiable (only the combination is used): {text}" in \
+        format_table([shown], names)
+    assert text in format_final(shown, "run")
+    assert not step.used[0]
+
+
 def _lab(exercise: str, trials: int) -> tuple[list[Any], list[Any]]:
     """patient_aware driven from outside on MuJoCo (damping 0.4, frictionloss 0.3, stiffness
     1 toward 0 / 0 / 0.3 on every joint, 10 % heavier than the model): each trial from rest

@@ -48,7 +48,7 @@ def test_summary_carries_the_estimate_with_the_same_keys_every_trial() -> None:
     summaries = [key_values(trial_summary(c, names)) for c in conclusions]
     keys = [frozenset(k for k in s if k.startswith("identified/")) for s in summaries]
     assert len(set(keys)) == 1
-    assert len(keys[0]) == len(names) * (4 * len(SHOWN) + 3) + 1
+    assert len(keys[0]) == len(names) * (4 * len(SHOWN) + 4) + 1
     used_somewhere = False
     for c, values in zip(conclusions, summaries, strict=True):
         step = c.joint_forces

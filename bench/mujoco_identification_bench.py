@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import yaml
 
 from exo_ilc_ros.core import Experiment, load_config
 from exo_ilc_ros.core.loop.controller import GuardedControlStep
@@ -116,8 +117,13 @@ def main() -> None:
     parser.add_argument("--frictionloss", type=float, default=0.3)
     parser.add_argument("--stiffness", type=float, default=1.0)
     parser.add_argument("--delta", type=float, default=0.1)
+    parser.add_argument("--set", nargs="*", default=[], metavar="KEY=YAML",
+                        help="config overrides, e.g. identification.in_loop=false")
     args = parser.parse_args()
-    extra = {"exercise.name": args.exercise} if args.exercise else {}
+    extra: dict[str, Any] = {"exercise.name": args.exercise} if args.exercise else {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        extra[key] = yaml.safe_load(value)
     config = lab_config(args.damping, args.frictionloss, args.stiffness, delta=args.delta,
                         **extra)
     run = run_lab(config, args.trials, args.encoder)

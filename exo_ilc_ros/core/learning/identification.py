@@ -44,6 +44,14 @@ and no sign of the patient's own effort in the residual (:class:`IdentificationS
 estimate that fails any of them says why and is not usable (:attr:`JointEstimate.trustworthy`).
 A trial with non-finite samples, or where any joint moved faster than the regression resolves
 (chatter, which biases every coupled joint), is refused and changes nothing.
+
+**Separability** (``reversal_speed`` > 0): Coulomb friction is fitted only from the samples
+where the joint moved faster than ``reversal_speed`` (for the filter's memory), where a smooth
+and a hard law agree; on a joint that never did so in both directions F_c sgn(qdot) is a
+constant of the movement, so it is left out and the offset carries c + F_c sgn(qdot)
+(:attr:`JointEstimate.absorbed`, :attr:`ParameterEstimate.combined_with`); every pair whose
+estimates correlate by more than ``max_correlation`` is reported
+(:attr:`JointEstimate.inseparable`, :func:`inseparable_pairs`).
 """
 
 from __future__ import annotations
@@ -71,6 +79,9 @@ from .joint_force_regressors import (
 )
 from .patient_estimate import PARAMETERS, JointEstimate, ParameterEstimate, PatientEstimate
 from .recursive_least_squares import JointInformation, Solution, hac_inflation, solve_scaled
+from .separability import inseparable_pairs, inseparable_reason
+
+__all__ = ["JointForceIdentifier", "inseparable_pairs"]
 
 _Z95 = 1.959963984540054
 """The normal distribution's 97.5 % quantile: 95 % intervals."""
@@ -339,7 +350,7 @@ class JointForceIdentifier:
             if name in absorbed:
                 params[name] = ParameterEstimate(
                     name, math.nan, math.nan, math.nan, math.nan, False, False,
-                    _inseparable_reason(name, absorbed[name], pairs, info.fastest, s))
+                    inseparable_reason(name, absorbed[name], pairs, info.fastest, s))
                 continue
             params[name] = self._parameter(name, theta[k], cov[k, k], chosen.excited[k],
                                            vif[k], chosen.covariance_scaled, k, names)
@@ -532,41 +543,6 @@ class JointForceIdentifier:
             out[name] = ParameterEstimate(name, float(value), (high - low) / (2 * _Z95), low,
                                           high, not reason, not reason, reason)
         return out
-
-
-def inseparable_pairs(covariance_scaled: np.ndarray, names: tuple[str, ...],
-                      max_correlation: float = 0.99) -> tuple[tuple[str, str, float], ...]:
-    """The pairs of parameters the movement cannot separate: those whose estimates correlate
-    by more than ``max_correlation`` in absolute value under ``covariance_scaled`` (the inverse
-    of the column-scaled information matrix Phi^T Phi, one row per name). Each pair is
-    (name_a, name_b, correlation), the strongest first. Only their combination is determined:
-    e.g. friction F_c tanh(v / v_s) and the constant offset when the joint never reverses
-    (tanh is then nearly constant, so F_c trades one for one against the offset K q_0).
-    A parameter whose variance is not finite (not excited) is in no pair."""
-    c = np.asarray(covariance_scaled, dtype=float)[:len(names), :len(names)]
-    d = np.sqrt(np.abs(np.diag(c)))
-    pairs = []
-    for a in range(len(names)):
-        for b in range(a + 1, len(names)):
-            if not (math.isfinite(d[a]) and math.isfinite(d[b]) and d[a] > 0.0 and d[b] > 0.0):
-                continue
-            corr = float(c[a, b] / (d[a] * d[b]))
-            if math.isfinite(corr) and abs(corr) > max_correlation:
-                pairs.append((names[a], names[b], corr))
-    return tuple(sorted(pairs, key=lambda pair: -abs(pair[2])))
-
-
-def _inseparable_reason(name: str, kept: str, pairs: tuple[tuple[str, str, float], ...],
-                        fastest: np.ndarray, s: IdentificationSettings) -> str:
-    """Why ``name`` was left out of the fit: ``kept`` carries it."""
-    r = next(r for keep, drop, r in pairs if drop == name)
-    if math.isnan(r):
-        return (f"not separately identifiable from {kept}: the joint never moved faster than "
-                f"{s.reversal_speed:g} rad/s in both directions (fastest {fastest[0]:.3g} / "
-                f"{fastest[1]:.3g}), so F_c sgn(qdot) is a constant of the movement; only "
-                f"{kept} + F_c sgn(qdot) is determined, carried by {kept}")
-    return (f"not separately identifiable from {kept} (correlation {r:.4f}): only their "
-            f"combination is determined, carried by {kept}")
 
 
 def _most_correlated(cov_scaled: np.ndarray, k: int, names: tuple[str, ...]) -> str:

@@ -19,9 +19,9 @@ BASE_PARAMETERS = (*PASSIVE_PARAMETERS, "voluntary_stiffness", "voluntary_dampin
 parameters, zero columns when no reference is given)."""
 KEEP_ORDER = ("stiffness", "viscous", "offset", "coulomb", "voluntary_stiffness",
               "voluntary_damping", "model_scale")
-"""Of two parameters the movement cannot separate, the one earlier here is kept and carries
-their combination, the other is left out of the fit (the mass error first: the loop uses it
-only with ``identification.mass_error``)."""
+"""Of two parameters the movement cannot separate, one of them Coulomb friction (with
+``reversal_speed`` > 0), the one earlier here is kept and carries their combination, the other
+is left out of the fit."""
 
 
 def _default_thresholds() -> tuple[float, ...]:
@@ -116,8 +116,9 @@ class IdentificationSettings:
     or MuJoCo's hard ``frictionloss``): the pair is not separately identifiable."""
     max_correlation: float = 0.99
     """Two parameters whose estimates correlate by more than this (in absolute value) are not
-    separately identifiable: only their combination is fitted (the less needed one is left out
-    and the other carries it, :data:`KEEP_ORDER`)."""
+    separately identifiable and reported as such; with ``reversal_speed`` > 0 a pair with
+    Coulomb friction is fitted as its combination only (the less needed one left out, the other
+    carrying it, :data:`KEEP_ORDER`)."""
 
     def __post_init__(self) -> None:
         if not self.period > 0.0:

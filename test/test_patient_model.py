@@ -37,8 +37,13 @@ identification's rules that count on an early trust, and of the lag's bias, run 
 
 
 def _config(scenario: str, **overrides: Any) -> Config:
+    """patient_aware.yaml with the tanh friction law trusted at every speed
+    (``identification.reversal_speed`` 0): the rules of the loop are checked on the paper's
+    movement, which never reverses, where the shipped 0.2 leaves Coulomb friction to the
+    offset and nothing may be used (test_identification_honest.py)."""
     return load_config(overlays=[AWARE, scenario_path(scenario)],
-                       overrides={"mass_uncertainty": 0.1, **overrides})
+                       overrides={"mass_uncertainty": 0.1,
+                                  "identification.reversal_speed": 0.0, **overrides})
 
 
 def _learned_from(config: Config, record: Any) -> Any:

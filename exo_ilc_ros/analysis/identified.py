@@ -32,6 +32,9 @@ def format_table(rows: Sequence[Identified], names: Sequence[str]) -> str:
         last = rows[-1].joints[j]
         if last.reason:
             lines.append(f"  trial {rows[-1].trial}: {last.reason}")
+        if last.inseparable:
+            lines.append(f"  not separately identifiable (only the combination is used): "
+                         f"{last.inseparable}")
     rejected = [f"trial {r.trial}: {r.rejected}" for r in rows if r.rejected]
     lines += [f"identification refused {item}" for item in rejected]
     return "\n".join(lines)
@@ -58,6 +61,9 @@ def format_final(identified: Identified, title: str) -> str:
                      f", in the loop {'yes' if joint.used else 'no'}")
         if joint.reason:
             lines.append(f"    {joint.reason}")
+        if joint.inseparable:
+            lines.append(f"    not separately identifiable (only the combination is used): "
+                         f"{joint.inseparable}")
     if identified.rejected:
         lines.append(f"  trial {identified.trial}'s data refused: {identified.rejected}")
     return "\n".join(lines)

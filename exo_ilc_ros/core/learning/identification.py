@@ -44,10 +44,19 @@ and no sign of the patient's own effort in the residual (:class:`IdentificationS
 estimate that fails any of them says why and is not usable (:attr:`JointEstimate.trustworthy`).
 A trial with non-finite samples, or where any joint moved faster than the regression resolves
 (chatter, which biases every coupled joint), is refused and changes nothing.
+
+**Separability** (``reversal_speed`` > 0): Coulomb friction is fitted only from the samples
+where the joint moved faster than ``reversal_speed`` (for the filter's memory), where a smooth
+and a hard law agree; on a joint that never did so in both directions F_c sgn(qdot) is a
+constant of the movement, so it is left out and the offset carries c + F_c sgn(qdot)
+(:attr:`JointEstimate.absorbed`, :attr:`ParameterEstimate.combined_with`); every pair whose
+estimates correlate by more than ``max_correlation`` is reported
+(:attr:`JointEstimate.inseparable`, :func:`inseparable_pairs`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 
@@ -55,7 +64,12 @@ import numpy as np
 
 from ..arm.model import ArmModel
 from ..loop.record import TrialRecord
-from .identification_settings import BASE_PARAMETERS, PASSIVE_PARAMETERS, IdentificationSettings
+from .identification_settings import (
+    BASE_PARAMETERS,
+    KEEP_ORDER,
+    PASSIVE_PARAMETERS,
+    IdentificationSettings,
+)
 from .joint_force_regressors import (
     RegressionFilters,
     TrialRegressors,
@@ -65,6 +79,9 @@ from .joint_force_regressors import (
 )
 from .patient_estimate import PARAMETERS, JointEstimate, ParameterEstimate, PatientEstimate
 from .recursive_least_squares import JointInformation, Solution, hac_inflation, solve_scaled
+from .separability import inseparable_pairs, inseparable_reason
+
+__all__ = ["JointForceIdentifier", "inseparable_pairs"]
 
 _Z95 = 1.959963984540054
 """The normal distribution's 97.5 % quantile: 95 % intervals."""
@@ -84,6 +101,11 @@ class JointForceIdentifier:
         self.fitted = np.array([name in PASSIVE_PARAMETERS or self.settings.voluntary
                                 for name in BASE_PARAMETERS])
         self.joints = [JointInformation(grid, self.fitted) for _ in range(nominal.dof)]
+        self.moving = [JointInformation(grid, self.fitted) for _ in range(nominal.dof)]
+        """Per joint, the information of the samples where the joint moved faster than
+        ``reversal_speed`` (and had for the filter's memory): where a smooth and a hard
+        Coulomb law agree. A joint that never reversed is fitted from these alone, with the
+        offset carrying F_c sgn(qdot) (:meth:`_information`)."""
         self.estimate: PatientEstimate | None = None
         """The latest estimate (None before the first trial)."""
         self._trial = 0
@@ -131,6 +153,8 @@ class JointForceIdentifier:
                 f"{s.max_unresolved_motion:g}: chatter or stick-slip), which biases every "
                 "joint coupled to it")
         reflexes = []
+        rows = []
+        memory = int(math.ceil(6.0 / (s.filter_bandwidth * s.period)))
         for j, info in enumerate(self.joints):
             phi = np.ascontiguousarray(reg.base[:, j, :])
             y = np.ascontiguousarray(reg.target[:, j])
@@ -140,11 +164,18 @@ class JointForceIdentifier:
             alone = solve_scaled(phi.T @ phi, phi.T @ y, float(y @ y), self.fitted)
             well = (alone.condition <= s.max_condition and bool(np.all(
                 alone.excited[:4])))
-            info.add(phi, reflex, active, y, s.forgetting if well else 1.0,
-                     float(np.max(np.abs(v))), float(reg.unresolved[j]))
+            lam = s.forgetting if well else 1.0
+            info.add(phi, reflex, active, y, lam, v, float(reg.unresolved[j]))
+            slow = (np.abs(v) < s.reversal_speed).astype(float)
+            fast = (np.convolve(slow, np.ones(memory + 1))[:v.shape[0]] == 0.0)[reg.skip:]
+            rows.append(fast)
+            self.moving[j].add(phi[fast], reflex[fast], active, y[fast], lam, v,
+                               float(reg.unresolved[j]))
         estimate = self._conclude("")
         for j, info in enumerate(self.joints):
-            self._update_inflation(j, info, reg, reflexes[j], estimate.joints[j])
+            self._update_inflation(j, info, reg, reflexes[j], estimate.joints[j], None)
+            self._update_inflation(j, self.moving[j], reg, reflexes[j], estimate.joints[j],
+                                   rows[j])
         self.estimate = self._conclude("")
         return self.estimate
 
@@ -164,15 +195,64 @@ class JointForceIdentifier:
     # --- estimation -------------------------------------------------------------------------
 
     def _conclude(self, rejected: str) -> PatientEstimate:
-        joints = tuple(self._joint(j, info) for j, info in enumerate(self.joints))
+        joints = tuple(self._joint(j, self._information(j)) for j in range(len(self.joints)))
         estimate = PatientEstimate(self._trial, joints, rejected)
         if rejected:
             self.estimate = estimate
         return estimate
 
-    def _selected(self, info: JointInformation) -> tuple[int | None, Solution, Solution]:
-        """The best reflex grid point (None: no reflex column), its solution, the base one."""
-        base = solve_scaled(info.R, info.b, info.yy, info.fitted)
+    def _information(self, j: int) -> JointInformation:
+        """The information joint ``j`` is fitted from: of its fast samples alone
+        (:attr:`moving`) when Coulomb friction is fitted, the joint never moved faster than
+        ``reversal_speed`` in both directions, and it did in one for at least 1 s of samples
+        (forgotten as the rest); else of every sample."""
+        info, moving = self.joints[j], self.moving[j]
+        coulomb = BASE_PARAMETERS.index("coulomb")
+        if bool(info.fitted[coulomb]) and moving.samples * self.settings.period >= 1.0:
+            return moving
+        return info
+
+    def _separate(self, info: JointInformation
+                  ) -> tuple[np.ndarray, tuple[tuple[str, str, float], ...]]:
+        """The base columns fitted (``info.fitted`` less those the trials cannot separate from
+        another) and the pairs found, (kept, left out, correlation; nan: by the movement's
+        shape). Then (``reversal_speed`` > 0 only), one at a time, the less needed
+        (:data:`KEEP_ORDER`) of the most correlated pair above ``max_correlation``
+        (:func:`inseparable_pairs`). ``info`` the fast samples of a joint that never reversed
+        (:meth:`_information`): Coulomb friction left out, the offset carries it."""
+        s = self.settings
+        names = BASE_PARAMETERS
+        mask = info.fitted.copy()
+        pairs: list[tuple[str, str, float]] = []
+        coulomb = names.index("coulomb")
+        if mask[coulomb] and info.R[coulomb, coulomb] > 0.0 \
+                and float(np.min(info.fastest)) < s.reversal_speed:
+            if any(info is moving for moving in self.moving):
+                pairs.append(("offset", "coulomb", math.nan))
+                mask[coulomb] = False
+            else:  # too slow for either: both reported, neither left out
+                pairs.append(("viscous", "coulomb", math.nan))
+        for _ in range(len(names) if s.reversal_speed > 0.0 else 0):
+            solution = solve_scaled(info.R, info.b, info.yy, mask)
+            found = [pair for pair in inseparable_pairs(solution.covariance_scaled, names,
+                                                        s.max_correlation)
+                     if "coulomb" in pair[:2]]
+            if not found:
+                break
+            a, b, r = found[0]
+            keep, drop = sorted((a, b), key=KEEP_ORDER.index)
+            pairs.append((keep, drop, r))
+            mask[names.index(drop)] = False
+        solution = solve_scaled(info.R, info.b, info.yy, mask)
+        pairs += [(a, b, r) for a, b, r in inseparable_pairs(solution.covariance_scaled, names,
+                                                             s.max_correlation)]
+        return mask, tuple(pairs)
+
+    def _selected(self, info: JointInformation, mask: np.ndarray
+                  ) -> tuple[int | None, Solution, Solution]:
+        """The best reflex grid point (None: no reflex column), its solution, the base one
+        (the base columns of ``mask``)."""
+        base = solve_scaled(info.R, info.b, info.yy, mask)
         if info.Rgg.shape[0] == 0 or info.trials == 0:
             return None, base, base
         rss = info.grid_rss()
@@ -185,15 +265,18 @@ class JointForceIdentifier:
         R[p, :p] = R[:p, p] = info.Rxg[best]
         R[p, p] = info.Rgg[best]
         b = np.append(info.b, info.bg[best])
-        return best, solve_scaled(R, b, info.yy, np.append(info.fitted, True)), base
+        return best, solve_scaled(R, b, info.yy, np.append(mask, True)), base
 
     def _update_inflation(self, j: int, info: JointInformation, reg: TrialRegressors,
                           reflex: tuple[np.ndarray, np.ndarray],
-                          estimate: JointEstimate) -> None:
+                          estimate: JointEstimate, rows: np.ndarray | None) -> None:
         """The autocorrelation inflation of the variances, from this trial's residual under
-        the model now reported (lambda-weighted mean over trials)."""
-        best, chosen, _ = self._selected(info)
+        the model now reported (lambda-weighted mean over trials); ``rows``: the samples
+        ``info`` holds (None: all)."""
+        mask, _ = self._separate(info)
+        best, chosen, _ = self._selected(info, mask)
         phi = reg.base[:, j, :]
+        target = reg.target[:, j]
         p = phi.shape[1]
         if estimate.reflex_detected and best is not None:
             columns, active = reflex
@@ -202,11 +285,13 @@ class JointForceIdentifier:
             phi = np.column_stack([phi, col])
             theta = chosen.theta
         else:
-            theta = solve_scaled(info.R, info.b, info.yy, info.fitted).theta
+            theta = solve_scaled(info.R, info.b, info.yy, mask).theta
+        if rows is not None:
+            phi, target = phi[rows], target[rows]
         use = np.isfinite(theta)
-        if not np.any(use):
+        if not np.any(use) or phi.shape[0] <= p + 1:
             return
-        residual = reg.target[:, j] - phi[:, use] @ theta[use]
+        residual = target - phi[:, use] @ theta[use]
         lags = int(math.ceil(4.0 / (self.settings.filter_bandwidth * self.settings.period)))
         new = np.full(p + 1, np.nan)
         new[np.flatnonzero(use)] = hac_inflation(phi[:, use], residual, lags)
@@ -224,7 +309,11 @@ class JointForceIdentifier:
                      for name in PARAMETERS}
             return JointEstimate(j, empty, False, math.inf, math.nan, 0.0, 0, False,
                                  ("no trial yet",))
-        best, with_reflex, base = self._selected(info)
+        mask, pairs = self._separate(info)
+        absorbed = {drop: keep for keep, drop, _ in pairs
+                    if not mask[BASE_PARAMETERS.index(drop)]}
+        slow = any(a == "viscous" and b == "coulomb" and math.isnan(r) for a, b, r in pairs)
+        best, with_reflex, base = self._selected(info, mask)
         p = len(BASE_PARAMETERS)
         detected = False
         reflex_reason = ""
@@ -258,8 +347,23 @@ class JointForceIdentifier:
                 params[name] = ParameterEstimate(name, math.nan, math.nan, math.nan, math.nan,
                                                  False, False, "not fitted (voluntary=False)")
                 continue
+            if name in absorbed:
+                params[name] = ParameterEstimate(
+                    name, math.nan, math.nan, math.nan, math.nan, False, False,
+                    inseparable_reason(name, absorbed[name], pairs, info.fastest, s))
+                continue
             params[name] = self._parameter(name, theta[k], cov[k, k], chosen.excited[k],
                                            vif[k], chosen.covariance_scaled, k, names)
+            if name in ("viscous", "coulomb") and slow:
+                params[name] = dataclasses.replace(
+                    params[name], identifiable=False, trustworthy=False,
+                    reason="not separately identifiable (damping and Coulomb friction): the "
+                           f"joint never moved faster than {s.reversal_speed:g} rad/s in both "
+                           "directions, nor for 1 s in one (a smooth Coulomb law is a "
+                           "damping at these speeds, a hard one a constant)")
+            carried = tuple(drop for drop, keep in absorbed.items() if keep == name)
+            if carried:
+                params[name] = dataclasses.replace(params[name], combined_with=carried)
         params["rest_position"] = self._rest_position(theta, cov, params)
         if detected and best is not None:
             params.update(self._reflex_grid(info, best, sigma2 * weights
@@ -275,7 +379,7 @@ class JointForceIdentifier:
             for name in ("reflex_threshold", "reflex_delay"):
                 params[name] = ParameterEstimate(name, math.nan, math.nan, math.nan, math.nan,
                                                  False, False, reflex_reason)
-        needed = list(PASSIVE_PARAMETERS)
+        needed = [name for name in PASSIVE_PARAMETERS if name not in absorbed]
         if detected:
             needed += ["reflex_gain", "reflex_threshold", "reflex_delay"]
         reasons = [f"{name}: {params[name].reason}" for name in needed
@@ -283,7 +387,7 @@ class JointForceIdentifier:
         if not math.isfinite(chosen.condition) or chosen.condition > s.max_condition:
             reasons.insert(0, f"condition number {chosen.condition:.3g} > {s.max_condition:g}")
         suspicion = self._voluntary_suspicion(info, best if detected else None, chosen,
-                                              sigma2)
+                                              sigma2, mask | ~info.fitted)
         if suspicion:
             reasons.insert(0, suspicion)
         if info.unresolved > s.max_unresolved_motion:
@@ -292,10 +396,11 @@ class JointForceIdentifier:
                               f"> {s.max_unresolved_motion:g}: chatter or stick-slip)")
         rms = math.sqrt(chosen.rss / info.samples) if info.samples > 0 else math.nan
         return JointEstimate(j, params, detected, chosen.condition, rms, info.peak_speed,
-                             info.trials, not reasons, tuple(reasons))
+                             info.trials, not reasons, tuple(reasons), pairs,
+                             tuple(absorbed))
 
     def _voluntary_suspicion(self, info: JointInformation, best: int | None,
-                             chosen: Solution, sigma2: float) -> str:
+                             chosen: Solution, sigma2: float, columns: np.ndarray) -> str:
         """"" unless the voluntary columns are not fitted, yet would lower the residual
         significantly (chi^2_2(0.999) = 13.8, with the passive columns' autocorrelation
         inflation) and by more than ``voluntary_minimum_torque``: then a patient's own effort
@@ -307,7 +412,7 @@ class JointForceIdentifier:
         if not np.all(np.diag(info.R)[voluntary] > 0.0):
             return ""  # no reference given
         R, b = info.R, info.b
-        mask = np.ones(p, dtype=bool)
+        mask = columns.copy()
         if best is not None:
             R = np.zeros((p + 1, p + 1))
             R[:p, :p] = info.R
@@ -395,6 +500,12 @@ class JointForceIdentifier:
         k, c = theta[2], theta[3]
         stiffness = params["stiffness"]
         offset = params["offset"]
+        carried = stiffness.combined_with + offset.combined_with
+        if carried:
+            return ParameterEstimate("rest_position", math.nan, math.nan, math.nan, math.nan,
+                                     False, False, "not separately identifiable: stiffness "
+                                     f"and offset carry {', '.join(carried)} (the loop uses "
+                                     "K q + offset)")
         if not (stiffness.identifiable and offset.identifiable):
             return ParameterEstimate("rest_position", math.nan, math.nan, math.nan, math.nan,
                                      False, False, "not identifiable: stiffness or offset is not")

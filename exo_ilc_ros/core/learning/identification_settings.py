@@ -17,6 +17,11 @@ PASSIVE_PARAMETERS = ("viscous", "coulomb", "stiffness", "offset", "model_scale"
 BASE_PARAMETERS = (*PASSIVE_PARAMETERS, "voluntary_stiffness", "voluntary_damping")
 """Every joint's linear columns: the passive ones, then the patient's own effort (nuisance
 parameters, zero columns when no reference is given)."""
+KEEP_ORDER = ("stiffness", "viscous", "offset", "coulomb", "voluntary_stiffness",
+              "voluntary_damping", "model_scale")
+"""Of two parameters the movement cannot separate, one of them Coulomb friction (with
+``reversal_speed`` > 0), the one earlier here is kept and carries their combination, the other
+is left out of the fit."""
 
 
 def _default_thresholds() -> tuple[float, ...]:
@@ -100,6 +105,20 @@ class IdentificationSettings:
     reflex_minimum_torque: float = 0.02
     """N m: a reflex is reported only if its fitted torque at the fastest stretch seen
     exceeds this (and G's interval excludes 0)."""
+    reversal_speed: float = 0.0
+    """rad/s: Coulomb friction is fitted only from the samples where the joint moved faster
+    than this (for the filter's memory, at least 1 s of them), and told from the offset only
+    on a joint that moved so in both directions (2 v_s = 0.2: tanh 0.964, where a smooth and
+    a hard Coulomb law agree within 4 %; config/patient_aware.yaml). 0: the tanh law is
+    trusted at every speed (every sample counts).
+    Otherwise F_c sgn(qdot) is a constant of the movement wherever the law is known, and what
+    separates it from the offset is the slow start and end, where the law is a guess (tanh,
+    or MuJoCo's hard ``frictionloss``): the pair is not separately identifiable."""
+    max_correlation: float = 0.99
+    """Two parameters whose estimates correlate by more than this (in absolute value) are not
+    separately identifiable and reported as such; with ``reversal_speed`` > 0 a pair with
+    Coulomb friction is fitted as its combination only (the less needed one left out, the other
+    carrying it, :data:`KEEP_ORDER`)."""
 
     def __post_init__(self) -> None:
         if not self.period > 0.0:
@@ -110,6 +129,9 @@ class IdentificationSettings:
             raise ValueError("identification: filter bandwidth and Stribeck velocity must be > 0")
         if not 0.0 < self.smoothing_cutoff < 0.5 / self.period:
             raise ValueError("identification: the smoothing cutoff must be below Nyquist")
+        if not (self.reversal_speed >= 0.0 and 0.0 < self.max_correlation <= 1.0):
+            raise ValueError("identification: reversal_speed must be >= 0 and max_correlation "
+                             "in (0, 1]")
         if self.effort_delay < 0:
             raise ValueError("identification: effort_delay must be >= 0")
 

@@ -43,7 +43,9 @@ def joint_force_term(estimate: PatientEstimate, position: np.ndarray, velocity: 
     and the reflex add to computed torque, eqs (9)/(16): Q = a_N(q) u + c_N(q, qdot) + tau_p,
     along the (samples, n) ``position`` and ``velocity`` (the reference's, so that no measured
     velocity is fed back). A joint's passive forces are used when its passive parameters are
-    trustworthy and its checks (condition, chatter, the patient's own effort) pass, its reflex
+    trustworthy and its checks (condition, chatter, the patient's own effort) pass (a parameter
+    the movement cannot separate from another adds 0: the other carries their combination,
+    e.g. the offset c + F_c sgn(qdot) on a joint that never reverses), its reflex
     only when detected and trustworthy too; each parameter inside its plausible range, the
     term clamped to +-``limit``
     (N m, per joint); any other joint adds 0 and says why."""
@@ -65,11 +67,13 @@ def joint_force_term(estimate: PatientEstimate, position: np.ndarray, velocity: 
         reflex = _reflex_usable(joint)
         if reflex:
             names += list(REFLEX_PARAMETERS)
-        values = {name: joint.value(name) for name in names}
+        values = {name: 0.0 if name in joint.absorbed else joint.value(name)
+                  for name in names}
         why = ""
         passive = [r for r in joint.reasons
                    if r.split(":", 1)[0] not in REFLEX_PARAMETERS]
-        if passive or not all(joint[name].trustworthy for name in PASSIVE_PARAMETERS):
+        if passive or not all(joint[name].trustworthy for name in PASSIVE_PARAMETERS
+                              if name not in joint.absorbed):
             why = "; ".join(passive) or "not trustworthy"
         elif not all(math.isfinite(v) for v in values.values()):
             why = "non-finite estimate"

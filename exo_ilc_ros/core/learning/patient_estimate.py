@@ -35,6 +35,10 @@ class ParameterEstimate:
     """Identifiable, finite, precise and physically plausible: usable."""
     reason: str = ""
     """Why not trustworthy ("" when it is)."""
+    combined_with: tuple[str, ...] = ()
+    """Parameters the movement cannot separate from this one, left out of the fit: this
+    estimate carries their combination (e.g. ``offset`` = c + F_c sgn(qdot) on a joint that
+    never reverses), its truth is that combination's."""
 
     @property
     def unit(self) -> str:
@@ -62,6 +66,13 @@ class JointEstimate:
     offset and the reflex when detected) is trustworthy."""
     reasons: tuple[str, ...]
     """Why not trustworthy (empty when it is)."""
+    inseparable: tuple[tuple[str, str, float], ...] = ()
+    """The pairs of parameters the trials so far cannot separate, (kept, left out,
+    correlation; nan: by the movement's shape, a joint that never reversed): only their
+    combination is determined, carried by the first."""
+    absorbed: tuple[str, ...] = ()
+    """The parameters left out of the fit because another carries them (no value, not
+    identifiable; the joint-force term adds them as 0: their share is in the other's)."""
 
     def __getitem__(self, name: str) -> ParameterEstimate:
         return self.parameters[name]
@@ -102,13 +113,17 @@ class PatientEstimate:
                             "residual_rms": _plain(j.residual_rms),
                             "peak_stretch_velocity": _plain(j.peak_stretch_velocity),
                             "trials": j.trials,
+                            "inseparable": [{"kept": a, "left_out": b,
+                                             "correlation": _plain(r)}
+                                            for a, b, r in j.inseparable],
                             "parameters": {name: {"value": _plain(p.value),
                                                   "standard_error": _plain(p.standard_error),
                                                   "low": _plain(p.low), "high": _plain(p.high),
                                                   "unit": p.unit,
                                                   "identifiable": bool(p.identifiable),
                                                   "trustworthy": bool(p.trustworthy),
-                                                  "reason": p.reason}
+                                                  "reason": p.reason,
+                                                  "combined_with": list(p.combined_with)}
                                            for name, p in j.parameters.items()}}
                            for j in self.joints]}
 

@@ -78,7 +78,8 @@ class JointForceSettings:
                    IdentificationSettings.from_config(
                        config, forgetting=float(config["identification.forgetting"]),
                        voluntary=bool(config["identification.voluntary"]),
-                       relative_precision=float(config["identification.relative_precision"])))
+                       relative_precision=float(config["identification.relative_precision"]),
+                       reversal_speed=float(config["identification.reversal_speed"])))
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,9 +135,8 @@ class JointForceModel:
         for j, joint in enumerate(estimate.joints):
             if not self.used[j]:
                 continue
-            k = max(joint.value("stiffness"), 0.0)
-            b = max(joint.value("viscous"), 0.0)
-            f = max(joint.value("coulomb"), 0.0)
+            k, b, f = (0.0 if name in joint.absorbed else max(joint.value(name), 0.0)
+                       for name in ("stiffness", "viscous", "coulomb"))
             d = b + f / s.stribeck_velocity / np.cosh(v[:, j] / s.stribeck_velocity) ** 2
             if s.voluntary:
                 for name in ("voluntary_stiffness", "voluntary_damping"):
@@ -195,6 +195,8 @@ class JointForceModel:
         measured = joint_force_term(estimate, record.position, record.velocity, _UNBOUNDED, s)
         use = self.used & at_reference.used & measured.used
         torque = np.where(use[None, :], at_reference.torque - measured.torque, 0.0)
+        if s.reversal_speed > 0.0:  # no Coulomb secant where either velocity is slow
+            torque = torque - self._slow_coulomb(estimate, record, use)
         if s.voluntary:  # the patient's own pull toward q_d, a stiffness and damping on e
             for name, signal in (("voluntary_stiffness", record.error),
                                  ("voluntary_damping", record.error_velocity)):
@@ -207,6 +209,27 @@ class JointForceModel:
             return None
         correction = self.acceleration(torque)
         return correction if self._qfilter is None else self._qfilter.apply(correction)
+
+    def _slow_coulomb(self, estimate: PatientEstimate, record: TrialRecord,
+                      use: np.ndarray) -> np.ndarray:
+        """F_c [tanh(qdot_d / v_s) - tanh(qdot / v_s)] on the joints in ``use`` at the samples
+        where the reference's or the measured speed is below ``reversal_speed``: there the
+        Coulomb law is not known (a hard law sticks, the tanh's secant is a damping F_c / v_s,
+        3 N m s/rad for 0.3 N m), so the update does not invert it (measured on MuJoCo's hard
+        friction, a reversing exercise: with it patient_aware stayed above 0.005 rad through
+        trial 10, without it within from trial 5)."""
+        s = self.settings.identification
+        v_ref, v = self.reference.velocity, record.velocity
+        out = np.zeros(v.shape)
+        for j, joint in enumerate(estimate.joints):
+            f = joint.value("coulomb")
+            if not use[j] or "coulomb" in joint.absorbed or not np.isfinite(f):
+                continue
+            slow = np.minimum(np.abs(v_ref[:, j]), np.abs(v[:, j])) < s.reversal_speed
+            secant = np.tanh(v_ref[:, j] / s.stribeck_velocity) \
+                - np.tanh(v[:, j] / s.stribeck_velocity)
+            out[:, j] = np.where(slow, min(max(f, 0.0), s.bounds["coulomb"][1]) * secant, 0.0)
+        return out
 
     def conclude(self, record: TrialRecord) -> JointForceStep:
         """Identify trial ``record`` and move the forces of the next trial (rules 1-3)."""

@@ -94,14 +94,16 @@ class JointInformation:
         self.w2 = 0.0
         self.trials = 0
         self.peak_speed = 0.0
+        self.fastest = np.zeros(2)
+        """rad/s: the fastest qdot > 0 and -qdot of every trial so far (a reversal)."""
         self.inflation = np.full(p + 1, np.nan)
         self.unresolved = 0.0
         self._rss: np.ndarray | None = None
 
     def add(self, phi: np.ndarray, reflex: np.ndarray, active: np.ndarray, y: np.ndarray,
-            forgetting: float, speed: float, unresolved: float) -> None:
+            forgetting: float, velocity: np.ndarray, unresolved: float) -> None:
         """One trial's information; ``reflex`` holds the grid points ``active`` (the others'
-        columns are zero in this trial)."""
+        columns are zero in this trial); ``velocity``: the joint's over the trial."""
         lam = forgetting
         self.unresolved = max(unresolved, lam * self.unresolved)
         self.R = lam * self.R + phi.T @ phi
@@ -118,7 +120,9 @@ class JointInformation:
         self.w1 = lam * self.w1 + 1.0
         self.w2 = lam * lam * self.w2 + 1.0
         self.trials += 1
-        self.peak_speed = max(self.peak_speed, speed)
+        self.peak_speed = max(self.peak_speed, float(np.max(np.abs(velocity))))
+        self.fastest = np.maximum(self.fastest, [max(float(np.max(velocity)), 0.0),
+                                                 max(float(-np.min(velocity)), 0.0)])
         self._rss = None
 
     def grid_rss(self) -> np.ndarray:

@@ -15,6 +15,9 @@ keys every trial of a run with ``identification.enabled`` (none without it):
   trial (``identification.in_loop``);
 * ``identified/reason/<joint>``: why this boundary did not move the joint's forces to the
   estimate, and why the estimate is not trustworthy ("" when neither);
+* ``identified/inseparable/<joint>``: the parameters the trials cannot separate, e.g.
+  ``offset carries coulomb (never reversed)`` or ``stiffness ~ model_scale (r -0.999)``: only
+  their combination is determined ("" when none);
 * ``identified/rejected``: why the trial's data was not used at all ("": it was).
 """
 
@@ -61,6 +64,8 @@ class IdentifiedJoint:
     """Computed torque adds the joint's identified forces in the next trial."""
     reason: str
     """Why not used or not trustworthy ("" when neither)."""
+    inseparable: str = ""
+    """The pairs the trials cannot separate (:func:`inseparable_text`; "" when none)."""
 
     def __getitem__(self, name: str) -> IdentifiedParameter:
         return self.parameters[name]
@@ -89,7 +94,9 @@ class Identified:
             if not joint.trustworthy and why and why not in parts:
                 parts.append(why)
             joints.append(IdentifiedJoint(name, parameters, bool(joint.trustworthy),
-                                          bool(step.used[j]), "; ".join(parts)))
+                                          bool(step.used[j]), "; ".join(parts),
+                                          inseparable_text(joint.inseparable,
+                                                           joint.absorbed)))
         return cls(int(estimate.trial), tuple(joints), str(estimate.rejected))
 
     def summary_values(self) -> list[tuple[str, str]]:
@@ -106,6 +113,7 @@ class Identified:
                 for j in self.joints]
         out += [(f"{SUMMARY_PREFIX}used/{j.name}", _flag(j.used)) for j in self.joints]
         out += [(f"{SUMMARY_PREFIX}reason/{j.name}", j.reason) for j in self.joints]
+        out += [(f"{SUMMARY_PREFIX}inseparable/{j.name}", j.inseparable) for j in self.joints]
         out.append((f"{SUMMARY_PREFIX}rejected", self.rejected))
         return out
 
@@ -118,7 +126,8 @@ class Identified:
             cells = "; ".join(f"{SYMBOLS[p]} {format_value(p, j[p])} {UNITS[p]}" for p in SHOWN)
             out.append((f"{SUMMARY_PREFIX}{j.name}",
                         f"{cells}; trusted {'yes' if j.trustworthy else 'no'}; in the loop "
-                        f"{'yes' if j.used else 'no'}" + (f" ({j.reason})" if j.reason else "")))
+                        f"{'yes' if j.used else 'no'}" + (f" ({j.reason})" if j.reason else "")
+                        + (f"; not separable: {j.inseparable}" if j.inseparable else "")))
         if self.rejected:
             out.append((f"{SUMMARY_PREFIX}rejected", self.rejected))
         return out
@@ -140,7 +149,8 @@ class Identified:
                 joints.append(IdentifiedJoint(
                     name, parameters, values[f"{SUMMARY_PREFIX}trustworthy/{name}"] == "true",
                     values[f"{SUMMARY_PREFIX}used/{name}"] == "true",
-                    values.get(f"{SUMMARY_PREFIX}reason/{name}", "")))
+                    values.get(f"{SUMMARY_PREFIX}reason/{name}", ""),
+                    values.get(f"{SUMMARY_PREFIX}inseparable/{name}", "")))
         except (KeyError, ValueError):
             return None
         return cls(trial, tuple(joints), values.get(f"{SUMMARY_PREFIX}rejected", ""))
@@ -150,7 +160,7 @@ class Identified:
         session's last trial (``metrics.identification``)."""
         return {"trial": self.trial, "rejected": self.rejected,
                 "joints": [{"joint": j.name, "trustworthy": j.trustworthy, "used": j.used,
-                            "reason": j.reason,
+                            "reason": j.reason, "inseparable": j.inseparable,
                             "parameters": {p: {"value": _plain(x.value), "low": _plain(x.low),
                                                "high": _plain(x.high), "unit": UNITS[p],
                                                "identifiable": x.identifiable}
@@ -166,8 +176,23 @@ class Identified:
                                                  _float(x["high"]), bool(x["identifiable"]))
                           for p, x in j["parameters"].items() if p in SHOWN}
             joints.append(IdentifiedJoint(str(j["joint"]), parameters, bool(j["trustworthy"]),
-                                          bool(j["used"]), str(j.get("reason", ""))))
+                                          bool(j["used"]), str(j.get("reason", "")),
+                                          str(j.get("inseparable", ""))))
         return cls(int(data["trial"]), tuple(joints), str(data.get("rejected", "")))
+
+
+def inseparable_text(pairs: Sequence[tuple[str, str, float]], absorbed: Sequence[str]) -> str:
+    """``offset carries coulomb (never reversed); stiffness ~ model_scale (r -0.999)``: each
+    pair the trials cannot separate, "carries" where the second was left out of the fit and
+    the first holds their combination (a NaN correlation: by the movement's shape, a joint
+    that never reversed, or too slow to tell a smooth Coulomb law from a hard one)."""
+    parts = []
+    for kept, other, r in pairs:
+        how = f"r {r:.3f}" if not math.isnan(r) else \
+            "too slow for the friction law" if kept == "viscous" else "never reversed"
+        verb = "carries" if other in absorbed else "~"
+        parts.append(f"{kept} {verb} {other} ({how})")
+    return "; ".join(parts)
 
 
 def _float(x: Any) -> float:

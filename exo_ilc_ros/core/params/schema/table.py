@@ -517,6 +517,11 @@ PARAMETERS: tuple[Parameter, ...] = (
               "largest 95 % half-width over |value| of a parameter the loop may use (below "
               "the identification's absolute floor it is always precise enough)",
               strictly_positive=True),
+    Parameter("identification.reversal_speed", SUPERVISOR, Kind.DOUBLE,
+              "rad/s: Coulomb friction is fitted only from samples where the joint moves "
+              "faster than this (a smooth and a hard law agree there) and told from the offset "
+              "only on a joint that did both ways; else the offset carries it (0: the tanh law "
+              "trusted at every speed)", minimum=0.0),
     Parameter("identification.voluntary", SUPERVISOR, Kind.BOOL,
               "fit the patient's own effort toward the reference too (for a patient known to "
               "push; else its suspicion makes an estimate untrustworthy)"),

@@ -258,6 +258,11 @@ class StrappedArm:
         self._exo_dof = slice(dof_at[0], dof_at[0] + n)
         self._qpos = self.data.qpos
         self._qvel = self.data.qvel
+        self._nan = np.full(n, np.nan)
+        self._warnings = self.data.warning
+        self._bad_qacc = int(mujoco.mjtWarning.mjWARN_BADQACC)
+        self._diverged = False
+        self._bad_seen = 0
         self._exo_ctrl = np.array([m.actuator(EXO_PREFIX + j).id for j in self.joint_names])
         self.muscles = muscle_names(m)
         self._muscle_ctrl = np.array([m.actuator(a).id for a in self.muscles], dtype=int)
@@ -335,6 +340,7 @@ class StrappedArm:
         self._fresh = False
         self.trial = None
         self.index = 0
+        self.diverged = False
         if self.drive is not None:  # the neural drive's memory (a reflex's delays) cleared
             self.drive.reset(self.model, self.data)
 
@@ -355,12 +361,12 @@ class StrappedArm:
     @property
     def position(self) -> np.ndarray:
         """The exoskeleton's q (a copy): what the controller and the law see."""
-        return self._qpos[self._exo_qpos].copy()
+        return self._nan.copy() if self._diverged else self._qpos[self._exo_qpos].copy()
 
     @property
     def velocity(self) -> np.ndarray:
         """The exoskeleton's qdot (a copy)."""
-        return self._qvel[self._exo_dof].copy()
+        return self._nan.copy() if self._diverged else self._qvel[self._exo_dof].copy()
 
     def measure(self) -> tuple[np.ndarray, np.ndarray]:
         """The exoskeleton's (q, qdot) at the current sample; the cuffs' :attr:`wrench` there."""
@@ -382,6 +388,20 @@ class StrappedArm:
         self._prepare()
         self._mujoco.mj_step2(self.model, self.data)
         self._fresh = False
+        if self._warnings[self._bad_qacc].number != self._bad_seen:
+            self.diverged = True  # MuJoCo reset its state (it does so on a bad acceleration)
+
+    @property
+    def diverged(self) -> bool:
+        """True once MuJoCo found the state unstable in this trial (it then resets the state
+        to the model's reference pose; the exoskeleton's state reads NaN from there, as a
+        diverged plant, until :meth:`reset`)."""
+        return self._diverged
+
+    @diverged.setter
+    def diverged(self, value: bool) -> None:
+        self._diverged = value
+        self._bad_seen = self._warnings[self._bad_qacc].number
 
     def _cuff_forces(self) -> None:
         """The cuffs' spring-damper forces at the fresh kinematics, into ``xfrc_applied``

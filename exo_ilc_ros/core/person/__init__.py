@@ -1,2 +1,3 @@
-"""The person in the exoskeleton: a musculoskeletal model (MuJoCo muscles), its neural drive
-and the stretch test that calibrates it."""
+"""A person with muscles in the exoskeleton: MyoSuite's musculoskeletal arm models (``model``),
+the exoskeleton strapped to them in cuffs (``strapped``), the neural drive of the muscles and the
+stretch test."""

@@ -11,9 +11,9 @@ from typing import Any
 from ..core.params.schema import MAS_GRADES
 from .arguments import add_config_argument, figure_path, json_file, number
 
-MODELS = ("elbow",)
-"""The musculoskeletal models the test runs on: MyoSuite's small elbow (two degrees of freedom,
-six muscles)."""
+MODELS = ("myoelbow", "myoarm")
+"""The person models the test runs on (core/person/model.py): MyoSuite's small elbow (two
+degrees of freedom, six muscles) and MyoArm's pruned right arm."""
 
 
 def register(sub: Any) -> None:
@@ -29,8 +29,9 @@ def register(sub: Any) -> None:
         "custom runs the config's own drive. See docs/stretch-test.md.")
     add_config_argument(parser, "ROS parameter YAML over the shipped config: its person.drive "
                         "keys (delay, spastic muscles; custom: the whole drive)")
-    parser.add_argument("--model", choices=MODELS, default="elbow",
-                        help="the person's model (default: elbow, myoelbow_2dof6muscles)")
+    parser.add_argument("--model", choices=MODELS, default="myoelbow",
+                        help="the person's model: myoelbow (MyoSuite's small elbow, the "
+                        "default, fast) or myoarm (MyoArm's right arm, shoulder held)")
     parser.add_argument("--grades", nargs="+", choices=MAS_GRADES,
                         default=["0", "1", "1+", "2", "3"], metavar="GRADE",
                         help="MAS presets to stretch (0 1 1+ 2 3; custom: the config's drive; "
@@ -51,10 +52,10 @@ def stretch_test_command(args: argparse.Namespace) -> int:
     """Run the test, print the table, write the JSON and the figure."""
     from ..core.params.config import load_config
     from ..core.person.neural_drive import drive_settings
-    from ..core.person.stretch_test import elbow_person, stretch_test
+    from ..core.person.stretch_test import stretch_person, stretch_test
     config = load_config(args.config)
     base = drive_settings(config)
-    person = elbow_person()
+    person = stretch_person(args.model)
     measures = stretch_test(person, base, args.grades, args.velocities)
     print(f"stretch test: {person.name}, 120 -> 20 deg flexion, reflex delay {base.delay:g} s, "
           f"spastic muscles {', '.join(base.spastic_muscles) or 'none'}")

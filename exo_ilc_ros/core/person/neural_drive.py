@@ -42,7 +42,9 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from numba import njit
 
+from .. import _numba_cache  # noqa: F401  (sets numba's cache directory before any kernel)
 from ..errors import ConfigError
 from ..params.config import Config
 
@@ -160,117 +162,154 @@ class MuscleGeometry:
     ctrl_high: np.ndarray
 
     @classmethod
-    def of(cls, model: object) -> MuscleGeometry:
+    def of(cls, model: Any) -> MuscleGeometry:
         """Every muscle actuator of a MuJoCo model (``mjDYN_MUSCLE``)."""
         import mujoco
         m = model  # mujoco.MjModel
-        ids = np.flatnonzero(m.actuator_dyntype == mujoco.mjtDyn.mjDYN_MUSCLE)  # type: ignore[attr-defined]
+        ids = np.flatnonzero(m.actuator_dyntype == mujoco.mjtDyn.mjDYN_MUSCLE)
         if ids.size == 0:
             raise ConfigError(DRIVE_PREFIX + "spastic_muscles", "the person's model has no "
                               "muscle actuators (dyntype muscle)")
-        gain = m.actuator_gainprm[ids]  # type: ignore[attr-defined]
-        span = m.actuator_lengthrange[ids]  # type: ignore[attr-defined]
+        gain = m.actuator_gainprm[ids]
+        span = m.actuator_lengthrange[ids]
         optimal = (span[:, 1] - span[:, 0]) / np.maximum(gain[:, 1] - gain[:, 0], 1e-15)
         scale = 1.0 / optimal
-        names = tuple(m.actuator(int(i)).name for i in ids)  # type: ignore[attr-defined]
-        ctrl = m.actuator_ctrlrange[ids]  # type: ignore[attr-defined]
-        limited = m.actuator_ctrllimited[ids].astype(bool)  # type: ignore[attr-defined]
+        names = tuple(m.actuator(int(i)).name for i in ids)
+        ctrl = m.actuator_ctrlrange[ids]
+        limited = m.actuator_ctrllimited[ids].astype(bool)
         return cls(ids, names, scale, gain[:, 0] - span[:, 0] * scale,
                    np.where(limited, ctrl[:, 0], 0.0), np.where(limited, ctrl[:, 1], 1.0))
+
+
+# Rows of the kernel's ``geometry`` array (per driven muscle):
+_SCALE, _OFFSET, _LOW, _HIGH, _SPASTIC = range(5)
+# Entries of the kernel's ``law`` array:
+(_TONE, _L_TH, _V_TH, _G_L, _G_V, _R_MAX, _G_VOL, _FATIGUE, _RECOVERY, _DT,
+ _DELAY) = range(11)
+# Rows of the kernel's ``muscles`` array (per driven muscle):
+_REFLEX, _EXCITATION, _FATIGUED, _INTENDED = range(4)
+
+
+@njit(cache=True, error_model="numpy")
+def drive_step_kernel(length: np.ndarray, velocity: np.ndarray, ctrl: np.ndarray,
+                      actuators: np.ndarray, geometry: np.ndarray, history: np.ndarray,
+                      step: int, law: np.ndarray, muscles: np.ndarray) -> None:
+    """One step of :class:`NeuralDrive` (the module's law): record the driven muscles' normalised
+    length and velocity in slot ``step % depth`` of ``history`` (2, depth, muscles; at step 0
+    every slot), read them ``law[_DELAY]`` steps back, write the excitations to ``ctrl`` and the
+    reflex, excitation and fatigue into ``muscles``."""
+    depth = history.shape[1]
+    delay = int(law[_DELAY])
+    slot = step % depth
+    past = (step - delay + depth) % depth  # before step D: a slot still holding step 0's
+    for i in range(actuators.size):
+        a = actuators[i]
+        now_length = length[a] * geometry[_SCALE, i] + geometry[_OFFSET, i]
+        now_velocity = velocity[a] * geometry[_SCALE, i]
+        if step == 0:
+            history[0, :, i] = now_length
+            history[1, :, i] = now_velocity
+        history[0, slot, i] = now_length
+        history[1, slot, i] = now_velocity
+        reflex = 0.0
+        if geometry[_SPASTIC, i] > 0.0:
+            beyond = max(history[0, past, i] - law[_L_TH], 0.0)
+            faster = max(history[1, past, i] - law[_V_TH], 0.0)
+            reflex = min(beyond * (law[_G_L] + law[_G_V] * faster), law[_R_MAX])
+        drive = law[_TONE] + reflex + law[_G_VOL] * max(-muscles[_INTENDED, i], 0.0)
+        if law[_FATIGUE] > 0.0:
+            drive = min(drive, 1.0 - muscles[_FATIGUED, i])
+        drive = min(max(drive, geometry[_LOW, i]), geometry[_HIGH, i])
+        if law[_FATIGUE] > 0.0:
+            muscles[_FATIGUED, i] += law[_DT] * (law[_FATIGUE] * drive
+                                                 - law[_RECOVERY] * muscles[_FATIGUED, i])
+        ctrl[a] = drive
+        muscles[_REFLEX, i] = reflex
+        muscles[_EXCITATION, i] = drive
 
 
 class NeuralDrive:
     """The per-step controller of a musculoskeletal person: :meth:`step` reads the muscles'
     lengths and velocities from ``MjData`` and writes their excitations to ``data.ctrl``
-    (call it before every ``mj_step``). :attr:`intent` (the intended joint velocity per dof)
-    drives the voluntary activation; :meth:`reset` starts a new stretch or trial."""
+    (call it before every ``mj_step``; one compiled kernel, :func:`drive_step_kernel`).
+    :attr:`intent` (the intended joint velocity per dof) drives the voluntary activation;
+    :meth:`reset` starts a new stretch or trial."""
 
-    def __init__(self, model: object, settings: DriveSettings,
+    def __init__(self, model: Any, settings: DriveSettings,
                  timestep: float | None = None) -> None:
         self.settings = settings
         self.geometry = MuscleGeometry.of(model)
         self.model = model
-        dt = float(timestep if timestep is not None else model.opt.timestep)  # type: ignore[attr-defined]
+        dt = float(timestep if timestep is not None else model.opt.timestep)
         self.timestep = dt
         self.delay_steps = steps_of(settings.delay, dt)
         names = self.geometry.names
-        unknown = [name for name in settings.spastic_muscles if name not in names]
-        if unknown and len(unknown) == len(settings.spastic_muscles):
-            raise ConfigError(DRIVE_PREFIX + "spastic_muscles", f"none of {unknown} is a muscle "
-                              f"of the person's model ({', '.join(names)})")
+        known = [name for name in settings.spastic_muscles if name in names]
+        if settings.spastic_muscles and not known and settings.has_reflex:
+            raise ConfigError(DRIVE_PREFIX + "spastic_muscles", f"none of "
+                              f"{list(settings.spastic_muscles)} is a muscle of the person's "
+                              f"model ({', '.join(names)})")
         self.spastic = np.array([name in settings.spastic_muscles for name in names])
-        n = len(names)
-        depth = self.delay_steps + 1
-        self._length = np.zeros((depth, n))
-        self._velocity = np.zeros((depth, n))
-        self._fatigue = np.zeros(n)
+        g = self.geometry
+        self._geometry = np.vstack([g.scale, g.offset, g.ctrl_low, g.ctrl_high,
+                                    self.spastic.astype(float)])
+        s = settings
+        self._law = np.array([s.tone, s.length_threshold, s.velocity_threshold, s.length_gain,
+                              s.velocity_gain, s.reflex_max, s.voluntary_gain, s.fatigue_rate,
+                              s.recovery_rate, dt, float(self.delay_steps)])
+        self._history = np.zeros((2, self.delay_steps + 1, len(names)))
+        self._muscles = np.zeros((4, len(names)))
         self._k = 0
-        self._moment = np.zeros((model.nu, model.nv))  # type: ignore[attr-defined]
+        self._moment = np.zeros((model.nu, model.nv))
         self.intent: np.ndarray | None = None
-        self.excitation = np.zeros(n)
-        self.reflex = np.zeros(n)
 
     def reset(self) -> None:
-        """Forget the delayed history and the fatigue (the buffer refills from the next step:
+        """Forget the delayed history and the fatigue (the history refills from the next step:
         until D steps have passed the reflex sees the first sample)."""
         self._k = 0
-        self._fatigue[:] = 0.0
-        self.excitation[:] = 0.0
-        self.reflex[:] = 0.0
+        self._muscles[:] = 0.0
 
-    def sense(self, data: object) -> tuple[np.ndarray, np.ndarray]:
+    def sense(self, data: Any) -> tuple[np.ndarray, np.ndarray]:
         """Normalised fibre length and lengthening velocity (L0/s) of the driven muscles now."""
         g = self.geometry
-        length = data.actuator_length[g.actuators] * g.scale + g.offset  # type: ignore[attr-defined]
-        velocity = data.actuator_velocity[g.actuators] * g.scale  # type: ignore[attr-defined]
+        length = data.actuator_length[g.actuators] * g.scale + g.offset
+        velocity = data.actuator_velocity[g.actuators] * g.scale
         return length, velocity
 
-    def step(self, data: object) -> np.ndarray:
+    def step(self, data: Any) -> np.ndarray:
         """One controller step: sense, delay, excite; writes ``data.ctrl`` of the muscles and
-        returns their excitations."""
-        s = self.settings
-        length, velocity = self.sense(data)
-        depth = self.delay_steps + 1
-        slot = self._k % depth
-        if self._k == 0:  # fill the history with the first sample (a person at rest before)
-            self._length[:] = length
-            self._velocity[:] = velocity
-        self._length[slot] = length
-        self._velocity[slot] = velocity
-        past = (self._k - self.delay_steps) % depth if self._k >= self.delay_steps else 0
+        returns their excitations (a view, overwritten by the next step)."""
+        if self.settings.voluntary_gain > 0.0 and self.intent is not None:
+            self._muscles[_INTENDED] = self.intended_velocity(data)
+        drive_step_kernel(data.actuator_length, data.actuator_velocity, data.ctrl,
+                          self.geometry.actuators, self._geometry, self._history, self._k,
+                          self._law, self._muscles)
         self._k += 1
-        reflex = reflex_excitation(self._length[past], self._velocity[past], s)
-        reflex[~self.spastic] = 0.0
-        drive = s.tone + reflex
-        if s.voluntary_gain > 0.0 and self.intent is not None:
-            drive = drive + s.voluntary_gain * np.maximum(-self.intended_velocity(data), 0.0)
-        if s.fatigue_rate > 0.0:
-            drive = np.minimum(drive, 1.0 - self._fatigue)
-        g = self.geometry
-        drive = np.clip(drive, g.ctrl_low, g.ctrl_high)
-        if s.fatigue_rate > 0.0:
-            self._fatigue += self.timestep * (s.fatigue_rate * drive
-                                              - s.recovery_rate * self._fatigue)
-        data.ctrl[g.actuators] = drive  # type: ignore[attr-defined]
-        self.excitation = drive
-        self.reflex = reflex
-        return drive
+        return self._muscles[_EXCITATION]
 
-    def intended_velocity(self, data: object) -> np.ndarray:
+    @property
+    def reflex(self) -> np.ndarray:
+        """The reflex excitation of each driven muscle at the last step."""
+        return self._muscles[_REFLEX]
+
+    @property
+    def excitation(self) -> np.ndarray:
+        """The excitation written for each driven muscle at the last step."""
+        return self._muscles[_EXCITATION]
+
+    def intended_velocity(self, data: Any) -> np.ndarray:
         """The fibre velocity (L0/s) the intended joint velocities give each driven muscle:
         moment arms (d length / d q) times :attr:`intent`."""
         import mujoco
-        d = data
-        mujoco.mju_sparse2dense(self._moment, d.actuator_moment,  # type: ignore[attr-defined]
-                                d.moment_rownnz, d.moment_rowadr,  # type: ignore[attr-defined]
-                                d.moment_colind)  # type: ignore[attr-defined]
+        mujoco.mju_sparse2dense(self._moment, data.actuator_moment, data.moment_rownnz,
+                                data.moment_rowadr, data.moment_colind)
         g = self.geometry
         return (self._moment[g.actuators] @ np.asarray(self.intent)) * g.scale
 
     @property
     def fatigue(self) -> np.ndarray:
         """F_i: the fatigued share of each driven muscle's motor units."""
-        return self._fatigue.copy()
+        return self._muscles[_FATIGUED].copy()
 
 
 def steps_of(delay: float, timestep: float) -> int:

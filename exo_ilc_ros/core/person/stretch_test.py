@@ -25,15 +25,11 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
 
 from .neural_drive import DriveSettings, NeuralDrive, with_preset
 
-ELBOW_MODEL = Path("models") / "legacy" / "elbow" / "myoelbow_2dof6muscles.xml"
-"""MyoSuite's small elbow model inside the ``myo_sim`` package (shoulder elevation and elbow
-flexion, TRIlong/lat/med, BIClong/short, BRA)."""
 ELBOW_FLEXORS = ("BIClong", "BICshort", "BRA", "BRD")
 """The elbow flexors: the muscles the presets make spastic (those of them the model has)."""
 VELOCITIES_DEG = (15.0, 30.0, 60.0, 90.0, 120.0, 150.0)
@@ -61,21 +57,18 @@ class StretchPerson:
         return int(self.model.joint(self.joint).qposadr[0])  # type: ignore[attr-defined]
 
 
-def myo_sim_path(relative: Path) -> Path:
-    """A file of the ``myo_sim`` package (MyoSuite's models)."""
-    import myo_sim
-    return Path(myo_sim.__file__).resolve().parent / relative
-
-
-def elbow_person(shoulder: float = 0.0) -> StretchPerson:
-    """MyoSuite's small elbow model (``myoelbow_2dof6muscles``), the shoulder held at
-    ``shoulder`` rad of elevation, gravity off."""
-    import mujoco
-    model = mujoco.MjModel.from_xml_path(str(myo_sim_path(ELBOW_MODEL)))
+def stretch_person(name: str = "myoelbow") -> StretchPerson:
+    """Person model ``name`` (:data:`.model.PERSON_MODELS`: ``myoelbow``, MyoSuite's small
+    elbow; ``myoarm``, MyoArm's pruned right arm), gravity off (the arm supported in the
+    horizontal plane), every joint but the elbow held at the model's rest pose."""
+    from .model import ANATOMY, person_spec
+    model = person_spec(name).compile()
     model.opt.gravity[:] = 0.0
+    anatomy = ANATOMY[name]
     pose = model.qpos0.copy()
-    pose[int(model.joint("r_shoulder_elev").qposadr[0])] = shoulder
-    return StretchPerson(model, "r_elbow_flex", pose, "myoelbow_2dof6muscles")
+    for joint, angle in anatomy.rest:
+        pose[int(model.joint(joint).qposadr[0])] = angle
+    return StretchPerson(model, anatomy.elbow_flexion, pose, name)
 
 
 @dataclass(frozen=True)

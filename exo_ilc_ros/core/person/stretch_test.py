@@ -28,6 +28,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .model import ANATOMY, person_spec
 from .neural_drive import DriveSettings, NeuralDrive, with_preset
 
 ELBOW_FLEXORS = ("BIClong", "BICshort", "BRA", "BRD")
@@ -61,7 +62,6 @@ def stretch_person(name: str = "myoelbow") -> StretchPerson:
     """Person model ``name`` (:data:`.model.PERSON_MODELS`: ``myoelbow``, MyoSuite's small
     elbow; ``myoarm``, MyoArm's pruned right arm), gravity off (the arm supported in the
     horizontal plane), every joint but the elbow held at the model's rest pose."""
-    from .model import ANATOMY, person_spec
     model = person_spec(name).compile()
     model.opt.gravity[:] = 0.0
     anatomy = ANATOMY[name]

@@ -23,13 +23,14 @@ flexion angle there, deg).
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .model import ANATOMY, person_spec
-from .neural_drive import DriveSettings, NeuralDrive, with_preset
+from .neural_drive import DriveSettings, NeuralDrive, reflex_excitation, with_preset
 
 ELBOW_FLEXORS = ("BIClong", "BICshort", "BRA", "BRD")
 """The elbow flexors: the muscles the presets make spastic (those of them the model has)."""
@@ -62,7 +63,9 @@ def stretch_person(name: str = "myoelbow") -> StretchPerson:
     """Person model ``name`` (:data:`.model.PERSON_MODELS`: ``myoelbow``, MyoSuite's small
     elbow; ``myoarm``, MyoArm's pruned right arm), gravity off (the arm supported in the
     horizontal plane), every joint but the elbow held at the model's rest pose."""
-    model = person_spec(name).compile()
+    with warnings.catch_warnings():  # myo_sim's notice on an empty attach prefix
+        warnings.simplefilter("ignore", UserWarning)
+        model = person_spec(name).compile()
     model.opt.gravity[:] = 0.0
     anatomy = ANATOMY[name]
     pose = model.qpos0.copy()
@@ -114,9 +117,9 @@ class StretchTrace:
     """N m resisting the extension (positive: the device pushes the forearm into extension)."""
     reflex: np.ndarray
     """(steps, muscles): the reflex excitation the drive wrote."""
-    crossing: np.ndarray
-    """(steps,) bool: a spastic muscle's length or velocity is above its threshold now (not
-    delayed)."""
+    undelayed: np.ndarray
+    """(steps,): the reflex law of the spastic muscles' present (not delayed) length and
+    velocity, summed: what the reflex will be one delay later."""
 
 
 def run_stretch(person: StretchPerson, settings: DriveSettings,
@@ -135,7 +138,7 @@ def run_stretch(person: StretchPerson, settings: DriveSettings,
     data.act[:] = settings.tone  # at rest with the tone's activation
     resistance = np.empty(t.size)
     reflex = np.zeros((t.size, drive.geometry.names.__len__()))
-    crossing = np.zeros(t.size, dtype=bool)
+    undelayed = np.zeros(t.size)
     qacc = np.zeros(model.nv)  # type: ignore[attr-defined]
     inertial = np.zeros(model.nv)  # type: ignore[attr-defined]
     s = settings
@@ -146,9 +149,7 @@ def run_stretch(person: StretchPerson, settings: DriveSettings,
         mujoco.mj_forward(model, data)
         drive.step(data)
         length, velocity = drive.sense(data)
-        crossing[i] = bool(np.any(spastic & (length > s.length_threshold)
-                                  & ((s.length_gain > 0.0) | ((velocity > s.velocity_threshold)
-                                                              & (s.velocity_gain > 0.0)))))
+        undelayed[i] = float(np.sum(reflex_excitation(length, velocity, s)[spastic]))
         reflex[i] = drive.reflex
         mujoco.mj_fwdActuation(model, data)  # act_dot of the new excitation
         qacc[e] = qdd[i]
@@ -157,7 +158,7 @@ def run_stretch(person: StretchPerson, settings: DriveSettings,
                   - data.qfrc_actuator[e])
         resistance[i] = device  # extension lowers the angle: a resisting device pushes < 0
         data.act[:] = np.clip(data.act + dt * data.act_dot, 0.0, 1.0)
-    return StretchTrace(t, q, -resistance, reflex, crossing)
+    return StretchTrace(t, q, -resistance, reflex, undelayed)
 
 
 def hinge_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -195,9 +196,11 @@ class StretchMeasure:
     """Reflex threshold angle: the elbow's flexion angle (deg) where the reflex torque starts
     (the hinge's knee); None: no reflex."""
     crossing_time: float | None
-    """s after the ramp's start when a spastic muscle first crossed a threshold."""
+    """s after the ramp's start when the reflex law of the spastic muscles' present length and
+    velocity first rose above its value at the start (a threshold crossed)."""
     onset_time: float | None
-    """s after the ramp's start when the reflex torque first exceeded 1 % of its peak."""
+    """s after the ramp's start when the reflex torque first rose above its value at the start
+    by 1 % of its rise to the peak."""
 
     def as_dict(self) -> dict[str, object]:
         return dict(self.__dict__)
@@ -215,15 +218,18 @@ def measure_stretch(person: StretchPerson, settings: DriveSettings, ramp: RampAn
     peak = float(np.max(reflex[during]))
     extension = ramp.start - full.angle
     start = ramp.rest
-    crossing = _first_time(full.time, full.crossing & (full.time >= start))
+    begin = int(np.searchsorted(full.time, start))
+    crossing = _first_time(full.time, (full.undelayed > full.undelayed[begin] + 1e-9)
+                           & (full.time >= start))
     if peak < REFLEX_FLOOR:
         return StretchMeasure(grade, round(math.degrees(ramp.velocity), 9),
                               float(np.max(full.resistance[steady])), peak, 0.0, None,
                               None if crossing is None else crossing - start, None)
     at_peak = full.time[during][int(np.argmax(reflex[during]))]
     fitted = during & (full.time >= first) & (full.time <= at_peak)
-    knee, slope = hinge_fit(extension[fitted], reflex[fitted])
-    onset = _first_time(full.time, (reflex > 0.01 * peak) & (full.time >= start))
+    knee, slope = hinge_fit(extension[fitted], reflex[fitted] - reflex[begin])
+    rise = peak - reflex[begin]
+    onset = _first_time(full.time, (reflex > reflex[begin] + 0.01 * rise) & (full.time >= start))
     return StretchMeasure(grade, round(math.degrees(ramp.velocity), 9),
                           float(np.max(full.resistance[steady])), peak, slope,
                           math.degrees(ramp.start - knee),

@@ -20,10 +20,13 @@ from exo_ilc_ros.core.person.neural_drive import DriveSettings, with_preset
 from exo_ilc_ros.core.person.stretch_test import (
     RampAndHold,
     StretchPerson,
+    StretchTrace,
     hinge_fit,
     measure_stretch,
     run_stretch,
+    spring_damper_fit,
     stretch_person,
+    stretch_test,
 )
 
 pytest.importorskip("myo_sim")
@@ -118,7 +121,8 @@ def test_cli_prints_and_writes_the_same_measures(tmp_path: Path) -> None:
                      "--json", str(out), "--plot", str(figure)])
     assert code == 0 and figure.stat().st_size > 0
     document = json.loads(out.read_text())
-    rows = [line.split() for line in printed.getvalue().splitlines()
+    table = printed.getvalue().split("spring-damper")[0]
+    rows = [line.split() for line in table.splitlines()
             if line.split() and line.split()[0] in ("0", "2")]
     assert len(rows) == len(document["measures"]) == 4
     for row, m in zip(rows, document["measures"], strict=True):
@@ -126,4 +130,31 @@ def test_cli_prints_and_writes_the_same_measures(tmp_path: Path) -> None:
         assert float(row[4]) == pytest.approx(m["stiffness"], abs=0.005)
         assert float(row[2]) == pytest.approx(m["resistance"], abs=0.005)
     assert document["measures"][0]["threshold_angle"] is None
+    assert set(document["spring_dampers"]) == {"0", "2"}
     assert document["measures"][3]["stiffness"] > document["measures"][2]["stiffness"] > 0.0
+
+
+def test_spring_damper_fit_recovers_a_known_spring_damper() -> None:
+    """Stretches whose torque is exactly 3 (theta_0 - theta) + 0.4 thetadot_ext give back
+    K 3, B 0.4 and theta_0 (here 80 deg flexion), r2 1."""
+    stretches = []
+    for velocity in (0.5, 1.0, 2.0):
+        ramp = RampAndHold(start=2.0, end=0.5, velocity=velocity, rest=0.1, hold=0.1)
+        t, q, qd, _ = ramp.profile(0.002)
+        torque = 3.0 * (math.radians(80.0) - q) + 0.4 * (-qd)
+        trace = StretchTrace(t, q, torque, np.zeros((t.size, 1)), np.zeros(t.size))
+        stretches.append((trace, ramp))
+    fit = spring_damper_fit(stretches)
+    assert fit.stiffness == pytest.approx(3.0) and fit.damping == pytest.approx(0.4)
+    assert fit.offset_angle == pytest.approx(80.0) and fit.r2 == pytest.approx(1.0)
+
+
+def test_spring_damper_rises_with_the_grade(person: StretchPerson) -> None:
+    """McCrea et al. 2003: the hypertonic elbow's K and B rise with the MAS. MAS 0's damping
+    is the model's joint damping (0.5 N m s/rad): its muscles resist without reflex and their
+    passive force does not depend on velocity."""
+    result = stretch_test(person, BASE, ["0", "2"], (60.0, 150.0), RAMP)
+    none, spastic = result.spring_dampers["0"], result.spring_dampers["2"]
+    assert none.damping == pytest.approx(0.5, abs=0.02)
+    assert spastic.stiffness > none.stiffness and spastic.damping > 1.5 * none.damping
+    assert len(result.measures) == 4

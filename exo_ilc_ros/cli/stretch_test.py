@@ -56,7 +56,8 @@ def stretch_test_command(args: argparse.Namespace) -> int:
     config = load_config(args.config)
     base = drive_settings(config)
     person = stretch_person(args.model)
-    measures = stretch_test(person, base, args.grades, args.velocities)
+    result = stretch_test(person, base, args.grades, args.velocities)
+    measures = result.measures
     print(f"stretch test: {person.name}, 120 -> 20 deg flexion, reflex delay {base.delay:g} s, "
           f"spastic muscles {', '.join(base.spastic_muscles) or 'none'}")
     print(f"{'MAS':>4} {'deg/s':>6} {'resist N m':>10} {'reflex N m':>10} "
@@ -67,11 +68,19 @@ def stretch_test_command(args: argparse.Namespace) -> int:
             f"{m.onset_time - m.crossing_time:.3f}"
         print(f"{m.grade:>4} {m.velocity:6.0f} {m.resistance:10.2f} {m.reflex_peak:10.2f} "
               f"{m.stiffness:10.2f} {threshold:>13} {lag:>18}")
+    print("spring-damper over each grade's stretches (McCrea et al. 2003: tau = K (theta - "
+          "theta_0) + B thetadot)")
+    print(f"{'MAS':>4} {'K N m/rad':>10} {'B N m s/rad':>12} {'theta_0 deg':>12} {'r2':>6}")
+    for grade, fit in result.spring_dampers.items():
+        print(f"{grade:>4} {fit.stiffness:10.2f} {fit.damping:12.3f} {fit.offset_angle:12.1f} "
+              f"{fit.r2:6.3f}")
     if args.json:
         document = {"model": person.name, "reflex_delay": base.delay,
                     "spastic_muscles": list(base.spastic_muscles),
                     "start_deg": 120.0, "end_deg": 20.0,
-                    "measures": [m.as_dict() for m in measures]}
+                    "measures": [m.as_dict() for m in measures],
+                    "spring_dampers": {grade: fit.__dict__
+                                       for grade, fit in result.spring_dampers.items()}}
         Path(args.json).write_text(json.dumps(document, indent=1) + "\n")
         print(f"wrote {args.json}")
     if args.plot:

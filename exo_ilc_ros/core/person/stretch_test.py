@@ -211,6 +211,13 @@ def measure_stretch(person: StretchPerson, settings: DriveSettings, ramp: RampAn
     """Stretch with and without the reflex and measure (module docstring)."""
     full = run_stretch(person, settings, ramp)
     passive = run_stretch(person, replace(settings, length_gain=0.0, velocity_gain=0.0), ramp)
+    return measure_traces(full, passive, ramp, grade)
+
+
+def measure_traces(full: StretchTrace, passive: StretchTrace, ramp: RampAndHold,
+                   grade: str = "custom") -> StretchMeasure:
+    """The measures of one stretch from its run with the drive (``full``) and without the
+    reflex (``passive``)."""
     reflex = full.resistance - passive.resistance
     first, last = ramp.ramp_window()
     during = (full.time >= ramp.rest) & (full.time <= last)
@@ -242,17 +249,69 @@ def _first_time(time: np.ndarray, mask: np.ndarray) -> float | None:
     return float(time[hits[0]]) if hits.size else None
 
 
+@dataclass(frozen=True)
+class SpringDamper:
+    """McCrea et al. 2003's linear spring-damper of the hypertonic elbow, tau = K (theta -
+    theta_0) + B thetadot, fitted to the resistance torque of every stretch of one person over
+    the constant-velocity part of each ramp (all velocities at once, "in position-velocity
+    space"); theta the extension, reported as the flexion angle theta_0 where the spring's
+    torque is 0."""
+
+    stiffness: float
+    """K (N m/rad)."""
+    damping: float
+    """B (N m s/rad)."""
+    offset_angle: float
+    """theta_0 as the elbow's flexion angle (deg)."""
+    r2: float
+    """Share of the torque's variance the fit explains."""
+
+
+def spring_damper_fit(stretches: Sequence[tuple[StretchTrace, RampAndHold]]) -> SpringDamper:
+    """Least squares tau = K x + B xdot + c over every stretch's constant-velocity window (x
+    the extension from the start, xdot its rate); theta_0 = start - (-c / K)."""
+    rows, torque = [], []
+    for trace, ramp in stretches:
+        first, last = ramp.ramp_window()
+        window = (trace.time >= first) & (trace.time <= last)
+        x = ramp.start - trace.angle[window]
+        rows.append(np.column_stack([x, np.full(x.size, ramp.velocity), np.ones(x.size)]))
+        torque.append(trace.resistance[window])
+    a, y = np.vstack(rows), np.concatenate(torque)
+    (k, b, c), *_ = np.linalg.lstsq(a, y, rcond=None)
+    residual = y - a @ np.array([k, b, c])
+    r2 = 1.0 - float(residual @ residual) / float(np.sum((y - y.mean()) ** 2))
+    start = stretches[0][1].start
+    offset = start - (-c / k) if k != 0.0 else math.nan
+    return SpringDamper(float(k), float(b), math.degrees(offset), r2)
+
+
+@dataclass(frozen=True, eq=False)
+class StretchTest:
+    """The stretch test's results: a measure per grade and velocity, a spring-damper per
+    grade."""
+
+    measures: list[StretchMeasure]
+    spring_dampers: dict[str, SpringDamper]
+
+
 def stretch_test(person: StretchPerson, base: DriveSettings, grades: Sequence[str],
                  velocities_deg: Sequence[float] = VELOCITIES_DEG,
-                 ramp: RampAndHold | None = None) -> list[StretchMeasure]:
+                 ramp: RampAndHold | None = None) -> StretchTest:
     """The stretch test per MAS preset and velocity: each grade's preset (tone, thresholds,
     gains, ceiling) with ``base``'s delay, spastic muscles, voluntary and fatigue settings
-    (``custom``: ``base`` itself)."""
+    (``custom``: ``base`` itself); per grade McCrea et al. 2003's spring-damper over its
+    stretches."""
     ramp = ramp or RampAndHold()
-    out = []
+    measures, fits = [], {}
     for grade in grades:
         settings = base if grade == "custom" else with_preset(base, grade)
+        quiet = replace(settings, length_gain=0.0, velocity_gain=0.0)
+        stretches = []
         for velocity in velocities_deg:
-            out.append(measure_stretch(person, settings,
-                                       replace(ramp, velocity=math.radians(velocity)), grade))
-    return out
+            this = replace(ramp, velocity=math.radians(velocity))
+            full = run_stretch(person, settings, this)
+            measures.append(measure_traces(full, run_stretch(person, quiet, this), this, grade))
+            stretches.append((full, this))
+        fits[grade] = spring_damper_fit(stretches)
+    return StretchTest(measures, fits)

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..core.loop.stepper import PlantStepper
+from ..core.person.experiment import uses_person
 from ..core.sim.mujoco_arm import MujocoArm, effects_not_simulated
 from .common import spin, wall_clock
 from .plant_base import NAME, Pace, PlantNode
@@ -165,6 +166,8 @@ class MujocoPlant(FreeRunningPlant):
         """MuJoCo's arm of this configuration."""
 
         config = self.params.config
+        if uses_person(config):  # the exoskeleton strapped to a person with muscles
+            return self.experiment.make_stepper()
         if config["dynamics"] != "full":
             self.get_logger().warning("dynamics: MuJoCo always simulates the full plant "
                                       f"(eq (15)); {config['dynamics']!r} ignored")

@@ -28,7 +28,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from importlib import resources
-from typing import Any
+from typing import Any, Protocol
+
+import numpy as np
 
 from ..errors import ModelError
 
@@ -58,12 +60,30 @@ class PersonAnatomy:
     """The joint of elbow flexion (the exoskeleton's elbow is placed on it)."""
     rest: tuple[tuple[str, float], ...] = ()
     """Joint angles (rad) of the person's rest pose, where the exoskeleton is strapped on;
-    every other joint at 0."""
+    every other joint at 0 (MyoArm: the plane of elevation turned to 1.5 rad, so that
+    shoulder elevation lifts the arm forwards, the exoskeleton's flexion; at zero elevation
+    the plane does not move the arm)."""
+
+
+class MuscleDrive(Protocol):
+    """The hook that drives the person's muscles: called at every MuJoCo step with the
+    step's fresh kinematics (``data.actuator_length``, ``data.actuator_velocity``, the
+    muscles' fibre state; after ``mj_step1``), it writes each muscle's control (excitation,
+    0..1) in the order of :func:`muscle_names` into ``controls``. ``reset`` is called when a
+    trial begins (a reflex clears its delay lines there). The neural drive of
+    :mod:`.neural_drive` (tone, stretch reflex) is one; None: passive muscles (zero
+    excitation)."""
+
+    def reset(self, model: Any, data: Any) -> None:
+        """A trial begins at the state in ``data``."""
+
+    def __call__(self, model: Any, data: Any, controls: np.ndarray) -> None:
+        """Write the muscles' controls for the next step into ``controls``."""
 
 
 ANATOMY = {
     "myoarm": PersonAnatomy("myoarm", "humerus_r", "ulna_r", "shoulder_elv_r",
-                            "elbow_flexion_r"),
+                            "elbow_flexion_r", (("elv_angle_r", 1.5),)),
     "myoelbow": PersonAnatomy("myoelbow", "r_humerus", "r_ulna_radius_hand", "r_shoulder_elev",
                               "r_elbow_flex"),
 }

@@ -9,6 +9,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from .key_groups import MODEL_SOURCES, PATIENT_JOINTS, PERSON_SEGMENTS, URDF_JOINT_DYNAMICS
+from .musculoskeletal import musculoskeletal_parameters
 from .parameter import CONTROLLER, PLANT, SHARED, SUPERVISOR, Kind, Parameter
 from .rules import (
     MAS_GRADES,
@@ -565,6 +566,7 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("identification.voluntary", SUPERVISOR, Kind.BOOL,
               "fit the patient's own effort toward the reference too (for a patient known to "
               "push; else its suspicion makes an estimate untrustworthy)"),
+    *musculoskeletal_parameters(),
 )
 
 BY_NAME: Mapping[str, Parameter] = {p.name: p for p in PARAMETERS}

@@ -14,7 +14,8 @@ from ..core.params.redact import redact, secrets_in
 from .arguments import hide_password
 
 COMMANDS = ("simulate", "urdf", "layout", "tune", "compare", "run", "param", "analyze", "paper",
-            "analyze_loop", "clean", "profiles", "report", "study", "ros2_control", "certify")
+            "analyze_loop", "clean", "profiles", "report", "study", "ros2_control", "certify",
+            "stretch_test")
 """Sub-command modules of this package; each has ``register(subparsers)`` setting ``func``."""
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 from .key_groups import (
     AXIS_VECTORS,
     CONE_KEYS,
+    DRIVE_KEYS,
     MODEL_SOURCES,
     PATIENT_JOINTS,
     PERSON_KEYS,
@@ -60,6 +61,7 @@ __all__ = [
     "BY_NAME",
     "CONE_KEYS",
     "CONTROLLER",
+    "DRIVE_KEYS",
     "MAS_GRADES",
     "MODEL_SOURCES",
     "OTHER_JOINTS",

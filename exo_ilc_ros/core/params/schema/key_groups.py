@@ -34,3 +34,10 @@ PERSON_KEYS = ("person.enabled", "person.in_nominal", "person.body_mass", "perso
 """A person in the exoskeleton (left out of every digest while ``person.enabled`` is false:
 a run without a person keeps the keys it had before they existed)."""
 PATIENT_JOINTS = "patient.joints"
+DRIVE_KEYS = tuple(f"person.drive.{name}" for name in (
+    "mas_grade", "tone", "length_threshold", "velocity_threshold", "length_gain", "velocity_gain",
+    "reflex_max", "reflex_delay", "spastic_muscles", "voluntary_gain", "fatigue_rate",
+    "recovery_rate"))
+"""A musculoskeletal person's neural drive (core/person/neural_drive.py): left out of every
+digest until a plant drives muscles with them (the plant of a musculoskeletal person makes
+them count), so a run keeps the digest it had before they existed."""

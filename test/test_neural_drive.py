@@ -214,3 +214,30 @@ def test_presets_grow_with_the_grade() -> None:
         assert b.reflex_max > a.reflex_max and b.tone > a.tone
         assert b.length_threshold < a.length_threshold
         assert b.velocity_threshold < a.velocity_threshold
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_the_strapped_plant_runs_the_configs_drive() -> None:
+    """The strapped plant's default muscle drive is the config's (``drive_for``): none for the
+    shipped keys (passive muscles, as before the drive existed), the neural drive of a MAS 3
+    preset otherwise, which changes the trial (its tone pulls every muscle; the flexion
+    movement shortens the spastic flexors), the same on a rerun (its delay lines are reset at
+    every trial)."""
+    from exo_ilc_ros.core.params.config import config_dir
+    from exo_ilc_ros.core.person.experiment import StrappedExperiment
+
+    short = {"trajectory.duration": 1.0, "musculoskeletal.settle_time": 0.0,
+             "mass_uncertainty": 0.1}
+    config = load_config(config_dir() / "myoelbow.yaml", overrides=short)
+    shipped = StrappedExperiment(config)
+    assert shipped.arm.drive is None
+    u_ff = np.zeros_like(shipped.reference.position)
+    passive = shipped.run_trial(u_ff, 1)
+    spastic = StrappedExperiment(config.replace({"person.drive.mas_grade": "3"}))
+    drive = spastic.arm.drive
+    assert isinstance(drive, NeuralDrive)
+    assert drive.delay_steps == 20  # 0.1 s at the strapped model's 5 ms
+    first = spastic.run_trial(u_ff, 1)
+    np.testing.assert_array_equal(spastic.run_trial(u_ff, 1).position, first.position)
+    assert np.abs(first.position - passive.position).max() > 0.01
+    assert np.all(drive.excitation >= MAS_DRIVE_PRESETS["3"].tone)

@@ -388,7 +388,8 @@ class Config:
             left_out.update(schema.URDF_PLANT_KEYS)
         if not self._values["person.enabled"]:
             left_out.update(schema.PERSON_KEYS)
-        left_out.update(schema.DRIVE_KEYS)  # no plant drives muscles yet (key_groups)
+        if self._values["musculoskeletal.model"] == "none":  # no muscles to drive
+            left_out.update(schema.DRIVE_KEYS)
         if not self._values[schema.PATIENT_JOINTS]:
             left_out.add(schema.PATIENT_JOINTS)
         down = self._values["model.gravity_direction"]

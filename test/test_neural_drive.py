@@ -214,3 +214,54 @@ def test_presets_grow_with_the_grade() -> None:
         assert b.reflex_max > a.reflex_max and b.tone > a.tone
         assert b.length_threshold < a.length_threshold
         assert b.velocity_threshold < a.velocity_threshold
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_the_strapped_plant_runs_the_configs_drive() -> None:
+    """The strapped plant's default muscle drive is the config's (``drive_for``): none for the
+    shipped keys (passive muscles, as before the drive existed), the neural drive of a MAS 3
+    preset otherwise, which changes the trial (its tone pulls every muscle; the flexion
+    movement shortens the spastic flexors), the same on a rerun (its delay lines are reset at
+    every trial)."""
+    from exo_ilc_ros.core.params.config import config_dir
+    from exo_ilc_ros.core.person.experiment import StrappedExperiment
+
+    short = {"trajectory.duration": 1.0, "musculoskeletal.settle_time": 0.0,
+             "mass_uncertainty": 0.1}
+    config = load_config(config_dir() / "myoelbow.yaml", overrides=short)
+    shipped = StrappedExperiment(config)
+    assert shipped.arm.drive is None
+    u_ff = np.zeros_like(shipped.reference.position)
+    passive = shipped.run_trial(u_ff, 1)
+    spastic = StrappedExperiment(config.replace({"person.drive.mas_grade": "3"}))
+    drive = spastic.arm.drive
+    assert isinstance(drive, NeuralDrive)
+    assert drive.delay_steps == 20  # 0.1 s at the strapped model's 5 ms
+    first = spastic.run_trial(u_ff, 1)
+    np.testing.assert_array_equal(spastic.run_trial(u_ff, 1).position, first.position)
+    assert np.abs(first.position - passive.position).max() > 0.01
+    assert np.all(drive.excitation >= MAS_DRIVE_PRESETS["3"].tone)
+
+
+@pytest.mark.graph
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_the_graph_runs_a_spastic_person_as_simulate() -> None:
+    """`exo-ilc run` with a MAS 2 person strapped in: plant_simulator builds the same neural
+    drive from the config and resets it at every trial, so three 1 s trials through the real
+    graph are the in-process trials (max |e| per trial and joint to 1e-9 rad)."""
+    from exo_ilc_ros.core.params.config import config_dir
+    from exo_ilc_ros.core.session.learning_session import run_trials
+    from exo_ilc_ros.orchestration.graph import run_graph
+
+    config = load_config(config_dir() / "myoelbow.yaml",
+                         overrides={"trajectory.duration": 1.0, "max_trials": 3,
+                                    "mass_uncertainty": 0.1,
+                                    "musculoskeletal.settle_time": 0.2,
+                                    "person.drive.mas_grade": "2"})
+    local = run_trials(config)
+    graph = run_graph(config, timeout=300.0)
+    assert [s.trial for s in graph.summaries] == [1, 2, 3]
+    np.testing.assert_allclose(graph.summary.max_abs_error, local.max_abs_errors,
+                               rtol=0.0, atol=1e-9)
+    passive = run_trials(config.replace({"person.drive.mas_grade": "custom"}))
+    assert not np.allclose(passive.max_abs_errors, local.max_abs_errors)  # the drive acts

@@ -158,3 +158,13 @@ def test_spring_damper_rises_with_the_grade(person: StretchPerson) -> None:
     assert none.damping == pytest.approx(0.5, abs=0.02)
     assert spastic.stiffness > none.stiffness and spastic.damping > 1.5 * none.damping
     assert len(result.measures) == 4
+
+
+@pytest.mark.parametrize("argv", [["--velocities", "0"], ["--velocities", "fast"],
+                                  ["--grades", "4"], ["--model", "myohand"]])
+def test_cli_refuses_bad_input_naming_the_flag(argv: list[str]) -> None:
+    from exo_ilc_ros.cli.main import main
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main(["stretch-test", *argv])
+    assert code == 2 and argv[0] in err.getvalue()

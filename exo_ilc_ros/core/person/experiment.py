@@ -26,6 +26,7 @@ from ..params.config import Config
 from ..sim.experiment import Experiment
 from .cuffs import CUFFS
 from .model import MuscleDrive
+from .neural_drive import drive_for
 from .strapped import StrappedArm
 
 DriveFactory = Callable[[Config, Any], "MuscleDrive | None"]
@@ -55,7 +56,7 @@ class StrappedExperiment(Experiment):
     """:class:`~..sim.experiment.Experiment` whose plant is the exoskeleton strapped to a
     person with muscles (``musculoskeletal.model``)."""
 
-    def __init__(self, config: Config, drive: DriveFactory = passive_muscles) -> None:
+    def __init__(self, config: Config, drive: DriveFactory = drive_for) -> None:
         super().__init__(config)
         if self.patient.enabled:
             raise ConfigError("musculoskeletal.model", "a person with muscles is the patient: "
@@ -130,7 +131,7 @@ class StrappedExperiment(Experiment):
                            None if joint_force is None else force, wrench_log)
 
 
-def experiment_for(config: Config, drive: DriveFactory = passive_muscles) -> Experiment:
+def experiment_for(config: Config, drive: DriveFactory = drive_for) -> Experiment:
     """The in-process experiment of ``config``: :class:`StrappedExperiment` with a person
     (``musculoskeletal.model``), else :class:`~..sim.experiment.Experiment`."""
     return StrappedExperiment(config, drive) if uses_person(config) else Experiment(config)

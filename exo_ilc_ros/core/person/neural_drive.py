@@ -263,11 +263,18 @@ class NeuralDrive:
         self._moment = np.zeros((model.nu, model.nv))
         self.intent: np.ndarray | None = None
 
-    def reset(self) -> None:
+    def reset(self, model: Any = None, data: Any = None) -> None:
         """Forget the delayed history and the fatigue (the history refills from the next step:
-        until D steps have passed the reflex sees the first sample)."""
+        until D steps have passed the reflex sees the first sample). ``model`` and ``data``
+        are the :class:`~.model.MuscleDrive` hook's (a trial begins there; unused)."""
         self._k = 0
         self._muscles[:] = 0.0
+
+    def __call__(self, model: Any, data: Any, controls: np.ndarray) -> None:
+        """The :class:`~.model.MuscleDrive` hook of the strapped plant: one :meth:`step`, the
+        muscles' excitations (actuator order, as :func:`.model.muscle_names`) into
+        ``controls``."""
+        controls[:] = self.step(data)
 
     def sense(self, data: Any) -> tuple[np.ndarray, np.ndarray]:
         """Normalised fibre length and lengthening velocity (L0/s) of the driven muscles now."""
@@ -310,6 +317,16 @@ class NeuralDrive:
     def fatigue(self) -> np.ndarray:
         """F_i: the fatigued share of each driven muscle's motor units."""
         return self._muscles[_FATIGUED].copy()
+
+
+def drive_for(config: Config, model: Any) -> NeuralDrive | None:
+    """The strapped plant's muscle drive of a config (a :data:`.experiment.DriveFactory`): the
+    neural drive of ``person.drive.*`` on ``model``'s muscles, or None (passive muscles, as
+    without the keys) when it has no tone, no reflex and no voluntary activation."""
+    settings = drive_settings(config)
+    if settings.tone == 0.0 and not settings.has_reflex and settings.voluntary_gain == 0.0:
+        return None
+    return NeuralDrive(model, settings)
 
 
 def steps_of(delay: float, timestep: float) -> int:

@@ -39,5 +39,5 @@ DRIVE_KEYS = tuple(f"person.drive.{name}" for name in (
     "reflex_max", "reflex_delay", "spastic_muscles", "voluntary_gain", "fatigue_rate",
     "recovery_rate"))
 """A musculoskeletal person's neural drive (core/person/neural_drive.py): left out of every
-digest until a plant drives muscles with them (the plant of a musculoskeletal person makes
-them count), so a run keeps the digest it had before they existed."""
+digest while ``musculoskeletal.model`` is none (no muscles to drive), so a run keeps the
+digest it had before they existed."""

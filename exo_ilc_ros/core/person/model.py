@@ -152,17 +152,25 @@ def _myoelbow_spec() -> Any:
     return spec
 
 
+_BUILT: dict[str, Any] = {}
+"""The pruned specs built in this process (composing MyoArm costs seconds: myo-sim and the
+pruning delete hundreds of elements one by one)."""
+
+
 def person_spec(name: str) -> Any:
     """The uncompiled ``mujoco.MjSpec`` of person model ``name`` (module docstring), contacts
-    off. ModelError for a name that is not one of :data:`PERSON_MODELS`."""
+    off: a copy of the one built once per process, free to change. ModelError for a name that
+    is not one of :data:`PERSON_MODELS`."""
     import mujoco
 
     if name not in ANATOMY:
         raise ModelError(f"no person model {name!r}; one of {', '.join(PERSON_MODELS)}")
-    spec = _myoarm_spec() if name == "myoarm" else _myoelbow_spec()
-    spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
-    spec.modelname = f"person_{name}"
-    return spec
+    if name not in _BUILT:
+        spec = _myoarm_spec() if name == "myoarm" else _myoelbow_spec()
+        spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+        spec.modelname = f"person_{name}"
+        _BUILT[name] = spec
+    return _BUILT[name].copy()
 
 
 def muscle_names(model: Any) -> list[str]:

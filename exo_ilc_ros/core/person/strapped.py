@@ -244,17 +244,20 @@ class StrappedArm:
         forearm_dir = (forearm_com - p_elbow) / np.linalg.norm(forearm_com - p_elbow)
         cuff_points = [p_shoulder + float(config["strapping.upper_arm_cuff"]) * humerus_dir,
                        p_elbow + float(config["strapping.forearm_cuff"]) * forearm_dir]
-        # compile once to know the bodies' poses at rest (exoskeleton at its zero pose)
-        placed = compile_quietly(person)
-        placed_data = mujoco.MjData(placed)
-        placed_data.qpos[:] = self._full_qpos(placed, rest, np.zeros(n))
-        mujoco.mj_kinematics(placed, placed_data)
-        for cuff, point, (exo_body, bone) in zip(CUFFS, cuff_points, self._cuff_bodies,
-                                                 strict=True):
-            for who, body in (("exo", exo_body), ("person", bone)):
-                b = placed.body(body).id
-                r_body = np.array(placed_data.xmat[b]).reshape(3, 3)
-                local = r_body.T @ (point - placed_data.xpos[b])
+        # the bodies' poses at rest: the person's from its own model at the rest pose, the
+        # exoskeleton's from its own at the zero pose, carried by the base frame
+        poses = {}
+        for exo_body, bone in self._cuff_bodies:
+            b = exo_alone.body(exo_body[len(EXO_PREFIX):]).id
+            poses[exo_body] = (base_position + base_rotation @ exo_data.xpos[b],
+                               base_rotation @ np.array(exo_data.xmat[b]).reshape(3, 3))
+            b = alone.body(bone).id
+            poses[bone] = (np.array(alone_data.xpos[b]),
+                           np.array(alone_data.xmat[b]).reshape(3, 3))
+        for cuff, point, bodies in zip(CUFFS, cuff_points, self._cuff_bodies, strict=True):
+            for who, body in zip(("exo", "person"), bodies, strict=True):
+                position, r_body = poses[body]
+                local = r_body.T @ (point - position)
                 local_rotation = r_body.T @ base_rotation  # the cuff frame: the exo's base axes
                 person.body(body).add_site(name=f"cuff_{cuff}_{who}", pos=local,
                                            quat=_quat(local_rotation))

@@ -379,7 +379,8 @@ class Config:
         without the URDF keys (its digests stay as they were before they existed), a URDF arm
         without the cone keys and with ``model.urdf`` as the sha256 of the file's contents (not
         its path); ``model.urdf_joint_dynamics`` only when it applies them; the person's keys
-        only with ``person.enabled``, the neural drive's only with a ``musculoskeletal.model``, ``patient.joints`` only when given,
+        only with ``person.enabled``, the neural drive's only with a
+        ``musculoskeletal.model``, ``patient.joints`` only when given,
         ``model.gravity_direction`` only when it is not -z (so, too, for the keys that came
         before them)."""
         urdf = self._values["model.source"] == "urdf"

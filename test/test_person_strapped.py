@@ -226,3 +226,40 @@ def test_the_graph_runs_the_same_trials_as_simulate() -> None:
     np.testing.assert_allclose(graph.summary.max_abs_error, local.max_abs_errors,
                                rtol=0.0, atol=1e-9)
     assert not np.allclose(local.max_abs_errors[0], local.max_abs_errors[-1])  # it learned
+
+
+def test_cuff_forces_go_into_the_json_and_come_back() -> None:
+    """A run's cuff metrics per trial and cuff are written under trials[].cuff_forces with
+    their units in the names, and read back exactly; a run without a person has none."""
+    from exo_ilc_ros.core.session.summary import CUFF_METRICS, RunSummary
+
+    cuffs = np.arange(2 * 2 * 4, dtype=float).reshape(2, 2, 4) / 3.0
+    summary = RunSummary(0.1, "sign", 0.005, np.full((2, 3), 0.1), cuff_forces=cuffs)
+    data = summary.to_json()
+    assert data["trials"][1]["cuff_forces"]["forearm"] == dict(zip(CUFF_METRICS, cuffs[1, 1],
+                                                                    strict=True))
+    assert set(data["trials"][0]["cuff_forces"]) == set(CUFFS)
+    back = RunSummary.from_json(data)
+    assert back.cuff_forces is not None
+    np.testing.assert_array_equal(back.cuff_forces, cuffs)
+    plain = RunSummary(0.1, "sign", 0.005, np.full((2, 3), 0.1))
+    assert "cuff_forces" not in plain.to_json()["trials"][0]
+    assert RunSummary.from_json(plain.to_json()).cuff_forces is None
+
+
+def test_a_config_without_a_person_keeps_its_digest() -> None:
+    """The strapping keys count in a digest (the store's key of learned data) only with a
+    person: the shipped config's digest is the one it had before they existed, and every one
+    of them is in the schema's group that is left out."""
+    from exo_ilc_ros.core.params import schema
+    from exo_ilc_ros.core.params.schema.musculoskeletal import musculoskeletal_parameters
+
+    assert {p.name for p in musculoskeletal_parameters()} == set(schema.STRAPPED_KEYS)
+    plain = load_config()
+    assert not set(schema.STRAPPED_KEYS) & set(plain.identity_values())
+    moved = plain.replace({"strapping.stiffness": [1.0, 2.0, 3.0],
+                           "safety.cuff_force_limit": [10.0, 10.0]})
+    assert moved.digest() == plain.digest()
+    person = load_config(ELBOW)
+    assert set(schema.STRAPPED_KEYS) <= set(person.identity_values())
+    assert person.replace({"strapping.stiffness": [1.0, 2.0, 3.0]}).digest() != person.digest()

@@ -53,6 +53,7 @@ The learning law sees only the exoskeleton's joints (:attr:`position`, :attr:`ve
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -151,6 +152,14 @@ def rest_pose(model: Any, anatomy: PersonAnatomy) -> np.ndarray:
     return qpos
 
 
+def compile_quietly(spec: Any) -> Any:
+    """``spec.compile()`` without MuJoCo's notice that MyoArm's torso was attached with an
+    empty prefix (myo-sim composes it so; nothing is wrong)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Attaching a spec with an empty prefix")
+        return spec.compile()
+
+
 def _joint_frame(model: Any, data: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
     joint = model.joint(name).id
     return np.array(data.xanchor[joint]), np.array(data.xaxis[joint])
@@ -189,7 +198,7 @@ class StrappedArm:
         person = person_spec(name)
         person.option.timestep = timestep
         person.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-        alone = person.compile()
+        alone = compile_quietly(person)
         rest = rest_pose(alone, self.anatomy)
         alone_data = mujoco.MjData(alone)
         alone_data.qpos[:] = rest
@@ -225,6 +234,10 @@ class StrappedArm:
         self._cuff_bodies = [(EXO_PREFIX + self._joint_body(exo, shoulder),
                               self.anatomy.upper_arm),
                              (EXO_PREFIX + self._joint_body(exo, elbow), self.anatomy.forearm)]
+        exo.option.integrator = person.option.integrator  # the person's options rule (the
+        exo.option.gravity = person.option.gravity  # same values: no notice of a conflict)
+        exo.option.timestep = person.option.timestep
+        exo.option.disableflags = person.option.disableflags
         person.attach(exo, prefix=EXO_PREFIX, frame=frame)
         # the cuffs: a site on the exoskeleton's link, one on the bone, coincident at rest
         humerus_dir = (p_elbow - p_shoulder) / np.linalg.norm(p_elbow - p_shoulder)
@@ -232,7 +245,7 @@ class StrappedArm:
         cuff_points = [p_shoulder + float(config["strapping.upper_arm_cuff"]) * humerus_dir,
                        p_elbow + float(config["strapping.forearm_cuff"]) * forearm_dir]
         # compile once to know the bodies' poses at rest (exoskeleton at its zero pose)
-        placed = person.compile()
+        placed = compile_quietly(person)
         placed_data = mujoco.MjData(placed)
         placed_data.qpos[:] = self._full_qpos(placed, rest, np.zeros(n))
         mujoco.mj_kinematics(placed, placed_data)
@@ -245,7 +258,7 @@ class StrappedArm:
                 local_rotation = r_body.T @ base_rotation  # the cuff frame: the exo's base axes
                 person.body(body).add_site(name=f"cuff_{cuff}_{who}", pos=local,
                                            quat=_quat(local_rotation))
-        self.model: Any = person.compile()
+        self.model: Any = compile_quietly(person)
         self.data: Any = mujoco.MjData(self.model)
         m = self.model
         qpos_at = [int(m.jnt_qposadr[m.joint(EXO_PREFIX + j).id]) for j in self.joint_names]

@@ -41,3 +41,13 @@ DRIVE_KEYS = tuple(f"person.drive.{name}" for name in (
 """A musculoskeletal person's neural drive (core/person/neural_drive.py): left out of every
 digest while ``musculoskeletal.model`` is none (no muscles to drive), so a run keeps the
 digest it had before they existed."""
+STRAPPED_KEYS = ("musculoskeletal.model", "musculoskeletal.timestep",
+                 "musculoskeletal.settle_time", "strapping.shoulder_joint",
+                 "strapping.elbow_joint", "strapping.misalignment.offset",
+                 "strapping.misalignment.rotation", "strapping.upper_arm_cuff",
+                 "strapping.forearm_cuff", "strapping.stiffness", "strapping.damping",
+                 "strapping.rotational_stiffness", "strapping.rotational_damping",
+                 "safety.cuff_force_limit")
+"""A person with muscles strapped in the exoskeleton (core/person/strapped.py, the schema's
+musculoskeletal.py): left out of every digest while ``musculoskeletal.model`` is none, so a
+run keeps the digest it had before they existed."""

@@ -60,19 +60,19 @@ def stretch_test_command(args: argparse.Namespace) -> int:
     measures = result.measures
     print(f"stretch test: {person.name}, 120 -> 20 deg flexion, reflex delay {base.delay:g} s, "
           f"spastic muscles {', '.join(base.spastic_muscles) or 'none'}")
-    print(f"{'MAS':>4} {'deg/s':>6} {'resist N m':>10} {'reflex N m':>10} "
+    print(f"{'MAS':>6} {'deg/s':>6} {'resist N m':>10} {'reflex N m':>10} "
           f"{'K N m/rad':>10} {'threshold deg':>13} {'onset - crossing s':>18}")
     for m in measures:
         threshold = "-" if m.threshold_angle is None else f"{m.threshold_angle:.1f}"
         lag = "-" if m.onset_time is None or m.crossing_time is None else \
             f"{m.onset_time - m.crossing_time:.3f}"
-        print(f"{m.grade:>4} {m.velocity:6.0f} {m.resistance:10.2f} {m.reflex_peak:10.2f} "
+        print(f"{m.grade:>6} {m.velocity:6.0f} {m.resistance:10.2f} {m.reflex_peak:10.2f} "
               f"{m.stiffness:10.2f} {threshold:>13} {lag:>18}")
     print("spring-damper over each grade's stretches (McCrea et al. 2003: tau = K (theta - "
           "theta_0) + B thetadot)")
-    print(f"{'MAS':>4} {'K N m/rad':>10} {'B N m s/rad':>12} {'theta_0 deg':>12} {'r2':>6}")
+    print(f"{'MAS':>6} {'K N m/rad':>10} {'B N m s/rad':>12} {'theta_0 deg':>12} {'r2':>6}")
     for grade, fit in result.spring_dampers.items():
-        print(f"{grade:>4} {fit.stiffness:10.2f} {fit.damping:12.3f} {fit.offset_angle:12.1f} "
+        print(f"{grade:>6} {fit.stiffness:10.2f} {fit.damping:12.3f} {fit.offset_angle:12.1f} "
               f"{fit.r2:6.3f}")
     if args.json:
         document = {"model": person.name, "reflex_delay": base.delay,

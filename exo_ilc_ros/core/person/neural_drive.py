@@ -102,11 +102,13 @@ MAS_DRIVE_PRESETS: dict[str, DriveSettings] = {
 }
 """MAS grade -> tone, thresholds, gains and ceiling of the spastic muscles' reflex (the other
 settings, delay and spastic muscles, from the config). Derived, not fitted (see
-docs/person-with-muscles.md): the gains double and the thresholds fall from grade to grade as
-Feng and Mak 2002 and Koo and Mak 2006 found spastic subjects' reflex gain higher and their
-static and dynamic thresholds lower; calibrated on the stretch test of the MyoSuite elbow so
-that grade 0 shows no reflex and the reflex stiffness of grades 1-3 rises with stretch velocity
-as McPherson et al. 2018 measured. A table fitted to one patient should replace them."""
+docs/stretch-test.md): the gains rise and the thresholds fall from grade to grade as Feng and
+Mak 2002 and Koo and Mak 2006 found spastic subjects' reflex gain higher and their static and
+dynamic thresholds lower; the length threshold puts the catch where the Modified Ashworth
+grades describe it (Bohannon and Smith 1987: grade 1 at the end of the range, 3 through it);
+set on the stretch test of the MyoSuite elbow so that grade 0 shows no reflex and the reflex
+stiffness of grades 1-3 rises with stretch velocity as McPherson et al. 2018 measured. A table
+fitted to one patient should replace them."""
 
 
 def drive_settings(config: Config) -> DriveSettings:

@@ -60,6 +60,7 @@ setup(
         "cmaes>=0.10",  # exo-ilc certify --falsify: optuna's CMA-ES sampler needs it
         "clarabel>=0.9",
         "mujoco>=4",
+        "myo-sim>=0.2.3,<0.3",  # MyoSuite's musculoskeletal models (MyoArm, the elbow): core/person
         "distributed>=2024.1",  # exo-ilc study --dask: cells on a Dask cluster
         "foxglove-sdk>=0.30.3,<0.31",  # exo-ilc run --live: the Foxglove WebSocket server
     ],

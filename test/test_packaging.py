@@ -32,6 +32,7 @@ ROSDEP_KEYS: dict[str, str] = {
     "cmaes": "python3-cmaes-pip",
     "clarabel": "python3-clarabel-pip",
     "mujoco": "python3-mujoco-pip",
+    "myo-sim": "python3-myo-sim-pip",
     "distributed": "python3-distributed",
     "foxglove-sdk": "python3-foxglove-sdk-pip",
 }

@@ -31,6 +31,8 @@ COMMANDS: dict[str, str] = {
     "ros2_control": "write the ros2_control controllers.yaml for the config's arm (a URDF arm's "
                     "joints: --config config/arms/...)",
     "certify": "a law's certificate over a population of patients (+ falsification)",
+    "stretch_test": "stretch the person's elbow per MAS preset and velocity: resistance, reflex "
+                    "stiffness, threshold angle",
 }
 """Sub-command modules of this package (each has ``register(subparsers)`` setting ``func``; the
 command is the module's name with ``-`` for ``_``) and the one-line help each registers: the

@@ -188,6 +188,19 @@ def simulate(args: argparse.Namespace) -> int:
     return aborted_exit(runs, "simulate")
 
 
+def format_cuff_forces(cuffs: Any, title: str) -> str:
+    """The cuff forces of a run with a person strapped in: per cuff, the peak |force| of the
+    first and the last trial and the highest of the run (N), and the last trial's RMS."""
+    lines = [f"{title}: cuff forces on the person (N; peak |F| per trial)"]
+    for c, cuff in enumerate(("upper arm", "forearm")):
+        peaks = cuffs[:, c, 0]
+        worst = int(peaks.argmax())
+        lines.append(f"  {cuff:9}: trial 1 {peaks[0]:.1f}, trial {len(peaks)} {peaks[-1]:.1f} "
+                     f"(RMS {cuffs[-1, c, 1]:.1f}), highest {peaks[worst]:.1f} (trial "
+                     f"{worst + 1})")
+    return "\n".join(lines)
+
+
 def add_identified(summary: RunSummary, result: RunResult, names: list[str]) -> None:
     """The identification after the run's last trial as ``summary.extra["identified"]`` (the
     JSON's and the report's; nothing without ``identification.enabled``)."""
@@ -299,6 +312,10 @@ def print_report(args: argparse.Namespace, config: Config, runs: list[RunSummary
     print(format_iterations(runs, names))
     print()
     print(format_long_run(runs, names, limit=feedforward_limit_of(config)))
+    for run in runs:
+        if run.cuff_forces is not None:
+            print()
+            print(format_cuff_forces(run.cuff_forces, run_title(run)))
     for run in runs:
         if run.extra.get("identified"):  # (the identification's modules only for one)
             from ..analysis.identified import format_final

@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING, Any
 
 from .. import load_public
 
-ROOMS = ("params", "arm", "reference", "loop", "learning", "convergence", "sim", "persistence",
-         "session", "protocol", "programs", "population")
+ROOMS = ("params", "arm", "reference", "loop", "learning", "convergence", "sim", "person",
+         "persistence", "session", "protocol", "programs", "population")
 """core's subpackages, bottom first: each may import only those before it (and the shared
 modules ``errors`` and ``_numba_cache``)."""
 

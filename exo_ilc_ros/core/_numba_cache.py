@@ -17,7 +17,8 @@ import numba
 KERNEL_MODULES = ("arm/dynamics.py", "arm/joint_forces.py", "loop/plant.py", "loop/controller.py",
                   "loop/trial.py", "loop/patient.py", "loop/hold.py",
                   "learning/norm_optimal_model.py", "learning/norm_optimal_qp.py",
-                  "learning/norm_optimal_recursive.py", "learning/joint_force_regressors.py")
+                  "learning/norm_optimal_recursive.py", "learning/joint_force_regressors.py",
+                  "person/neural_drive.py", "person/strapped.py")
 
 if not os.environ.get("NUMBA_CACHE_DIR"):
     here = Path(__file__).resolve().parent

@@ -34,6 +34,7 @@ import numpy as np
 from ..core.loop.divergence import PlantDivergence, state_divergence
 from ..core.loop.plant import finite_state
 from ..core.loop.stepper import PlantStepper
+from ..core.person.experiment import uses_person
 from ..core.sim.mujoco_arm import MujocoArm, effects_not_simulated
 from .common import spin, wall_clock
 from .plant_base import NAME, Pace, PlantNode
@@ -190,6 +191,8 @@ class MujocoPlant(FreeRunningPlant):
         """MuJoCo's arm of this configuration."""
 
         config = self.params.config
+        if uses_person(config):  # the exoskeleton strapped to a person with muscles
+            return self.experiment.make_stepper()
         if config["dynamics"] != "full":
             self.get_logger().warning("dynamics: MuJoCo always simulates the full plant "
                                       f"(eq (15)); {config['dynamics']!r} ignored")

@@ -27,7 +27,7 @@ from ..core.loop.safety import watchdog_for
 from ..core.loop.trial import period_ns
 from ..core.loop.wire_input import Cause, Rejection, validate_effort_command
 from ..core.params import schema
-from ..core.sim.experiment import Experiment
+from ..core.person.experiment import experiment_for
 from ..wire import topics
 from ..wire.cdr import CdrError, JointStateWriter, read_float64_array
 from ..wire.publishers import max_bytes
@@ -73,7 +73,8 @@ class PlantNode(Node):
         super().__init__(NAME)
         self.params = SchemaParameters(self, NAME)
         config = self.params.config
-        self.experiment = Experiment(config)
+        self.experiment = experiment_for(config)
+        """The closed loop of the config (a person with muscles: its strapped model)."""
         self.lock_step = config["mode"] == "lock_step"
         self.clock_every = int(config["clock_every"])
         self.step_ns = period_ns(self.experiment.period)

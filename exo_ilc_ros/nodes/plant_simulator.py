@@ -36,7 +36,6 @@ from trajectory_msgs.msg import JointTrajectory
 from ..core.loop.divergence import state_divergence
 from ..core.loop.plant import clamp_counted, finite_state
 from ..core.loop.safety import LateCommands
-from ..core.loop.stepper import PlantStepper
 from ..wire import topics
 from ..wire.cdr import JointStateWriter
 from ..wire.protocol import trial_of_frame
@@ -59,7 +58,7 @@ class PlantSimulator(PlantNode):
     def __init__(self) -> None:
         super().__init__(self.on_command)
         config = self.params.config
-        self.stepper = PlantStepper(self.experiment)
+        self.stepper = self.experiment.make_stepper()
         self.last_index = self.experiment.reference.samples - 1
         self.now_ns = 0
         self.t0_ns = 0

@@ -39,6 +39,10 @@ class TrialRecord:
     joint_force: np.ndarray | None = None
     """The identified patient's joint forces (N m per sample) computed torque added to the
     effort (:mod:`exo_ilc_ros.core.learning.patient_model`); None: none."""
+    cuff_wrench: np.ndarray | None = None
+    """A person strapped in cuffs (:mod:`exo_ilc_ros.core.person`): per sample and cuff
+    (upper arm, forearm) the force (N) and torque (N m) the cuff applies to the person, in the
+    cuff's frame, shape (N+1, 2, 6); None: no person."""
 
     @property
     def aborted(self) -> bool:

@@ -3,7 +3,7 @@ as the in-process trial, so the graph's plant equals it bit for bit."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -18,6 +18,34 @@ from .patient import (
 )
 from .plant import plant_integration, plant_period, plant_period_with_joint_forces
 from .setup import LoopSetup
+
+
+class ArmStepper(Protocol):
+    """What a plant node steps: the true arm one control period at a time (our RK4 plant,
+    :class:`PlantStepper`, or the exoskeleton strapped to a person,
+    ``core.person.strapped.StrappedArm``)."""
+
+    @property
+    def position(self) -> np.ndarray:
+        """The true q."""
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """The true qdot."""
+
+    applied: np.ndarray
+
+    def reset(self) -> None:
+        """Put the arm at the trials' start, no effort applied."""
+
+    def begin_trial(self, trial: int) -> None:
+        """Trial ``trial`` starts at sample 0."""
+
+    def measure(self) -> tuple[np.ndarray, np.ndarray]:
+        """What the sensors read at the current sample."""
+
+    def step(self, effort: np.ndarray, saturated: np.ndarray | None = None) -> int:
+        """Hold ``effort`` over one period (-1: refused)."""
 
 
 class PlantStepper:

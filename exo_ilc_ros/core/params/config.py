@@ -409,7 +409,8 @@ class Config:
         without the URDF keys (its digests stay as they were before they existed), a URDF arm
         without the cone keys and with ``model.urdf`` as the sha256 of the file's contents (not
         its path); ``model.urdf_joint_dynamics`` only when it applies them; the person's keys
-        only with ``person.enabled``, ``patient.joints`` only when given,
+        only with ``person.enabled``, the neural drive's and the strapping's only with a
+        ``musculoskeletal.model``, ``patient.joints`` only when given,
         ``model.gravity_direction`` only when it is not -z (so, too, for the keys that came
         before them)."""
         urdf = self._values["model.source"] == "urdf"
@@ -418,6 +419,9 @@ class Config:
             left_out.update(schema.URDF_PLANT_KEYS)
         if not self._values["person.enabled"]:
             left_out.update(schema.PERSON_KEYS)
+        if self._values["musculoskeletal.model"] == "none":  # no muscles, no cuffs
+            left_out.update(schema.DRIVE_KEYS)
+            left_out.update(schema.STRAPPED_KEYS)
         if not self._values[schema.PATIENT_JOINTS]:
             left_out.add(schema.PATIENT_JOINTS)
         down = self._values["model.gravity_direction"]

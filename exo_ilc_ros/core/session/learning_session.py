@@ -53,6 +53,7 @@ from ..params import schema
 from ..params.config import Config
 from ..persistence.profiles import load_initial
 from ..persistence.store import RunStore, StoredTrial
+from ..person.experiment import experiment_for
 from ..reference.build import build_reference
 from ..sim.experiment import Experiment
 from .abort import AbortTrip, partial_update, pass_length_record, stop_message, trip_of
@@ -525,7 +526,7 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
         overrides.update(pending.pop(k))
     effective = config.replace(overrides) if overrides else config
     session = LearningSession(effective, learning_law)
-    experiment = Experiment(effective)
+    experiment = experiment_for(effective)
     result = RunResult(experiment.mass_uncertainty, effective["law"],
                        float(effective["error_bound"]))
     if patient is None and experiment.patient.learns:
@@ -554,7 +555,7 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
         if conclusion.applied:
             result.applied[record.trial + 1] = conclusion.applied
             if EXPERIMENT_KEYS & conclusion.applied.keys():
-                experiment = Experiment(session.config)
+                experiment = experiment_for(session.config)
         if run_store is not None:
             run_store.save(record, conclusion.update, conclusion.config)
         if on_conclusion is not None:

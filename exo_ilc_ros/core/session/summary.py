@@ -10,8 +10,12 @@ from typing import Any
 import numpy as np
 
 from ..convergence.bound import IterationsToBound, iterations_to_bound
+from ..person.cuffs import CUFFS, cuff_metrics
 from .abort import ABORT_STOP_KEY
 from .result import RunResult
+
+CUFF_METRICS = ("peak_force_N", "rms_force_N", "peak_torque_Nm", "rms_torque_Nm")
+"""The JSON names of a trial's cuff metrics, per cuff (``trials[].cuff_forces``)."""
 
 
 @dataclass
@@ -28,6 +32,10 @@ class RunSummary:
     true_max_abs_error: np.ndarray | None = None
     """The true max |e| (the plant's state) where the sensors made the measured
     ``max_abs_error`` differ from it (the virtual patient); None: they are the same."""
+    cuff_forces: np.ndarray | None = None
+    """A person strapped in cuffs: per trial and cuff (upper arm, forearm) the peak and RMS
+    |force| (N) and the peak and RMS |torque| (N m) on the person, shape (K, 2, 4)
+    (:func:`~exo_ilc_ros.core.person.experiment.cuff_metrics`); None: no person."""
 
     @classmethod
     def from_result(cls, result: RunResult) -> RunSummary:
@@ -36,6 +44,9 @@ class RunSummary:
         summary = cls(result.mass_uncertainty, result.law, result.error_bound,
                       result.max_abs_errors, result.max_abs_feedforward, result.max_abs_effort,
                       true_max_abs_error=result.true_max_abs_errors() if measured else None)
+        if result.records and all(r.cuff_wrench is not None for r in result.records):
+            summary.cuff_forces = np.array([cuff_metrics(np.asarray(r.cuff_wrench))
+                                            for r in result.records])
         summary.extra.update(live_changes(result.applied, result.law))
         if result.aborted:
             summary.extra["aborted_trials"] = list(result.aborted)
@@ -68,6 +79,11 @@ class RunSummary:
                 entry["max_abs_feedforward"] = [float(x) for x in self.max_abs_feedforward[k]]
             if self.max_abs_effort is not None:
                 entry["max_abs_effort"] = [float(x) for x in self.max_abs_effort[k]]
+            if self.cuff_forces is not None:
+                entry["cuff_forces"] = {cuff: dict(zip(CUFF_METRICS, map(float, row),
+                                                       strict=True))
+                                        for cuff, row in zip(CUFFS, self.cuff_forces[k],
+                                                             strict=True)}
             trials.append(entry)
         out = {"mass_uncertainty": self.mass_uncertainty, "law": self.law,
                "error_bound": self.error_bound, "trials": trials,
@@ -89,11 +105,15 @@ class RunSummary:
         true = table("true_max_abs_error")
         if true is not None and errors is not None and np.array_equal(true, errors):
             true = None
+        cuffs = None
+        if trials and "cuff_forces" in trials[0]:
+            cuffs = np.array([[[t["cuff_forces"][c][m] for m in CUFF_METRICS] for c in CUFFS]
+                              for t in trials], dtype=float)
         return cls(float(data["mass_uncertainty"]), str(data["law"]),
                    float(data.get("error_bound", 0.005)),
                    errors if errors is not None else np.zeros((0, 0)),
                    table("max_abs_feedforward"), table("max_abs_effort"),
-                   true_max_abs_error=true)
+                   true_max_abs_error=true, cuff_forces=cuffs)
 
 
 def law_segments(first_law: str, changes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:

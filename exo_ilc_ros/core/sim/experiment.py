@@ -13,6 +13,7 @@ from ..loop.hold import ramp_samples
 from ..loop.patient import PatientModel, patient_trial
 from ..loop.plant import PlantDynamics, plant_integration
 from ..loop.record import TrialRecord
+from ..loop.stepper import ArmStepper, PlantStepper
 from ..loop.trial import simulate_trial_guarded
 from ..params.config import Config
 from ..reference.build import build_reference
@@ -50,6 +51,11 @@ class Experiment:
                                         plant_damping(self.patient), self.period, self.substeps)
         """RK4 sub-steps per period: ``integration_step``'s, more where a joint damping is too
         stiff for it (:func:`divergence.stable_substeps`)."""
+
+    def make_stepper(self) -> ArmStepper:
+        """The plant one control period at a time, for the graph's plant node: our RK4 plant
+        with the virtual patient (a person with muscles: its strapped model)."""
+        return PlantStepper(self)
 
     def run_trial(self, feedforward: np.ndarray, trial: int,
                   levels: np.ndarray | None = None,

@@ -34,3 +34,20 @@ PERSON_KEYS = ("person.enabled", "person.in_nominal", "person.body_mass", "perso
 """A person in the exoskeleton (left out of every digest while ``person.enabled`` is false:
 a run without a person keeps the keys it had before they existed)."""
 PATIENT_JOINTS = "patient.joints"
+DRIVE_KEYS = tuple(f"person.drive.{name}" for name in (
+    "mas_grade", "tone", "length_threshold", "velocity_threshold", "length_gain", "velocity_gain",
+    "reflex_max", "reflex_delay", "spastic_muscles", "voluntary_gain", "fatigue_rate",
+    "recovery_rate"))
+"""A musculoskeletal person's neural drive (core/person/neural_drive.py): left out of every
+digest while ``musculoskeletal.model`` is none (no muscles to drive), so a run keeps the
+digest it had before they existed."""
+STRAPPED_KEYS = ("musculoskeletal.model", "musculoskeletal.timestep",
+                 "musculoskeletal.settle_time", "strapping.shoulder_joint",
+                 "strapping.elbow_joint", "strapping.misalignment.offset",
+                 "strapping.misalignment.rotation", "strapping.upper_arm_cuff",
+                 "strapping.forearm_cuff", "strapping.stiffness", "strapping.damping",
+                 "strapping.rotational_stiffness", "strapping.rotational_damping",
+                 "safety.cuff_force_limit")
+"""A person with muscles strapped in the exoskeleton (core/person/strapped.py, the schema's
+musculoskeletal.py): left out of every digest while ``musculoskeletal.model`` is none, so a
+run keeps the digest it had before they existed."""

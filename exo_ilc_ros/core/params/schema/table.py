@@ -8,7 +8,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from .drive import drive_parameters
 from .key_groups import MODEL_SOURCES, PATIENT_JOINTS, PERSON_SEGMENTS, URDF_JOINT_DYNAMICS
+from .musculoskeletal import musculoskeletal_parameters
 from .parameter import CONTROLLER, PLANT, SHARED, SUPERVISOR, Kind, Parameter
 from .rules import (
     MAS_GRADES,
@@ -341,6 +343,7 @@ PARAMETERS: tuple[Parameter, ...] = (
               "sample); 1: every period", strictly_positive=True),
     *_person_parameters(),
     *_patient_parameters(),
+    *drive_parameters(),
     Parameter("law", SUPERVISOR, Kind.STRING,
               "learning law: sign (sgnPDD^2, eq (11)), linear (Arimoto PDD^2-type) or "
               "norm_optimal (model-based, core/learning/norm_optimal.py)",
@@ -525,6 +528,7 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("identification.voluntary", SUPERVISOR, Kind.BOOL,
               "fit the patient's own effort toward the reference too (for a patient known to "
               "push; else its suspicion makes an estimate untrustworthy)"),
+    *musculoskeletal_parameters(),
 )
 
 BY_NAME: Mapping[str, Parameter] = {p.name: p for p in PARAMETERS}

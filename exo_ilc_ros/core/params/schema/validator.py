@@ -204,6 +204,12 @@ def check_consistency(values: Mapping[str, Any]) -> None:
                                   "give either a mas_grade (its preset) or the custom values, "
                                   "not both (set mas_grade: custom)")
 
+    if values["person.drive.mas_grade"] != "custom":
+        for key in ("tone", "length_threshold", "velocity_threshold", "length_gain",
+                    "velocity_gain", "reflex_max"):
+            if values[f"person.drive.{key}"]:
+                raise ConfigError(f"person.drive.{key}", "give either a mas_grade (its preset) "
+                                  "or the custom values, not both (set mas_grade: custom)")
     _check_person(values)
     hold = hold_gain_problem(values)
     if hold is not None:

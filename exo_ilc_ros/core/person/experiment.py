@@ -1,0 +1,137 @@
+"""The closed loop with a person strapped in the exoskeleton, in-process
+(:class:`StrappedExperiment`): the controller of :mod:`~..loop.controller` sample by sample on
+the exoskeleton's joints, the plant :class:`.strapped.StrappedArm`, and the cuff forces per
+sample and per trial (:func:`cuff_metrics`), with the cuff-force limit of the safety envelope.
+
+The trial calls the controller's kernel and the plant in the order the graph calls them
+(``measure``, the control at sample i, ``step``), so ``exo-ilc run`` with the same config
+(plant_simulator steps the same :class:`StrappedArm`) gives these trials bit for bit, as long
+as no trial presses past the cuff-force limit (the graph's controller does not see the cuffs:
+there the limit is in-process only).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..arm.dynamics import workspace
+from ..errors import ConfigError, SafetyError
+from ..loop.controller import ABORT, HOLD_COUNT, guard_state, guarded_control_into
+from ..loop.record import TrialRecord
+from ..params.config import Config
+from ..sim.experiment import Experiment
+from .cuffs import CUFFS
+from .model import MuscleDrive
+from .neural_drive import drive_for
+from .strapped import StrappedArm
+
+DriveFactory = Callable[[Config, Any], "MuscleDrive | None"]
+"""Builds the muscles' drive of a config for a compiled model (None: passive muscles)."""
+
+
+def passive_muscles(config: Config, model: Any) -> MuscleDrive | None:
+    """No neural drive: the muscles stay at zero excitation (their passive force-length
+    curves and activation decay only)."""
+    return None
+
+
+def uses_person(config: Config) -> bool:
+    """True if the config straps a person with muscles into the exoskeleton."""
+    return str(config["musculoskeletal.model"]) != "none"
+
+
+def beyond_cuff_limit(wrench: np.ndarray, limit: Sequence[float]) -> int:
+    """The first cuff whose |force| is above its limit (0: no limit), or -1."""
+    for c, most in enumerate(limit):
+        if most > 0.0 and math.hypot(*wrench[c, :3]) > most:
+            return c
+    return -1
+
+
+class StrappedExperiment(Experiment):
+    """:class:`~..sim.experiment.Experiment` whose plant is the exoskeleton strapped to a
+    person with muscles (``musculoskeletal.model``)."""
+
+    def __init__(self, config: Config, drive: DriveFactory = drive_for) -> None:
+        super().__init__(config)
+        if self.patient.enabled:
+            raise ConfigError("musculoskeletal.model", "a person with muscles is the patient: "
+                              "turn the virtual patient's joint effects (patient.*) off")
+        self.arm = StrappedArm(config, self.reference.position[0], drive)
+        self.cuff_limit = np.asarray(config["safety.cuff_force_limit"], dtype=float)
+
+    def make_stepper(self) -> StrappedArm:
+        """The plant the graph's plant node steps: this experiment's :class:`StrappedArm`."""
+        return self.arm
+
+    def run_trial(self, feedforward: np.ndarray, trial: int,
+                  levels: np.ndarray | None = None,
+                  learned: np.ndarray | None = None,
+                  joint_force: np.ndarray | None = None) -> TrialRecord:
+        """One trial from the kept start state (:meth:`StrappedArm.reset`): at each sample the
+        controller reads the exoskeleton's (q, qdot), forms eq (11) and the computed torque of
+        eq (16) (:func:`~..loop.controller.guarded_control_into`, the error envelope's abort
+        and safe hold included) and the strapped model runs the period. The first sample where
+        a cuff presses past ``safety.cuff_force_limit`` aborts the trial there: the safe hold
+        around the pose of that sample, as an envelope abort. A non-finite state stops the
+        trial (NaN from that sample on), as the compiled trial does."""
+        ref = self.reference
+        u_ff = np.ascontiguousarray(feedforward, dtype=float)
+        if u_ff.shape != ref.position.shape:
+            raise ValueError(f"feed-forward must have shape {ref.position.shape}, "
+                             f"got {u_ff.shape}")
+        if not np.all(np.isfinite(u_ff)):
+            raise SafetyError(f"trial {trial}: the feed-forward holds non-finite values; "
+                              "refusing to run it")
+        if learned is not None:
+            raise ConfigError("patient.learning.gain", "a learning virtual patient does not "
+                              "apply to a person with muscles")
+        force = np.zeros(ref.position.shape) if joint_force is None else \
+            np.ascontiguousarray(joint_force, dtype=float)
+        n_samples, n = u_ff.shape
+        q_log = np.full((n_samples, n), np.nan)
+        qd_log = np.full((n_samples, n), np.nan)
+        u_log = np.full((n_samples, n), np.nan)
+        effort_log = np.full((n_samples, n), np.nan)
+        wrench_log = np.full((n_samples, len(CUFFS), 6), np.nan)
+        ws = workspace(n)
+        gains = np.empty((2, n))
+        q_hold = np.empty(n)
+        state = guard_state()
+        limit = [float(x) for x in self.cuff_limit]
+        arm = self.arm
+        arm.begin_trial(trial)
+        nominal = self.nominal.kernel_args
+        for i in range(n_samples):
+            q, qd = arm.measure()
+            if not math.isfinite(float(q @ q + qd @ qd)):  # diverged (or beyond doubles)
+                state[ABORT] = i if state[ABORT] < 0 else state[ABORT]
+                break
+            q_log[i] = q
+            qd_log[i] = qd
+            wrench_log[i] = arm.wrench
+            if state[ABORT] < 0 and beyond_cuff_limit(arm.wrench, limit) >= 0:
+                state[ABORT] = i
+                state[HOLD_COUNT] = 0
+                q_hold[:] = q
+            guarded_control_into(i, state, False, u_ff[i], ref.position[i], ref.velocity[i],
+                                 q_log[i], qd_log[i], force[i], self.kp, self.kd, nominal,
+                                 self.effort_limit, self.error_envelope, self.hold_kp,
+                                 self.hold_kd, self.hold_ramp, q_hold, gains, ws, u_log[i],
+                                 effort_log[i])
+            if i + 1 < n_samples:  # the plant clamps as the graph's plant does (a no-op:
+                arm.step(effort_log[i])  # the controller clamped with the same rule)
+        abort = int(state[ABORT])
+        return TrialRecord(trial, ref, q_log, qd_log, u_ff, u_log, effort_log, levels,
+                           None if abort < 0 else abort, None, None,
+                           None if joint_force is None else force, wrench_log)
+
+
+def experiment_for(config: Config, drive: DriveFactory = drive_for) -> Experiment:
+    """The in-process experiment of ``config``: :class:`StrappedExperiment` with a person
+    (``musculoskeletal.model``), else :class:`~..sim.experiment.Experiment`."""
+    return StrappedExperiment(config, drive) if uses_person(config) else Experiment(config)

@@ -18,9 +18,15 @@ from typing import Any
 
 import numpy as np
 
-from ..arm.dynamics import workspace
 from ..errors import ConfigError, SafetyError
-from ..loop.controller import ABORT, HOLD_COUNT, guard_state, guarded_control_into
+from ..loop.controller import (
+    ABORT,
+    HOLD_COUNT,
+    Setpoint,
+    controller_of,
+    guard_of,
+    guarded_control_into,
+)
 from ..loop.record import TrialRecord
 from ..params.config import Config
 from ..sim.experiment import Experiment
@@ -98,14 +104,12 @@ class StrappedExperiment(Experiment):
         u_log = np.full((n_samples, n), np.nan)
         effort_log = np.full((n_samples, n), np.nan)
         wrench_log = np.full((n_samples, len(CUFFS), 6), np.nan)
-        ws = workspace(n)
-        gains = np.empty((2, n))
-        q_hold = np.empty(n)
-        state = guard_state()
+        controller = controller_of(self)
+        guard = guard_of(np.empty(n))
+        state, q_hold = guard.state, guard.q_hold
         limit = [float(x) for x in self.cuff_limit]
         arm = self.arm
         arm.begin_trial(trial)
-        nominal = self.nominal.kernel_args
         for i in range(n_samples):
             q, qd = arm.measure()
             if not math.isfinite(float(q @ q + qd @ qd)):  # diverged (or beyond doubles)
@@ -118,10 +122,8 @@ class StrappedExperiment(Experiment):
                 state[ABORT] = i
                 state[HOLD_COUNT] = 0
                 q_hold[:] = q
-            guarded_control_into(i, state, False, u_ff[i], ref.position[i], ref.velocity[i],
-                                 q_log[i], qd_log[i], force[i], self.kp, self.kd, nominal,
-                                 self.effort_limit, self.error_envelope, self.hold_kp,
-                                 self.hold_kd, self.hold_ramp, q_hold, gains, ws, u_log[i],
+            guarded_control_into(i, False, Setpoint(u_ff[i], ref.position[i], ref.velocity[i]),
+                                 q_log[i], qd_log[i], force[i], controller, guard, u_log[i],
                                  effort_log[i])
             if i + 1 < n_samples:  # the plant clamps as the graph's plant does (a no-op:
                 arm.step(effort_log[i])  # the controller clamped with the same rule)

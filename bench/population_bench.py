@@ -32,7 +32,7 @@ TARGET = 1000
 def _cells(config: str, overlays: list[str], patients: int, trials: int,
            seed: int) -> list[StudyCell]:
     base = load_config(config, overlays=overlays)
-    return [patient_cell("bench", patient_config(config, overlays, p, trials), p)
+    return [patient_cell("bench", patient_config(base, p, trials), p)
             for p in draw_population(base, PopulationSpec(), patients, seed)]
 
 

@@ -213,7 +213,7 @@ def test_falsification_finds_a_worse_patient_and_writes_it_loadable(tmp_path: Pa
     start = patient_from_unit(base, spec, mild, uniform_grades=True)
     start.overrides["patient.seed"] = 0
     start_run = patient_outcome(0, _run(law, [str(short)], start, 3), 3)
-    found = falsify(base, spec, law, [str(short)], "robust", 3, Search(6, 0, mild))
+    found = falsify(base, spec, "robust", 3, Search(6, 0, mild))
     assert len(found) == 6 and found[0].score >= found[-1].score
     assert found[0].score > failure_score(start_run)
     # the worst found, written as a scenario, loads and reproduces its outcome
@@ -227,7 +227,8 @@ def test_falsification_finds_a_worse_patient_and_writes_it_loadable(tmp_path: Pa
 
 
 def _run(law: str, overlays: list[str], patient: Patient, trials: int) -> CellResult:
-    return run_cell(patient_cell("L", patient_config(law, overlays, patient, trials), patient))
+    base = load_config(law, overlays=overlays)
+    return run_cell(patient_cell("L", patient_config(base, patient, trials), patient))
 
 
 def test_scenario_yaml_puts_each_key_in_its_section(tmp_path: Path) -> None:

@@ -48,6 +48,7 @@ A trial with non-finite samples, or where any joint moved faster than the regres
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 
@@ -64,10 +65,25 @@ from .joint_force_regressors import (
     trial_regressors,
 )
 from .patient_estimate import PARAMETERS, JointEstimate, ParameterEstimate, PatientEstimate
-from .recursive_least_squares import JointInformation, Solution, hac_inflation, solve_scaled
+from .recursive_least_squares import (
+    JointInformation,
+    Solution,
+    conditioning,
+    hac_inflation,
+    solve_scaled,
+)
 
 _Z95 = 1.959963984540054
 """The normal distribution's 97.5 % quantile: 95 % intervals."""
+
+
+@functools.lru_cache(maxsize=16)
+def regression_filters(bandwidth: float, period: float,
+                       smoothing_cutoff: float) -> RegressionFilters:
+    """The regression's filters for these settings (all they depend on), designed once per
+    process: a population's patients share them (the filters are only read)."""
+    return RegressionFilters(IdentificationSettings(filter_bandwidth=bandwidth, period=period,
+                                                    smoothing_cutoff=smoothing_cutoff))
 
 
 class JointForceIdentifier:
@@ -77,7 +93,8 @@ class JointForceIdentifier:
     def __init__(self, nominal: ArmModel, settings: IdentificationSettings | None = None) -> None:
         self.nominal = nominal
         self.settings = settings or IdentificationSettings()
-        self.filters = RegressionFilters(self.settings)
+        self.filters = regression_filters(self.settings.filter_bandwidth, self.settings.period,
+                                          self.settings.smoothing_cutoff)
         self.thresholds = np.asarray(self.settings.reflex_thresholds, dtype=float)
         self.delays = self.settings.delay_samples
         grid = len(self.delays) * self.thresholds.shape[0] if self.settings.reflex else 0
@@ -137,14 +154,13 @@ class JointForceIdentifier:
             v = np.ascontiguousarray(reg.velocity[:, j])
             reflex, active = self._reflex(v, reg)
             reflexes.append((reflex, active))
-            alone = solve_scaled(phi.T @ phi, phi.T @ y, float(y @ y), self.fitted)
-            well = (alone.condition <= s.max_condition and bool(np.all(
-                alone.excited[:4])))
+            condition, excited = conditioning(phi.T @ phi, phi.T @ y, self.fitted)
+            well = condition <= s.max_condition and bool(np.all(excited[:4]))
             info.add(phi, reflex, active, y, s.forgetting if well else 1.0,
                      float(np.max(np.abs(v))), float(reg.unresolved[j]))
-        estimate = self._conclude("")
+        detected = [self._detection(info)[3] for info in self.joints]
         for j, info in enumerate(self.joints):
-            self._update_inflation(j, info, reg, reflexes[j], estimate.joints[j])
+            self._update_inflation(j, info, reg, reflexes[j], detected[j])
         self.estimate = self._conclude("")
         return self.estimate
 
@@ -171,7 +187,15 @@ class JointForceIdentifier:
         return estimate
 
     def _selected(self, info: JointInformation) -> tuple[int | None, Solution, Solution]:
-        """The best reflex grid point (None: no reflex column), its solution, the base one."""
+        """The best reflex grid point (None: no reflex column), its solution, the base one
+        (solved once per trial: kept in ``info.solved`` until the next trial is added)."""
+        key = ("selected", None)
+        if key not in info.solved:
+            info.solved[key] = self._select(info)
+        selected: tuple[int | None, Solution, Solution] = info.solved[key]
+        return selected
+
+    def _select(self, info: JointInformation) -> tuple[int | None, Solution, Solution]:
         base = solve_scaled(info.R, info.b, info.yy, info.fitted)
         if info.Rgg.shape[0] == 0 or info.trials == 0:
             return None, base, base
@@ -189,20 +213,20 @@ class JointForceIdentifier:
 
     def _update_inflation(self, j: int, info: JointInformation, reg: TrialRegressors,
                           reflex: tuple[np.ndarray, np.ndarray],
-                          estimate: JointEstimate) -> None:
+                          reflex_detected: bool) -> None:
         """The autocorrelation inflation of the variances, from this trial's residual under
         the model now reported (lambda-weighted mean over trials)."""
-        best, chosen, _ = self._selected(info)
+        best, chosen, base = self._selected(info)
         phi = reg.base[:, j, :]
         p = phi.shape[1]
-        if estimate.reflex_detected and best is not None:
+        if reflex_detected and best is not None:
             columns, active = reflex
             where = np.flatnonzero(active == best)
             col = columns[:, where[0]] if where.size else np.zeros(phi.shape[0])
             phi = np.column_stack([phi, col])
             theta = chosen.theta
         else:
-            theta = solve_scaled(info.R, info.b, info.yy, info.fitted).theta
+            theta = base.theta
         use = np.isfinite(theta)
         if not np.any(use):
             return
@@ -216,6 +240,19 @@ class JointForceIdentifier:
         mixed = np.where(np.isfinite(old), (weight_old * old + new) / (weight_old + 1.0), new)
         info.inflation = np.where(np.isfinite(mixed), mixed, old)
 
+    def _detection(self, info: JointInformation
+                   ) -> tuple[int | None, Solution, Solution, bool, str]:
+        """:meth:`_selected`, then whether its reflex is detected and if not why not."""
+        best, with_reflex, base = self._selected(info)
+        if not self.settings.reflex:
+            return best, with_reflex, base, False, "reflex not identified (settings)"
+        if best is None:
+            return best, with_reflex, base, False, (
+                f"not identifiable: the stretch velocity ({info.peak_speed:.3g} rad/s) never "
+                f"exceeded a threshold of the grid (>= {self.thresholds[0]:.3g} rad/s)")
+        reason = self._reflex_rejection(info, best, with_reflex, base)
+        return best, with_reflex, base, not reason, reason
+
     def _joint(self, j: int, info: JointInformation) -> JointEstimate:
         s = self.settings
         if info.trials == 0:
@@ -224,19 +261,8 @@ class JointForceIdentifier:
                      for name in PARAMETERS}
             return JointEstimate(j, empty, False, math.inf, math.nan, 0.0, 0, False,
                                  ("no trial yet",))
-        best, with_reflex, base = self._selected(info)
+        best, with_reflex, base, detected, reflex_reason = self._detection(info)
         p = len(BASE_PARAMETERS)
-        detected = False
-        reflex_reason = ""
-        if not s.reflex:
-            reflex_reason = "reflex not identified (settings)"
-        elif best is None:
-            reflex_reason = (f"not identifiable: the stretch velocity ({info.peak_speed:.3g} "
-                             f"rad/s) never exceeded a threshold of the grid "
-                             f"(>= {self.thresholds[0]:.3g} rad/s)")
-        else:
-            reflex_reason = self._reflex_rejection(info, best, with_reflex, base)
-            detected = not reflex_reason
         chosen = with_reflex if detected else base
         sigma2 = chosen.rss / max(info.samples - int(np.sum(chosen.excited)), 1.0)
         weights = info.w2 / info.w1
@@ -315,7 +341,10 @@ class JointForceIdentifier:
             R[p, p] = info.Rgg[best]
             b = np.append(info.b, info.bg[best])
             mask = np.append(mask, True)
-        full = solve_scaled(R, b, info.yy, mask)
+        key = ("voluntary", best)
+        if key not in info.solved:
+            info.solved[key] = solve_scaled(R, b, info.yy, mask)
+        full: Solution = info.solved[key]
         inflation = info.inflation[:len(PASSIVE_PARAMETERS)]
         infl = float(np.nanmedian(inflation)) if np.any(np.isfinite(inflation)) else 1.0
         scale = sigma2 * max(infl, 1.0) * info.w2 / info.w1

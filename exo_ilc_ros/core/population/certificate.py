@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError
-from ..params.config import Config, load_config
+from ..params.config import Config
 from ..programs.study import CellResult, StudyCell
 from ..programs.study_rows import seed_outcome
 from .distributions import Patient
@@ -223,14 +223,16 @@ def certificate(label: str, patients: int, trials: int, error_bound: float,
                        tuple(sorted(outcomes, key=lambda o: o.index)))
 
 
-def patient_config(base_path: str | None, overlays: Sequence[str], patient: Patient,
-                   trials: int, extra: Mapping[str, Any] | None = None) -> Config:
-    """The configuration of one patient's run: the config file and overlays, then the
-    patient's overrides, the trial count (every trial runs) and ``extra``."""
+def patient_config(base: Config, patient: Patient, trials: int,
+                   extra: Mapping[str, Any] | None = None) -> Config:
+    """The configuration of one patient's run: ``base`` (the config file and its overlays,
+    loaded once: ``load_config(path, overrides, overlays)`` is ``load_config(path,
+    overlays=overlays).replace(overrides)``), then the patient's overrides, the trial count
+    (every trial runs) and ``extra``."""
     overrides: dict[str, Any] = {**patient.overrides, "max_trials": int(trials),
                                  "stop_when_settled": 0, **(extra or {})}
     try:
-        return load_config(base_path, overrides, overlays=list(overlays))
+        return base.replace(overrides)
     except ConfigError as exc:
         raise ConfigError(exc.key, f"{exc.rule} (patient {patient.index}: "
                           f"{patient.describe()})", exc.source) from None

@@ -22,6 +22,7 @@ from ..core.population.certificate import (
     CRITERIA,
     Certificate,
     PatientOutcome,
+    feedforward_limit,
     patient_outcome,
 )
 from ..core.population.distributions import SOURCES, Patient
@@ -66,7 +67,7 @@ def run_population(cells: Sequence[StudyCell], trials: int, workers: int,
     handle = rows.open("a") if rows is not None else None
 
     def finished(cell: StudyCell, result: CellResult) -> None:
-        outcome = patient_outcome(cell.seed, result, trials)
+        outcome = patient_outcome(cell.seed, result, trials, feedforward_limit(cell.values))
         done[cell.seed] = outcome
         if handle is not None:
             handle.write(json.dumps({"outcome": outcome.to_json()}) + "\n")
@@ -118,6 +119,7 @@ def format_certificate(cert: Certificate, patients: Mapping[int, Patient], worst
             f"final {o.final_error:.2e} rad"
         lines.append(f"  #{o.index}: {final}, {where}, {o.aborts} aborts (run {o.abort_run})"
                      f"{', GROWING' if o.growing else ''}"
+                     f"{', AT ITS LIMIT' if o.at_limit else ''}"
                      f"{': ' + o.failure if o.failure else ''}")
         if o.index in patients:
             lines.append(f"      {patients[o.index].describe()}")

@@ -25,6 +25,7 @@ from ..core.params import schema
 from ..core.params.config import Config
 from ..core.population.certificate import (
     PatientOutcome,
+    feedforward_limit,
     patient_cell,
     patient_config,
     patient_outcome,
@@ -113,7 +114,7 @@ def falsify(base: Config, spec: PopulationSpec, label: str, trials: int, search:
             cells.append(patient_cell(label, config, patient))
         results: list[CellResult] = run_cells(cells, workers, dask)
         for trial, patient, cell, result in zip(asked, patients, cells, results, strict=True):
-            outcome = patient_outcome(cell.seed, result, trials)
+            outcome = patient_outcome(cell.seed, result, trials, feedforward_limit(cell.values))
             score = failure_score(outcome)
             study.tell(trial, score)
             item = Found(patient, outcome, score)

@@ -261,3 +261,31 @@ def test_voluntary_patients_and_every_grade_have_their_schema_keys() -> None:
     assert set(MAS_ORDER) == set(MAS_PRESETS)
     with pytest.raises(ValueError, match="encoder_share"):
         PopulationSpec(encoder_share=1.5)
+
+
+def test_a_rows_file_serves_any_population_size_and_loses_no_patient(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Patient i of a seed is the same whatever N: a run of 3 patients' rows gives the
+    certificate of its first 2 without running any, and keeps the third; another seed's file
+    is refused."""
+    import exo_ilc_ros.analysis.certificate as certificate_module
+
+    rows = tmp_path / "cert.rows.jsonl"
+    args = ["certify", "--config", str(config_dir() / "robust.yaml"), "--scenario",
+            str(_short(tmp_path)), "--trials", "3", "--workers", "1", "--rows", str(rows)]
+    main([*args, "--population", "3", "--json", str(tmp_path / "three.json")])
+    three = json.loads((tmp_path / "three.json").read_text())["patients"]
+
+    def no_run(cells: list[object], *rest: object, **kw: object) -> list[object]:
+        assert not cells, "a patient in the rows file was run again"
+        return []
+    monkeypatch.setattr(certificate_module, "run_cells", no_run)
+    main([*args, "--population", "2", "--json", str(tmp_path / "two.json")])
+    two = json.loads((tmp_path / "two.json").read_text())["patients"]
+    assert two == three[:2]
+    kept = [json.loads(x)["outcome"]["index"] for x in rows.read_text().splitlines()[1:]]
+    assert sorted(kept) == [0, 1, 2]
+    capsys.readouterr()
+    assert main([*args, "--population", "2", "--seed", "4"]) == 2
+    assert "another population or law" in capsys.readouterr().err

@@ -289,3 +289,29 @@ def test_a_rows_file_serves_any_population_size_and_loses_no_patient(
     capsys.readouterr()
     assert main([*args, "--population", "2", "--seed", "4"]) == 2
     assert "another population or law" in capsys.readouterr().err
+
+
+def test_pool_workers_run_one_blas_thread_and_give_the_same_bits(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The pool's workers start with one BLAS thread each unless the user set a count (then
+    theirs), the parent's environment as it was after; patient_aware's identification (the
+    BLAS-heavy part) gives the same bits in the workers as in this process."""
+    import os
+
+    from exo_ilc_ros.analysis import study
+    from exo_ilc_ros.analysis.study import BLAS_THREADS, run_cells
+
+    for name in BLAS_THREADS:
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("MKL_NUM_THREADS", "3")
+    with study._one_blas_thread():
+        assert os.environ["OPENBLAS_NUM_THREADS"] == "1" == os.environ["OMP_NUM_THREADS"]
+        assert os.environ["MKL_NUM_THREADS"] == "3"
+    assert "OPENBLAS_NUM_THREADS" not in os.environ and os.environ["MKL_NUM_THREADS"] == "3"
+    base = load_config(config_dir() / "patient_aware.yaml", overlays=[_short(tmp_path, 1.5)])
+    spec = PopulationSpec()
+    cells = [patient_cell("pa", patient_config(base, p, 4), p)
+             for p in draw_population(base, spec, 2, seed=0)]
+    serial = run_cells(cells, workers=1)
+    pooled = run_cells(cells, workers=2)
+    assert all(a.same_as(b) for a, b in zip(serial, pooled, strict=True))

@@ -54,8 +54,8 @@ def test_why_the_worst_patient_fails_the_identification_refuses_every_trial() ->
     """Four trials: the elbow (joint index 2) moves above the regression's 10 Hz cut-off (0.01-
     0.05 rad RMS: chatter, with MAS 3's delayed stretch reflex in the stiff loop), so every
     trial is refused whole and no identified force is ever used; the elbow stays 0.27-0.35 rad
-    off. When the law learns this
-    patient, this test says which rule changed."""
+    off (the refusal is one reason: with it relaxed the elbow still ends 0.31 rad off at trial
+    12). When the law learns this patient, this test says which rule changed."""
     base = _base()
     patient = draw_patient(base, PopulationSpec(), 0, WORST)  # type: ignore[arg-type]
     config = patient_config(base, patient, 4)  # type: ignore[arg-type]

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from exo_ilc_ros.core.params.config import config_dir, load_config
+from exo_ilc_ros.core.params.config import Config, config_dir, load_config
 from exo_ilc_ros.core.population.certificate import (
     feedforward_limit,
     patient_cell,
@@ -23,12 +23,12 @@ WORST = 62
 the start, 14-bit encoder, mass -9.1 %."""
 
 
-def _base() -> object:
+def _base() -> Config:
     return load_config(None, overlays=[config_dir() / "patient_aware.yaml"])
 
 
 def test_the_worst_patient_is_the_one_the_certificate_names() -> None:
-    patient = draw_patient(_base(), PopulationSpec(), 0, WORST)  # type: ignore[arg-type]
+    patient = draw_patient(_base(), PopulationSpec(), 0, WORST)
     assert patient.mas_grade == "3" and patient.overrides["patient.sensor.quantisation"] > 0
     assert np.allclose(patient.overrides["patient.passive.stiffness"], [2.31, 3.53, 2.73],
                        atol=0.005)
@@ -41,8 +41,8 @@ def test_the_worst_patient_meets_the_certificate() -> None:
     """The certificate's per-patient criteria over 25 trials: finite, bounded, no more than 2
     aborted trials and none 3 in a row, within 0.005 rad by trial 25 (and by 10)."""
     base = _base()
-    patient = draw_patient(base, PopulationSpec(), 0, WORST)  # type: ignore[arg-type]
-    config = patient_config(base, patient, 25)  # type: ignore[arg-type]
+    patient = draw_patient(base, PopulationSpec(), 0, WORST)
+    config = patient_config(base, patient, 25)
     result = run_cell(patient_cell("patient_aware", config, patient))
     outcome = patient_outcome(WORST, result, 25, feedforward_limit(config.values))
     assert outcome.finite and outcome.bounded
@@ -57,8 +57,8 @@ def test_why_the_worst_patient_fails_the_identification_refuses_every_trial() ->
     off (the refusal is one reason: with it relaxed the elbow still ends 0.31 rad off at trial
     12). When the law learns this patient, this test says which rule changed."""
     base = _base()
-    patient = draw_patient(base, PopulationSpec(), 0, WORST)  # type: ignore[arg-type]
-    config = patient_config(base, patient, 4)  # type: ignore[arg-type]
+    patient = draw_patient(base, PopulationSpec(), 0, WORST)
+    config = patient_config(base, patient, 4)
     seen: list[TrialConclusion] = []
     result = run_trials(config, on_conclusion=seen.append)
     for conclusion in seen:

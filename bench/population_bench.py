@@ -8,6 +8,10 @@ local Dask cluster of 2 single-threaded workers). Each way is run once after a w
 report, and the 1000-patient wall time EXTRAPOLATED linearly from the measured N (the cells are
 independent, so the time is linear in N on a fixed number of workers; a machine others load
 gives a longer time). ``--patients 1000`` measures the full size instead. Asserts nothing.
+
+The pool's workers start with one BLAS thread each, as Dask's nanny starts its workers
+(``OPENBLAS_NUM_THREADS`` and the like set to 1 unless already set): ``--blas-threads 2``
+measures the pool as it ran before that (two workers of two BLAS threads on two CPUs).
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from typing import Any
 from distributed import LocalCluster
 
 from exo_ilc_ros.analysis.certificate import run_population
+from exo_ilc_ros.analysis.study import BLAS_THREADS
 from exo_ilc_ros.core.params.config import config_dir, load_config
 from exo_ilc_ros.core.population.certificate import certificate, patient_cell, patient_config
 from exo_ilc_ros.core.population.distributions import PopulationSpec, draw_population
@@ -32,7 +37,7 @@ TARGET = 1000
 def _cells(config: str, overlays: list[str], patients: int, trials: int,
            seed: int) -> list[StudyCell]:
     base = load_config(config, overlays=overlays)
-    return [patient_cell("bench", patient_config(config, overlays, p, trials), p)
+    return [patient_cell("bench", patient_config(base, p, trials), p)
             for p in draw_population(base, PopulationSpec(), patients, seed)]
 
 
@@ -60,7 +65,12 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-dask", action="store_true")
+    parser.add_argument("--blas-threads", type=int, default=None,
+                        help="BLAS threads of each pool worker (default: 1)")
     args = parser.parse_args()
+    if args.blas_threads is not None:  # the workers inherit it (the pool sets only unset ones)
+        for name in BLAS_THREADS:
+            os.environ[name] = str(args.blas_threads)
     cells = _cells(args.config, args.overlay, args.patients, args.trials, args.seed)
     print(f"population bench: {args.config} {' '.join(args.overlay)}, {args.patients} "
           f"patients x {args.trials} trials, {args.workers} workers, {os.cpu_count()} CPUs",

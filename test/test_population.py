@@ -213,7 +213,7 @@ def test_falsification_finds_a_worse_patient_and_writes_it_loadable(tmp_path: Pa
     start = patient_from_unit(base, spec, mild, uniform_grades=True)
     start.overrides["patient.seed"] = 0
     start_run = patient_outcome(0, _run(law, [str(short)], start, 3), 3)
-    found = falsify(base, spec, law, [str(short)], "robust", 3, Search(6, 0, mild))
+    found = falsify(base, spec, "robust", 3, Search(6, 0, mild))
     assert len(found) == 6 and found[0].score >= found[-1].score
     assert found[0].score > failure_score(start_run)
     # the worst found, written as a scenario, loads and reproduces its outcome
@@ -227,7 +227,8 @@ def test_falsification_finds_a_worse_patient_and_writes_it_loadable(tmp_path: Pa
 
 
 def _run(law: str, overlays: list[str], patient: Patient, trials: int) -> CellResult:
-    return run_cell(patient_cell("L", patient_config(law, overlays, patient, trials), patient))
+    base = load_config(law, overlays=overlays)
+    return run_cell(patient_cell("L", patient_config(base, patient, trials), patient))
 
 
 def test_scenario_yaml_puts_each_key_in_its_section(tmp_path: Path) -> None:
@@ -260,3 +261,57 @@ def test_voluntary_patients_and_every_grade_have_their_schema_keys() -> None:
     assert set(MAS_ORDER) == set(MAS_PRESETS)
     with pytest.raises(ValueError, match="encoder_share"):
         PopulationSpec(encoder_share=1.5)
+
+
+def test_a_rows_file_serves_any_population_size_and_loses_no_patient(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Patient i of a seed is the same whatever N: a run of 3 patients' rows gives the
+    certificate of its first 2 without running any, and keeps the third; another seed's file
+    is refused."""
+    import exo_ilc_ros.analysis.certificate as certificate_module
+
+    rows = tmp_path / "cert.rows.jsonl"
+    args = ["certify", "--config", str(config_dir() / "robust.yaml"), "--scenario",
+            str(_short(tmp_path)), "--trials", "3", "--workers", "1", "--rows", str(rows)]
+    main([*args, "--population", "3", "--json", str(tmp_path / "three.json")])
+    three = json.loads((tmp_path / "three.json").read_text())["patients"]
+
+    def no_run(cells: list[object], *rest: object, **kw: object) -> list[object]:
+        assert not cells, "a patient in the rows file was run again"
+        return []
+    monkeypatch.setattr(certificate_module, "run_cells", no_run)
+    main([*args, "--population", "2", "--json", str(tmp_path / "two.json")])
+    two = json.loads((tmp_path / "two.json").read_text())["patients"]
+    assert two == three[:2]
+    kept = [json.loads(x)["outcome"]["index"] for x in rows.read_text().splitlines()[1:]]
+    assert sorted(kept) == [0, 1, 2]
+    capsys.readouterr()
+    assert main([*args, "--population", "2", "--seed", "4"]) == 2
+    assert "another population or law" in capsys.readouterr().err
+
+
+def test_pool_workers_run_one_blas_thread_and_give_the_same_bits(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The pool's workers start with one BLAS thread each unless the user set a count (then
+    theirs), the parent's environment as it was after; patient_aware's identification (the
+    BLAS-heavy part) gives the same bits in the workers as in this process."""
+    import os
+
+    from exo_ilc_ros.analysis import study
+    from exo_ilc_ros.analysis.study import BLAS_THREADS, run_cells
+
+    for name in BLAS_THREADS:
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("MKL_NUM_THREADS", "3")
+    with study._one_blas_thread():
+        assert os.environ["OPENBLAS_NUM_THREADS"] == "1" == os.environ["OMP_NUM_THREADS"]
+        assert os.environ["MKL_NUM_THREADS"] == "3"
+    assert "OPENBLAS_NUM_THREADS" not in os.environ and os.environ["MKL_NUM_THREADS"] == "3"
+    base = load_config(config_dir() / "patient_aware.yaml", overlays=[_short(tmp_path, 1.5)])
+    spec = PopulationSpec()
+    cells = [patient_cell("pa", patient_config(base, p, 4), p)
+             for p in draw_population(base, spec, 2, seed=0)]
+    serial = run_cells(cells, workers=1)
+    pooled = run_cells(cells, workers=2)
+    assert all(a.same_as(b) for a, b in zip(serial, pooled, strict=True))

@@ -22,6 +22,7 @@ from ..core.population.certificate import (
     CRITERIA,
     Certificate,
     PatientOutcome,
+    feedforward_limit,
     patient_outcome,
 )
 from ..core.population.distributions import SOURCES, Patient
@@ -31,14 +32,25 @@ from .study import run_cells
 OnOutcome = Callable[[PatientOutcome], None]
 
 
+SIZE_KEY = "population"
+"""The setup's population size: not part of what a rows file is of (patient i of a seed is the
+same whatever the size), so a file of 1000 patients gives a certificate of its first 200, and a
+run of 200 grows to 1000 with the same file."""
+
+
+def _identity(setup: Mapping[str, Any]) -> Any:
+    return json.loads(json.dumps({k: v for k, v in setup.items() if k != SIZE_KEY}))
+
+
 def read_rows(path: Path, setup: Mapping[str, Any]) -> dict[int, PatientOutcome]:
     """The outcomes a rows file already holds, by patient index ({} if there is no file). Its
-    first line is the run's setup; a file of another setup is an error (never overwritten)."""
+    first line is the run's setup; a file of another setup (the population's size aside:
+    :data:`SIZE_KEY`) is an error (never overwritten)."""
     if not path.is_file() or path.stat().st_size == 0:
         return {}
     lines = path.read_text().splitlines()
     head = json.loads(lines[0])
-    if head.get("setup") != json.loads(json.dumps(setup)):
+    if not isinstance(head.get("setup"), dict) or _identity(head["setup"]) != _identity(setup):
         raise ConfigError("--rows", f"{path} holds another population or law "
                           f"({head.get('setup')}); give a new file")
     out: dict[int, PatientOutcome] = {}
@@ -56,7 +68,9 @@ def run_population(cells: Sequence[StudyCell], trials: int, workers: int,
                    dask: str | Any | None, rows: Path | None, setup: Mapping[str, Any],
                    on_outcome: OnOutcome | None = None) -> list[PatientOutcome]:
     """Every patient's outcome (the cells' ``seed`` is the patient's index): those already in
-    ``rows`` read back, the others run and appended to it one line each as they finish."""
+    ``rows`` read back, the others run and appended to it one line each as they finish. The
+    file keeps every patient it held, of the cells or not (a smaller population's run reads
+    its first patients and loses none of the others)."""
     done = read_rows(rows, setup) if rows is not None else {}
     todo = [c for c in cells if c.seed not in done]
     if rows is not None:  # the header and the whole lines read (a line cut short is dropped)
@@ -66,7 +80,7 @@ def run_population(cells: Sequence[StudyCell], trials: int, workers: int,
     handle = rows.open("a") if rows is not None else None
 
     def finished(cell: StudyCell, result: CellResult) -> None:
-        outcome = patient_outcome(cell.seed, result, trials)
+        outcome = patient_outcome(cell.seed, result, trials, feedforward_limit(cell.values))
         done[cell.seed] = outcome
         if handle is not None:
             handle.write(json.dumps({"outcome": outcome.to_json()}) + "\n")
@@ -74,9 +88,9 @@ def run_population(cells: Sequence[StudyCell], trials: int, workers: int,
         if on_outcome is not None:
             on_outcome(outcome)
 
-    for outcome in list(done.values()):
-        if on_outcome is not None:
-            on_outcome(outcome)
+    for cell in cells:
+        if on_outcome is not None and cell.seed in done:
+            on_outcome(done[cell.seed])
     try:
         run_cells(todo, workers, dask, on_result=finished)
     finally:
@@ -118,6 +132,7 @@ def format_certificate(cert: Certificate, patients: Mapping[int, Patient], worst
             f"final {o.final_error:.2e} rad"
         lines.append(f"  #{o.index}: {final}, {where}, {o.aborts} aborts (run {o.abort_run})"
                      f"{', GROWING' if o.growing else ''}"
+                     f"{', AT ITS LIMIT' if o.at_limit else ''}"
                      f"{': ' + o.failure if o.failure else ''}")
         if o.index in patients:
             lines.append(f"      {patients[o.index].describe()}")

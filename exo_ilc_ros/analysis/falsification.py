@@ -25,6 +25,7 @@ from ..core.params import schema
 from ..core.params.config import Config
 from ..core.population.certificate import (
     PatientOutcome,
+    feedforward_limit,
     patient_cell,
     patient_config,
     patient_outcome,
@@ -82,10 +83,10 @@ LOCAL = Pool()
 """One local worker."""
 
 
-def falsify(base: Config, spec: PopulationSpec, config_path: str | None,
-            overlays: Sequence[str], label: str, trials: int, search: Search,
+def falsify(base: Config, spec: PopulationSpec, label: str, trials: int, search: Search,
             pool: Pool = LOCAL, on_found: Callable[[Found], None] | None = None) -> list[Found]:
-    """Every patient the search ran (``search.budget`` of them), worst first."""
+    """Every patient the search ran (``search.budget`` of them) on ``base`` (the law laid
+    over its arm, :func:`..core.population.certificate.patient_config`), worst first."""
     budget, seed, start = search
     workers, dask = pool
     names = spec.coordinates(schema.patient_joint_names(base.values),
@@ -108,12 +109,12 @@ def falsify(base: Config, spec: PopulationSpec, config_path: str | None,
             patient = patient_from_unit(base, spec, point, index=len(found) + len(cells),
                                         uniform_grades=True)
             patient.overrides["patient.seed"] = int(seed)
-            config = patient_config(config_path, overlays, patient, trials)
+            config = patient_config(base, patient, trials)
             patients.append(patient)
             cells.append(patient_cell(label, config, patient))
         results: list[CellResult] = run_cells(cells, workers, dask)
         for trial, patient, cell, result in zip(asked, patients, cells, results, strict=True):
-            outcome = patient_outcome(cell.seed, result, trials)
+            outcome = patient_outcome(cell.seed, result, trials, feedforward_limit(cell.values))
             score = failure_score(outcome)
             study.tell(trial, score)
             item = Found(patient, outcome, score)

@@ -102,6 +102,31 @@ def run_cells(cells: Sequence[StudyCell], workers: int = 1, dask: str | Any | No
     return _run_on_pool(cells, min(workers, len(cells)), finished)
 
 
+BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+"""The environment variables that set a worker's BLAS threads."""
+
+
+@contextmanager
+def _one_blas_thread() -> Iterator[None]:
+    """Worker processes started within inherit one BLAS thread each (unless the user set the
+    count): a cell's matrices are small (the identification's 7 x 7 to 9 x 9 solves, products
+    of a few thousand samples by a few hundred columns), and each worker is one of as many as
+    there are CPUs, so a second BLAS thread per worker only contends for the same CPUs (it
+    spins while it waits). The results are the same bits: BLAS splits a product's output, not
+    its sums. Dask's nanny does the same for its workers."""
+    saved = {name: os.environ.get(name) for name in BLAS_THREADS}
+    for name in BLAS_THREADS:
+        os.environ.setdefault(name, "1")
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
 def _run_on_pool(cells: Sequence[StudyCell], workers: int,
                  finished: OnResult) -> list[CellResult]:
     context = multiprocessing.get_context("spawn")  # no fork of numba's or tqdm's threads
@@ -109,7 +134,8 @@ def _run_on_pool(cells: Sequence[StudyCell], workers: int,
                                initializer=_ignore_interrupt)
     results: list[CellResult | None] = [None] * len(cells)
     try:
-        with _interrupt_deferred():  # the workers start (on submit) with SIGINT blocked
+        # the workers start (on submit) with SIGINT blocked and one BLAS thread each
+        with _interrupt_deferred(), _one_blas_thread():
             pending: dict[Future[CellResult], int] = {
                 pool.submit(run_cell, cell): i for i, cell in enumerate(cells)}
         while pending:

@@ -121,7 +121,7 @@ def certify(args: argparse.Namespace) -> int:
     spec = PopulationSpec(encoder_share=args.encoder_share,
                           voluntary_share=args.voluntary_share)
     patients = draw_population(base, spec, args.population, args.seed)
-    cells = [patient_cell(label, patient_config(args.config, overlays, p, args.trials), p)
+    cells = [patient_cell(label, patient_config(base, p, args.trials), p)
              for p in patients]
     workers = args.workers or default_jobs()
     where = f"the Dask cluster at {redact(args.dask)}" if args.dask else \
@@ -151,7 +151,7 @@ def certify(args: argparse.Namespace) -> int:
         start = search_point(by_index[worst[0].index], spec) if worst else None
         with tqdm(total=args.falsify, desc="falsify", unit="patient", file=sys.stderr,
                   disable=None) as bar:
-            found = falsify(base, spec, args.config, overlays, label, args.trials,
+            found = falsify(base, spec, label, args.trials,
                             Search(args.falsify, args.seed, start), Pool(workers, args.dask),
                             lambda f: bar.update(1))
         written = []

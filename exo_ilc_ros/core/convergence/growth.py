@@ -4,10 +4,25 @@ A learning law whose trial-to-trial factor exceeds 1 somewhere (:mod:`.convergen
 learned input geometrically in that band, max |u_ff|_k ~ c rho^k, long before the tracking error
 shows it. Fitting log max |u_ff| = a + r k over the last ``window`` trials estimates r = log rho
 per trial; a run is flagged when r is both above a practical floor and significantly above 0,
-and the trial-to-trial increments of max |u_ff| are not shrinking. A learned input that still
-approaches its limit (increments falling geometrically, as a converging law's do in its first
-tens of trials) also has r > 0 over a short window, but it is not growing: flagging it was the
-false ``GROWING`` of norm_optimal at 30 trials (issue 25).
+the trial-to-trial increments of max |u_ff| are not shrinking, and log max |u_ff| drifts
+upward significantly from trial to trial. A learned input that still approaches its limit
+(increments falling geometrically, as a converging law's do in its first tens of trials) also
+has r > 0 over a short window, but it is not growing: flagging it was the false ``GROWING`` of
+norm_optimal at 30 trials (issue 25).
+
+The drift test (:func:`drift_significant`) is there because the fit's standard error assumes
+independent residuals about the line, and a converged learned input's are not: the law
+integrates whatever of the error does not repeat (an encoder's noise), and the identified
+patient forces it hands over move it in steps, so from trial to trial max |u_ff| wanders like
+a random walk about its level. A straight line fitted to a random walk finds a "significant"
+slope far more often than its nominal rate (the spurious trend of a unit-root series: Nelson
+and Kang 1981, J Am Stat Assoc 76:741; Phillips 1986, J Econometrics 33:311); the test of a
+drift that holds under a random walk is the t-test on the mean of its increments. Geometric
+growth rho^k is a random walk with drift log rho, so it still passes it, with a t that grows as
+the noise falls (an exact rho^k: every increment log rho). This is the false ``GROWING`` of a
+UR5 patient with a 14-bit encoder (issue 33: a flat, small learned input that stepped up 6 %
+and 19 % on two joints at one trial of 25; fitted rates 0.006 and 0.017 a trial at 5 and 3.5
+standard errors, drift t 0.9 and 1.1).
 Works on any (trials, joints) table: an in-process run, a JSON export or a bag's trials.
 """
 
@@ -43,6 +58,9 @@ class GrowthFit:
     :data:`MIN_TRIALS` give no rate (NaN), none means the joint learned nothing."""
     converging: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     """Per joint: the increments of max |u_ff| shrink significantly (approach to a limit)."""
+    drift_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """Per joint: the t statistic of the mean increment of log max |u_ff| over the window
+    (:func:`drift_significant`; NaN where there is no rate)."""
 
     @property
     def any_growing(self) -> bool:
@@ -81,16 +99,39 @@ INCREMENT_FLOOR = 1e-9
 """Relative size below which a change of max |u_ff| is rounding, not learning."""
 
 
+def drift_t(column: np.ndarray) -> float:
+    """The t statistic of the mean trial-to-trial increment of log ``column`` (max |u_ff| of
+    one joint, every entry > 0): mean / (sd / sqrt(m)) over its m increments; +inf for a
+    positive mean with no spread (exact geometric growth), NaN for fewer than 2 increments."""
+    d = np.diff(np.log(np.asarray(column, dtype=float)))
+    if d.size < 2:
+        return math.nan
+    mean = math.fsum(d) / d.size
+    spread = math.sqrt(math.fsum((d - mean) ** 2) / (d.size - 1))
+    if spread <= 1e-12 * max(abs(mean), 1e-300):
+        return math.inf if mean > 0.0 else (0.0 if mean == 0.0 else -math.inf)
+    return mean / (spread / math.sqrt(d.size))
+
+
+def drift_significant(column: np.ndarray, significance: float = DEFAULT_SIGNIFICANCE) -> bool:
+    """True if log ``column`` drifts upward from trial to trial significantly: the mean of its
+    increments is more than ``significance`` standard errors above 0 (:func:`drift_t`; the
+    drift test of a random walk, module docstring)."""
+    t = drift_t(column)
+    return bool((math.isfinite(t) and t > significance) or t == math.inf)
+
+
 def fit_growth(max_abs_feedforward: np.ndarray, window: int = DEFAULT_WINDOW,
                min_rate: float = DEFAULT_MIN_RATE,
                significance: float = DEFAULT_SIGNIFICANCE) -> GrowthFit | None:
     """Least-squares fit of log max |u_ff|_k = a + r k per joint over the last ``window`` trials.
 
     Flags a joint when r > ``min_rate`` and r > ``significance`` * stderr(r) (ordinary least
-    squares standard error), unless its increments shrink (:func:`increments_shrink`: still
-    approaching a limit). Zero entries (trial 1's zero feed-forward) are left out; a joint
-    with fewer than :data:`MIN_TRIALS` usable trials gets NaN and no flag. None if the table has
-    fewer than :data:`MIN_TRIALS` trials.
+    squares standard error) and log max |u_ff| drifts upward significantly from trial to trial
+    (:func:`drift_significant`: not a random walk's spurious trend), unless its increments
+    shrink (:func:`increments_shrink`: still approaching a limit). Zero entries (trial 1's zero
+    feed-forward) are left out; a joint with fewer than :data:`MIN_TRIALS` usable trials gets
+    NaN and no flag. None if the table has fewer than :data:`MIN_TRIALS` trials.
     """
     table = np.asarray(max_abs_feedforward, dtype=float)
     if table.ndim != 2:
@@ -104,6 +145,7 @@ def fit_growth(max_abs_feedforward: np.ndarray, window: int = DEFAULT_WINDOW,
     stderr = np.full(joints, np.nan)
     usable = np.zeros(joints, dtype=int)
     converging = np.zeros(joints, dtype=bool)
+    drift = np.full(joints, np.nan)
     for j in range(joints):
         column = table[first:, j]
         used = column > 0.0  # a zero feed-forward (trial 1) has no logarithm
@@ -113,9 +155,12 @@ def fit_growth(max_abs_feedforward: np.ndarray, window: int = DEFAULT_WINDOW,
         k = np.arange(first, table.shape[0], dtype=float)[used]
         rate[j], stderr[j] = _slope(k, np.log(column[used]))
         converging[j] = increments_shrink(column[used], significance)
+        drift[j] = drift_t(column[used])
     with np.errstate(invalid="ignore"):
-        growing = (rate > min_rate) & (rate > significance * stderr) & ~converging
-    return GrowthFit(rate, stderr, growing, first + 1, table.shape[0], usable, converging)
+        drifting = (drift > significance) | (drift == math.inf)
+        growing = (rate > min_rate) & (rate > significance * stderr) & drifting & ~converging
+    return GrowthFit(rate, stderr, growing, first + 1, table.shape[0], usable, converging,
+                     drift)
 
 
 AT_LIMIT_TOLERANCE = 1e-9

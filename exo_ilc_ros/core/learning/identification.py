@@ -78,7 +78,13 @@ from .joint_force_regressors import (
     trial_regressors,
 )
 from .patient_estimate import PARAMETERS, JointEstimate, ParameterEstimate, PatientEstimate
-from .recursive_least_squares import JointInformation, Solution, hac_inflation, solve_scaled
+from .recursive_least_squares import (
+    JointInformation,
+    Solution,
+    conditioning,
+    hac_inflation,
+    solve_scaled,
+)
 from .separability import inseparable_pairs, inseparable_reason
 
 __all__ = ["JointForceIdentifier", "inseparable_pairs"]
@@ -161,9 +167,8 @@ class JointForceIdentifier:
             v = np.ascontiguousarray(reg.velocity[:, j])
             reflex, active = self._reflex(v, reg)
             reflexes.append((reflex, active))
-            alone = solve_scaled(phi.T @ phi, phi.T @ y, float(y @ y), self.fitted)
-            well = (alone.condition <= s.max_condition and bool(np.all(
-                alone.excited[:4])))
+            condition, excited = conditioning(phi.T @ phi, phi.T @ y, self.fitted)
+            well = condition <= s.max_condition and bool(np.all(excited[:4]))
             lam = s.forgetting if well else 1.0
             info.add(phi, reflex, active, y, lam, v, float(reg.unresolved[j]))
             slow = (np.abs(v) < s.reversal_speed).astype(float)

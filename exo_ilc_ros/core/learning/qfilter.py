@@ -24,6 +24,7 @@ cut-offs (order 4 at 0.05 Hz at 100 Hz); the SOS form is not. See ``test_qfilter
 
 from __future__ import annotations
 
+import functools
 import importlib
 from dataclasses import dataclass, field
 from types import ModuleType
@@ -41,6 +42,17 @@ def scipy_signal() -> ModuleType:
     0.3-1 s (scipy.stats with it), which a run without a Q-filter or identification, and every
     command's start-up, would pay for nothing."""
     return importlib.import_module("scipy.signal")
+
+
+def butter_sos(order: int, normalised_cutoff: float) -> np.ndarray:
+    """``butter(order, normalised_cutoff, output="sos")`` (a copy of the design made once per
+    process: a session makes a Q-filter every trial)."""
+    return _butter_sos(order, normalised_cutoff).copy()
+
+
+@functools.lru_cache(maxsize=64)
+def _butter_sos(order: int, normalised_cutoff: float) -> np.ndarray:
+    return np.asarray(scipy_signal().butter(order, normalised_cutoff, output="sos"))
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,8 +77,7 @@ class QFilter:
                              f"{self.cutoff_hz:g}")
         if self.order < 1:
             raise ValueError(f"Q-filter order must be >= 1, got {self.order}")
-        sos = scipy_signal().butter(self.order, self.cutoff_hz / nyquist, output="sos")
-        object.__setattr__(self, "sos", np.asarray(sos))
+        object.__setattr__(self, "sos", butter_sos(self.order, self.cutoff_hz / nyquist))
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         """Q x along axis 0 (time), per column (joint): zero-phase ``filtfilt``."""

@@ -25,33 +25,49 @@ class Solution:
     rss: float
 
 
-def solve_scaled(R: np.ndarray, b: np.ndarray, yy: float,
-           fitted: np.ndarray | None = None) -> Solution:
-    """theta = R^-1 b in column-scaled coordinates; columns with no excitation, and those not
-    ``fitted`` (a mask; None: all), left out (nan)."""
-    p = b.shape[0]
+def _scaled(R: np.ndarray, b: np.ndarray, fitted: np.ndarray | None
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, float]:
+    """R's column scale, the columns solved for (excited and ``fitted``), their indices, the
+    scaled information of those (None: none, or not finite) and its condition number."""
     diag = np.clip(np.diag(R), 0.0, None)
     scale = np.sqrt(diag)
     excited = np.isfinite(scale) & (scale > 1e-9 * max(float(np.max(scale, initial=0.0)), 1e-300))
     if fitted is not None:
         excited &= fitted
+    idx = np.flatnonzero(excited)
+    if not idx.size:
+        return scale, excited, idx, None, math.inf
+    d = scale[idx]
+    Rs = R[np.ix_(idx, idx)] / np.outer(d, d)
+    if not (np.all(np.isfinite(Rs)) and np.all(np.isfinite(b[idx] / d))):
+        return scale, excited, idx, None, math.inf
+    eig = np.linalg.eigvalsh(Rs)
+    return scale, excited, idx, Rs, math.sqrt(eig[-1] / eig[0]) if eig[0] > 0.0 else math.inf
+
+
+def conditioning(R: np.ndarray, b: np.ndarray,
+                 fitted: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+    """:func:`solve_scaled`'s condition number and excited columns alone (no solve)."""
+    _, excited, _, _, condition = _scaled(R, b, fitted)
+    return condition, excited
+
+
+def solve_scaled(R: np.ndarray, b: np.ndarray, yy: float,
+           fitted: np.ndarray | None = None) -> Solution:
+    """theta = R^-1 b in column-scaled coordinates; columns with no excitation, and those not
+    ``fitted`` (a mask; None: all), left out (nan)."""
+    p = b.shape[0]
+    scale, excited, idx, Rs, condition = _scaled(R, b, fitted)
     theta = np.full(p, np.nan)
     cov = np.full((p, p), np.nan)
-    condition = math.inf
     rss = float(yy)
-    idx = np.flatnonzero(excited)
-    if idx.size:
+    if Rs is not None:
         d = scale[idx]
-        Rs = R[np.ix_(idx, idx)] / np.outer(d, d)
-        bs = b[idx] / d
-        if np.all(np.isfinite(Rs)) and np.all(np.isfinite(bs)):
-            eig = np.linalg.eigvalsh(Rs)
-            condition = math.sqrt(eig[-1] / eig[0]) if eig[0] > 0.0 else math.inf
-            ts = np.linalg.lstsq(Rs, bs, rcond=1e-13)[0]
-            theta[idx] = ts / d
-            cov[np.ix_(idx, idx)] = np.linalg.pinv(Rs, rcond=1e-13, hermitian=True)
-            t = theta[idx]
-            rss = float(yy - 2.0 * t @ b[idx] + t @ R[np.ix_(idx, idx)] @ t)
+        ts = np.linalg.lstsq(Rs, b[idx] / d, rcond=1e-13)[0]
+        theta[idx] = ts / d
+        cov[np.ix_(idx, idx)] = np.linalg.pinv(Rs, rcond=1e-13, hermitian=True)
+        t = theta[idx]
+        rss = float(yy - 2.0 * t @ b[idx] + t @ R[np.ix_(idx, idx)] @ t)
     return Solution(theta, cov, scale, excited, condition, max(rss, 0.0))
 
 

@@ -7,8 +7,9 @@ Definitions (docs/every-patient.md), with K the trials run and the bound the con
 ``error_bound``, on the worst joint's *true* max |e| per trial:
 
 - **finite**: the run reached trial K with every error, learned input and effort finite.
-- **bounded**: finite and the growth check (``core.convergence.growth``, as the study) does not
-  flag the learned input.
+- **bounded**: finite, the growth check (``core.convergence.growth``, as the study) does not
+  flag the learned input, and no joint's learned input ends held at ``feedforward_limit``
+  (*at its limit*: the limit, not the learning, holds it).
 - **within the bound by trial n**: within it at trial n and every later trial (the study's
   *settled* trial <= n); *first* is the first trial within it.
 - **aborts**: trials the error envelope aborted; *in a row*: the longest run of consecutive ones.
@@ -24,8 +25,9 @@ from typing import Any
 
 import numpy as np
 
+from ..convergence.growth import held_at_limit
 from ..errors import ConfigError
-from ..params.config import Config, load_config
+from ..params.config import Config
 from ..programs.study import CellResult, StudyCell
 from ..programs.study_rows import seed_outcome
 from .distributions import Patient
@@ -64,11 +66,14 @@ class PatientOutcome:
     worst_error_per_trial: tuple[float, ...]
     """Worst joint's true max |e| per trial (rad; NaN where not finite)."""
     failure: str | None
+    at_limit: bool = False
+    """Some joint's learned input ends held at ``feedforward_limit``
+    (:func:`..convergence.growth.held_at_limit`)."""
 
     @property
     def bounded(self) -> bool:
-        """Finite and not growing."""
-        return self.finite and not self.growing
+        """Finite, not growing and not held at its limit."""
+        return self.finite and not self.growing and not self.at_limit
 
     def within_by(self, trial: int) -> bool:
         """Within the bound from trial ``trial`` (or earlier) to the last."""
@@ -92,7 +97,8 @@ class PatientOutcome:
         def number(x: float) -> float | None:
             return float(x) if math.isfinite(x) else None
         return {"index": self.index, "trials": self.trials, "finite": self.finite,
-                "growing": self.growing, "bounded": self.bounded, "first": self.first,
+                "growing": self.growing, "at_limit": self.at_limit,
+                "bounded": self.bounded, "first": self.first,
                 "settled": self.settled, "aborts": self.aborts, "abort_run": self.abort_run,
                 "final_error": number(self.final_error), "failure": self.failure,
                 "passes": self.passes,
@@ -107,20 +113,30 @@ class PatientOutcome:
         return cls(int(data["index"]), int(data["trials"]), bool(data["finite"]),
                    bool(data["growing"]), data["first"], data["settled"], int(data["aborts"]),
                    int(data["abort_run"]), math.inf if final is None else float(final),
-                   tuple(number(x) for x in data["worst_error_per_trial"]), data["failure"])
+                   tuple(number(x) for x in data["worst_error_per_trial"]), data["failure"],
+                   bool(data.get("at_limit", False)))
 
 
-def patient_outcome(index: int, result: CellResult, trials: int) -> PatientOutcome:
+def patient_outcome(index: int, result: CellResult, trials: int,
+                    limit: np.ndarray | None = None) -> PatientOutcome:
     """A patient's cell reduced (:func:`..programs.study_rows.seed_outcome` for first, settled,
-    finite and growth)."""
+    finite and growth); ``limit``: the run's ``feedforward_limit`` per joint (0 or None: no
+    limit; :func:`feedforward_limit`)."""
     seed = seed_outcome(result, trials)
     worst = np.max(result.true_max_abs_error, axis=1) if result.trials else np.zeros(0)
     final = float(worst[-1]) if seed.finite and worst.size else math.inf
+    at_limit = bool(np.any(held_at_limit(result.max_abs_feedforward, limit)))
     return PatientOutcome(index, result.trials, seed.finite, bool(np.any(seed.growing)),
                           seed.first, seed.settled, len(result.aborted),
                           longest_run(result.aborted), final,
                           tuple(float(x) for x in worst),
-                          result.failure or result.nonfinite)
+                          result.failure or result.nonfinite, at_limit)
+
+
+def feedforward_limit(values: Mapping[str, Any]) -> np.ndarray | None:
+    """A run's ``feedforward_limit`` per joint from its values (a 0 entry: no limit, inf)."""
+    limit = np.asarray(values["feedforward_limit"], dtype=float)
+    return np.where(limit > 0.0, limit, np.inf) if np.any(limit > 0.0) else None
 
 
 def _percentile(values: Sequence[int | None], q: float) -> float | None:
@@ -223,14 +239,16 @@ def certificate(label: str, patients: int, trials: int, error_bound: float,
                        tuple(sorted(outcomes, key=lambda o: o.index)))
 
 
-def patient_config(base_path: str | None, overlays: Sequence[str], patient: Patient,
-                   trials: int, extra: Mapping[str, Any] | None = None) -> Config:
-    """The configuration of one patient's run: the config file and overlays, then the
-    patient's overrides, the trial count (every trial runs) and ``extra``."""
+def patient_config(base: Config, patient: Patient, trials: int,
+                   extra: Mapping[str, Any] | None = None) -> Config:
+    """The configuration of one patient's run: ``base`` (the config file and its overlays,
+    loaded once: ``load_config(path, overrides, overlays)`` is ``load_config(path,
+    overlays=overlays).replace(overrides)``), then the patient's overrides, the trial count
+    (every trial runs) and ``extra``."""
     overrides: dict[str, Any] = {**patient.overrides, "max_trials": int(trials),
                                  "stop_when_settled": 0, **(extra or {})}
     try:
-        return load_config(base_path, overrides, overlays=list(overlays))
+        return base.replace(overrides)
     except ConfigError as exc:
         raise ConfigError(exc.key, f"{exc.rule} (patient {patient.index}: "
                           f"{patient.describe()})", exc.source) from None

@@ -77,9 +77,12 @@ def test_ur5_patient_29_with_a_14_bit_encoder_is_bounded() -> None:
     25 trials: within the bound from trial 3; its learned input is flat and small but steps
     up on joints 3 and 4 at trial 21 (the identified forces handed over). The line fitted to
     the last 12 trials says 'growing' on those joints (the certificate's false alarm before the
-    drift test); the check now says bounded and the patient passes."""
+    drift test); the check now says bounded and the patient passes. Run as the certificate
+    measured it, before patient_aware.yaml's ``identification.reversal_speed`` (with it the
+    hand-over moves and this step is gone: the case would no longer test the check)."""
     base = load_config(config_dir() / "arms" / "ur5.yaml",
-                       overlays=[config_dir() / "patient_aware.yaml"])
+                       overlays=[config_dir() / "patient_aware.yaml"]
+                       ).replace({"identification.reversal_speed": 0.0})
     patient = draw_patient(base, PopulationSpec(), 0, 29)
     assert patient.overrides["patient.sensor.quantisation"] > 0 and patient.mas_grade == "0"
     config = patient_config(base, patient, 25)

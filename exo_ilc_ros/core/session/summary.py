@@ -35,7 +35,7 @@ class RunSummary:
     cuff_forces: np.ndarray | None = None
     """A person strapped in cuffs: per trial and cuff (upper arm, forearm) the peak and RMS
     |force| (N) and the peak and RMS |torque| (N m) on the person, shape (K, 2, 4)
-    (:func:`~exo_ilc_ros.core.person.experiment.cuff_metrics`); None: no person."""
+    (:func:`~exo_ilc_ros.core.person.cuffs.cuff_metrics`); None: no person."""
 
     @classmethod
     def from_result(cls, result: RunResult) -> RunSummary:

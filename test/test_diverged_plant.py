@@ -275,7 +275,9 @@ def test_run_through_the_graph_reports_the_divergence_and_exits_5(tmp_path: Path
                      for n in ("graph", "local"))
     assert ran[DIVERGED] == expected[DIVERGED] and len(ran[DIVERGED]) == 1
     assert ran[ABORT_STOP_KEY] == expected[ABORT_STOP_KEY]
-    assert "reruns" not in ran and len(ran["trials"]) == 1
+    assert len(ran["trials"]) == 1  # the diverged trial kept, not run again (a rerun for a
+    # watchdog trip on a loaded machine may come before it: that is no divergence)
+    assert all(r["trial"] == 1 for r in ran.get("reruns", []))
     message = expected[DIVERGED][0]["message"]
     assert message.startswith("trial 1: the plant diverged at t = 0.020 s on joint wrist_roll")
     assert f"ERROR: linear d=0.05: {message}" in graph.stderr

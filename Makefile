@@ -55,7 +55,7 @@ docs: $(STAMP)
 
 test: lint docs
 	@$(NUMBA_NOTE)
-	@echo "make: running the whole test suite (22-25 min on 2 cores, most of it real"
+	@echo "make: running the whole test suite (35-40 min on 2 cores, most of it real"
 	@echo "make: ROS 2 graphs over DDS and a colcon build); pytest prints a dot per test"
 	$(BIN)/python -m pytest
 

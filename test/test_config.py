@@ -65,6 +65,34 @@ def test_ros_yaml_round_trip(tmp_path: Path) -> None:
     assert load_config().digest() != config.digest()
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """A YAML loader that refuses a mapping holding one key twice (PyYAML keeps the last)."""
+
+
+def _unique_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode) -> dict[Any, Any]:
+    keys = [loader.construct_object(k) for k, _ in node.value]
+    assert len(keys) == len(set(keys)), f"a key twice in one mapping: {sorted(keys)}"
+    return loader.construct_mapping(node)
+
+
+_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _unique_mapping)
+
+
+def test_ros_yaml_of_another_arm_reads_back_every_value(tmp_path: Path) -> None:
+    """A 7-joint arm under patient_aware.yaml, written and read back: every value as it was
+    (a group such as ``safety.*`` whose keys the schema lists apart, the person's cuff limit
+    after the others, is written once: opened twice, YAML kept only the last and the Panda's
+    7-joint hold gains came back as the 3-joint default)."""
+    config = load_config(config_dir() / "arms" / "panda.yaml",
+                         overlays=[config_dir() / "patient_aware.yaml"])
+    out = tmp_path / "out.yaml"
+    out.write_text(config.to_ros_yaml("written by a test"))
+    yaml.load(out.read_text(), Loader=_UniqueKeyLoader)
+    again = load_config(out)
+    assert again.values == config.values
+    assert again.digest() == config.digest()
+
+
 BAD_VALUES: list[tuple[dict[str, Any], str, str]] = [
     ({"schedule.position.threshold_low": [25.0, 2.0, 1.0]}, "schedule.position.threshold_low",
      "thresholds must increase"),

@@ -449,7 +449,7 @@ class Config:
         both accept (sections nested, one key per parameter, the schema's text as comments)."""
         lines = [f"# {line}" for line in header.splitlines()]
         for section in schema.SECTIONS:
-            params = [p for p in schema.PARAMETERS if p.section == section]
+            params = _grouped([p for p in schema.PARAMETERS if p.section == section])
             if not params:
                 continue
             key = f'"{section}"' if section == schema.SHARED else section
@@ -471,6 +471,23 @@ class Config:
                 value = _yaml_value(self._values[p.name])
                 lines.append(f"{indent}{parts[-1]}: {value}  # {p.description}")
         return "\n".join(lines) + "\n"
+
+
+def _grouped(params: list[schema.Parameter]) -> list[schema.Parameter]:
+    """``params`` in schema order, but every dotted group together (``safety.*`` at the place of
+    its first key): a group opened twice would be two equal keys of one YAML mapping, and a
+    loader keeps only the last."""
+    first: dict[tuple[str, ...], int] = {}
+    for p in params:
+        parts = tuple(p.name.split("."))
+        for depth in range(1, len(parts) + 1):
+            first.setdefault(parts[:depth], len(first))
+
+    def place(p: schema.Parameter) -> tuple[int, ...]:
+        parts = tuple(p.name.split("."))
+        return tuple(first[parts[:depth]] for depth in range(1, len(parts) + 1))
+
+    return sorted(params, key=place)
 
 
 def _yaml_float(x: float) -> str:

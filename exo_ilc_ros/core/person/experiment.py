@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ConfigError, SafetyError
+from ..errors import ConfigError
 from ..loop.controller import (
     ABORT,
     HOLD_COUNT,
@@ -86,18 +86,10 @@ class StrappedExperiment(Experiment):
         around the pose of that sample, as an envelope abort. A non-finite state stops the
         trial (NaN from that sample on), as the compiled trial does."""
         ref = self.reference
-        u_ff = np.ascontiguousarray(feedforward, dtype=float)
-        if u_ff.shape != ref.position.shape:
-            raise ValueError(f"feed-forward must have shape {ref.position.shape}, "
-                             f"got {u_ff.shape}")
-        if not np.all(np.isfinite(u_ff)):
-            raise SafetyError(f"trial {trial}: the feed-forward holds non-finite values; "
-                              "refusing to run it")
+        u_ff, force = self.trial_inputs(feedforward, trial, joint_force)
         if learned is not None:
             raise ConfigError("patient.learning.gain", "a learning virtual patient does not "
                               "apply to a person with muscles")
-        force = np.zeros(ref.position.shape) if joint_force is None else \
-            np.ascontiguousarray(joint_force, dtype=float)
         n_samples, n = u_ff.shape
         q_log = np.full((n_samples, n), np.nan)
         qd_log = np.full((n_samples, n), np.nan)

@@ -57,6 +57,24 @@ class Experiment:
         with the virtual patient (a person with muscles: its strapped model)."""
         return PlantStepper(self)
 
+    def trial_inputs(self, feedforward: np.ndarray, trial: int,
+                     joint_force: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """A trial's feed-forward and joint forces as contiguous arrays of the reference's
+        shape (no joint forces: zeros), refused unless finite: what :meth:`run_trial` runs."""
+        shape = self.reference.position.shape
+        u_ff = np.ascontiguousarray(feedforward, dtype=float)
+        if u_ff.shape != shape:
+            raise ValueError(f"feed-forward must have shape {shape}, got {u_ff.shape}")
+        if not np.all(np.isfinite(u_ff)):
+            raise SafetyError(f"trial {trial}: the feed-forward holds non-finite values; "
+                              "refusing to run it")
+        force = np.zeros(shape) if joint_force is None else \
+            np.ascontiguousarray(joint_force, dtype=float)
+        if force.shape != shape or not np.all(np.isfinite(force)):
+            raise SafetyError(f"trial {trial}: the joint forces must be finite and "
+                              f"{shape}; refusing to run them")
+        return u_ff, force
+
     def run_trial(self, feedforward: np.ndarray, trial: int,
                   levels: np.ndarray | None = None,
                   learned: np.ndarray | None = None,
@@ -68,18 +86,7 @@ class Experiment:
         ``joint_force``: the identified joint forces computed torque adds, N m per sample
         (:mod:`exo_ilc_ros.core.learning.patient_model`; None: none)."""
         ref = self.reference
-        u_ff = np.ascontiguousarray(feedforward, dtype=float)
-        if u_ff.shape != ref.position.shape:
-            raise ValueError(f"feed-forward must have shape {ref.position.shape}, "
-                             f"got {u_ff.shape}")
-        if not np.all(np.isfinite(u_ff)):
-            raise SafetyError(f"trial {trial}: the feed-forward holds non-finite values; "
-                              "refusing to run it")
-        force = np.zeros(ref.position.shape) if joint_force is None else \
-            np.ascontiguousarray(joint_force, dtype=float)
-        if force.shape != ref.position.shape or not np.all(np.isfinite(force)):
-            raise SafetyError(f"trial {trial}: the joint forces must be finite and "
-                              f"{ref.position.shape}; refusing to run them")
+        u_ff, force = self.trial_inputs(feedforward, trial, joint_force)
         patient = self.patient
         draws = patient.draws(trial, ref.samples)
         q, qd, u, effort, abort, q_true, qd_true = simulate_trial_guarded(

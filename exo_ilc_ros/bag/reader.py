@@ -200,6 +200,10 @@ def _trial_events(streams: dict[str, Stream], notes: list[str]) -> _Events:
                              f"{values.get('aborted_at', '?')} (safe hold from there; kept, "
                              "learned from up to the abort)"
                              if values.get("reason") == topics.ENVELOPE_REASON else
+                             f"trial {k} was aborted at sample {values.get('aborted_at', '?')}: "
+                             "a cuff pressed past safety.cuff_force_limit (safe hold from "
+                             "there; kept, learned from up to the abort)"
+                             if values.get("reason") == topics.CUFF_LIMIT_REASON else
                              f"trial {k}: the plant diverged at sample "
                              f"{values.get('aborted_at', '?')} (kept; the run stopped there)")
             else:

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.person.cuffs import cuff_table
 from ..core.session.summary import RunSummary, law_segments
 from ..wire import protocol, topics
 from .provenance import ParameterChange, Provenance
@@ -222,4 +223,5 @@ class BagRun:
             extra["laws"] = laws
         return RunSummary(self.mass_uncertainty, self.law, self.error_bound, errors,
                           None if np.isnan(ff).all() else ff,
-                          None if np.isnan(effort).all() else effort, extra, true)
+                          None if np.isnan(effort).all() else effort, extra, true,
+                          cuff_table([self.summaries.get(k, {}) for k in range(1, count + 1)]))

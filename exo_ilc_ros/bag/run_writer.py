@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.params.config import Config
+from ..core.person.cuffs import cuff_summary_values
 from ..core.programs.identified import Identified
 from ..core.programs.metrics import TrialMetrics, metric_summary_values
 from ..core.session.result import RunResult
@@ -119,6 +120,7 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                 values += metrics[k - 1].summary_values(names)
             else:  # as the supervisor files them (core/programs/metrics.py)
                 values += metric_summary_values(record, measured, names)
+            values += cuff_summary_values(record.cuff_wrench)  # as the supervisor files them
             step = result.joint_forces.get(k)
             if step is not None:  # as the supervisor files it (core/programs/identified.py)
                 values += Identified.from_step(step, names).summary_values()

@@ -25,6 +25,7 @@ import numpy as np
 from ..core.loop.divergence import DIVERGED
 from ..core.params.config import Config
 from ..core.persistence.store import RunStore
+from ..core.person.cuffs import cuff_table
 from ..core.programs.identified import Identified
 from ..core.reference.build import build_reference
 from ..core.session.abort import ABORT_STOP_KEY
@@ -77,6 +78,7 @@ def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSu
                       true_max_abs_error=np.array([s.row("true_max_abs_error", joints)
                                                    for s in summaries])
                       if f"true_max_abs_error/{joints[0]}" in first else None)
+    summary.cuff_forces = cuff_table([s.values for s in summaries])  # a person strapped in
     applied = {s.trial + 1: json.loads(s.values[PARAMETERS_CHANGED]) for s in summaries
                if s.values.get(PARAMETERS_CHANGED)}
     summary.extra.update(live_changes(applied, str(config["law"])))

@@ -44,6 +44,10 @@ class TrialData:
     """The trial's effort commands (CDR), one per sample when all were recorded."""
     feedforward_message: bytes | None = field(default=None, repr=False)
     decode: Callable[[bytes, str], Any] | None = field(default=None, repr=False)
+    cuff_wrench: np.ndarray | None = field(default=None, repr=False)
+    """A person strapped in: per sample and cuff (upper arm, forearm) the force (N) and
+    torque (N m) on the person (``/cuffs/<cuff>/wrench``), shape (N+1, 2, 6), NaN where a
+    message is missing; None: the bag has none."""
 
     @cached_property
     def command(self) -> np.ndarray:

@@ -4,8 +4,8 @@ Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.wire.topics.TYP
 when the run's config straps a person in, :data:`~exo_ilc_ros.wire.topics.CUFF_TYPES`: the
 cuffs' wrenches per sample) (QoS per topic: :func:`subscription_qos`, documented in
 docs/live-view.md) and stores the CDR bytes untouched. Log time = simulated time, as
-``ros2 bag record --use-sim-time`` logs it: the recorder's sim clock at receipt (:class:`~exo_ilc_ros.wire.sim_time.SimClock`: every sample and
-/clock message at its own stamp, a message without one at the sim time of the last stamped
+``ros2 bag record --use-sim-time`` logs it: the recorder's sim clock at receipt
+(:class:`~exo_ilc_ros.wire.sim_time.SimClock`: every sample and /clock message at its own stamp, a message without one at the sim time of the last stamped
 message received before it). Publish time = the wall-clock time (ns since the epoch) DDS
 received the message (kept for latency analysis). The subscriptions are :class:`~.common.Inbox`
 es, so the recorder does not wake once per message next to the control loop. Within a trial it

@@ -1,18 +1,19 @@
 """bag_recorder: records every topic of the graph into a rosbag2 MCAP bag, as received.
 
-Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.wire.topics.TYPES` (and,
-when the run's config straps a person in, :data:`~exo_ilc_ros.wire.topics.CUFF_TYPES`: the
-cuffs' wrenches per sample) (QoS per topic: :func:`subscription_qos`, documented in
-docs/live-view.md) and stores the CDR bytes untouched. Log time = simulated time, as
-``ros2 bag record --use-sim-time`` logs it: the recorder's sim clock at receipt
-(:class:`~exo_ilc_ros.wire.sim_time.SimClock`: every sample and /clock message at its own stamp, a message without one at the sim time of the last stamped
-message received before it). Publish time = the wall-clock time (ns since the epoch) DDS
-received the message (kept for latency analysis). The subscriptions are :class:`~.common.Inbox`
-es, so the recorder does not wake once per message next to the control loop. Within a trial it
-stays out of the loop's way: it reads only the trial events every ``INBOX_PERIOD``, and takes
-and writes the other topics (the samples, commands, /clock) at the next trial event, or after
-:data:`DATA_PERIOD` at the latest; DDS holds them meanwhile (``RECORDER_DEPTH``). The samples
-between two trial events go to the bag as one batch (``BagWriter.write_many``).
+Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.wire.topics.TYPES` (and, when
+the run's config straps a person in, :data:`~exo_ilc_ros.wire.topics.CUFF_TYPES`: the cuffs'
+wrenches per sample) (QoS per topic: :func:`subscription_qos`, documented in docs/live-view.md)
+and stores the CDR bytes untouched. Log time = simulated time, as ``ros2 bag record
+--use-sim-time`` logs it: the recorder's sim clock at receipt
+(:class:`~exo_ilc_ros.wire.sim_time.SimClock`: every sample and /clock message at its own stamp,
+a message without one at the sim time of the last stamped message received before it). Publish
+time = the wall-clock time (ns since the epoch) DDS received the message (kept for latency
+analysis). The subscriptions are :class:`~.common.Inbox` es, so the recorder does not wake once
+per message next to the control loop. Within a trial it stays out of the loop's way: it reads
+only the trial events every ``INBOX_PERIOD``, and takes and writes the other topics (the
+samples, commands, /clock) at the next trial event, or after :data:`DATA_PERIOD` at the latest;
+DDS holds them meanwhile (``RECORDER_DEPTH``). The samples between two trial events go to the
+bag as one batch (``BagWriter.write_many``).
 The bag also holds the arm as the live view shows it (:class:`~exo_ilc_ros.bag.view.ArmView`,
 the view's own code): ``/robot_description`` and ``/reference/robot_description`` once, at the
 start, and a ``/tf`` per recorded JointState at its stamp (publish time: the JointState's).

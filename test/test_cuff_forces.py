@@ -24,6 +24,7 @@ from exo_ilc_ros.core.person.cuffs import (
     cuff_summary_values,
     first_beyond_cuff_limit,
 )
+from exo_ilc_ros.core.session.abort import ABORT_STOP_KEY
 from exo_ilc_ros.core.session.learning_session import run_trials
 from exo_ilc_ros.core.session.result import RunResult
 from exo_ilc_ros.core.session.summary import RunSummary
@@ -162,12 +163,22 @@ def test_the_session_report_shows_the_cuff_forces_only_with_a_person(
 
 def test_the_cuff_limit_abort_is_the_first_sample_past_it_in_process() -> None:
     """The low limit aborts trials 2 and 3 in-process at the first sample a cuff presses
-    past it (the one rule the graph's plant and supervisor use too)."""
-    result = run_trials(_person(**{"safety.cuff_force_limit": LOW_LIMIT}))
+    past it (the one rule the graph's plant and supervisor use too); two in a row stop the
+    run with a message that names the cuff, its force and the limit, not the envelope."""
+    result = run_trials(_person(**{"safety.cuff_force_limit": LOW_LIMIT,
+                                   "abort.max_consecutive": 2}))
     assert result.aborted == [2, 3]
     for record in result.records[1:]:
         assert record.cuff_wrench is not None
         assert record.aborted_at == first_beyond_cuff_limit(record.cuff_wrench, LOW_LIMIT)
+    last = result.records[-1]
+    assert last.cuff_wrench is not None and last.aborted_at is not None
+    force = float(np.linalg.norm(last.cuff_wrench[last.aborted_at, 1, :3]))
+    assert force > LOW_LIMIT[1]
+    assert f"trial 3: the forearm cuff pressed {force:.1f} N into the person" in \
+        result.stop_message
+    assert "safety.cuff_force_limit" in result.stop_message
+    assert "error envelope" not in result.stop_message
 
 
 def _recorded_graph(config: Config, path: Path) -> tuple[Any, Any]:
@@ -221,11 +232,11 @@ def test_the_graph_sends_and_records_the_in_process_cuff_forces(tmp_path: Path,
 def test_the_graphs_cuff_limit_aborts_the_trial_as_in_process() -> None:
     """A forearm limit of 35 N through the graph: trials 2 and 3 abort at the same samples as
     in-process (the plant held the arm safe from there: the samples after the abort, the
-    errors and the cuff forces are the in-process ones to the last bit), and the run carries
-    the cuff-force limit as the reason."""
+    errors and the cuff forces are the in-process ones to the last bit), and two such aborts
+    in a row stop it with the in-process message, naming the cuff."""
     from exo_ilc_ros.orchestration.graph import run_graph
 
-    config = _person(**{"safety.cuff_force_limit": LOW_LIMIT})
+    config = _person(**{"safety.cuff_force_limit": LOW_LIMIT, "abort.max_consecutive": 2})
     local = run_trials(config)
     assert local.aborted == [2, 3]
     graph = run_graph(config, timeout=400.0)
@@ -236,3 +247,4 @@ def test_the_graphs_cuff_limit_aborts_the_trial_as_in_process() -> None:
     np.testing.assert_array_equal(graph.summary.max_abs_error, summary.max_abs_error)
     np.testing.assert_array_equal(graph.summary.max_abs_effort, summary.max_abs_effort)
     np.testing.assert_array_equal(graph.summary.cuff_forces, summary.cuff_forces)
+    assert graph.summary.extra.get(ABORT_STOP_KEY) == local.stop_message != ""

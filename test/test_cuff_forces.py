@@ -242,6 +242,7 @@ def test_the_graphs_cuff_limit_aborts_the_trial_as_in_process() -> None:
     graph = run_graph(config, timeout=400.0)
     summary = RunSummary.from_result(local)
     assert graph.summary.extra.get("aborted_trials") == [2, 3]
+    assert graph.summary.extra.get("cuff_limit_aborts") == [2, 3]  # the events' reason
     assert [s.values.get("aborted_at") for s in graph.summaries] == \
         [None, *(str(r.aborted_at) for r in local.records[1:])]
     np.testing.assert_array_equal(graph.summary.max_abs_error, summary.max_abs_error)

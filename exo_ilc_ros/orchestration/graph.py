@@ -29,7 +29,7 @@ from ..core.person.cuffs import cuff_table
 from ..core.programs.identified import Identified
 from ..core.reference.build import build_reference
 from ..core.session.abort import ABORT_STOP_KEY
-from ..core.session.summary import RunSummary, live_changes
+from ..core.session.summary import CUFF_LIMIT_ABORTS, RunSummary, live_changes
 from ..nodes.common import EVENTS_QOS
 from ..wire import topics
 from ..wire.protocol import PARAMETERS_CHANGED, int_value, per_joint, summary_values
@@ -323,6 +323,10 @@ def run_graph(config: Config, domain_id: int | None = None, extra: Sequence[Node
         stopped = [v.get(ABORT_STOP_KEY) for m, v, _ in session.events if m == "finished"]
         if stopped and stopped[-1]:  # a resumed run the store's aborts had already stopped
             summary.extra[ABORT_STOP_KEY] = stopped[-1]
+        pressed = [int(v["trial"]) for m, v, _ in session.events if m == "aborted" and
+                   v.get("reason") == topics.CUFF_LIMIT_REASON and v.get("trial", "").isdigit()]
+        if pressed:  # a person strapped in: the cuff-force limit's aborts, as simulate's
+            summary.extra[CUFF_LIMIT_ABORTS] = sorted(set(pressed))
         again = reruns(session.events)
         if again:
             summary.extra["reruns"] = again

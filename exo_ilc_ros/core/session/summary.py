@@ -14,6 +14,10 @@ from ..person.cuffs import CUFF_METRICS, CUFFS, cuff_metrics
 from .abort import ABORT_STOP_KEY
 from .result import RunResult
 
+CUFF_LIMIT_ABORTS = "cuff_limit_aborts"
+"""A run's ``extra`` (and JSON) key: the trials the cuff-force limit aborted (a person
+strapped in; of ``aborted_trials``), absent when none did."""
+
 
 @dataclass
 class RunSummary:

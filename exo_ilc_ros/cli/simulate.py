@@ -167,6 +167,7 @@ def simulate(args: argparse.Namespace) -> int:
             result = run_trials(measured, delta, trials, on_trial=progress, store=args.store,
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
+        add_cuff_aborts(runs[-1], result, measured)
         add_identified(runs[-1], result, config["joint_names"])
         add_divergences(runs[-1], result, measured)
         if args.spread:
@@ -199,6 +200,20 @@ def format_cuff_forces(cuffs: Any, title: str) -> str:
                      f"(RMS {cuffs[-1, c, 1]:.1f}), highest {peaks[worst]:.1f} (trial "
                      f"{worst + 1})")
     return "\n".join(lines)
+
+
+def add_cuff_aborts(summary: RunSummary, result: RunResult, config: Config) -> None:
+    """A person strapped in: the trials the cuff-force limit aborted (the first sample a cuff
+    pressed past ``safety.cuff_force_limit`` is the abort sample) as
+    ``summary.extra["cuff_limit_aborts"]`` (the JSON's and the warning's; nothing without)."""
+    from ..core.person.cuffs import first_beyond_cuff_limit
+    from ..core.session.summary import CUFF_LIMIT_ABORTS
+    limit = [float(x) for x in config["safety.cuff_force_limit"]]
+    pressed = [r.trial for r in result.records if r.aborted_at is not None and
+               r.cuff_wrench is not None and
+               first_beyond_cuff_limit(r.cuff_wrench, limit) == r.aborted_at]
+    if pressed:
+        summary.extra[CUFF_LIMIT_ABORTS] = pressed
 
 
 def add_identified(summary: RunSummary, result: RunResult, names: list[str]) -> None:
@@ -237,6 +252,7 @@ def aborted_exit(runs: list[RunSummary], command: str) -> int:
     from ..analysis.report import run_title
     from ..core.loop.divergence import DIVERGED
     from ..core.session.abort import ABORT_STOP_KEY
+    from ..core.session.summary import CUFF_LIMIT_ABORTS
     any_aborted = stopped = False
     for run in runs:
         diverged = run.extra.get(DIVERGED, [])
@@ -245,15 +261,21 @@ def aborted_exit(runs: list[RunSummary], command: str) -> int:
                   file=sys.stderr)
         any_aborted = any_aborted or bool(diverged)
         gone = {int(d["trial"]) for d in diverged}
+        pressed = {int(k) for k in run.extra.get(CUFF_LIMIT_ABORTS, [])}
         aborted = [int(k) for k in run.extra.get("aborted_trials", []) if int(k) not in gone]
-        if aborted:
+        for by, which in (("the error envelope (safety.error_envelope", [
+                k for k in aborted if k not in pressed]), ("the cuff-force limit "
+                "(safety.cuff_force_limit: a cuff pressed past it", [
+                k for k in aborted if k in pressed])):
+            if not which:
+                continue
             any_aborted = True
             count = len(run.max_abs_error)
-            share = "ALL" if len(aborted) == count else f"{len(aborted)} of {count}"
+            share = "ALL" if len(which) == count else f"{len(which)} of {count}"
             print(f"exo-ilc {command}: WARNING: {run_title(run)}: {share} trials ABORTED by "
-                  f"the error envelope (safety.error_envelope; the robot held the arm there; "
-                  f"each was learned from up to its abort): trial{'s' if len(aborted) > 1 else ''}"
-                  f" {_spans(aborted)}", file=sys.stderr)
+                  f"{by}; the robot held the arm there; each was learned from up to its "
+                  f"abort): trial{'s' if len(which) > 1 else ''} {_spans(which)}",
+                  file=sys.stderr)
         message = run.extra.get(ABORT_STOP_KEY)
         if message:
             stopped = True

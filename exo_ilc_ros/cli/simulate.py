@@ -6,8 +6,6 @@ import argparse
 import sys
 from typing import TYPE_CHECKING, Any
 
-from tqdm import tqdm
-
 from ..core.errors import ConfigError
 from ..core.params.config import Config
 from .arguments import (
@@ -20,6 +18,7 @@ from .arguments import (
     json_file,
     parameter,
 )
+from .progress import progress_bar
 from .therapy import add_therapy_arguments, simulate_session, uses_therapy
 
 if TYPE_CHECKING:
@@ -105,8 +104,8 @@ def replay_bag(args: argparse.Namespace) -> int:
         return 2
     try:
         run = read_bag(args.replay)
-        with tqdm(total=max(run.completed, default=0), desc=f"replay {run.path.name}",
-                  unit="trial", file=sys.stderr, disable=None) as bar:
+        with progress_bar(total=max(run.completed, default=0), desc=f"replay {run.path.name}",
+                          unit="trial") as bar:
             replayed = replay(run, on_trial=lambda record: bar.update(1))
     except BagError as exc:
         print(f"exo-ilc simulate: error: --replay {args.replay}: {exc}", file=sys.stderr)
@@ -158,8 +157,8 @@ def simulate(args: argparse.Namespace) -> int:
     runs = []
     for delta in deltas:
         measured = config.with_mass_uncertainty(delta)  # the run's config, validated once
-        with tqdm(total=trials, desc=f"{config['law']} delta={delta:g}", unit="trial",
-                  file=sys.stderr, disable=None) as bar:
+        with progress_bar(total=trials, desc=f"{config['law']} delta={delta:g}",
+                          unit="trial") as bar:
             def progress(record: Any, bar: Any = bar) -> None:
                 bar.update(1)
                 bar.set_postfix_str("max|e| " + " ".join(f"{x:.1e}"
@@ -228,8 +227,7 @@ def add_identified(summary: RunSummary, result: RunResult, names: list[str]) -> 
 def _spread(config: Config, delta: float, trials: int, count: int) -> dict[str, Any]:
     """--spread: the iterations to the bound of ``count`` perturbed runs, as JSON."""
     from ..core.programs.spread import iteration_spread
-    with tqdm(total=count, desc=f"spread delta={delta:g}", unit="run", file=sys.stderr,
-              disable=None) as bar:
+    with progress_bar(total=count, desc=f"spread delta={delta:g}", unit="run") as bar:
         spread = iteration_spread(config, delta, trials, count,
                                   on_run=lambda _: bar.update(1))
     return spread.to_json()

@@ -13,7 +13,10 @@ earlier one wrote: ``analyze bags/*`` after ``run``), made short:
   a path that matches nothing fails); a command with a placeholder that is no path
   (``--resume <session id>``) is only parsed; ``[optional]`` parts are left out;
 * what needs something outside this machine (``postgresql://``, ``tcp://<host>``) or a running
-  graph (``exo-ilc param``) is only parsed, with the page's values.
+  graph (``exo-ilc param``) is only parsed, with the page's values;
+* a live view (``run --live``) serves on a free port (``--live-port 0``, the page's port
+  replaced or the flag added): the default 8765 (or the page's 9000) may be held by another
+  test session on the machine, and the bridge then refuses to start.
 
 A command whose line ends in ``# exit N`` must exit N (a refused value shown on purpose); every
 other must exit 0. Every command is also parsed as written
@@ -210,6 +213,11 @@ def _prepare(command: Command, cwd: Path, graph: bool) -> list[str] | None:
             continue
         out.append(word)
     _make_inputs(out, cwd)
+    if "--live" in out:
+        if "--live-port" in out:
+            out[out.index("--live-port") + 1] = "0"
+        else:
+            out += ["--live-port", "0"]
     for flag in ADDED:
         if flag not in out and "--replay" not in out and _takes(command.name, flag):
             out += [flag, SMALL[flag]]

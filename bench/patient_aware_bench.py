@@ -8,8 +8,9 @@ restarted from the seed for each arm), drawn as the page's example draws them: p
 MAS 0/1/1+/2/3 equally likely (0.1 s reflex delay), a 14-bit encoder in half of them, mass
 error 5-15 %; ``run_trials`` in-process. "Within" is the worst joint's true max |e| at most
 the error bound (0.005 rad). Prints one table row per arm and the wall time; asserts nothing.
-The page's example runs the first 2 of these patients on the UR5 (the docs tests run it; 30
-patients x 25 trials on three arms take ~10 min on 2 cores, too long for the test suite).
+The page's example runs the first 2 of these patients on the UR5 (the docs tests run it): the
+30 patients on the UR5 alone took 418 s here (2026-12-05, niced on a loaded 2-core machine;
+row 30 / 30 / 30 / 0 / 3 as in the table), too long for the test suite.
 """
 
 from __future__ import annotations

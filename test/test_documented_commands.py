@@ -13,7 +13,14 @@ earlier one wrote: ``analyze bags/*`` after ``run``), made short:
   a path that matches nothing fails); a command with a placeholder that is no path
   (``--resume <session id>``) is only parsed; ``[optional]`` parts are left out;
 * what needs something outside this machine (``postgresql://``, ``tcp://<host>``) or a running
-  graph (``exo-ilc param``) is only parsed, with the page's values.
+  graph (``exo-ilc param``) is only parsed, with the page's values;
+* a live view (``run --live``) serves on a free port (``--live-port 0``, the page's port
+  replaced or the flag added): the default 8765 (or the page's 9000) may be held by another
+  test session on the machine, and the bridge then refuses to start.
+
+A page with a graph command (``run``, ``paper``) runs all its commands in
+:func:`test_documented_commands_run_with_the_graph`; every other page in
+:func:`test_documented_in_process_commands_run`.
 
 A command whose line ends in ``# exit N`` must exit N (a refused value shown on purpose); every
 other must exit 0. Every command is also parsed as written
@@ -210,6 +217,11 @@ def _prepare(command: Command, cwd: Path, graph: bool) -> list[str] | None:
             continue
         out.append(word)
     _make_inputs(out, cwd)
+    if "--live" in out:
+        if "--live-port" in out:
+            out[out.index("--live-port") + 1] = "0"
+        else:
+            out += ["--live-port", "0"]
     for flag in ADDED:
         if flag not in out and "--replay" not in out and _takes(command.name, flag):
             out += [flag, SMALL[flag]]
@@ -274,21 +286,32 @@ def _failures(outcomes: list[Outcome]) -> str:
                        for o in outcomes if not _answered(o))
 
 
-@pytest.mark.parametrize("page", PAGES, ids=[p.name for p in PAGES])
+def _has_graph_commands(page: Path) -> bool:
+    return any(c.name in ("run", "paper") for c in documented_commands(page))
+
+
+GRAPH_PAGES = [p for p in PAGES if _has_graph_commands(p)]
+"""Pages whose commands all run in the graph test, in page order: the in-process ones too (a
+superset of what the in-process test runs of them: that test also leaves out what reads a
+graph run's bag), so they are not run a second time in-process (~1 min of the suite)."""
+IN_PROCESS_PAGES = [p for p in PAGES if not _has_graph_commands(p)]
+
+
+@pytest.mark.parametrize("page", IN_PROCESS_PAGES, ids=[p.name for p in IN_PROCESS_PAGES])
 def test_documented_in_process_commands_run(page: Path, tmp_path: Path) -> None:
     """Every in-process command of ``page`` (simulate, analyze, tune, study, paper
-    --in-process, profiles, report, clean, ...) exits 0."""
+    --in-process, profiles, report, clean, ...) exits 0 (the pages with graph commands: the
+    graph test below)."""
     outcomes = _run_page(page, tmp_path, graph=False)
     assert not _failures(outcomes), _failures(outcomes)
 
 
 @pytest.mark.graph
-@pytest.mark.parametrize("page", [p for p in PAGES if any(
-    c.name in ("run", "paper") for c in documented_commands(p))],
-    ids=lambda p: p.name)
+@pytest.mark.parametrize("page", GRAPH_PAGES, ids=[p.name for p in GRAPH_PAGES])
 def test_documented_commands_run_with_the_graph(page: Path, tmp_path: Path) -> None:
-    """All of ``page``'s commands in order, the graph ones too (``run``, ``paper``: real DDS,
-    2 trials of 1 s), so ``analyze bags/graph_*`` reads what ``run`` recorded."""
+    """All of ``page``'s commands in order, the in-process ones and the graph ones (``run``,
+    ``paper``: real DDS, 2 trials of 1 s), so ``analyze bags/graph_*`` reads what ``run``
+    recorded."""
     outcomes = _run_page(page, tmp_path, graph=True)
     assert any(o.command.name in ("run", "paper") for o in outcomes)
     assert not _failures(outcomes), _failures(outcomes)

@@ -383,13 +383,14 @@ def test_recorded_live_change_replays_in_process_exactly(tmp_path: Path) -> None
     assert not np.array_equal(without.max_abs_errors, np.array(graph)), "the change mattered"
 
 
-@pytest.mark.parametrize(("store", "bag"), [(False, False), (False, True), (True, False),
-                                            (True, True)])
+@pytest.mark.parametrize(("store", "bag"), [(False, True), (True, False)])
 def test_run_reports_the_mass_uncertainty_it_ran(tmp_path: Path, store: bool,
                                                  bag: bool) -> None:
     """`exo-ilc run --mass-uncertainty 0.15`: the table, the JSON, the bag (provenance, run
     name, `analyze`), the store key and the supervisor's summaries all say 0.15, with or
-    without a store and a bag (the supervisor once labelled a run without a store 0.05)."""
+    without a store and a bag (the supervisor once labelled a run without a store 0.05): each
+    of the two with and without the other (the bag without a store: where the label went
+    wrong; four graph runs for the four pairs cost the suite ~1 min)."""
     config_file = tmp_path / "short.yaml"
     config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n')
     out = tmp_path / "run.json"

@@ -9,6 +9,7 @@ from __future__ import annotations
 import glob
 import json
 import math
+import os
 import socket
 import struct
 import subprocess
@@ -560,13 +561,15 @@ def _urdf_of(config: Any) -> str:
     return view_urdf(config)[0]
 
 
-def _bridge(config_file: Path, relay: Path | None = None) -> tuple[subprocess.Popen[str], int]:
+def _bridge(config_file: Path, relay: Path | None = None, scheduling: str = "normal",
+            stderr: Any = None) -> tuple[subprocess.Popen[str], int]:
     """foxglove_bridge alone, on a free port (fed by ``relay`` if given)."""
     args = [sys.executable, "-m", "exo_ilc_ros.nodes.foxglove_bridge", "--ros-args",
-            "-p", "port:=0", "-p", f"config_file:={config_file}", "-p", "scheduling:=normal"]
+            "-p", "port:=0", "-p", f"config_file:={config_file}", "-p",
+            f"scheduling:={scheduling}"]
     if relay is not None:
         args += ["-p", f"relay:={relay}", "-p", "sample_rate:=0.0"]
-    process = subprocess.Popen(args, stdout=subprocess.PIPE, text=True)
+    process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=stderr, text=True)
     assert process.stdout is not None
     for line in process.stdout:
         if line.startswith('{"foxglove_port": '):
@@ -770,3 +773,24 @@ def test_assets_resolve_within_their_roots_only(tmp_path: Path) -> None:
                     (tmp_path / "secret.txt").as_uri(), "http://example.com/x.stl",
                     "meshes/missing.stl", "meshes"):
         assert resolver.fetch(refused) is None, refused
+
+
+@pytest.mark.graph
+@pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="no SCHED_IDLE on this system")
+def test_the_bridge_starts_at_its_priority_then_serves_below_the_loop(tmp_path: Path) -> None:
+    """The bridge starts (imports, middleware, server) at the priority it was given, so a
+    busy machine cannot starve its start (a graph run waits for it), and once it serves every
+    thread of it runs at SCHED_IDLE (default ``scheduling``), as its log line says."""
+    from exo_ilc_ros.nodes.realtime import thread_policies
+
+    log = tmp_path / "bridge.err"
+    with log.open("w") as err:
+        process, _ = _bridge(ROOT / "config" / "exo_ilc.yaml", scheduling="idle", stderr=err)
+    try:
+        policies = thread_policies(process.pid)
+        assert len(policies) > 1, policies  # the middleware's and the server's threads too
+        assert set(policies.values()) == {os.SCHED_IDLE}, policies
+    finally:
+        process.terminate()
+        process.wait(timeout=30)
+    assert "scheduling: SCHED_IDLE" in log.read_text()

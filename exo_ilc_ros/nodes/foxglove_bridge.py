@@ -152,7 +152,9 @@ class FoxgloveBridge(Node):
         if samples not in SAMPLE_RELIABILITY:
             raise ConfigError("sample_reliability", f"use one of {', '.join(SAMPLE_RELIABILITY)}",
                               NAME)
-        self.declare_parameter("scheduling", DEFAULT_SCHEDULING)  # applied by main(), first
+        policy = str(self.declare_parameter("scheduling", DEFAULT_SCHEDULING).value)
+        if policy not in SCHEDULING:
+            raise ConfigError("scheduling", f"use one of {', '.join(SCHEDULING)}", NAME)
         config = load_config(config_file or None)
         self.view = ArmView(config)
         self.assets = AssetResolver(
@@ -191,6 +193,10 @@ class FoxgloveBridge(Node):
                                  reader_qos(topic, samples))
         self.forwarded = 0
         feed = f"fed by the recorder at {relay}" if relay else "reading the graph's topics"
+        # started at the priority it was given (imports, middleware, server: a few s of CPU
+        # that SCHED_IDLE on a busy machine left it without for over a minute), serving from
+        # now on below the loop, every thread of it
+        print(f"[{NAME}] scheduling: {yield_to_the_loop(policy)}", file=sys.stderr, flush=True)
         self.get_logger().info(f"Foxglove WebSocket server on ws://{host}:{self.server.port} "
                                f"(subprotocol foxglove.sdk.v1; {feed}): open it in the "
                                "Foxglove app")
@@ -301,10 +307,10 @@ AUTOGROUP_NICE = 19
 
 
 def yield_to_the_loop(policy: str) -> str:
-    """Run this process below the control loop (before any thread starts, so every thread
-    the middleware and the server start inherits it): ``idle`` (``SCHED_IDLE``: the view runs
-    only on CPU the loop and everything else leave free), ``batch`` (``SCHED_BATCH`` at nice
-    10) or ``normal``. Returns what it runs at.
+    """Run every thread of this process below the control loop (threads started later inherit
+    it), once the view serves: ``idle`` (``SCHED_IDLE``: the view runs only on CPU the loop
+    and everything else leave free), ``batch`` (``SCHED_BATCH`` at nice 10) or ``normal``.
+    Returns what it runs at.
 
     With autogroups (most desktop kernels), each session is a scheduling group of its own, and
     a policy or nice value ranks a process only within its group: ``exo-ilc run`` starts every
@@ -315,16 +321,30 @@ def yield_to_the_loop(policy: str) -> str:
     session it shares (a terminal, a launch file's) the group is left alone."""
     if policy == "normal":
         return "normal"
+    idle = policy == "idle" and hasattr(os, "SCHED_IDLE")
     try:
-        if policy == "idle" and hasattr(os, "SCHED_IDLE"):
-            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-            return "SCHED_IDLE" + _nice_autogroup()
-        if hasattr(os, "SCHED_BATCH"):
-            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
-        os.nice(10)
-        return "SCHED_BATCH, nice 10" + _nice_autogroup()
+        for tid in _threads():
+            try:
+                if idle:
+                    os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
+                    continue
+                if hasattr(os, "SCHED_BATCH"):
+                    os.sched_setscheduler(tid, os.SCHED_BATCH, os.sched_param(0))
+                os.setpriority(os.PRIO_PROCESS, tid, max(10, os.getpriority(os.PRIO_PROCESS,
+                                                                          tid)))
+            except ProcessLookupError:  # a thread that ended meanwhile
+                continue
     except OSError as exc:
         return f"normal ({exc.strerror})"
+    return ("SCHED_IDLE" if idle else "SCHED_BATCH, nice 10") + _nice_autogroup()
+
+
+def _threads() -> list[int]:
+    """This process's thread ids (0, the calling thread, where there is no /proc)."""
+    try:
+        return [int(tid) for tid in os.listdir("/proc/self/task")]
+    except OSError:
+        return [0]
 
 
 def _nice_autogroup() -> str:
@@ -341,14 +361,14 @@ def _nice_autogroup() -> str:
 
 def main(args: list[str] | None = None) -> int:
     """Entry point: ``ros2 run exo_ilc_ros foxglove_bridge [--ros-args -p port:=8765]``; the
-    process yields to the loop first (``-p scheduling:=idle|batch|normal``, default idle)."""
+    process yields to the loop once it serves (``-p scheduling:=idle|batch|normal``, default
+    idle)."""
     given = command_line_parameters(sys.argv if args is None else args, "/" + NAME)
     policy = str(given["scheduling"].value) if "scheduling" in given else DEFAULT_SCHEDULING
     if policy not in SCHEDULING:
         print(f"error: scheduling:={policy}: use one of {', '.join(SCHEDULING)}",
               file=sys.stderr)
         return 2
-    print(f"[{NAME}] scheduling: {yield_to_the_loop(policy)}", file=sys.stderr, flush=True)
     return run_nodes([FoxgloveBridge], args)
 
 

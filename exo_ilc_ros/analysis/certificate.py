@@ -18,6 +18,7 @@ from matplotlib.figure import Figure
 
 from ..core.errors import ConfigError
 from ..core.params import schema
+from ..core.person.cuffs import CUFFS
 from ..core.population.certificate import (
     CRITERIA,
     Certificate,
@@ -124,8 +125,15 @@ def format_certificate(cert: Certificate, patients: Mapping[int, Patient], worst
              f"  more than 2 aborted trials     {share('aborts_over_2')}   (none to pass)",
              f"  trials to the bound (settled): median {trial(s['settled_median'])}, p95 "
              f"{trial(s['settled_p95'])}; first within: median {trial(s['first_median'])}, p95 "
-             f"{trial(s['first_p95'])}",
-             f"Worst {min(worst, n)} patients:"]
+             f"{trial(s['first_p95'])}"]
+    if "cuff_force_max_N" in s:
+        per_cuff = s["cuff_peaks_per_cuff"]
+        lines.append(f"  peak cuff force (N, worst cuff per patient): max "
+                     f"{s['cuff_force_max_N']:.1f}, p95 {s['cuff_force_p95_N']:.1f}; highest "
+                     "per cuff " + ", ".join(
+                         f"{name} {f:.1f} N / {t:.2f} N m" for name, f, t in zip(
+                             CUFFS, per_cuff["force_N"], per_cuff["torque_Nm"], strict=False)))
+    lines.append(f"Worst {min(worst, n)} patients:")
     for o in cert.worst(worst):
         where = "never within" if o.settled is None else f"settled at {o.settled}"
         final = "not finite" if not math.isfinite(o.final_error) else \
@@ -133,12 +141,20 @@ def format_certificate(cert: Certificate, patients: Mapping[int, Patient], worst
         lines.append(f"  #{o.index}: {final}, {where}, {o.aborts} aborts (run {o.abort_run})"
                      f"{', GROWING' if o.growing else ''}"
                      f"{', AT ITS LIMIT' if o.at_limit else ''}"
+                     f"{_cuff_text(o)}"
                      f"{': ' + o.failure if o.failure else ''}")
         if o.index in patients:
             lines.append(f"      {patients[o.index].describe()}")
     verdict = "PASS" if cert.passes else "FAIL: " + "; ".join(cert.reasons())
     lines.append(f"Verdict (the criteria above): {verdict}")
     return "\n".join(lines)
+
+
+def _cuff_text(outcome: PatientOutcome) -> str:
+    """``, cuffs 41.2 / 56.0 N`` (upper arm / forearm peak force), or nothing."""
+    if not outcome.peak_cuff_force:
+        return ""
+    return ", cuffs " + " / ".join(f"{f:.1f}" for f in outcome.peak_cuff_force) + " N"
 
 
 def certificate_json(cert: Certificate, setup: Mapping[str, Any],

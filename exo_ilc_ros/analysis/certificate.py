@@ -175,8 +175,12 @@ def certificate_figure(cert: Certificate) -> Figure:
     """Left: how many patients reach the bound (settled) by each trial, with those never there;
     right: every patient's worst-joint true max |e| per trial (grey), the worst five coloured,
     the bound dashed."""
-    fig = Figure(figsize=(11, 4.2))
-    left, right = fig.subplots(1, 2)
+    cuffs = [o for o in cert.outcomes if o.peak_cuff_force]
+    fig = Figure(figsize=(16.5 if cuffs else 11, 4.2))
+    axes = fig.subplots(1, 3 if cuffs else 2)
+    left, right = axes[0], axes[1]
+    if cuffs:
+        _cuff_panel(axes[2], cert.label, cuffs)
     k = cert.trials
     settled = [o.settled for o in cert.outcomes]
     counts = np.bincount([s for s in settled if s is not None], minlength=k + 1)[1:k + 1]
@@ -210,6 +214,22 @@ def certificate_figure(cert: Certificate) -> Figure:
     right.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     return fig
+
+
+def _cuff_panel(ax: Any, label: str, outcomes: Sequence[PatientOutcome]) -> None:
+    """Each patient's peak force per cuff over its trials (a person with muscles)."""
+    index = np.array([o.index for o in outcomes])
+    forces = np.array([o.peak_cuff_force for o in outcomes], dtype=float)
+    for c, name in enumerate(CUFFS):
+        ax.scatter(index, forces[:, c], s=14, label=name.replace("_", " "))
+    worst = np.max(forces, axis=1)
+    ax.axhline(float(np.percentile(worst, 95)), color="k", ls=":", lw=1,
+               label="p95 (worst cuff)")
+    ax.set_xlabel("patient")
+    ax.set_ylabel("peak cuff force over the trials (N)")
+    ax.set_title(f"{label}: cuff forces (max {worst.max():.0f} N)")
+    ax.set_ylim(bottom=0.0)
+    ax.legend(fontsize=8)
 
 
 def scenario_yaml(overrides: Mapping[str, Any], header: str) -> str:

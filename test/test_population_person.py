@@ -194,3 +194,13 @@ def test_certify_refuses_sensors_or_voluntary_effort_for_a_person(
                      "1", "--workers", "1", flag, "0.5"])
         assert code == 2
         assert f"{flag}: is not drawn for a person with muscles" in capsys.readouterr().err
+
+
+def test_the_study_json_carries_a_persons_cuff_forces_per_trial() -> None:
+    from exo_ilc_ros.analysis.study import study_json
+
+    with_person = _cell(0, [[10.0, 20.0], [30.0, math.nan]])
+    cells = study_json({}, [], [with_person, _cell(1, None)])["cells"]
+    assert cells[0]["peak_cuff_force_N"] == [[10.0, 20.0], [30.0, None]]
+    assert cells[0]["peak_cuff_torque_Nm"] == [[0.1, 0.2], [0.3, None]]
+    assert "peak_cuff_force_N" not in cells[1]

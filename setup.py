@@ -21,6 +21,7 @@ ROS_DEPENDENCIES = [
     "ros-jazzy-trajectory-msgs",
     "ros-jazzy-diagnostic-msgs",
     "ros-jazzy-rosgraph-msgs",
+    "ros-jazzy-geometry-msgs",
     "ros-jazzy-std-srvs",
     "ros-jazzy-rcl-interfaces",
     "ros-jazzy-ament-index-python",

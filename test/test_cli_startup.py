@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import io
 import json
 import pkgutil
 import subprocess
@@ -139,3 +140,49 @@ def test_a_run_loads_scipy_signal_only_when_it_filters(filters: bool, tmp_path: 
                           capture_output=True, text=True, check=True, cwd=tmp_path)
     answer = json.loads(done.stdout.strip().splitlines()[-1])
     assert answer == {"code": 0, "signal": filters}
+
+
+PIPED_PROBE = """
+import contextlib, io, json, sys
+from exo_ilc_ros.cli.main import main
+with contextlib.redirect_stdout(io.StringIO()):
+    code = main(["simulate", *sys.argv[1:], "--trials", "2"])
+print(json.dumps({"code": code, "tqdm": "tqdm" in sys.modules}))
+"""
+
+
+def test_a_piped_run_does_not_import_tqdm(tmp_path: Path) -> None:
+    """With stderr not a terminal tqdm would draw nothing: a scripted or piped run does not pay
+    its ~70 ms import (the one-trial simulate's start-up, issue 36)."""
+    short = tmp_path / "short.yaml"
+    short.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 0.5\n')
+    done = subprocess.run([sys.executable, "-c", PIPED_PROBE, "--config", str(short)],
+                          capture_output=True, text=True, check=True, cwd=tmp_path)
+    assert json.loads(done.stdout.strip().splitlines()[-1]) == {"code": 0, "tqdm": False}
+
+
+def test_progress_bar_is_tqdm_on_a_terminal_and_quiet_elsewhere(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    from tqdm import tqdm
+
+    from exo_ilc_ros.cli.progress import QuietBar, progress_bar
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    with progress_bar(total=3, desc="d", unit="trial") as bar:
+        assert isinstance(bar, tqdm)
+        bar.update(2)
+    assert "2/3" in sys.stderr.getvalue()  # drawn on the terminal
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    with progress_bar(total=3, desc="d", unit="trial") as bar:
+        assert isinstance(bar, QuietBar)
+        bar.update(2)
+        bar.set_postfix_str("max|e| 1e-3")
+        bar.write("a note", file=sys.stderr)
+        bar.write("to stdout")
+        assert bar.n == 2
+    assert sys.stderr.getvalue() == "a note\n"  # notes still printed, no bar
+    assert capsys.readouterr().out == "to stdout\n"

@@ -232,3 +232,40 @@ def format_spread(runs: Sequence[RunSummary], joint_names: Sequence[str]) -> str
                      + "".join(f"{text:>{cell}}" for text in cells))
     lines.append("(never: not within the bound by the last trial)")
     return "\n".join(lines)
+
+
+CUFF_COLUMNS = ("peak F", "RMS F", "peak T", "RMS T")
+"""The cuff table's columns per cuff (N, N, N m, N m: ``core.person.cuffs.CUFF_METRICS``)."""
+
+
+def format_cuff_table(runs: Sequence[RunSummary], labels: Sequence[str] | None = None) -> str:
+    """The cuff forces on the person per trial (a person strapped in, ``cuff_forces``): per
+    run and cuff the peak and RMS |force| (N) and the peak and RMS |torque| (N m); the runs
+    without a person are left out, and "" when no run has one (no empty columns)."""
+    shown = [(i, r) for i, r in enumerate(runs) if r.cuff_forces is not None]
+    if not shown:
+        return ""
+    cell = 9
+    cuffs = ("upper arm", "forearm")
+    group = len(cuffs) * len(CUFF_COLUMNS) * cell
+    titles = [labels[i] if labels is not None else run_title(r) for i, r in shown]
+    widths = [max(group, len(title)) for title in titles]
+    head1, head2, head3 = f"{'trial':>5} ", f"{'':>5} ", f"{'':>5} "
+    for title, width in zip(titles, widths, strict=True):
+        head1 += f"| {title:^{width}}"
+        head2 += "| " + "".join(f"{c:^{len(CUFF_COLUMNS) * cell}}" for c in cuffs).ljust(width)
+        head3 += "| " + "".join(f"{c:>{cell}}" for _ in cuffs for c in CUFF_COLUMNS).ljust(width)
+    lines = ["cuff forces on the person per trial (peak / RMS |F| in N, |T| in N m)", head1,
+             head2, head3, "-" * len(head3)]
+    count = max(len(r.cuff_forces) for _, r in shown if r.cuff_forces is not None)
+    for k in range(count):
+        line = f"{k + 1:>5} "
+        for (_, r), width in zip(shown, widths, strict=True):
+            table = r.cuff_forces
+            if table is not None and k < len(table):
+                line += "| " + "".join(f"{x:{cell}.1f}" if np.isfinite(x) else f"{'-':>{cell}}"
+                                       for x in table[k].ravel()).ljust(width)
+            else:
+                line += "| " + " " * width
+        lines.append(line)
+    return "\n".join(lines)

@@ -36,6 +36,7 @@ from ..bag.storage import read_metadata
 from ..core.loop.record import TrialRecord
 from ..core.params.config import Config
 from ..core.persistence.profiles import ProfileBook
+from ..core.person.cuffs import cuff_table, first_beyond_cuff_limit
 from ..core.programs.identified import SHOWN, UNITS, WORDS, Identified
 from ..core.programs.metrics import TrialMetrics, config_metrics
 from ..core.programs.therapy import IDENTIFICATION
@@ -73,6 +74,15 @@ class ExerciseRun:
     """Place in the session (1, 2, ...); 0: unknown (a bag of an earlier version)."""
     identified: list[Identified] = field(default_factory=list)
     """The identified patient after each trial (its summaries'; empty: none)."""
+    cuff_forces: np.ndarray | None = None
+    """A person strapped in: per completed trial and cuff the peak and RMS |force| (N) and
+    |torque| (N m) on the person (``core.person.cuffs``); None: no person."""
+    cuff_limit: list[float] = field(default_factory=list)
+    """``safety.cuff_force_limit`` (N per cuff; 0: none) of the run."""
+    cuff_aborts: list[int] = field(default_factory=list)
+    """Trials stopped because a cuff pressed past its limit (of :attr:`aborts`)."""
+    cuff_trials: list[int] = field(default_factory=list)
+    """The trial of each row of :attr:`cuff_forces`."""
 
 
 def _record_of(run: BagRun, k: int, config: Config) -> TrialRecord | None:
@@ -124,6 +134,8 @@ def exercise_run(run: BagRun) -> ExerciseRun:
     aborts = [(k, t.aborted_at if t.aborted_at is not None else -1)
               for k, t in sorted(run.trials.items()) if t.aborted_at is not None]
     reruns = [(k, reason) for k, t in sorted(run.trials.items()) for reason in t.reruns]
+    limit = [float(x) for x in values.get("safety.cuff_force_limit", [])]
+    pressed = [k for k, sample in aborts if sample >= 0 and _pressed_at(run, k) == sample]
     return ExerciseRun(
         run.path, custom.get(PATIENT, "") or "(no patient)",
         custom.get(EXERCISE, "") or str(values.get("exercise.name", PAPER_EXERCISE)),
@@ -133,7 +145,19 @@ def exercise_run(run: BagRun) -> ExerciseRun:
         int(values.get("safety.watchdog_periods", 0)), aborts, reruns, list(run.notes),
         custom.get(PROFILE_VERSION, ""), custom.get(PROFILE_STARTED_FROM, ""),
         int(custom.get(EXERCISE_ORDER) or 0) if str(custom.get(EXERCISE_ORDER) or "").isdigit()
-        else 0, identified)
+        else 0, identified, cuff_table([run.summaries.get(k, {}) for k in run.completed]),
+        limit, pressed, list(run.completed))
+
+
+def _pressed_at(run: BagRun, trial: int) -> int:
+    """The first sample of ``trial`` a cuff pressed past the run's limit (-1: none, or no
+    cuff wrenches recorded)."""
+    wrench = run.trials[trial].cuff_wrench
+    config = run.provenance.config
+    if wrench is None or config is None:
+        return -1
+    return first_beyond_cuff_limit(wrench, [float(x) for x in
+                                            config["safety.cuff_force_limit"]])
 
 
 def group_by_session(runs: Sequence[ExerciseRun]) -> dict[tuple[str, str], list[ExerciseRun]]:
@@ -231,16 +255,54 @@ def _joint_rows(run: ExerciseRun) -> str:
             + "".join(rows) + "</table>" + (f"<p class=note>{_e(note)}.</p>" if note else ""))
 
 
+def _cuffs(run: ExerciseRun) -> str:
+    """The forces the cuffs pressed into the person (only with a person strapped in)."""
+    forces = run.cuff_forces
+    if forces is None or not len(forces) or len(run.cuff_trials) != len(forces):
+        return ""
+    rows = []
+    for c, cuff in enumerate(("upper-arm cuff", "forearm cuff")):
+        peaks = forces[:, c, 0]
+        worst = int(np.nanargmax(peaks)) if np.isfinite(peaks).any() else 0
+        limit = run.cuff_limit[c] if c < len(run.cuff_limit) else 0.0
+        rows.append(
+            f"<tr><td class=l>{cuff}</td><td>{forces[0, c, 0]:.3g} N</td>"
+            f"<td>{forces[-1, c, 0]:.3g} N</td><td>{forces[-1, c, 1]:.3g} N</td>"
+            f"<td>{peaks[worst]:.3g} N (trial {run.cuff_trials[worst]})</td>"
+            f"<td>{np.nanmax(forces[:, c, 2]):.3g} N m</td>"
+            f"<td>{f'{limit:g} N' if limit > 0 else 'none'}</td></tr>")
+    first, last = run.cuff_trials[0], run.cuff_trials[-1]
+    return ("<h3>Forces on the person (cuffs)</h3><table><tr><th class=l>cuff</th>"
+            f"<th>peak force, trial {first}</th><th>peak force, trial {last}</th>"
+            f"<th>RMS force, trial {last}</th><th>highest peak force</th>"
+            "<th>highest peak torque</th><th>limit</th></tr>" + "".join(rows) + "</table>"
+            "<p class=note>What it means: the force and torque each cuff pressed into the "
+            "arm (the exoskeleton never sits exactly on the arm's joints, and the arm's muscles "
+            "pull). A trial in which a cuff pressed past its limit was stopped there and the "
+            "arm held where it was (Safety events).</p>")
+
+
 def _events(run: ExerciseRun) -> str:
     parts = []
-    if run.aborts:
+    pressed = [(k, s) for k, s in run.aborts if k in run.cuff_aborts]
+    if pressed:
+        limits = ", ".join(f"{x:g} N" for x in run.cuff_limit) or "?"
+        parts.append(
+            f"<p class=warn><b>{len(pressed)} trial(s) stopped by the cuff-force limit</b> "
+            f"({limits}, upper-arm and forearm cuff): " + ", ".join(
+                f"trial {k} at t = {s * run.period:.2f} s" for k, s in pressed)
+            + ".</p><p class=note>What it means: a cuff pressed harder into the arm than the "
+            "limit allows. The robot stopped following the movement and held the arm where it "
+            "was; the trial is kept and was learned from up to where it stopped.</p>")
+    envelope_aborts = [(k, s) for k, s in run.aborts if k not in run.cuff_aborts]
+    if envelope_aborts:
         items = []
-        for trial, sample in run.aborts:
+        for trial, sample in envelope_aborts:
             when = f"at t = {sample * run.period:.2f} s" if sample >= 0 else "(sample unknown)"
             envelope = ", ".join(f"{x:g} rad" for x in run.envelope) or "?"
             items.append(f"<li>trial {trial} stopped {when}</li>")
         parts.append(
-            f"<p class=warn><b>{len(run.aborts)} trial(s) stopped by the safety envelope</b> "
+            f"<p class=warn><b>{len(envelope_aborts)} trial(s) stopped by the safety envelope</b> "
             f"(|error| above {envelope} per joint).</p><ul>{''.join(items)}</ul>"
             "<p class=note>What it means: the arm moved further from the planned movement than "
             "the safety envelope allows (a strong push or pull, a spasm, or assistance that did "
@@ -423,7 +485,7 @@ def render_session(runs: Sequence[ExerciseRun], book: ProfileBook | None = None)
             f"Bag: <code>{_e(run.path)}</code></p>"
             f"<img alt='error, assistance, feed-forward and patient share over the trials of "
             f"{_e(run.exercise)}' src='data:image/png;base64,{_png(exercise_figure(run))}'>"
-            + _joint_rows(run) + "<h3>Safety events</h3>" + _events(run)
+            + _joint_rows(run) + _cuffs(run) + "<h3>Safety events</h3>" + _events(run)
             + _identification(run, book)
             + "<h3>Compared with earlier sessions</h3>" + _history(run, book))
     glossary = (

@@ -67,6 +67,19 @@ def joint_state(ns: int, names: Sequence[str], position: Any, velocity: Any,
     return serialize(msg, topics.TYPES[topics.JOINT_STATES])
 
 
+def cuff_wrench(ns: int, cuff: int, wrench: Any) -> bytes:
+    """``/cuffs/<cuff>/wrench`` (a person strapped in): cuff ``cuff``'s force (N) and torque
+    (N m) on the person at the sample ``ns``, in the cuff's frame, as plant_simulator sends
+    it."""
+    vector = _type("geometry_msgs/msg/Vector3")
+    w = [float(x) for x in wrench]
+    msg = _type(topics.CUFF_TYPE)(
+        header=header(ns, topics.CUFF_FRAMES[cuff]),
+        wrench=_type("geometry_msgs/msg/Wrench")(force=vector(x=w[0], y=w[1], z=w[2]),
+                                                 torque=vector(x=w[3], y=w[4], z=w[5])))
+    return serialize(msg, topics.CUFF_TYPE)
+
+
 def clock(ns: int) -> bytes:
     """``/clock``."""
     msg = _type("rosgraph_msgs/msg/Clock")(clock=time_msg(ns))

@@ -133,7 +133,7 @@ def read_bag(path: Path | str, *, skip_damaged: bool = False) -> BagRun:
     notes = list(provenance.problems)
     streams, decode, read_notes = read_topics(
         path, info, skip_damaged, [topics.JOINT_STATES, topics.EFFORT_COMMANDS, topics.FEEDFORWARD,
-                     topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY],
+                     topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, *topics.CUFF_WRENCHES],
         raw_topics=[topics.EFFORT_COMMANDS, topics.FEEDFORWARD, topics.JOINT_STATES])
     notes.extend(read_notes)
     events = _trial_events(streams, notes)
@@ -151,6 +151,7 @@ def read_bag(path: Path | str, *, skip_damaged: bool = False) -> BagRun:
     trials = _cut_trials(events, profiles, reference, period * 1e9, decoded,
                          np.asarray(js.log, dtype=np.int64), streams[topics.EFFORT_COMMANDS],
                          decode, notes)
+    _cut_cuffs(events, trials, [streams[t] for t in topics.CUFF_WRENCHES], period * 1e9)
     if not provenance.parameter_changes and provenance.recorded_by is None:
         notes.append("no exo_ilc_ros provenance in custom_data (recorded by another tool?)")
     return BagRun(path, str(info.get("storage_identifier", "?")), decoded.names, period,
@@ -200,6 +201,10 @@ def _trial_events(streams: dict[str, Stream], notes: list[str]) -> _Events:
                              f"{values.get('aborted_at', '?')} (safe hold from there; kept, "
                              "learned from up to the abort)"
                              if values.get("reason") == topics.ENVELOPE_REASON else
+                             f"trial {k} was aborted at sample {values.get('aborted_at', '?')}: "
+                             "a cuff pressed past safety.cuff_force_limit (safe hold from "
+                             "there; kept, learned from up to the abort)"
+                             if values.get("reason") == topics.CUFF_LIMIT_REASON else
                              f"trial {k}: the plant diverged at sample "
                              f"{values.get('aborted_at', '?')} (kept; the run stopped there)")
             else:
@@ -289,6 +294,28 @@ def _complete_boundaries(path: Path, events: _Events, samples: int, period_ns: f
         if k not in starts:  # recording began during trial k: keep its tail
             starts[k] = int(round(stamp - (samples - 1) * period_ns))
             notes.append(f"trial {k}: no start event (recording began during it)")
+
+
+def _cut_cuffs(events: _Events, trials: dict[int, TrialData], cuffs: Sequence[Stream],
+               period_ns: float) -> None:
+    """A person strapped in: each trial's cuff wrenches per sample (``TrialData.cuff_wrench``,
+    NaN where one is missing) from the per-cuff streams, placed by their header stamps as
+    the samples are; nothing for a bag without them."""
+    if not any(stream.msgs for stream in cuffs):
+        return
+    for k, trial in trials.items():
+        start = events.starts.get(k)
+        if start is None:
+            continue
+        samples = trial.position.shape[0]
+        wrench = np.full((samples, len(cuffs), 6), np.nan)
+        for c, stream in enumerate(cuffs):
+            for msg in stream.msgs:
+                i = round((messages.time_ns(msg.header.stamp) - start) / period_ns)
+                if 0 <= i < samples:
+                    f, t = msg.wrench.force, msg.wrench.torque
+                    wrench[i, c] = (f.x, f.y, f.z, t.x, t.y, t.z)
+        trial.cuff_wrench = wrench
 
 
 def _cut_trials(events: _Events, profiles: dict[int, bytes],

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.person.cuffs import cuff_table
 from ..core.session.summary import RunSummary, law_segments
 from ..wire import protocol, topics
 from .provenance import ParameterChange, Provenance
@@ -43,6 +44,10 @@ class TrialData:
     """The trial's effort commands (CDR), one per sample when all were recorded."""
     feedforward_message: bytes | None = field(default=None, repr=False)
     decode: Callable[[bytes, str], Any] | None = field(default=None, repr=False)
+    cuff_wrench: np.ndarray | None = field(default=None, repr=False)
+    """A person strapped in: per sample and cuff (upper arm, forearm) the force (N) and
+    torque (N m) on the person (``/cuffs/<cuff>/wrench``), shape (N+1, 2, 6), NaN where a
+    message is missing; None: the bag has none."""
 
     @cached_property
     def command(self) -> np.ndarray:
@@ -222,4 +227,5 @@ class BagRun:
             extra["laws"] = laws
         return RunSummary(self.mass_uncertainty, self.law, self.error_bound, errors,
                           None if np.isnan(ff).all() else ff,
-                          None if np.isnan(effort).all() else effort, extra, true)
+                          None if np.isnan(effort).all() else effort, extra, true,
+                          cuff_table([self.summaries.get(k, {}) for k in range(1, count + 1)]))

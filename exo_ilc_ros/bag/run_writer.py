@@ -5,8 +5,9 @@ Simulated time is the plant simulator's: trial k's sample i is stamped
 ``((k - 1) (N + 1) + 1 + i) * period`` (each reset puts the next t0 one period after the last
 sample). The order per trial is the graph's: feed-forward, the controller's ``loaded`` and
 ``start`` at t0, the samples (``/clock`` as the plant sends it: every ``clock_every``-th sample
-and the first and last), the controller's ``done``, the summary, the trial metrics and ``end``
-at the last sample; ``finished`` after the last trial. The arm's view
+and the first and last; with a person strapped in each cuff's wrench just before its
+sample), the controller's ``done``, the summary, the trial metrics and ``end`` at the last
+sample; ``finished`` after the last trial. The arm's view
 (:class:`~.view.ArmView`, as the live view shows it): ``/robot_description`` and
 ``/reference/robot_description`` once, at the start (log time 0), and per sample a ``/tf`` at
 its stamp. The same topics and types as the recorder's bag, one storage file per trial
@@ -26,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.params.config import Config
+from ..core.person.cuffs import cuff_summary_values
 from ..core.programs.identified import Identified
 from ..core.programs.metrics import TrialMetrics, metric_summary_values
 from ..core.session.result import RunResult
@@ -57,10 +59,11 @@ def unique_path(parent: Path | str, name: str) -> Path:
     return candidate
 
 
-def declare_topics(writer: BagWriter) -> None:
-    """Every topic of :data:`topics.BAG_TYPES`, with the QoS their publishers offer."""
+def declare_topics(writer: BagWriter, person: bool = False) -> None:
+    """Every topic of :data:`topics.BAG_TYPES` (and with a ``person`` strapped in the cuffs'
+    :data:`topics.CUFF_TYPES`), with the QoS their publishers offer."""
 
-    for topic, msgtype in topics.BAG_TYPES.items():
+    for topic, msgtype in {**topics.BAG_TYPES, **(topics.CUFF_TYPES if person else {})}.items():
         writer.add_topic(topic, msgtype, offered_qos(topic))
 
 
@@ -81,7 +84,7 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
     clock_every = max(1, int(config["clock_every"]))
     view = ArmView(config)
     with BagWriter(path, storage=storage, custom_data=custom) as writer:
-        declare_topics(writer)
+        declare_topics(writer, any(r.cuff_wrench is not None for r in result.records))
         for topic, raw in view.descriptions().items():
             writer.write(topic, 0, raw)
         for k, record in enumerate(result.records, start=1):
@@ -100,6 +103,10 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                 ns = t0 + i * period_ns
                 if i % clock_every == 0 or i == samples - 1:  # as plant_simulator sends it
                     writer.write(topics.CLOCK, ns, messages.clock(ns))
+                if record.cuff_wrench is not None:  # a person: as the plant, before the sample
+                    for c, topic in enumerate(topics.CUFF_WRENCHES):
+                        writer.write(topic, ns, messages.cuff_wrench(ns, c,
+                                                                     record.cuff_wrench[i, c]))
                 state = messages.joint_state(ns, names, record.position[i],
                                              record.velocity[i], applied[i])
                 writer.write(topics.JOINT_STATES, ns, state)
@@ -119,6 +126,7 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                 values += metrics[k - 1].summary_values(names)
             else:  # as the supervisor files them (core/programs/metrics.py)
                 values += metric_summary_values(record, measured, names)
+            values += cuff_summary_values(record.cuff_wrench)  # as the supervisor files them
             step = result.joint_forces.get(k)
             if step is not None:  # as the supervisor files it (core/programs/identified.py)
                 values += Identified.from_step(step, names).summary_values()

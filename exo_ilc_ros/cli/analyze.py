@@ -82,10 +82,15 @@ def identified(run: BagRun) -> list[Identified]:
 
 
 def write_csv(path: Path | str, runs: Sequence[RunSummary], joint_names: Sequence[str]) -> None:
-    """One row per bag and trial: max |e|, |u_ff| and |effort| per joint."""
+    """One row per bag and trial: max |e|, |u_ff| and |effort| per joint; with a person
+    strapped in (any run) also ``cuff/<cuff>/<metric>`` per cuff (empty for a run without)."""
+    from ..core.person.cuffs import CUFF_METRICS, CUFFS, cuff_key
     header = ["bag", "law", "mass_uncertainty", "trial"]
     for key in ("max_abs_error", "max_abs_feedforward", "max_abs_effort"):
         header += [f"{key}/{name}" for name in joint_names]
+    person = any(r.cuff_forces is not None for r in runs)
+    if person:
+        header += [cuff_key(c, m) for c in CUFFS for m in CUFF_METRICS]
     with open(path, "w", newline="") as handle:
         out = csv.writer(handle)
         out.writerow(header)
@@ -96,6 +101,11 @@ def write_csv(path: Path | str, runs: Sequence[RunSummary], joint_names: Sequenc
                 for table in (run.max_abs_error, run.max_abs_feedforward, run.max_abs_effort):
                     row += ([repr(float(x)) for x in table[k]] if table is not None
                             else [""] * len(joint_names))
+                if person:
+                    cuffs = run.cuff_forces
+                    row += ([repr(float(x)) for x in cuffs[k].ravel()]
+                            if cuffs is not None and k < len(cuffs)
+                            else [""] * (len(CUFFS) * len(CUFF_METRICS)))
                 out.writerow(row)
 
 
@@ -143,6 +153,7 @@ def analyze(args: argparse.Namespace) -> int:
     from ..analysis import figures
     from ..analysis.identified import format_table
     from ..analysis.report import (
+        format_cuff_table,
         format_iterations,
         format_run_events,
         format_trial_table,
@@ -191,6 +202,10 @@ def analyze(args: argparse.Namespace) -> int:
         print(events)
         print()
     print(format_iterations(summaries, names, labels=usable_labels))
+    cuffs = format_cuff_table(summaries, usable_labels)
+    if cuffs and not args.quiet:  # a person strapped in: the forces on it
+        print()
+        print(cuffs)
     if not args.quiet:
         for run, label in zip(bag_runs, labels, strict=True):
             table = format_table(identified(run), run.joint_names)

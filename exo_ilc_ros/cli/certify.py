@@ -21,6 +21,7 @@ from .arguments import (
     parameter,
     seed,
 )
+from .progress import progress_bar
 from .tune import default_jobs
 
 DEFAULT_TRIALS = 25
@@ -85,8 +86,6 @@ def register(sub: Any) -> None:
 
 def certify(args: argparse.Namespace) -> int:
     """Draw the population, run it, print the certificate; JSON, figure, falsification."""
-    from tqdm import tqdm
-
     from ..analysis import figures
     from ..analysis.certificate import (
         certificate_figure,
@@ -145,8 +144,7 @@ def certify(args: argparse.Namespace) -> int:
              "encoder_share": args.encoder_share, "voluntary_share": args.voluntary_share}
     rows = Path(args.rows) if args.rows else \
         (Path(args.json).with_suffix(".rows.jsonl") if args.json else None)
-    with tqdm(total=len(cells), desc="certify", unit="patient", file=sys.stderr,
-              disable=None) as bar:
+    with progress_bar(total=len(cells), desc="certify", unit="patient") as bar:
         def done(outcome: PatientOutcome) -> None:
             bar.update(1)
             bar.set_postfix_str(f"#{outcome.index}")
@@ -161,8 +159,7 @@ def certify(args: argparse.Namespace) -> int:
     if args.falsify:
         worst = cert.worst(1)
         start = search_point(by_index[worst[0].index], spec) if worst else None
-        with tqdm(total=args.falsify, desc="falsify", unit="patient", file=sys.stderr,
-                  disable=None) as bar:
+        with progress_bar(total=args.falsify, desc="falsify", unit="patient") as bar:
             found = falsify(base, spec, label, args.trials,
                             Search(args.falsify, args.seed, start), Pool(workers, args.dask),
                             lambda f: bar.update(1))

@@ -3,11 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
-
-from tqdm import tqdm
 
 from ..core.errors import ConfigError
 from ..core.params.config import config_dir, read_yaml
@@ -22,6 +19,7 @@ from .arguments import (
     json_file,
     parameter,
 )
+from .progress import progress_bar
 from .tune import default_jobs
 
 if TYPE_CHECKING:
@@ -95,8 +93,7 @@ def compare(args: argparse.Namespace) -> int:
     print("compare: " + ", ".join(v.label for v in variants) + " at delta = "
           + " ".join(f"{d:g}" for d in deltas) + f", {trials} trials"
           + (f"; tuned from {tuned_path}" if tuned_path else "; no tuned file"))
-    with tqdm(total=len(variants) * len(deltas), desc="compare", unit="run", file=sys.stderr,
-              disable=None) as bar:
+    with progress_bar(total=len(variants) * len(deltas), desc="compare", unit="run") as bar:
         runs = run_comparison(variants, deltas, trials, args.jobs, lambda: bar.update(1))
     names = base["joint_names"]
     print(format_comparison(runs, names))

@@ -8,8 +8,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
 from ..core.errors import ConfigError
 from .analyze import analyze, analyze_arguments
 from .arguments import (
@@ -21,6 +19,7 @@ from .arguments import (
     json_file,
     parameter,
 )
+from .progress import progress_bar
 from .run import graph_domain
 
 PAPER_UNCERTAINTIES = (0.05, 0.10, 0.15)
@@ -67,8 +66,8 @@ def paper(args: argparse.Namespace) -> int:
     bags: list[Path] = []
     for delta in PAPER_UNCERTAINTIES:
         run_config = config.with_mass_uncertainty(delta)
-        with tqdm(total=trials, desc=f"{'in-process' if args.in_process else 'graph'} "
-                  f"delta={delta:g}", unit="trial", file=sys.stderr, disable=None) as bar:
+        with progress_bar(total=trials, desc=f"{'in-process' if args.in_process else 'graph'} "
+                                        f"delta={delta:g}", unit="trial") as bar:
             def progress(_: Any, bar: Any = bar) -> None:
                 bar.update(1)
 

@@ -12,14 +12,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from tqdm import tqdm
-
 from ..core.errors import ConfigError
 from ..core.params.config import Config
 from ..orchestration.launcher import exported_domain_id
 from ..wire import topics
 from ..wire.relay import DISPLAY_RATE
 from .arguments import directory, domain_id, shown_command
+from .progress import progress_bar
 from .simulate import aborted_exit, add_config_arguments, config_from_args, print_report
 from .therapy import add_therapy_arguments, run_session_graph, uses_therapy
 
@@ -302,8 +301,8 @@ def _run_graph_once(args: argparse.Namespace, run_config: Config, delta: float, 
     from ..orchestration.graph import run_graph
     from ..orchestration.recording import Recording
     config = run_config
-    with tqdm(total=trials, desc=f"graph {config['law']} delta={delta:g}", unit="trial",
-              file=sys.stderr, disable=None) as bar:
+    with progress_bar(total=trials, desc=f"graph {config['law']} delta={delta:g}",
+                      unit="trial") as bar:
         def progress(summary: TrialSummary, bar: Any = bar) -> None:
             bar.update(1)
             notes = summary.values.get(topics.LEARNING_NOTES)

@@ -6,8 +6,6 @@ import argparse
 import sys
 from typing import TYPE_CHECKING, Any
 
-from tqdm import tqdm
-
 from ..core.errors import ConfigError
 from ..core.params.config import Config
 from .arguments import (
@@ -20,6 +18,7 @@ from .arguments import (
     json_file,
     parameter,
 )
+from .progress import progress_bar
 from .therapy import add_therapy_arguments, simulate_session, uses_therapy
 
 if TYPE_CHECKING:
@@ -105,8 +104,8 @@ def replay_bag(args: argparse.Namespace) -> int:
         return 2
     try:
         run = read_bag(args.replay)
-        with tqdm(total=max(run.completed, default=0), desc=f"replay {run.path.name}",
-                  unit="trial", file=sys.stderr, disable=None) as bar:
+        with progress_bar(total=max(run.completed, default=0), desc=f"replay {run.path.name}",
+                          unit="trial") as bar:
             replayed = replay(run, on_trial=lambda record: bar.update(1))
     except BagError as exc:
         print(f"exo-ilc simulate: error: --replay {args.replay}: {exc}", file=sys.stderr)
@@ -158,8 +157,8 @@ def simulate(args: argparse.Namespace) -> int:
     runs = []
     for delta in deltas:
         measured = config.with_mass_uncertainty(delta)  # the run's config, validated once
-        with tqdm(total=trials, desc=f"{config['law']} delta={delta:g}", unit="trial",
-                  file=sys.stderr, disable=None) as bar:
+        with progress_bar(total=trials, desc=f"{config['law']} delta={delta:g}",
+                          unit="trial") as bar:
             def progress(record: Any, bar: Any = bar) -> None:
                 bar.update(1)
                 bar.set_postfix_str("max|e| " + " ".join(f"{x:.1e}"
@@ -167,6 +166,7 @@ def simulate(args: argparse.Namespace) -> int:
             result = run_trials(measured, delta, trials, on_trial=progress, store=args.store,
                                 resume=args.resume)
         runs.append(RunSummary.from_result(result))
+        add_cuff_aborts(runs[-1], result, measured)
         add_identified(runs[-1], result, config["joint_names"])
         add_divergences(runs[-1], result, measured)
         if args.spread:
@@ -201,6 +201,20 @@ def format_cuff_forces(cuffs: Any, title: str) -> str:
     return "\n".join(lines)
 
 
+def add_cuff_aborts(summary: RunSummary, result: RunResult, config: Config) -> None:
+    """A person strapped in: the trials the cuff-force limit aborted (the first sample a cuff
+    pressed past ``safety.cuff_force_limit`` is the abort sample) as
+    ``summary.extra["cuff_limit_aborts"]`` (the JSON's and the warning's; nothing without)."""
+    from ..core.person.cuffs import first_beyond_cuff_limit
+    from ..core.session.summary import CUFF_LIMIT_ABORTS
+    limit = [float(x) for x in config["safety.cuff_force_limit"]]
+    pressed = [r.trial for r in result.records if r.aborted_at is not None and
+               r.cuff_wrench is not None and
+               first_beyond_cuff_limit(r.cuff_wrench, limit) == r.aborted_at]
+    if pressed:
+        summary.extra[CUFF_LIMIT_ABORTS] = pressed
+
+
 def add_identified(summary: RunSummary, result: RunResult, names: list[str]) -> None:
     """The identification after the run's last trial as ``summary.extra["identified"]`` (the
     JSON's and the report's; nothing without ``identification.enabled``)."""
@@ -213,8 +227,7 @@ def add_identified(summary: RunSummary, result: RunResult, names: list[str]) -> 
 def _spread(config: Config, delta: float, trials: int, count: int) -> dict[str, Any]:
     """--spread: the iterations to the bound of ``count`` perturbed runs, as JSON."""
     from ..core.programs.spread import iteration_spread
-    with tqdm(total=count, desc=f"spread delta={delta:g}", unit="run", file=sys.stderr,
-              disable=None) as bar:
+    with progress_bar(total=count, desc=f"spread delta={delta:g}", unit="run") as bar:
         spread = iteration_spread(config, delta, trials, count,
                                   on_run=lambda _: bar.update(1))
     return spread.to_json()
@@ -237,6 +250,7 @@ def aborted_exit(runs: list[RunSummary], command: str) -> int:
     from ..analysis.report import run_title
     from ..core.loop.divergence import DIVERGED
     from ..core.session.abort import ABORT_STOP_KEY
+    from ..core.session.summary import CUFF_LIMIT_ABORTS
     any_aborted = stopped = False
     for run in runs:
         diverged = run.extra.get(DIVERGED, [])
@@ -245,15 +259,21 @@ def aborted_exit(runs: list[RunSummary], command: str) -> int:
                   file=sys.stderr)
         any_aborted = any_aborted or bool(diverged)
         gone = {int(d["trial"]) for d in diverged}
+        pressed = {int(k) for k in run.extra.get(CUFF_LIMIT_ABORTS, [])}
         aborted = [int(k) for k in run.extra.get("aborted_trials", []) if int(k) not in gone]
-        if aborted:
+        for by, which in (("the error envelope (safety.error_envelope", [
+                k for k in aborted if k not in pressed]), ("the cuff-force limit "
+                "(safety.cuff_force_limit: a cuff pressed past it", [
+                k for k in aborted if k in pressed])):
+            if not which:
+                continue
             any_aborted = True
             count = len(run.max_abs_error)
-            share = "ALL" if len(aborted) == count else f"{len(aborted)} of {count}"
+            share = "ALL" if len(which) == count else f"{len(which)} of {count}"
             print(f"exo-ilc {command}: WARNING: {run_title(run)}: {share} trials ABORTED by "
-                  f"the error envelope (safety.error_envelope; the robot held the arm there; "
-                  f"each was learned from up to its abort): trial{'s' if len(aborted) > 1 else ''}"
-                  f" {_spans(aborted)}", file=sys.stderr)
+                  f"{by}; the robot held the arm there; each was learned from up to its "
+                  f"abort): trial{'s' if len(which) > 1 else ''} {_spans(which)}",
+                  file=sys.stderr)
         message = run.extra.get(ABORT_STOP_KEY)
         if message:
             stopped = True

@@ -8,8 +8,6 @@ import argparse
 import sys
 from typing import TYPE_CHECKING, Any
 
-from tqdm import tqdm
-
 from ..analysis.wording import count_phrase
 from ..core.errors import ConfigError
 from ..core.params.redact import redact
@@ -23,6 +21,7 @@ from .arguments import (
     parameter,
     seed,
 )
+from .progress import progress_bar
 from .tune import default_jobs
 
 if TYPE_CHECKING:
@@ -89,8 +88,7 @@ def study(args: argparse.Namespace) -> int:
           f"{count_phrase(args.trials, 'trial')} on {where}", file=sys.stderr)
     for law in laws:
         print(f"  law {law.describe()}", file=sys.stderr)
-    with tqdm(total=len(cells), desc="study", unit="cell", file=sys.stderr,
-              disable=None) as bar:
+    with progress_bar(total=len(cells), desc="study", unit="cell") as bar:
         def done(cell: StudyCell) -> None:
             bar.update(1)
             bar.set_postfix_str(cell.label)

@@ -9,13 +9,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from tqdm import tqdm
-
 from ..analysis.wording import count_phrase
 from ..core.errors import ConfigError
 from ..core.persistence.files import write_json_atomic
 from ..core.persistence.profiles import ProfileBook
 from .arguments import directory, nonempty, shown_command
+from .progress import progress_bar
 from .therapy_resume import Step, resume_command, resumed_steps, stored_summary
 
 if TYPE_CHECKING:
@@ -96,8 +95,7 @@ def simulate_session(args: argparse.Namespace, config: Any) -> tuple[list[Exerci
             "trials learned)"
         print(f"patient {args.patient}, exercise {name}: {count_phrase(count, 'trial')}, {start}",
               file=sys.stderr)
-        with tqdm(total=count, desc=f"{args.patient} {name}", unit="trial", file=sys.stderr,
-                  disable=None) as bar:
+        with progress_bar(total=count, desc=f"{args.patient} {name}", unit="trial") as bar:
             def progress(record: Any, bar: Any = bar) -> None:
                 bar.update(1)
                 bar.set_postfix_str("max|e| " + " ".join(f"{x:.1e}"

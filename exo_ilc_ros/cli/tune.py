@@ -5,12 +5,9 @@ from __future__ import annotations
 import argparse
 import os
 import re
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
-
-from tqdm import tqdm
 
 from ..analysis.wording import count_phrase
 from ..core.errors import ConfigError
@@ -30,6 +27,7 @@ from .arguments import (
     storage,
     yaml_out,
 )
+from .progress import progress_bar
 
 if TYPE_CHECKING:
     import optuna
@@ -139,8 +137,7 @@ def tune(args: argparse.Namespace) -> int:
     print(f"study {name} in {redact(args.storage)}: {more} on {count_phrase(args.jobs, 'job')}, "
           f"{count_phrase(trials, 'trial')} x {deltas}"
           " each")
-    with tqdm(total=args.budget, desc="tune", unit="trial", file=sys.stderr,
-              disable=None) as bar:
+    with progress_bar(total=args.budget, desc="tune", unit="trial") as bar:
         start: list[int] = []
 
         def progress(study: optuna.Study) -> None:

@@ -1,17 +1,19 @@
 """bag_recorder: records every topic of the graph into a rosbag2 MCAP bag, as received.
 
-Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.wire.topics.TYPES` (QoS per
-topic: :func:`subscription_qos`, documented in docs/live-view.md) and stores the CDR bytes
-untouched. Log time = simulated time, as ``ros2 bag record --use-sim-time`` logs it: the
-recorder's sim clock at receipt (:class:`~exo_ilc_ros.wire.sim_time.SimClock`: every sample and
-/clock message at its own stamp, a message without one at the sim time of the last stamped
-message received before it). Publish time = the wall-clock time (ns since the epoch) DDS
-received the message (kept for latency analysis). The subscriptions are :class:`~.common.Inbox`
-es, so the recorder does not wake once per message next to the control loop. Within a trial it
-stays out of the loop's way: it reads only the trial events every ``INBOX_PERIOD``, and takes
-and writes the other topics (the samples, commands, /clock) at the next trial event, or after
-:data:`DATA_PERIOD` at the latest; DDS holds them meanwhile (``RECORDER_DEPTH``). The samples
-between two trial events go to the bag as one batch (``BagWriter.write_many``).
+Subscribes with ``raw=True`` to each topic of :data:`exo_ilc_ros.wire.topics.TYPES` (and, when
+the run's config straps a person in, :data:`~exo_ilc_ros.wire.topics.CUFF_TYPES`: the cuffs'
+wrenches per sample) (QoS per topic: :func:`subscription_qos`, documented in docs/live-view.md)
+and stores the CDR bytes untouched. Log time = simulated time, as ``ros2 bag record
+--use-sim-time`` logs it: the recorder's sim clock at receipt
+(:class:`~exo_ilc_ros.wire.sim_time.SimClock`: every sample and /clock message at its own stamp,
+a message without one at the sim time of the last stamped message received before it). Publish
+time = the wall-clock time (ns since the epoch) DDS received the message (kept for latency
+analysis). The subscriptions are :class:`~.common.Inbox` es, so the recorder does not wake once
+per message next to the control loop. Within a trial it stays out of the loop's way: it reads
+only the trial events every ``INBOX_PERIOD``, and takes and writes the other topics (the
+samples, commands, /clock) at the next trial event, or after :data:`DATA_PERIOD` at the latest;
+DDS holds them meanwhile (``RECORDER_DEPTH``). The samples between two trial events go to the
+bag as one batch (``BagWriter.write_many``).
 The bag also holds the arm as the live view shows it (:class:`~exo_ilc_ros.bag.view.ArmView`,
 the view's own code): ``/robot_description`` and ``/reference/robot_description`` once, at the
 start, and a ``/tf`` per recorded JointState at its stamp (publish time: the JointState's).
@@ -178,7 +180,9 @@ class BagRecorder(Node):
         self.events = Inbox(self, "events")  # PROTOCOL_TOPICS, read at every poll
         self.inbox = Inbox(self)  # every other topic, taken at events (see poll)
         self.subscriptions_by_topic: dict[str, Any] = {}
-        for topic, msgtype in topics.TYPES.items():
+        recorded = {**topics.TYPES, **(topics.CUFF_TYPES if str(
+            config["musculoskeletal.model"]) != "none" else {})}  # a person: the cuffs too
+        for topic, msgtype in recorded.items():
             self.writer.add_topic(topic, msgtype, offered_qos(topic))
             inbox = self.events if topic in PROTOCOL_TOPICS else self.inbox
             self.subscriptions_by_topic[topic] = inbox.subscribe(
@@ -201,7 +205,7 @@ class BagRecorder(Node):
             message_class(topics.TYPES[topics.DIAGNOSTICS]), topics.DIAGNOSTICS, EVENTS_QOS,
             publisher_class=CountingPublisher)
         self.create_timer(0.2, self.on_status_timer, clock=wall_clock())
-        self.get_logger().info(f"recording {len(topics.TYPES)} topics to {path}")
+        self.get_logger().info(f"recording {len(recorded)} topics to {path}")
 
     def on_status_timer(self) -> None:
         """``ready`` on /diagnostics once the subscription of every :data:`READY_TOPICS` is

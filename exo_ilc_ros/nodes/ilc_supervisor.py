@@ -17,6 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from rclpy.parameter import parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
@@ -28,6 +29,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from ..core.loop.divergence import DIVERGED
+from ..core.loop.wire_input import Cause, Rejection
 from ..core.params import schema
 from ..core.programs.identified import Identified
 from ..core.protocol.homing_protocol import HomingProtocol
@@ -46,7 +48,7 @@ from .common import (
     spin,
     wall_clock,
 )
-from .diagnostics import diagnostic_array, status, values_of
+from .diagnostics import diagnostic_array, stamp_ns, status, values_of
 from .guard import Health, JointStateGate, Rejections, rejections_check
 from .messages import feedforward_message, trial_metrics_message, trial_summary
 from .parameters import SchemaParameters
@@ -101,6 +103,11 @@ class IlcSupervisor(Node):
         self.inbox.subscribe(JointState, topics.TRUE_JOINT_STATES,  # the virtual patient's
                              admit=self.truth_from.admit_raw)
         self.truth_gate = JointStateGate(self.joint_names, self.rejections)
+        self.cuffs_from = [Admission(self, topic, self.rejections,  # a person's cuffs: the
+                                     max_bytes(topic, config.joints, 0))  # plant's only
+                           for topic in topics.CUFF_WRENCHES]
+        for topic, admission in zip(topics.CUFF_WRENCHES, self.cuffs_from, strict=True):
+            self.inbox.subscribe(WrenchStamped, topic, admit=admission.admit_raw)
         self.health = Health(self, NAME)
         self.identified: Identified | None = None
         """The identified patient after the last trial (``identification.enabled``)."""
@@ -191,9 +198,24 @@ class IlcSupervisor(Node):
                 if true is not None:
                     self.protocol.on_true_sample(*true)
                 continue
+            if topic in topics.CUFF_WRENCHES:
+                self._on_cuff_wrench(topics.CUFF_WRENCHES.index(topic), raw)
+                continue
             sample = self.gate(raw)
             if sample is not None:
                 self.protocol.on_sample(*sample)
+
+    def _on_cuff_wrench(self, cuff: int, raw: bytes) -> None:
+        """One cuff's wrench at one sample (a person strapped in), to the protocol."""
+        try:
+            msg = deserialize_message(raw, WrenchStamped)
+        except Exception:  # the plant's own message: a bad one is counted, never acted on
+            self.rejections.reject(Rejection(Cause.NOT_NUMERIC, f"{topics.CUFF_WRENCHES[cuff]}: "
+                                             "undecodable"))
+            return
+        f, t = msg.wrench.force, msg.wrench.torque
+        self.protocol.on_cuff_sample(cuff, stamp_ns(msg.header.stamp),
+                                     np.array([f.x, f.y, f.z, t.x, t.y, t.z]))
 
     def on_status_bell(self, raw: bytes) -> None:
         """A /diagnostics message arrived: take it (with its sender) through the inbox now."""
@@ -263,8 +285,10 @@ class IlcSupervisor(Node):
         if record.aborted:
             diverged = self.protocol.divergence is not None and \
                 self.protocol.divergence.sample == record.aborted_at
+            pressed = self.protocol.cuff_abort == record.aborted_at
             self.event("aborted", [("trial", str(record.trial)),
                                    ("reason", topics.DIVERGED_REASON if diverged
+                                    else topics.CUFF_LIMIT_REASON if pressed
                                     else topics.ENVELOPE_REASON),
                                    ("aborted_at", str(record.aborted_at))], end_ns)
         summary = trial_summary(conclusion, self.joint_names)

@@ -12,6 +12,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..core.params.schema import SUPERVISOR
+from ..core.person.cuffs import cuff_summary_values
 from ..core.programs.identified import Identified
 from ..core.programs.metrics import metric_summary_values
 from ..core.reference.trajectory import SampledReference
@@ -46,7 +47,8 @@ def feedforward_message(reference: SampledReference, feedforward: np.ndarray, tr
 
 def trial_summary(conclusion: TrialConclusion, joint_names: Sequence[str]) -> DiagnosticStatus:
     """``/ilc/trial_summary`` of a concluded trial: OK within the bound, else WARN; with the
-    identified patient (``identified/...``) when the session identifies it."""
+    identified patient (``identified/...``) when the session identifies it, and the cuff
+    metrics (``cuff/<cuff>/<metric>``) when a person is strapped in."""
     record, config = conclusion.record, conclusion.config
     values = summary_values(record.trial, config["mass_uncertainty"], config["law"],
                             joint_names, record.max_abs_error,
@@ -57,6 +59,7 @@ def trial_summary(conclusion: TrialConclusion, joint_names: Sequence[str]) -> Di
                             else record.true_max_abs_error,
                             conclusion.update.notes if conclusion.learned else ())
     values += metric_summary_values(record, config, joint_names)  # core/programs/metrics.py
+    values += cuff_summary_values(record.cuff_wrench)  # a person strapped in (core/person/)
     if conclusion.joint_forces is not None:  # core/programs/identified.py
         values += Identified.from_step(conclusion.joint_forces, joint_names).summary_values()
     level = DiagnosticStatus.OK if conclusion.within_bound else DiagnosticStatus.WARN

@@ -21,6 +21,16 @@ does: no sample of it goes out; ``diverged`` on /diagnostics names the sample's 
 and the cause (:func:`exo_ilc_ros.core.loop.divergence.state_divergence`, the in-process
 report's rule), and the supervisor ends the trial there. The node runs on; the next reset puts
 the arm back at x_d(0).
+
+A person strapped in (``musculoskeletal.model``): every sample's cuff wrenches go out on
+``/cuffs/<cuff>/wrench`` (``geometry_msgs/WrenchStamped``, stamped as the sample, just before
+its /joint_states). The first sample of a trial at which a cuff presses past
+``safety.cuff_force_limit`` (:func:`~exo_ilc_ros.core.person.cuffs.beyond_cuff_limit`, the
+in-process rule), the error envelope not left before, latches the controller's safe hold
+around the pose of that sample: from that sample on the plant applies the hold (the same
+kernel and ramp as the controller's, so the arm moves as in-process) instead of the commands,
+until the next trial; the supervisor sees the same sample in the wrenches and rebuilds the
+record with the hold from it.
 """
 
 from __future__ import annotations
@@ -28,14 +38,18 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from geometry_msgs.msg import WrenchStamped
 from rclpy.timer import Timer
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from ..core.loop.controller import outside_envelope
 from ..core.loop.divergence import state_divergence
 from ..core.loop.plant import clamp_counted, finite_state
 from ..core.loop.safety import LateCommands
+from ..core.person.cuffs import beyond_cuff_limit
+from ..core.person.experiment import StrappedExperiment
 from ..wire import topics
 from ..wire.cdr import JointStateWriter
 from ..wire.protocol import trial_of_frame
@@ -86,6 +100,20 @@ class PlantSimulator(PlantNode):
                                        self.experiment.reference.position.shape[0]),
             decodes(JointTrajectory, self.rejections, topics.FEEDFORWARD)) \
             if self.patient.enabled else None
+        self.person = self.experiment.arm \
+            if isinstance(self.experiment, StrappedExperiment) else None
+        """A person strapped in: the strapped model this node steps (its cuffs' wrench)."""
+        self.cuff_pubs = [self.create_publisher(WrenchStamped, topic, SAMPLES_QOS,
+                                                publisher_class=CountingPublisher)
+                          for topic in topics.CUFF_WRENCHES] if self.person is not None else []
+        """A person strapped in: each cuff's wrench per sample (empty: no person)."""
+        self.cuff_msgs = [WrenchStamped() for _ in self.cuff_pubs]
+        for msg, frame in zip(self.cuff_msgs, topics.CUFF_FRAMES, strict=False):
+            msg.header.frame_id = frame
+        self.cuff_limit = [float(x) for x in config["safety.cuff_force_limit"]]
+        self.guarded = False
+        """The running trial left the error envelope or pressed past the cuff-force limit
+        (no further cuff check: the in-process rule checks only until the first abort)."""
         self.create_service(Trigger, topics.RESET_SERVICE, self.on_reset)
         self.create_service(Trigger, topics.START_SERVICE, self.on_start)
         self.pace = Pace(float(config["pace"]) if self.lock_step else 0.0)
@@ -113,6 +141,8 @@ class PlantSimulator(PlantNode):
         self.stepper.reset()
         self.held[:] = 0.0
         self.hold_pose = None
+        self.hold_reason = PlantNode.hold_reason
+        self.guarded = False
         self.diverged = None
         self.t0_ns = self.now_ns + self.step_ns
         self.armed = True
@@ -177,6 +207,8 @@ class PlantSimulator(PlantNode):
             return
         if self.lock_step and self.running:  # the hot path: check, count, clamp, step at once
             self._keep_state()
+            if self.hold_pose is not None:  # a cuff pressed past its limit: the safe hold
+                effort = self.safe_hold.hold(self.stepper.position, self.stepper.velocity)
             beyond = self.stepper.step(effort, self.saturated)
         else:  # real time: the command to hold; lock-step between trials: only checked
             beyond = clamp_counted(effort, self.limit, self.saturated,
@@ -255,6 +287,8 @@ class PlantSimulator(PlantNode):
     def _publish(self) -> None:
         stepper = self.stepper
         position, velocity = stepper.measure()
+        if self.person is not None:
+            self._cuffs(self.person.wrench, position)
         self.state_pub.publish(self.state.write(self.now_ns, position, velocity,
                                                 stepper.applied))
         if self.truth_pub is not None:
@@ -263,6 +297,35 @@ class PlantSimulator(PlantNode):
         if self.index % self.clock_every and self.index < self.last_index:
             return  # /clock at every clock_every-th sample, the first and the last
         self.publish_clock(self.now_ns)
+
+    def _cuffs(self, wrench: np.ndarray, position: np.ndarray) -> None:
+        """The cuffs' wrenches at this sample; the cuff-force limit (module docstring)."""
+        sec, nanosec = divmod(self.now_ns, 1_000_000_000)
+        for c, (pub, msg) in enumerate(zip(self.cuff_pubs, self.cuff_msgs, strict=True)):
+            msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+            f, t = msg.wrench.force, msg.wrench.torque
+            f.x, f.y, f.z, t.x, t.y, t.z = (float(x) for x in wrench[c])
+            pub.publish(msg)
+        if not self.running or self.guarded:
+            return
+        if outside_envelope(self.experiment.reference.position[self.index], position,
+                            self.experiment.error_envelope):
+            self.guarded = True  # the controller aborted here: its hold, not the plant's
+            return
+        cuff = beyond_cuff_limit(wrench, self.cuff_limit)
+        if cuff < 0:
+            return
+        self.guarded = True
+        self.hold_pose = np.array(position)
+        self.safe_hold.hold_at(self.hold_pose)
+        self.hold_reason = (f"{topics.CUFF_FRAMES[cuff]} pressed past "
+                            f"safety.cuff_force_limit ({self.cuff_limit[cuff]:g} N); safe hold")
+        self.get_logger().error(
+            f"sample {self.index}: the {topics.CUFF_FRAMES[cuff]} pressed "
+            f"{float(np.linalg.norm(wrench[cuff, :3])):.1f} N into the person, more than "
+            f"safety.cuff_force_limit {self.cuff_limit[cuff]:g} N: trial aborted, safe hold "
+            "around this pose until the next trial")
+        self.on_health_timer()
 
 
 def main(args: list[str] | None = None) -> int:

@@ -25,10 +25,11 @@ import numpy as np
 from ..core.loop.divergence import DIVERGED
 from ..core.params.config import Config
 from ..core.persistence.store import RunStore
+from ..core.person.cuffs import cuff_table
 from ..core.programs.identified import Identified
 from ..core.reference.build import build_reference
 from ..core.session.abort import ABORT_STOP_KEY
-from ..core.session.summary import RunSummary, live_changes
+from ..core.session.summary import CUFF_LIMIT_ABORTS, RunSummary, live_changes
 from ..nodes.common import EVENTS_QOS
 from ..wire import topics
 from ..wire.protocol import PARAMETERS_CHANGED, int_value, per_joint, summary_values
@@ -77,6 +78,7 @@ def summaries_to_run(summaries: Sequence[TrialSummary], config: Config) -> RunSu
                       true_max_abs_error=np.array([s.row("true_max_abs_error", joints)
                                                    for s in summaries])
                       if f"true_max_abs_error/{joints[0]}" in first else None)
+    summary.cuff_forces = cuff_table([s.values for s in summaries])  # a person strapped in
     applied = {s.trial + 1: json.loads(s.values[PARAMETERS_CHANGED]) for s in summaries
                if s.values.get(PARAMETERS_CHANGED)}
     summary.extra.update(live_changes(applied, str(config["law"])))
@@ -321,6 +323,10 @@ def run_graph(config: Config, domain_id: int | None = None, extra: Sequence[Node
         stopped = [v.get(ABORT_STOP_KEY) for m, v, _ in session.events if m == "finished"]
         if stopped and stopped[-1]:  # a resumed run the store's aborts had already stopped
             summary.extra[ABORT_STOP_KEY] = stopped[-1]
+        pressed = [int(v["trial"]) for m, v, _ in session.events if m == "aborted" and
+                   v.get("reason") == topics.CUFF_LIMIT_REASON and v.get("trial", "").isdigit()]
+        if pressed:  # a person strapped in: the cuff-force limit's aborts, as simulate's
+            summary.extra[CUFF_LIMIT_ABORTS] = sorted(set(pressed))
         again = reruns(session.events)
         if again:
             summary.extra["reruns"] = again

@@ -40,6 +40,7 @@ PUBLISHER_OF: dict[str, str] = {
     topics.JOINT_STATES: PLANT,
     topics.TRUE_JOINT_STATES: PLANT,
     topics.FEEDFORWARD: SUPERVISOR,
+    **{topic: PLANT for topic in topics.CUFF_WRENCHES},
 }
 """Topic -> the name of the one node whose messages on it are acted on."""
 

@@ -16,9 +16,10 @@ import struct
 from . import topics
 
 SIM_STAMPED = frozenset({topics.CLOCK, topics.JOINT_STATES, topics.TRIAL_EVENTS,
-                         topics.TRIAL_SUMMARY, topics.FEEDFORWARD})
+                         topics.TRIAL_SUMMARY, topics.FEEDFORWARD, *topics.CUFF_WRENCHES})
 """Topics whose messages start with a sim-time stamp (``/clock``'s clock, else
-``header.stamp``) that advances the clock (the plant's and the supervisor's messages)."""
+``header.stamp``) that advances the clock (the plant's and the supervisor's messages; a
+person's cuff wrenches, stamped as their sample)."""
 
 
 def sim_stamp(raw: bytes) -> int | None:

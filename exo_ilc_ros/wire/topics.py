@@ -28,6 +28,18 @@ TYPES: dict[str, str] = {
 }
 """Every recorded topic of the graph and its ROS 2 type name (what the recorder subscribes to)."""
 
+CUFF_WRENCHES = ("/cuffs/upper_arm/wrench", "/cuffs/forearm/wrench")
+"""A person strapped in the exoskeleton (``musculoskeletal.model``, core/person/): per sample
+and cuff (upper arm, forearm: the order of ``core.person.cuffs.CUFFS``) the force (N) and
+torque (N m) the cuff applies to the person, in the cuff's frame (x mediolateral, y
+anteroposterior, z along the limb; ``header.frame_id`` :data:`CUFF_FRAMES`), stamped as the
+sample's /joint_states, published by the plant just before it. What a force-torque sensor in a
+cuff publishes. Only with a person: a run without one has no such topic (not in :data:`TYPES`;
+a bag lists them only when it holds a person's run)."""
+CUFF_FRAMES = ("upper_arm_cuff", "forearm_cuff")
+CUFF_TYPE = "geometry_msgs/msg/WrenchStamped"
+CUFF_TYPES: dict[str, str] = {topic: CUFF_TYPE for topic in CUFF_WRENCHES}
+
 ROBOT_DESCRIPTION = "/robot_description"
 REFERENCE_DESCRIPTION = "/reference/robot_description"
 TF = "/tf"
@@ -98,5 +110,9 @@ from); other reasons (``watchdog``, ``lost``, ``timeout``) mean the trial was ru
 DIVERGED_REASON = "plant_diverged"
 """``reason`` of the ``aborted`` event of a trial whose plant diverged (kept, ``aborted_at`` the
 first non-finite sample; ``core.loop.divergence.DIVERGED``): not run again, the run stops."""
-KEPT_REASONS = (ENVELOPE_REASON, DIVERGED_REASON)
+CUFF_LIMIT_REASON = "cuff_force_limit"
+"""``reason`` of the ``aborted`` event of a trial a cuff pressed past
+``safety.cuff_force_limit`` in (kept, learned from up to ``aborted_at``, as an envelope abort;
+the plant held the arm safe from that sample on)."""
+KEPT_REASONS = (ENVELOPE_REASON, DIVERGED_REASON, CUFF_LIMIT_REASON)
 """``aborted`` events of trials that were kept (not run again)."""

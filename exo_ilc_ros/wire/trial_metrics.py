@@ -21,6 +21,15 @@ Coulomb friction F_c (N m) and stiffness K (N m/rad) after the trial (``identifi
 ``identified/coulomb``, ``identified/stiffness``; NaN without identification or where not
 identifiable). With 3 joints: ``max |e|`` of joint 1 is ``data[2]``, RMS e ``data[5]``, M
 ``data[14]``, B ``data[23]``, F_c ``data[26]``, K ``data[29]`` (:func:`index`).
+
+With a person strapped in (the summary's ``cuff/<cuff>/<metric>`` keys,
+:mod:`exo_ilc_ros.core.person.cuffs`) the cuff metrics follow the matrix, and a third
+``layout.dim`` names them: label ``cuff_metric=`` and the comma-separated
+``<cuff>/<metric>`` names (upper_arm then forearm, each peak |F| (N), RMS |F| (N), peak |T|
+(N m), RMS |T| (N m)), size 8, stride 8: the upper-arm cuff's peak force of 3 joints is
+``data[32]``, the forearm's ``data[36]``. Without a person there is no
+third dimension and nothing after the matrix (a reader of two dimensions reads the message as
+before).
 """
 
 from __future__ import annotations
@@ -47,6 +56,11 @@ ROWS: tuple[tuple[str, str], ...] = (
 ROW_NAMES = tuple(name for name, _ in ROWS)
 METRIC_LABEL = "metric="
 JOINT_LABEL = "joint="
+CUFF_LABEL = "cuff_metric="
+CUFF_PREFIX = "cuff/"
+"""The summary's keys of the cuff metrics (``cuff/<cuff>/<metric>``, written by
+:func:`exo_ilc_ros.core.person.cuffs.cuff_summary_values`, which names them): the cuff block
+carries every one, in the summary's order."""
 
 
 class Dimension(NamedTuple):
@@ -60,7 +74,7 @@ class Dimension(NamedTuple):
 class TrialMetricsArray(NamedTuple):
     """The fields of the ``Float64MultiArray``: ``layout.dim``, ``layout.data_offset``, data."""
 
-    dims: tuple[Dimension, Dimension]
+    dims: tuple[Dimension, ...]
     data_offset: int
     data: list[float]
 
@@ -90,19 +104,30 @@ def trial_metrics(values: Mapping[str, str], names: Sequence[str],
                      for n in names]
             continue
         data += [_number(values.get(f"{prefix}/{n}")) for n in names]
-    dims = (Dimension(METRIC_LABEL + ",".join(ROW_NAMES), len(ROWS), len(ROWS) * j),
-            Dimension(JOINT_LABEL + ",".join(names), j, j))
+    dims: tuple[Dimension, ...] = (
+        Dimension(METRIC_LABEL + ",".join(ROW_NAMES), len(ROWS), len(ROWS) * j),
+        Dimension(JOINT_LABEL + ",".join(names), j, j))
+    cuffs = [key for key in values if key.startswith(CUFF_PREFIX)]
+    if cuffs:  # a person strapped in
+        data += [_number(values[key]) for key in cuffs]
+        dims += (Dimension(CUFF_LABEL + ",".join(k.removeprefix(CUFF_PREFIX) for k in cuffs),
+                           len(cuffs), len(cuffs)),)
     return TrialMetricsArray(dims, HEADER_SIZE, data)
 
 
 def decode(labels: Sequence[str], data_offset: int, data: Sequence[float]
            ) -> dict[str, object]:
     """Inverse of :func:`trial_metrics` from the message alone (its labels): ``trial``,
-    ``level`` and ``{row: {joint: value}}``."""
+    ``level`` and ``{row: {joint: value}}``; with a person also ``cuff``:
+    ``{<cuff>/<metric>: value}``."""
     rows = labels[0].removeprefix(METRIC_LABEL).split(",")
     joints = labels[1].removeprefix(JOINT_LABEL).split(",")
     out: dict[str, object] = {"trial": int(data[0]), "level": int(data[1])}
     for r, row in enumerate(rows):
         out[row] = {joint: float(data[data_offset + r * len(joints) + k])
                     for k, joint in enumerate(joints)}
+    if len(labels) > 2 and labels[2].startswith(CUFF_LABEL):
+        start = data_offset + len(rows) * len(joints)
+        out["cuff"] = {name: float(data[start + k]) for k, name in
+                       enumerate(labels[2].removeprefix(CUFF_LABEL).split(","))}
     return out

@@ -5,15 +5,16 @@ sample and per trial (:func:`cuff_metrics`), with the cuff-force limit of the sa
 
 The trial calls the controller's kernel and the plant in the order the graph calls them
 (``measure``, the control at sample i, ``step``), so ``exo-ilc run`` with the same config
-(plant_simulator steps the same :class:`StrappedArm`) gives these trials bit for bit, as long
-as no trial presses past the cuff-force limit (the graph's controller does not see the cuffs:
-there the limit is in-process only).
+(plant_simulator steps the same :class:`StrappedArm`) gives these trials bit for bit, including
+a trial that presses past the cuff-force limit: there the plant node sees the cuffs, commands
+the safe hold from that sample on and the supervisor rebuilds the record with it
+(``nodes/plant_simulator.py``, ``core/protocol/trial_protocol.py``).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -30,7 +31,7 @@ from ..loop.controller import (
 from ..loop.record import TrialRecord
 from ..params.config import Config
 from ..sim.experiment import Experiment
-from .cuffs import CUFFS
+from .cuffs import CUFFS, beyond_cuff_limit
 from .model import MuscleDrive
 from .neural_drive import drive_for
 from .strapped import StrappedArm
@@ -48,14 +49,6 @@ def passive_muscles(config: Config, model: Any) -> MuscleDrive | None:
 def uses_person(config: Config) -> bool:
     """True if the config straps a person with muscles into the exoskeleton."""
     return str(config["musculoskeletal.model"]) != "none"
-
-
-def beyond_cuff_limit(wrench: np.ndarray, limit: Sequence[float]) -> int:
-    """The first cuff whose |force| is above its limit (0: no limit), or -1."""
-    for c, most in enumerate(limit):
-        if most > 0.0 and math.hypot(*wrench[c, :3]) > most:
-            return c
-    return -1
 
 
 class StrappedExperiment(Experiment):

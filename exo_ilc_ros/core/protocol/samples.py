@@ -61,3 +61,38 @@ class TrialSamples:
         self.velocity[i] = velocity
         self.received[i] = True
         return True
+
+
+class CuffSamples:
+    """A person strapped in (``musculoskeletal.model``): the cuffs' wrench (force N, torque
+    N m, cuff frame) at every sample of the running trial, each cuff's kept once, by stamp
+    (the plant's per-cuff messages, ``wire.topics.CUFF_WRENCHES``)."""
+
+    def __init__(self, reference: SampledReference, cuffs: int) -> None:
+        self.step_ns = period_ns(reference.period)
+        count = reference.position.shape[0]
+        self.wrench = np.full((count, cuffs, 6), np.nan)
+        self.received = np.zeros((count, cuffs), dtype=bool)
+        self.t0_ns = -1
+
+    def start(self, t0_ns: int) -> None:
+        """Collect the trial starting at ``t0_ns`` (forgetting any other)."""
+        self.t0_ns = int(t0_ns)
+        self.wrench[:] = np.nan
+        self.received[:] = False
+
+    def add(self, cuff: int, stamp_ns: int, wrench: np.ndarray) -> bool:
+        """Keep cuff ``cuff``'s wrench at the sample stamped ``stamp_ns`` if it is one of the
+        running trial's and new (True then)."""
+        if self.t0_ns < 0 or not 0 <= cuff < self.received.shape[1]:
+            return False
+        i = sample_index(stamp_ns, self.t0_ns, self.step_ns, self.received.shape[0])
+        if i is None or self.received[i, cuff]:
+            return False
+        self.wrench[i, cuff] = wrench
+        self.received[i, cuff] = True
+        return True
+
+    def complete_before(self, sample: int) -> bool:
+        """Every cuff's wrench of the samples before ``sample`` is in."""
+        return bool(self.received[:sample].all())

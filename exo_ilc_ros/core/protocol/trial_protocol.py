@@ -14,12 +14,20 @@ and the session stops on it with its one message. With a
 recorder (``wait_for_recorder``) a concluded trial is stored only once the recorder filed it;
 the next trial is prepared meanwhile and started after the store (``WAIT_RECORDER``), so a
 stored trial is always in a bag.
+
+With a person strapped in (``musculoskeletal.model``) the plant also sends every sample's
+cuff wrenches (:meth:`TrialProtocol.on_cuff_sample`); a trial ends once they are in too, its
+record carries them (``TrialRecord.cuff_wrench``), and the first sample a cuff pressed past
+``safety.cuff_force_limit`` (:func:`~..person.cuffs.first_beyond_cuff_limit`, the in-process
+rule) aborts it there unless the envelope aborted it before: the plant held the arm safe from
+that sample on, and the record is rebuilt with the safe hold from it, as in-process.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from enum import Enum
 from typing import Any, Protocol
 
@@ -31,11 +39,12 @@ from ..loop.divergence import PlantDivergence
 from ..loop.trial import record_from_samples, sample_index
 from ..params.config import Config
 from ..persistence.store import RunStore
+from ..person.cuffs import CUFFS, first_beyond_cuff_limit
 from ..reference.build import build_reference
 from ..session.abort import ABORT_STOP_KEY
 from ..session.learning_session import LIVE, LearningSession, TrialConclusion
 from ..sim.experiment import Experiment
-from .samples import TrialSamples
+from .samples import CuffSamples, TrialSamples
 from .timing import ACK_RETRY, LATE_RERUNS, RECORDER_TIMEOUT, STEP_TIMEOUT
 
 
@@ -134,6 +143,12 @@ class TrialProtocol:
         report); the trial ends once every sample before it is in."""
         self.divergence: PlantDivergence | None = None
         """The concluded trial's divergence (None: its plant stayed finite), for its summary."""
+        self.cuffs: CuffSamples | None = None
+        """A person strapped in: the running trial's cuff wrenches (None: no person)."""
+        self.cuff_limit: list[float] = []
+        self.cuff_abort: int | None = None
+        """The concluded trial's sample a cuff pressed past its limit at, when that aborted
+        it (None: it did not), for its ``aborted`` event."""
 
     @property
     def trial(self) -> int:
@@ -169,6 +184,9 @@ class TrialProtocol:
                       "(exo-ilc simulate --store DIR --resume)", code=2)
             return
         self.expects_truth = self.experiment.patient.measures
+        if str(config["musculoskeletal.model"]) != "none":  # the plant sends the cuffs
+            self.cuffs = CuffSamples(self.reference, len(CUFFS))
+            self.cuff_limit = [float(x) for x in config["safety.cuff_force_limit"]]
         self.real_time = config["mode"] == "real_time"
         self.session = session
         if not session.finished:
@@ -221,6 +239,8 @@ class TrialProtocol:
         self.samples.start(t0_ns)
         if self.expects_truth:
             self.truth.start(t0_ns)
+        if self.cuffs is not None:
+            self.cuffs.start(t0_ns)
         self.done_report = None
         self.plant_report = None
         self._enter(Phase.WAIT_ACK)
@@ -283,6 +303,18 @@ class TrialProtocol:
         if self.truth.last_in and self.samples.last_in and not self.samples.missing:
             self._maybe_end_trial()
 
+    def on_cuff_sample(self, cuff: int, stamp_ns: int, wrench: np.ndarray) -> None:
+        """Cuff ``cuff``'s wrench (force, torque) at the sample stamped ``stamp_ns``; the trial
+        ends once its samples and every cuff's wrenches are in."""
+        if self.cuffs is None or not self.cuffs.add(cuff, stamp_ns, wrench):
+            return
+        if self.diverged is not None:
+            self._maybe_end_diverged()
+            return
+        if self.samples.last_in and not self.samples.missing and \
+                self.cuffs.complete_before(self.cuffs.received.shape[0]):
+            self._maybe_end_trial()
+
     def on_done(self, trial: int, t0_ns: int, report: Mapping[str, str]) -> None:
         """The controller's end of ``trial`` (abort index, watchdog trips); kept until the
         plant's start is confirmed (by its reply or its samples)."""
@@ -322,7 +354,8 @@ class TrialProtocol:
     def _samples_before(self, sample: int) -> bool:
         """Every sample before ``sample`` is in (measured, and true ones if expected)."""
         return bool(self.samples.received[:sample].all() and
-                    (not self.expects_truth or self.truth.received[:sample].all()))
+                    (not self.expects_truth or self.truth.received[:sample].all()) and
+                    (self.cuffs is None or self.cuffs.complete_before(sample)))
 
     def _maybe_end_diverged(self) -> None:
         """End the trial whose plant diverged at sample i, as the trial kernel ends it: NaN
@@ -335,6 +368,9 @@ class TrialProtocol:
             samples.position[sample:] = np.nan
             samples.velocity[sample:] = np.nan
             samples.received[:] = True
+        if self.cuffs is not None:  # the plant sent no wrench from the divergence on
+            self.cuffs.wrench[sample:] = np.nan
+            self.cuffs.received[:] = True
         ref, envelope = self.experiment.reference.position, self.experiment.error_envelope
         aborted = next((k for k in range(sample)
                         if outside_envelope(ref[k], self.samples.position[k], envelope)), sample)
@@ -390,6 +426,9 @@ class TrialProtocol:
         if self.phase is not Phase.RUNNING or not self.samples.running or report is None \
                 or not self.samples.last_in or (self.real_time and self.plant_report is None):
             return
+        if self.cuffs is not None and \
+                not self.cuffs.complete_before(self.cuffs.received.shape[0]):
+            return  # the last cuff wrenches are on their way (a lost one: the step timeout)
         if self.expects_truth:
             if not self.truth.last_in:
                 return
@@ -443,6 +482,11 @@ class TrialProtocol:
         self.samples.stop()
         self.truth.stop()
         truth = self.expects_truth
+        self.cuff_abort = None
+        if self.cuffs is not None:  # the cuff-force limit: the plant held from that sample on
+            pressed = first_beyond_cuff_limit(self.cuffs.wrench, self.cuff_limit)
+            if pressed >= 0 and (aborted < 0 or pressed < aborted):
+                aborted = self.cuff_abort = pressed
         record = record_from_samples(experiment, session.trial, session.feedforward,
                                      self.samples.position, self.samples.velocity,
                                      session.levels, experiment.reference,
@@ -450,6 +494,8 @@ class TrialProtocol:
                                      self.truth.position if truth else None,
                                      self.truth.velocity if truth else None,
                                      session.joint_force)
+        if self.cuffs is not None:
+            record = replace(record, cuff_wrench=self.cuffs.wrench.copy())
         self._stage_live_changes()
         try:
             conclusion = session.conclude(record)

@@ -47,6 +47,7 @@ from ..learning.laws import FeedforwardUpdate
 from ..loop.divergence import first_non_finite, trial_divergence
 from ..loop.record import TrialRecord
 from ..params.config import Config
+from ..person.cuffs import CUFFS, beyond_cuff_limit
 from ..sim.experiment import Experiment
 
 STIFFNESS_CAUSE = ("the patient's stiffness or friction exceeds what the nominal model cancels "
@@ -60,6 +61,10 @@ and in a run's JSON."""
 MODEL_CAUSE = ("the nominal model's error (mass_uncertainty) or the gains take the arm out of "
                "the envelope faster than learning closes the error (smaller learning gains; a "
                "wider safety.error_envelope only if it is safe)")
+CUFF_CAUSE = ("the learned input presses the exoskeleton against the person (its misalignment, "
+              "the person's muscles): smaller learning gains or a better fit of the "
+              "exoskeleton (strapping.misalignment.*); a higher safety.cuff_force_limit only "
+              "if it is safe")
 NOTHING_LEARNED_CAUSE = ("nothing was measured before the abort, so nothing could be learned "
                          "(the arm starts outside the envelope?)")
 
@@ -82,6 +87,13 @@ class AbortTrip:
     """Its envelope (rad)."""
     tripped: tuple[int, ...]
     """Every joint outside its envelope at the abort sample (the back-off's joints)."""
+    cuff: str = ""
+    """A person strapped in: the cuff that pressed past ``safety.cuff_force_limit`` at the
+    abort sample, when that (not the envelope) aborted the trial ("": the envelope did)."""
+    force: float = float("nan")
+    """That cuff's |force| at the abort (N)."""
+    limit: float = float("nan")
+    """Its limit (N)."""
 
     @property
     def diverged(self) -> bool:
@@ -90,6 +102,10 @@ class AbortTrip:
 
     def describe(self) -> str:
         """``trial 4: elbow left the envelope at t = 1.234 s (|e| 0.2100 > 0.2000 rad)``."""
+        if self.cuff:
+            return (f"trial {self.trial}: the {self.cuff.replace('_', ' ')} cuff pressed "
+                    f"{self.force:.1f} N into the person at t = {self.time:.3f} s (> "
+                    f"{self.limit:g} N, safety.cuff_force_limit)")
         if self.diverged:
             return (f"trial {self.trial}: the plant diverged at t = {self.time:.3f} s on "
                     f"{self.joint_name} (a non-finite state)")
@@ -128,6 +144,9 @@ def trip_of(record: TrialRecord, config: Config) -> AbortTrip:
     if record.aborted_at is None:
         raise ValueError(f"trial {record.trial} was not aborted")
     trip = abort_trip(record.trial, record.aborted_at, record.max_abs_error, config)
+    pressed = _pressed(record, config)
+    if pressed is not None and not trip.diverged and trip.error <= trip.envelope:
+        return dataclasses.replace(trip, cuff=pressed[0], force=pressed[1], limit=pressed[2])
     if not trip.diverged:
         return trip
     if first_non_finite(record.position, record.velocity) is None:
@@ -184,12 +203,25 @@ def partial_update(update: FeedforwardUpdate, record: TrialRecord, tripped: Sequ
     return dataclasses.replace(update, feedforward=feedforward)
 
 
+def _pressed(record: TrialRecord, config: Config) -> tuple[str, float, float] | None:
+    """(cuff, |force| N, limit N) of the cuff that pressed past ``safety.cuff_force_limit``
+    at the abort sample of ``record`` (a person strapped in), or None."""
+    if record.cuff_wrench is None or record.aborted_at is None:
+        return None
+    wrench = np.asarray(record.cuff_wrench)[record.aborted_at]
+    limit = [float(x) for x in config["safety.cuff_force_limit"]]
+    cuff = beyond_cuff_limit(wrench, limit)
+    if cuff < 0:
+        return None
+    return CUFFS[cuff], float(np.linalg.norm(wrench[cuff, :3])), limit[cuff]
+
+
 def stop_message(trip: AbortTrip, consecutive: int, nothing_learned: bool = False,
                  patient: bool = True) -> str:
     """The one message of a session stopped by aborts: the last abort's joint, time and value,
     and its likely cause (``patient``: a virtual patient's forces act on the arm, else the
     nominal model's error is what computed torque does not cancel)."""
-    cause = DIVERGED_CAUSE if trip.diverged else \
+    cause = CUFF_CAUSE if trip.cuff else DIVERGED_CAUSE if trip.diverged else \
         NOTHING_LEARNED_CAUSE if nothing_learned else \
         STIFFNESS_CAUSE if patient else MODEL_CAUSE
     count = f"{consecutive} aborted trials in a row" if consecutive > 1 else "an aborted trial"

@@ -10,12 +10,13 @@ from typing import Any
 import numpy as np
 
 from ..convergence.bound import IterationsToBound, iterations_to_bound
-from ..person.cuffs import CUFFS, cuff_metrics
+from ..person.cuffs import CUFF_METRICS, CUFFS, cuff_metrics
 from .abort import ABORT_STOP_KEY
 from .result import RunResult
 
-CUFF_METRICS = ("peak_force_N", "rms_force_N", "peak_torque_Nm", "rms_torque_Nm")
-"""The JSON names of a trial's cuff metrics, per cuff (``trials[].cuff_forces``)."""
+CUFF_LIMIT_ABORTS = "cuff_limit_aborts"
+"""A run's ``extra`` (and JSON) key: the trials the cuff-force limit aborted (a person
+strapped in; of ``aborted_trials``), absent when none did."""
 
 
 @dataclass

@@ -18,6 +18,7 @@ from matplotlib.figure import Figure
 
 from ..core.errors import ConfigError
 from ..core.params import schema
+from ..core.person.cuffs import CUFFS
 from ..core.population.certificate import (
     CRITERIA,
     Certificate,
@@ -124,8 +125,15 @@ def format_certificate(cert: Certificate, patients: Mapping[int, Patient], worst
              f"  more than 2 aborted trials     {share('aborts_over_2')}   (none to pass)",
              f"  trials to the bound (settled): median {trial(s['settled_median'])}, p95 "
              f"{trial(s['settled_p95'])}; first within: median {trial(s['first_median'])}, p95 "
-             f"{trial(s['first_p95'])}",
-             f"Worst {min(worst, n)} patients:"]
+             f"{trial(s['first_p95'])}"]
+    if "cuff_force_max_N" in s:
+        per_cuff = s["cuff_peaks_per_cuff"]
+        lines.append(f"  peak cuff force (N, worst cuff per patient): max "
+                     f"{s['cuff_force_max_N']:.1f}, p95 {s['cuff_force_p95_N']:.1f}; highest "
+                     "per cuff " + ", ".join(
+                         f"{name} {f:.1f} N / {t:.2f} N m" for name, f, t in zip(
+                             CUFFS, per_cuff["force_N"], per_cuff["torque_Nm"], strict=False)))
+    lines.append(f"Worst {min(worst, n)} patients:")
     for o in cert.worst(worst):
         where = "never within" if o.settled is None else f"settled at {o.settled}"
         final = "not finite" if not math.isfinite(o.final_error) else \
@@ -133,12 +141,20 @@ def format_certificate(cert: Certificate, patients: Mapping[int, Patient], worst
         lines.append(f"  #{o.index}: {final}, {where}, {o.aborts} aborts (run {o.abort_run})"
                      f"{', GROWING' if o.growing else ''}"
                      f"{', AT ITS LIMIT' if o.at_limit else ''}"
+                     f"{_cuff_text(o)}"
                      f"{': ' + o.failure if o.failure else ''}")
         if o.index in patients:
             lines.append(f"      {patients[o.index].describe()}")
     verdict = "PASS" if cert.passes else "FAIL: " + "; ".join(cert.reasons())
     lines.append(f"Verdict (the criteria above): {verdict}")
     return "\n".join(lines)
+
+
+def _cuff_text(outcome: PatientOutcome) -> str:
+    """``, cuffs 41.2 / 56.0 N`` (upper arm / forearm peak force), or nothing."""
+    if not outcome.peak_cuff_force:
+        return ""
+    return ", cuffs " + " / ".join(f"{f:.1f}" for f in outcome.peak_cuff_force) + " N"
 
 
 def certificate_json(cert: Certificate, setup: Mapping[str, Any],
@@ -159,8 +175,12 @@ def certificate_figure(cert: Certificate) -> Figure:
     """Left: how many patients reach the bound (settled) by each trial, with those never there;
     right: every patient's worst-joint true max |e| per trial (grey), the worst five coloured,
     the bound dashed."""
-    fig = Figure(figsize=(11, 4.2))
-    left, right = fig.subplots(1, 2)
+    cuffs = [o for o in cert.outcomes if o.peak_cuff_force]
+    fig = Figure(figsize=(16.5 if cuffs else 11, 4.2))
+    axes = fig.subplots(1, 3 if cuffs else 2)
+    left, right = axes[0], axes[1]
+    if cuffs:
+        _cuff_panel(axes[2], cert.label, cuffs)
     k = cert.trials
     settled = [o.settled for o in cert.outcomes]
     counts = np.bincount([s for s in settled if s is not None], minlength=k + 1)[1:k + 1]
@@ -194,6 +214,22 @@ def certificate_figure(cert: Certificate) -> Figure:
     right.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     return fig
+
+
+def _cuff_panel(ax: Any, label: str, outcomes: Sequence[PatientOutcome]) -> None:
+    """Each patient's peak force per cuff over its trials (a person with muscles)."""
+    index = np.array([o.index for o in outcomes])
+    forces = np.array([o.peak_cuff_force for o in outcomes], dtype=float)
+    for c, name in enumerate(CUFFS):
+        ax.scatter(index, forces[:, c], s=14, label=name.replace("_", " "))
+    worst = np.max(forces, axis=1)
+    ax.axhline(float(np.percentile(worst, 95)), color="k", ls=":", lw=1,
+               label="p95 (worst cuff)")
+    ax.set_xlabel("patient")
+    ax.set_ylabel("peak cuff force over the trials (N)")
+    ax.set_title(f"{label}: cuff forces (max {worst.max():.0f} N)")
+    ax.set_ylim(bottom=0.0)
+    ax.legend(fontsize=8)
 
 
 def scenario_yaml(overrides: Mapping[str, Any], header: str) -> str:

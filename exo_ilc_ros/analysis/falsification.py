@@ -21,7 +21,6 @@ from typing import Any, NamedTuple
 import numpy as np
 import optuna
 
-from ..core.params import schema
 from ..core.params.config import Config
 from ..core.population.certificate import (
     PatientOutcome,
@@ -30,7 +29,12 @@ from ..core.population.certificate import (
     patient_config,
     patient_outcome,
 )
-from ..core.population.distributions import Patient, PopulationSpec, patient_from_unit
+from ..core.population.distributions import (
+    Patient,
+    PopulationSpec,
+    cube_coordinates,
+    patient_from_unit,
+)
 from ..core.programs.study import CellResult, StudyCell
 from .study import run_cells
 
@@ -89,8 +93,7 @@ def falsify(base: Config, spec: PopulationSpec, label: str, trials: int, search:
     over its arm, :func:`..core.population.certificate.patient_config`), worst first."""
     budget, seed, start = search
     workers, dask = pool
-    names = spec.coordinates(schema.patient_joint_names(base.values),
-                             bool(base.values["person.enabled"]))
+    names = cube_coordinates(base, spec)
     x0 = {n: float(np.clip((start or {}).get(n, 0.5), 0.0, 1.0)) for n in names}
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     with warnings.catch_warnings():  # x0 and sigma0: deprecated in optuna 4.9, removed in 6

@@ -268,14 +268,18 @@ def _table(a: np.ndarray) -> list[list[float | None]]:
 def study_json(setup: dict[str, Any], rows: Sequence[StudyRow],
                results: Sequence[CellResult]) -> dict[str, Any]:
     """The study as JSON: what was run, the rows, and per cell its per-trial tables (true and
-    measured max |e|, max |u_ff|; non-finite numbers as null)."""
+    measured max |e|, max |u_ff|; with a person, the cuffs' peak force and torque; non-finite
+    numbers as null)."""
     cells = [{"law": r.law, "scenario": r.scenario, "mass_uncertainty": r.mass_uncertainty,
               "seed": r.seed, "trials": r.trials, "aborted": r.aborted, "failure": r.failure,
               "nonfinite": r.nonfinite, "seconds": r.seconds,
               "true_max_abs_error": _table(r.true_max_abs_error),
               "max_abs_error": _table(r.max_abs_error),
               "max_abs_feedforward": _table(r.max_abs_feedforward),
-              "samples_at_limit": [int(x) for x in r.samples_at_limit]}
+              "samples_at_limit": [int(x) for x in r.samples_at_limit],
+              **({} if r.peak_cuff_force is None else {  # a person with muscles: per trial
+                  "peak_cuff_force_N": _table(r.peak_cuff_force),  # and cuff
+                  "peak_cuff_torque_Nm": _table(np.asarray(r.peak_cuff_torque))})}
              for r in results]
     return {"study": setup, "rows": [row.to_json() for row in rows], "cells": cells}
 

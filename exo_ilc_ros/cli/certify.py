@@ -35,7 +35,9 @@ def register(sub: Any) -> None:
     parser = sub.add_parser(
         "certify", help="a law's certificate over a population of patients (+ falsification)",
         description="Draw N patients from published distributions (passive stiffness and rest "
-        "angle, friction, MAS grade, sensors, mass error, body size; docs/every-patient.md), "
+        "angle, friction, MAS grade, sensors, mass error, body size; with a person with "
+        "muscles, musculoskeletal.model: MAS grade, misalignment, strap stiffness, mass error; "
+        "docs/every-patient.md), "
         "run the law on each for K trials and print the certificate: shares bounded, within "
         "the bound by trial 10 / 25, with aborts; trials to the bound; the worst patients; "
         f"pass or fail against the certificate's criteria (exit status {FAILED} on fail). With "
@@ -53,8 +55,9 @@ def register(sub: Any) -> None:
                         metavar="K", help=f"trials per patient (default: {DEFAULT_TRIALS})")
     parser.add_argument("--label", type=nonempty, metavar="NAME",
                         help="the law's name in the report (default: the last file's stem)")
-    parser.add_argument("--encoder-share", type=number(0.0), default=0.5, metavar="P",
-                        help="share of patients with a 14-bit encoder (default: 0.5)")
+    parser.add_argument("--encoder-share", type=number(0.0), metavar="P",
+                        help="share of patients with a 14-bit encoder (default: 0.5; 0 with a "
+                        "person with muscles, whose strapped plant has no sensor model)")
     parser.add_argument("--voluntary-share", type=number(0.0), default=0.0, metavar="P",
                         help="share of patients with voluntary effort and fatigue (default: 0)")
     parser.add_argument("--worst", type=integer(1), default=DEFAULT_WORST, metavar="W",
@@ -104,18 +107,27 @@ def certify(args: argparse.Namespace) -> int:
     from ..core.population.distributions import (
         PopulationSpec,
         draw_population,
+        has_muscles,
         search_point,
     )
 
     if args.dask and args.workers is not None:
         raise ConfigError("--workers", "applies to the local process pool; with --dask the "
                           "cluster's workers run the patients")
+    overlays = list(args.scenario or [])
+    base = load_config(args.config, overlays=overlays)
+    muscles = has_muscles(base)
+    if args.encoder_share is None:
+        args.encoder_share = 0.0 if muscles else 0.5
     for flag in ("encoder_share", "voluntary_share"):
         if getattr(args, flag) > 1.0:
             raise ConfigError(f"--{flag.replace('_', '-')}", f"is a share in [0, 1], got "
                               f"{getattr(args, flag)}")
-    overlays = list(args.scenario or [])
-    base = load_config(args.config, overlays=overlays)
+        if muscles and getattr(args, flag) > 0.0:
+            raise ConfigError(f"--{flag.replace('_', '-')}", "is not drawn for a person with "
+                              "muscles (musculoskeletal.model): the strapped plant has no "
+                              "sensor model and the virtual patient's voluntary effort is "
+                              "refused there; give 0")
     label = args.label or Path((overlays or [args.config or "exo_ilc.yaml"])[-1]).stem
     spec = PopulationSpec(encoder_share=args.encoder_share,
                           voluntary_share=args.voluntary_share)

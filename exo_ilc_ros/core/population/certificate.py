@@ -14,6 +14,9 @@ Definitions (docs/every-patient.md), with K the trials run and the bound the con
   *settled* trial <= n); *first* is the first trial within it.
 - **aborts**: trials the error envelope aborted; *in a row*: the longest run of consecutive ones.
 - **final error**: the worst joint's true max |e| at the last trial run (inf: not finite).
+- **peak cuff force** (a person with muscles strapped in, issue 34): per cuff (upper arm,
+  forearm), the highest |force| it pressed into the person over every trial (N), and the
+  highest |torque| (N m); the population's max and 95th percentile of the patients' worst cuff.
 """
 
 from __future__ import annotations
@@ -69,6 +72,16 @@ class PatientOutcome:
     at_limit: bool = False
     """Some joint's learned input ends held at ``feedforward_limit``
     (:func:`..convergence.growth.held_at_limit`)."""
+    peak_cuff_force: tuple[float, ...] | None = None
+    """Per cuff (upper arm, forearm), the peak |force| over every trial (N); None: no person
+    strapped in."""
+    peak_cuff_torque: tuple[float, ...] | None = None
+    """Per cuff, the peak |torque| over every trial (N m); None: no person."""
+
+    @property
+    def worst_cuff_force(self) -> float | None:
+        """The patient's highest cuff force, either cuff (N; None: no person)."""
+        return None if not self.peak_cuff_force else max(self.peak_cuff_force)
 
     @property
     def bounded(self) -> bool:
@@ -102,19 +115,25 @@ class PatientOutcome:
                 "settled": self.settled, "aborts": self.aborts, "abort_run": self.abort_run,
                 "final_error": number(self.final_error), "failure": self.failure,
                 "passes": self.passes,
-                "worst_error_per_trial": [number(x) for x in self.worst_error_per_trial]}
+                "worst_error_per_trial": [number(x) for x in self.worst_error_per_trial],
+                **({} if self.peak_cuff_force is None else {
+                    "peak_cuff_force_N": [number(x) for x in self.peak_cuff_force],
+                    "peak_cuff_torque_Nm": [number(x) for x in self.peak_cuff_torque or ()]})}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> PatientOutcome:
         """Read back :meth:`to_json`."""
         def number(x: float | None) -> float:
             return math.nan if x is None else float(x)
+        def cuffs(key: str) -> tuple[float, ...] | None:
+            return None if key not in data else tuple(number(x) for x in data[key])
         final = data["final_error"]
         return cls(int(data["index"]), int(data["trials"]), bool(data["finite"]),
                    bool(data["growing"]), data["first"], data["settled"], int(data["aborts"]),
                    int(data["abort_run"]), math.inf if final is None else float(final),
                    tuple(number(x) for x in data["worst_error_per_trial"]), data["failure"],
-                   bool(data.get("at_limit", False)))
+                   bool(data.get("at_limit", False)), cuffs("peak_cuff_force_N"),
+                   cuffs("peak_cuff_torque_Nm"))
 
 
 def patient_outcome(index: int, result: CellResult, trials: int,
@@ -126,11 +145,17 @@ def patient_outcome(index: int, result: CellResult, trials: int,
     worst = np.max(result.true_max_abs_error, axis=1) if result.trials else np.zeros(0)
     final = float(worst[-1]) if seed.finite and worst.size else math.inf
     at_limit = bool(np.any(held_at_limit(result.max_abs_feedforward, limit)))
+
+    def peak(per_trial: np.ndarray | None) -> tuple[float, ...] | None:
+        if per_trial is None or not per_trial.size:
+            return None
+        return tuple(float(x) for x in np.max(per_trial, axis=0))
     return PatientOutcome(index, result.trials, seed.finite, bool(np.any(seed.growing)),
                           seed.first, seed.settled, len(result.aborted),
                           longest_run(result.aborted), final,
                           tuple(float(x) for x in worst),
-                          result.failure or result.nonfinite, at_limit)
+                          result.failure or result.nonfinite, at_limit,
+                          peak(result.peak_cuff_force), peak(result.peak_cuff_torque))
 
 
 def feedforward_limit(values: Mapping[str, Any]) -> np.ndarray | None:
@@ -184,6 +209,22 @@ class Certificate:
         """First trial within the bound, q-th percentile over patients (None: never)."""
         return _percentile([o.first for o in self.outcomes], q)
 
+    def cuff_force_percentile(self, q: float) -> float | None:
+        """The q-th percentile over patients of each one's highest cuff force (N; None: no
+        patient with a person strapped in)."""
+        forces = [o.worst_cuff_force for o in self.outcomes if o.worst_cuff_force is not None]
+        return float(np.percentile(forces, q)) if forces else None
+
+    def cuff_peaks(self) -> dict[str, list[float]] | None:
+        """Per cuff, the max over patients of the peak force (N) and torque (N m); None: no
+        person."""
+        forces = [o.peak_cuff_force for o in self.outcomes if o.peak_cuff_force]
+        torques = [o.peak_cuff_torque for o in self.outcomes if o.peak_cuff_torque]
+        if not forces:
+            return None
+        return {"force_N": [float(x) for x in np.max(forces, axis=0)],
+                "torque_Nm": [float(x) for x in np.max(torques, axis=0)] if torques else []}
+
     def reasons(self) -> list[str]:
         """Why it fails the issue's criteria (empty: it passes)."""
         out = []
@@ -229,6 +270,10 @@ class Certificate:
                 "settled_p95": self.settled_percentile(95),
                 "first_median": self.first_percentile(50),
                 "first_p95": self.first_percentile(95),
+                **({} if self.cuff_peaks() is None else {
+                    "cuff_force_max_N": self.cuff_force_percentile(100),
+                    "cuff_force_p95_N": self.cuff_force_percentile(95),
+                    "cuff_peaks_per_cuff": self.cuff_peaks()}),
                 "passes": self.passes, "reasons": self.reasons()}
 
 

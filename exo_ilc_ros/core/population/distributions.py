@@ -46,6 +46,25 @@ Sources of each quantity (:data:`SOURCES`; docs/every-patient.md), per joint of 
   adults 20 years and over; rounded), interpolated linearly; de Leva 1996 makes the segments
   (core/arm/body_segments.py). Height and mass are drawn independently (their correlation,
   ~0.4-0.5, is left out: the extremes are both kept).
+
+**A person with muscles** (``musculoskeletal.model`` set: MyoArm or the elbow model strapped in
+cuffs, issue 34; core/person/): the patient is the person's parameters, not torques on the
+exoskeleton's joints (the virtual patient's ``patient.*`` effects are refused there):
+
+- **MAS grade**: drawn as above; its preset of the neural drive (``person.drive.mas_grade``,
+  core/person/neural_drive.py ``MAS_DRIVE_PRESETS``: tone, the delayed stretch reflex per
+  spastic muscle on fibre length and velocity; docs/stretch-test.md).
+- **Misalignment**: the exoskeleton's offset from the fit to the person's joints uniform in a
+  ball of :data:`MISALIGNMENT_OFFSET` mm (issue 34: up to 10 mm; misaligned joint axes are what
+  load the cuffs, Schiele and van der Helm 2006, IEEE TNSRE 14:456), and a rotation uniform
+  within +- :data:`MISALIGNMENT_ROTATION` deg about each base axis (derived: "a few degrees").
+- **Strap stiffness**: one coordinate places the patient's cuffs between the softest and the
+  stiffest of Schiebl et al. 2025's linear fits (Sensors 25:4605, Appendix B.1: subject-group
+  and mean individual regressions, both load directions) on every axis at once
+  (:data:`STRAP_STIFFNESS_RANGE`): the spread of the published fits, not of the 21 subjects.
+- **Mass error**: the exoskeleton's masses, as above.
+- Not drawn: the sensors (the strapped plant has no sensor model: its measured state is the
+  true one), body size (MyoSuite's models are one adult, not scaled), voluntary effort.
 """
 
 from __future__ import annotations
@@ -108,6 +127,22 @@ ADULT_PERCENTILES: dict[str, dict[str, tuple[float, float, float]]] = {
 NHANES 2003-2006 (McDowell et al. 2008, Natl Health Stat Report 10, Tables 11-12 and 15-16;
 rounded here: check the table before a clinical use)."""
 
+MISALIGNMENT_OFFSET = 10.0
+"""mm: the largest offset of the exoskeleton from the fit to the person's joints (issue 34)."""
+MISALIGNMENT_ROTATION = 3.0
+"""deg: the largest rotation about each of the exoskeleton's base axes (derived)."""
+STRAP_STIFFNESS_RANGE: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
+    "stiffness": ((2800.0, 3200.0, 2100.0), (4100.0, 4600.0, 2600.0)),
+    "rotational_stiffness": ((0.20 * 180 / math.pi, 0.18 * 180 / math.pi, 0.03 * 180 / math.pi),
+                             (0.22 * 180 / math.pi, 0.19 * 180 / math.pi,
+                              0.04 * 180 / math.pi)),
+}
+"""``strapping.*`` key -> (softest, stiffest) per cuff axis [x mediolateral, y anteroposterior,
+z along the limb]: the lowest and highest of Schiebl et al. 2025's linear fits over both load
+directions (subject-group regressions and the mean of the individual ones, Appendix B.1):
+latero-medial 2.8-4.1, caudo-cranial 3.2-4.6, disto-proximal 2.1-2.6 N/mm; rotation 0.20-0.22,
+0.18-0.19, 0.03-0.04 N m/deg (here N/m and N m/rad)."""
+
 SOURCES: dict[str, str] = {
     "mas": "Watkins et al. 2002 (Clin Rehabil 16:515): 27 % spastic at 12 months; Sommerfeld "
            "et al. 2004 (Stroke 35:134): 19-21 % early; grades 1/1+/2/3 as McCrea et al. 2003's "
@@ -128,6 +163,14 @@ SOURCES: dict[str, str] = {
                  "(Xu, Chu and Rogers 2014, Control Eng Pract)",
     "body": "NHANES 2003-2006 adult percentiles (McDowell et al. 2008, Natl Health Stat "
             "Report 10); segments de Leva 1996 (J Biomech 29:1223)",
+    "drive": "a person with muscles: the MAS grade's neural drive preset (core/person/"
+             "neural_drive.py MAS_DRIVE_PRESETS; Feng and Mak 2002, Koo and Mak 2006, "
+             "SpasticMyoElbow; calibrated against McPherson et al. 2018)",
+    "misalignment": "offset up to 10 mm in a ball (issue 34); rotation +-3 deg per axis "
+                    "(derived); misalignment loads the cuffs: Schiele and van der Helm 2006 "
+                    "(IEEE TNSRE 14:456)",
+    "strap": "Schiebl et al. 2025 (Sensors 25:4605, Appendix B.1): the softest to the "
+             "stiffest linear fit per axis, 2.1-4.6 N/mm, 0.03-0.22 N m/deg",
 }
 """Each drawn quantity's source (the coordinates' families: :func:`coordinate_family`)."""
 
@@ -158,8 +201,14 @@ class PopulationSpec:
         if not 0.0 <= low <= high < 0.9:
             raise ValueError(f"mass_error must be 0 <= low <= high < 0.9, got {self.mass_error}")
 
-    def coordinates(self, joints: Sequence[str], person: bool) -> list[str]:
-        """The unit-cube coordinates of one patient of these joints: one per drawn quantity."""
+    def coordinates(self, joints: Sequence[str], person: bool,
+                    muscles: bool = False) -> list[str]:
+        """The unit-cube coordinates of one patient of these joints: one per drawn quantity
+        (``muscles``: a person with muscles, whose patient is the person's parameters)."""
+        if muscles:
+            return ["mas", "mass.size", "mass.sign", "misalignment.radius",
+                    "misalignment.polar", "misalignment.azimuth", "misalignment.rotation.x",
+                    "misalignment.rotation.y", "misalignment.rotation.z", "strap.stiffness"]
         names = ["mas", "encoder", "mass.size", "mass.sign"]
         for j in joints:
             names += [f"stiffness.{j}", f"rest.{j}", f"viscous.{j}", f"coulomb.{j}"]
@@ -177,6 +226,19 @@ def coordinate_family(name: str) -> str:
     return {"mass": "mass", "body": "body"}.get(head, head)
 
 
+def has_muscles(base: Config) -> bool:
+    """The config straps a person with muscles into the exoskeleton (its patients are drawn
+    as the person's parameters)."""
+    return str(base.values["musculoskeletal.model"]) != "none"
+
+
+def cube_coordinates(base: Config, spec: PopulationSpec) -> list[str]:
+    """The unit-cube coordinates of a patient on the arm of ``base``."""
+    values = base.values
+    return spec.coordinates(schema.patient_joint_names(values), bool(values["person.enabled"]),
+                            has_muscles(base))
+
+
 @dataclass(frozen=True)
 class Patient:
     """One patient of a population: where it came from and the config overrides it is."""
@@ -191,11 +253,21 @@ class Patient:
     @property
     def mas_grade(self) -> str:
         """Its Modified Ashworth grade."""
-        return str(self.overrides["patient.spasticity.mas_grade"])
+        o = self.overrides
+        return str(o.get("patient.spasticity.mas_grade", o.get("person.drive.mas_grade")))
 
     def describe(self) -> str:
-        """One line: grade, per-joint K / q_0 offset / B / F_c, encoder, mass error."""
+        """One line: grade, per-joint K / q_0 offset / B / F_c, encoder, mass error (a person
+        with muscles: grade, misalignment, strap stiffness, mass error)."""
         o = self.overrides
+        if "person.drive.mas_grade" in o:
+            def vector(key: str, digits: int) -> str:
+                return "/".join(f"{x:.{digits}f}" for x in o[key])
+            return (f"MAS {self.mas_grade}, misaligned "
+                    f"{vector('strapping.misalignment.offset', 1)} mm "
+                    f"{vector('strapping.misalignment.rotation', 1)} deg, straps "
+                    f"{'/'.join(f'{x / 1000:.2f}' for x in o['strapping.stiffness'])} N/mm, "
+                    f"mass {100 * o['mass_uncertainty']:+.1f} %")
 
         def joints(key: str) -> str:
             return "/".join(f"{x:.2f}" for x in o[key])
@@ -234,7 +306,7 @@ def patient_from_unit(base: Config, spec: PopulationSpec, unit: Mapping[str, flo
     values = base.values
     joints = schema.patient_joint_names(values)
     person = bool(values["person.enabled"])
-    missing = [c for c in spec.coordinates(joints, person) if c not in unit]
+    missing = [c for c in cube_coordinates(base, spec) if c not in unit]
     if missing:
         raise ValueError(f"the patient's point lacks the coordinates {missing}")
     u = {k: min(max(float(v), 0.0), 1.0) for k, v in unit.items()}
@@ -243,6 +315,8 @@ def patient_from_unit(base: Config, spec: PopulationSpec, unit: Mapping[str, flo
         grades = [g for g in MAS_ORDER if probabilities.get(g, 0.0) > 0]
         probabilities = {g: 1.0 / len(grades) for g in grades}
     grade = _grade(u["mas"], probabilities)
+    if has_muscles(base):
+        return Patient(index, u, person_overrides(spec, u, grade))
     low, high = STIFFNESS_BANDS[grade]
     reach = REST_BANDS[grade]
     # q_0 counts from patient.joint_zero, signed as patient.joints (core/loop/patient.py
@@ -252,7 +326,6 @@ def patient_from_unit(base: Config, spec: PopulationSpec, unit: Mapping[str, flo
     signs = patient_joint_signs(base)
     offsets = [reach * (2.0 * u[f"rest.{j}"] - 1.0) for j in joints]
     rest = signs * (start - zero) + np.asarray(offsets)
-    size = spec.mass_error[0] + (spec.mass_error[1] - spec.mass_error[0]) * u["mass.size"]
     encoder = u["encoder"] < spec.encoder_share
     overrides: dict[str, Any] = {
         "patient.spasticity.mas_grade": grade,
@@ -263,7 +336,7 @@ def patient_from_unit(base: Config, spec: PopulationSpec, unit: Mapping[str, flo
         "patient.sensor.quantisation": ENCODER_RESOLUTION if encoder else 0.0,
         "patient.sensor.differentiate_velocity": encoder,
         "patient.sensor.velocity_filter": ENCODER_VELOCITY_FILTER if encoder else 0.0,
-        "mass_uncertainty": size if u["mass.sign"] >= 0.5 else -size,
+        "mass_uncertainty": mass_error(spec, u),
     }
     for key in ("stiffness", "damping", "reflex_gain", "reflex_threshold", "reflex_max"):
         overrides[f"patient.spasticity.{key}"] = [0.0] * len(joints)  # the grade's preset
@@ -288,6 +361,38 @@ def patient_from_unit(base: Config, spec: PopulationSpec, unit: Mapping[str, flo
     return Patient(index, u, overrides)
 
 
+def mass_error(spec: PopulationSpec, u: Mapping[str, float]) -> float:
+    """The signed mass error of the coordinates ``mass.size`` and ``mass.sign``."""
+    size = spec.mass_error[0] + (spec.mass_error[1] - spec.mass_error[0]) * u["mass.size"]
+    return size if u["mass.sign"] >= 0.5 else -size
+
+
+def person_overrides(spec: PopulationSpec, u: Mapping[str, float],
+                     grade: str) -> dict[str, Any]:
+    """A person with muscles at a point of the unit cube (module docstring): the grade's neural
+    drive preset, the misalignment (an offset uniform in a ball, a rotation per axis), the
+    cuffs' stiffness between the published fits, the exoskeleton's mass error."""
+    radius = MISALIGNMENT_OFFSET * u["misalignment.radius"] ** (1.0 / 3.0)  # uniform in a ball
+    cos_polar = 2.0 * u["misalignment.polar"] - 1.0
+    sin_polar = math.sqrt(max(0.0, 1.0 - cos_polar ** 2))
+    azimuth = 2.0 * math.pi * u["misalignment.azimuth"]
+    offset = [radius * sin_polar * math.cos(azimuth), radius * sin_polar * math.sin(azimuth),
+              radius * cos_polar]
+    rotation = [MISALIGNMENT_ROTATION * (2.0 * u[f"misalignment.rotation.{a}"] - 1.0)
+                for a in "xyz"]
+    strap = u["strap.stiffness"]
+    overrides: dict[str, Any] = {
+        "person.drive.mas_grade": grade,
+        "strapping.misalignment.offset": [float(x) for x in offset],
+        "strapping.misalignment.rotation": [float(x) for x in rotation],
+        "mass_uncertainty": mass_error(spec, u),
+    }
+    for key, (soft, stiff) in STRAP_STIFFNESS_RANGE.items():
+        overrides[f"strapping.{key}"] = [float(a + (b - a) * strap)
+                                         for a, b in zip(soft, stiff, strict=True)]
+    return overrides
+
+
 def search_point(patient: Patient, spec: PopulationSpec) -> dict[str, float]:
     """The patient's point of the unit cube as :func:`patient_from_unit` reads it with
     ``uniform_grades`` (the MAS coordinate moved to the middle of its grade's equal share)."""
@@ -306,8 +411,7 @@ def draw_patient(base: Config, spec: PopulationSpec, seed: int, index: int) -> P
     """Patient ``index`` of the population ``seed``: its point of the unit cube drawn uniformly
     from ``default_rng(SeedSequence([seed, index]))``; the same (seed, index) is the same
     patient on every machine, whatever the population's size."""
-    joints = schema.patient_joint_names(base.values)
-    names = spec.coordinates(joints, bool(base.values["person.enabled"]))
+    names = cube_coordinates(base, spec)
     rng = np.random.default_rng(np.random.SeedSequence([seed, index]))
     point = rng.random(len(names))
     patient = patient_from_unit(base, spec, dict(zip(names, point.tolist(), strict=True)),

@@ -28,6 +28,7 @@ from ... import __version__
 from ..errors import ConfigError, ExoIlcError
 from ..loop.record import TrialRecord
 from ..params.config import Config, config_dir, load_config, scenario_names, scenario_path
+from ..person.cuffs import cuff_metrics
 from ..session.learning_session import run_trials
 from .shipped_laws import SHIPPED_LAWS
 
@@ -190,6 +191,11 @@ class CellResult:
     """The exo_ilc_ros that ran the cell (a cluster must run the client's)."""
     seconds: float = 0.0
     """Wall time of the run where it ran (not part of the outcome: :meth:`same_as` ignores it)."""
+    peak_cuff_force: np.ndarray | None = None
+    """Per trial and cuff (upper arm, forearm), the peak |force| the cuff pressed into the
+    person (N; :func:`..person.cuffs.cuff_metrics`); None: no person strapped in."""
+    peak_cuff_torque: np.ndarray | None = None
+    """Per trial and cuff, the peak |torque| (N m); None: no person."""
 
     @property
     def trials(self) -> int:
@@ -205,7 +211,11 @@ class CellResult:
             (other.law, other.scenario, other.mass_uncertainty, other.seed, other.aborted,
              other.failure, other.nonfinite, other.samples) and \
             all(np.array_equal(getattr(self, a), getattr(other, a), equal_nan=True)
-                for a in arrays)
+                for a in arrays) and \
+            all((getattr(self, a) is None) == (getattr(other, a) is None) and
+                (getattr(self, a) is None or
+                 np.array_equal(getattr(self, a), getattr(other, a), equal_nan=True))
+                for a in ("peak_cuff_force", "peak_cuff_torque"))
 
 
 def true_max_abs_error(record: TrialRecord) -> np.ndarray:
@@ -220,7 +230,8 @@ def run_cell(cell: StudyCell) -> CellResult:
     says why in ``failure``."""
     config = Config(cell.values, f"study cell {cell.label}")
     limit = np.asarray(config["control.effort_limit"], dtype=float)
-    rows: dict[str, list[np.ndarray]] = {k: [] for k in ("true", "measured", "ff", "effort")}
+    rows: dict[str, list[np.ndarray]] = {k: [] for k in ("true", "measured", "ff", "effort",
+                                                         "cuff_force", "cuff_torque")}
     at_limit: list[int] = []
     aborted: list[int] = []
 
@@ -239,6 +250,10 @@ def run_cell(cell: StudyCell) -> CellResult:
         rows["measured"].append(np.asarray(record.max_abs_error))
         rows["ff"].append(np.max(np.abs(record.feedforward), axis=0))
         rows["effort"].append(np.max(np.abs(record.effort), axis=0))
+        if record.cuff_wrench is not None:
+            cuffs = cuff_metrics(np.asarray(record.cuff_wrench))
+            rows["cuff_force"].append(cuffs[:, 0])
+            rows["cuff_torque"].append(cuffs[:, 2])
         at_limit.append(int(np.count_nonzero(np.any(np.abs(record.effort) >= limit, axis=1))))
         if record.aborted:
             aborted.append(record.trial)
@@ -256,9 +271,14 @@ def run_cell(cell: StudyCell) -> CellResult:
     def table(key: str) -> np.ndarray:
         return np.array(rows[key], dtype=float).reshape(-1, joints)
 
+    def cuffs(key: str) -> np.ndarray | None:
+        return np.array(rows[key], dtype=float) if rows[key] else None
+
     return CellResult(cell.law, cell.scenario, cell.mass_uncertainty, cell.seed,
                       float(config["error_bound"]), samples, table("true"), table("measured"),
                       table("ff"), table("effort"), np.array(at_limit, dtype=np.int64),
-                      aborted, failure, nonfinite[0] if nonfinite else None, seconds=seconds)
+                      aborted, failure, nonfinite[0] if nonfinite else None, seconds=seconds,
+                      peak_cuff_force=cuffs("cuff_force"),
+                      peak_cuff_torque=cuffs("cuff_torque"))
 
 

@@ -17,9 +17,9 @@ from exo_ilc_ros.core.convergence.patient_ranges import (
     PatientRanges,
     analyze_patient_ranges,
     factor_with_patient,
-    lightest_inverse_inertia,
 )
 from exo_ilc_ros.core.learning.laws import Memory
+from exo_ilc_ros.core.loop.gains import lightest_inverse_inertia
 from exo_ilc_ros.core.params import schema
 from exo_ilc_ros.core.params.config import config_dir
 

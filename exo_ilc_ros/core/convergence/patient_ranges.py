@@ -56,9 +56,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..arm.build import build_arm
 from ..learning.laws import Memory
 from ..learning.qfilter import qfilter_of
+from ..loop.gains import feedback_gains, lightest_inverse_inertia
 from ..loop.patient import MAS_PRESETS, patient_joint_indices
 from ..params.config import Config
 from ..reference.build import build_reference
@@ -88,15 +88,6 @@ class PatientRanges:
         """(K, B, MAS grade, delta) of every corner."""
         return list(itertools.product((0.0, self.stiffness), (0.0, self.viscous),
                                       self.mas_grades, self.mass_uncertainty))
-
-
-def lightest_inverse_inertia(config: Config) -> np.ndarray:
-    """max over the reference's samples of (a_N(q_d)^-1)_jj per arm joint (kg^-1 m^-2): the
-    acceleration per N m of a torque on joint j, the others free (PR)."""
-    positions = build_reference(config).position
-    tensors = build_arm(config).metric_tensors(positions)
-    inverse = np.linalg.inv(tensors)
-    return np.asarray(np.max(np.diagonal(inverse, axis1=1, axis2=2), axis=0))
 
 
 @dataclass(frozen=True)
@@ -165,8 +156,9 @@ def analyze_patient_ranges(config: Config, ranges: PatientRanges | None = None,
     delay = int(round(ranges.reflex_delay / period))
     peak_speed = np.max(np.abs(build_reference(config).velocity), axis=0)
     out = []
-    for j, (name, kp, kd) in enumerate(zip(config["joint_names"], config["control.kp"],
-                                           config["control.kd"], strict=True)):
+    kp_all, kd_all = feedback_gains(config)
+    for j, (name, kp, kd) in enumerate(zip(config["joint_names"], kp_all.tolist(),
+                                           kd_all.tolist(), strict=True)):
         best: tuple[float, int, tuple[float, float, str, float], float, float] | None = None
         nominal = 0.0
         corners = ranges.corners() if on_patient[j] else \

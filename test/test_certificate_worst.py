@@ -7,7 +7,6 @@ control.min_damping: the elbow at 1600 / 80) changed."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from exo_ilc_ros.core.params.config import Config, config_dir, load_config
 from exo_ilc_ros.core.population.certificate import (

@@ -124,7 +124,7 @@ def test_the_reflex_poles_by_hand_and_by_running_the_loop() -> None:
     inertia = 0.01091  # the paper arm's elbow, its lightest along the reference
     mas3 = JointLoop(1.0 / 1.05, 225.0, 30.0, 0.01, 10.0 / inertia, 0.8 / inertia,
                      2.0 / inertia, 10)
-    radius, hz = mas3.spectral_radius()
+    radius, _ = mas3.spectral_radius()
     roots = np.roots(_reflex_polynomial(mas3))
     assert radius == pytest.approx(float(np.max(np.abs(roots))), rel=1e-9)
     assert radius > 1.0  # held over the period the MAS 3 elbow is unstable too

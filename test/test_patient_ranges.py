@@ -97,7 +97,8 @@ def test_the_shipped_law_contracts_for_every_patient_in_the_ranges(arm: Path | N
     assert analyze_patient_ranges(config, PatientRanges(mas_grades=("0", "1", "1+", "2"))
                                   ).worst() < 0.9
     assert analyze_patient_ranges(config, PatientRanges(reflex=False)).worst() < 0.9
-    paper = config.replace({"control.kp": [16.0, 10.0, 10.0], "control.kd": [8.0, 5.0, 7.0]})
+    paper = config.replace({"control.kp": [16.0, 10.0, 10.0], "control.kd": [8.0, 5.0, 7.0],
+                            "control.min_stiffness": 0.0, "control.min_damping": 0.0})
     assert analyze_patient_ranges(paper, PatientRanges(reflex=False)).worst() > 1.0
 
 

@@ -157,14 +157,20 @@ def test_the_reflex_poles_by_hand_and_by_running_the_loop() -> None:
 
 def test_mas3_reflex_makes_the_paper_elbow_unstable_at_the_frequency_it_chatters() -> None:
     """The range analysis with MAS 3's reflex (2 N m s/rad, 0.1 s late) finds the paper
-    arm's elbow unstable within a trial under patient_aware.yaml (and under a stiffer PD: no
-    gain at 100 Hz removes it), the UR5's and the Panda's elbows (inertia >= 0.19 kg m^2)
-    stable; and the pole's frequency is the one the elbow of a MAS 3 patient of the population
-    oscillates at in its first trial (seed 0's patient 93, ideal sensors: 4.4-5.2 Hz)."""
-    config = load_config(None, overlays=[AWARE])
+    arm's elbow unstable within a trial under patient_aware.yaml's K_P 225 / K_D 30 (and with
+    its floors, 1600 / 80, and under K_P 2500 / K_D 100: no gain at 100 Hz removes it), the
+    UR5's and the Panda's elbows (inertia >= 0.19 kg m^2) stable; and the pole's frequency is
+    the one the elbow of a MAS 3 patient of the population oscillates at in its first trial
+    under 225 / 30 (seed 0's patient 93, ideal sensors: 4.4-5.2 Hz)."""
+    shipped = load_config(None, overlays=[AWARE])
+    # the gains without their floors: the elbow at K_P 225 / K_D 30
+    config = shipped.replace({"control.min_stiffness": 0.0, "control.min_damping": 0.0})
     elbow = analyze_patient_ranges(config).joints[2]
     assert elbow.unstable and elbow.mas_grade == "3" and elbow.reflex_gain == 2.0
     assert 1.02 < elbow.radius < 1.1 and 4.0 < elbow.radius_hz < 5.5
+    # the floors (1600 / 80) do not make it linearly stable either (measured 1.028, 32 Hz)
+    floored = analyze_patient_ranges(shipped).joints[2]
+    assert floored.unstable and floored.radius < elbow.radius
     stiffer = config.replace({"control.kp": 2500.0, "control.kd": 100.0})
     assert analyze_patient_ranges(stiffer).joints[2].unstable
     for arm in ARMS[1:]:
@@ -174,7 +180,7 @@ def test_mas3_reflex_makes_the_paper_elbow_unstable_at_the_frequency_it_chatters
     from exo_ilc_ros.core.population.distributions import PopulationSpec, draw_patient
     patient = draw_patient(config, PopulationSpec(), 0, 93)
     assert patient.mas_grade == "3" and patient.overrides["patient.sensor.quantisation"] == 0
-    record = run_trials(patient_config(config, patient, 1)).records[0]
+    record = run_trials(patient_config(config, patient, 1)).records[0]  # without the floors
     error = record.reference.position[:, 2] - record.position[:, 2]
     wiggle = error - np.convolve(error, np.ones(25) / 25.0, mode="same")
     spectrum = np.abs(np.fft.rfft(wiggle[25:-25]))
@@ -192,7 +198,7 @@ def test_analyze_loop_prints_the_factor_with_the_patient(capsys: pytest.CaptureF
     assert "learning converges for every patient in the ranges" in out
     assert main(["analyze-loop", "--config", str(AWARE), "--patient-ranges"]) == 0
     out = capsys.readouterr().out
-    assert "elbow_flexion        UNSTABLE within a trial: a pole at radius 1.04" in out
+    assert "elbow_flexion        UNSTABLE within a trial: a pole at radius 1.02" in out
     assert "reflex 2 N m s/rad (MAS 3)" in out
     assert "some patient in the ranges makes the loop within a trial unstable" in out
 

@@ -1,11 +1,12 @@
 """The worst patient of patient_aware.yaml's certificate on the paper's arm (issue 33; seed 0,
-patients 0-290 measured, docs/every-patient.md): patient 62, MAS 3 with a 14-bit encoder, ends
-0.32 rad off without an aborted trial. What the certificate asserts for it, and why it fails."""
+patients 0-290 measured, docs/every-patient.md): patient 62, MAS 3 with a 14-bit encoder, ended
+0.32 rad off without an aborted trial under K_P 225 / K_D 30 on the elbow. What the certificate
+asserts for it, why it failed, and what the gains' floors (control.min_stiffness,
+control.min_damping: the elbow at 1600 / 80) changed."""
 
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from exo_ilc_ros.core.params.config import Config, config_dir, load_config
 from exo_ilc_ros.core.population.certificate import (
@@ -34,12 +35,11 @@ def test_the_worst_patient_is_the_one_the_certificate_names() -> None:
                        atol=0.005)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 33, open: on the paper arm patient_aware.yaml "
-                   "leaves MAS 3 patients 0.2-0.3 rad off (10 of 15 in seed 0's first 291); "
-                   "the identification refuses every trial for the elbow's chatter")
 def test_the_worst_patient_meets_the_certificate() -> None:
     """The certificate's per-patient criteria over 25 trials: finite, bounded, no more than 2
-    aborted trials and none 3 in a row, within 0.005 rad by trial 25 (and by 10)."""
+    aborted trials and none 3 in a row, within 0.005 rad by trial 25 (measured: first within
+    at trial 8, settled from 16: not by trial 10, which the certificate asks of 95 % of the
+    population, not of each patient)."""
     base = _base()
     patient = draw_patient(base, PopulationSpec(), 0, WORST)
     config = patient_config(base, patient, 25)
@@ -47,16 +47,24 @@ def test_the_worst_patient_meets_the_certificate() -> None:
     outcome = patient_outcome(WORST, result, 25, feedforward_limit(config.values))
     assert outcome.finite and outcome.bounded
     assert outcome.aborts <= 2 and outcome.abort_run < 3
-    assert outcome.within_by(10), outcome.worst_error_per_trial
+    assert outcome.passes and outcome.within_by(25), outcome.worst_error_per_trial
 
 
-def test_why_the_worst_patient_fails_the_identification_refuses_every_trial() -> None:
-    """Four trials: the elbow (joint index 2) moves above the regression's 10 Hz cut-off (0.01-
-    0.05 rad RMS: chatter, with MAS 3's delayed stretch reflex in the stiff loop), so every
-    trial is refused whole and no identified force is ever used; the elbow stays 0.27-0.35 rad
-    off (the refusal is one reason: with it relaxed the elbow still ends 0.31 rad off at trial
-    12). When the law learns this patient, this test says which rule changed."""
-    base = _base()
+def _elbow_chatter(record) -> float:
+    """RMS of the elbow's true error about its 25-sample moving mean (rad): the ~5 Hz limit
+    cycle of a delayed reflex, not the slow error learning removes."""
+    true = record.position if record.true_position is None else record.true_position
+    error = record.reference.position[:, 2] - true[:, 2]
+    wiggle = error - np.convolve(error, np.ones(25) / 25.0, mode="same")
+    return float(np.sqrt(np.mean(wiggle[25:-25] ** 2)))
+
+
+def test_why_the_worst_patient_failed_without_the_floors() -> None:
+    """Four trials under the gains before the floors (K_P 225 / K_D 30 on the elbow): the
+    elbow (joint index 2) chatters (0.01-0.07 rad about its mean: MAS 3's delayed stretch
+    reflex in the loop), every trial is refused whole ("moved faster than the regression
+    resolves") and no identified force is ever used; the elbow stays 0.2-0.4 rad off."""
+    base = _base().replace({"control.min_stiffness": 0.0, "control.min_damping": 0.0})
     patient = draw_patient(base, PopulationSpec(), 0, WORST)
     config = patient_config(base, patient, 4)
     seen: list[TrialConclusion] = []
@@ -68,3 +76,15 @@ def test_why_the_worst_patient_fails_the_identification_refuses_every_trial() ->
             forces.estimate.rejected, forces.estimate.rejected
     elbow = [float(np.max(np.abs(r.error[:, 2]))) for r in result.records]
     assert all(0.2 < e < 0.4 for e in elbow), elbow
+    assert all(_elbow_chatter(r) > 0.01 for r in result.records)
+
+
+def test_the_floors_damp_the_elbows_chatter() -> None:
+    """The shipped law (the elbow at K_P 1600 / K_D 80 by its floors): the chatter is there in
+    trial 1 (the learned input is still zero) and gone by trial 4 (measured 0.0007 rad about
+    the mean, elbow 0.015 rad off; 0.04 and 0.33 rad under the old gains)."""
+    base = _base()
+    patient = draw_patient(base, PopulationSpec(), 0, WORST)
+    result = run_trials(patient_config(base, patient, 4))
+    assert _elbow_chatter(result.records[-1]) < 0.003
+    assert float(np.max(np.abs(result.records[-1].error[:, 2]))) < 0.05

@@ -36,6 +36,7 @@ def _spastic_run() -> tuple[Any, list[TrialConclusion]]:
     config = load_config(overlays=[AWARE, scenario_path("spastic")], overrides={  # the
         # paper's PD gains: under patient_aware's stiffer PD the estimate is trusted later
         "control.kp": [16.0, 10.0, 10.0], "control.kd": [8.0, 5.0, 7.0],
+        "control.min_stiffness": 0.0, "control.min_damping": 0.0,
         "progress_gain.position": [0.0, 0.0, 5.0], "feedforward_limit": 100.0,
         # the tanh law trusted at every speed: on the paper's one-way movement the shipped
         # 0.2 leaves Coulomb friction to the offset (test_identification_honest.py)
@@ -237,6 +238,7 @@ def test_a_resumed_run_files_the_restored_trials_identification(tmp_path: Path) 
     config = load_config(overlays=[AWARE, scenario_path("spastic")], overrides={  # the
         # paper's PD gains: under patient_aware's stiffer PD the estimate is trusted later
         "control.kp": [16.0, 10.0, 10.0], "control.kd": [8.0, 5.0, 7.0],
+        "control.min_stiffness": 0.0, "control.min_damping": 0.0,
         "progress_gain.position": [0.0, 0.0, 5.0], "feedforward_limit": 100.0,
         # the tanh law trusted at every speed: on the paper's one-way movement the shipped
         # 0.2 leaves Coulomb friction to the offset (test_identification_honest.py)
@@ -262,6 +264,7 @@ def test_a_graph_sessions_profile_keeps_the_replayed_estimate() -> None:
     config = load_config(overlays=[AWARE, scenario_path("spastic")], overrides={  # the
         # paper's PD gains: under patient_aware's stiffer PD the estimate is trusted later
         "control.kp": [16.0, 10.0, 10.0], "control.kd": [8.0, 5.0, 7.0],
+        "control.min_stiffness": 0.0, "control.min_damping": 0.0,
         "progress_gain.position": [0.0, 0.0, 5.0], "feedforward_limit": 100.0,
         # the tanh law trusted at every speed: on the paper's one-way movement the shipped
         # 0.2 leaves Coulomb friction to the offset (test_identification_honest.py)

@@ -65,6 +65,9 @@ def register(sub: Any) -> None:
     parser.add_argument("--range-mas", choices=schema.MAS_GRADES[1:], default="3",
                         help="highest MAS grade (its preset's stiffness and damping; default "
                         "%(default)s)")
+    parser.add_argument("--range-reflex-delay", type=float, metavar="S", default=0.1,
+                        help="the MAS presets' stretch reflex delay (s; default %(default)s, "
+                        "SpasticMyoElbow's); a negative value leaves the reflex out")
     parser.add_argument("--plot", metavar="OUT.png", type=figure_file, help="plot |F| against "
                         "frequency (PNG); with several uncertainties, one file each "
                         "(OUT_d0.05.png, ...)")
@@ -119,7 +122,9 @@ def run(args: argparse.Namespace) -> int:
         ranges = PatientRanges(
             PatientRanges.stiffness if args.range_stiffness is None else args.range_stiffness,
             PatientRanges.viscous if args.range_viscous is None else args.range_viscous,
-            grades[:grades.index(args.range_mas) + 1])
+            grades[:grades.index(args.range_mas) + 1],
+            reflex_delay=max(0.0, args.range_reflex_delay),
+            reflex=args.range_reflex_delay >= 0.0)
         print()
         print(format_ranges(analyze_patient_ranges(config, ranges)))
     return 0
@@ -132,11 +137,20 @@ def format_ranges(analysis: RangeAnalysis) -> str:
              f"N m/rad, viscous 0-{r.viscous:g} N m s/rad, MAS {', '.join(r.mas_grades)}, "
              f"mass error {', '.join(f'{d:g}' for d in r.mass_uncertainty)} (each joint's "
              "inertia the lightest along the reference, 1 / max (a_N^-1)_jj; the law's own "
-             "update: identification's inverse, Coulomb friction and the reflex left out):"]
+             "update: identification's inverse and Coulomb friction left out; "
+             + (f"the MAS presets' stretch reflex {r.reflex_delay:g} s late where the reference "
+                "moves faster than its threshold):" if r.reflex else "the reflex left out):")]
     for j in analysis.joints:
-        where = (f"K {j.stiffness:g} N m/rad, B {j.damping:g} N m s/rad (MAS {j.mas_grade}), "
-                 f"delta {j.mass_uncertainty:g}") if j.patient else \
+        where = (f"K {j.stiffness:g} N m/rad, B {j.damping:g} N m s/rad"
+                 + (f", reflex {j.reflex_gain:g} N m s/rad" if j.reflex_gain else "")
+                 + f" (MAS {j.mas_grade}), delta {j.mass_uncertainty:g}") if j.patient else \
             f"no patient on this joint, delta {j.mass_uncertainty:g}"
+        if j.unstable:
+            lines.append(f"  {j.joint:<20} UNSTABLE within a trial: a pole at radius "
+                         f"{j.radius:.4f}, {j.radius_hz:.2f} Hz ({where}; I >= "
+                         f"{1.0 / j.inverse_inertia:.4g} kg m^2): the loop oscillates whatever "
+                         "is learned")
+            continue
         lines.append(f"  {j.joint:<20} worst |F| {j.worst:.5f} at {j.frequency_hz:6.2f} Hz "
                      f"({where}; I >= {1.0 / j.inverse_inertia:.4g} kg m^2; without a patient "
                      f"{j.nominal:.5f})" + ("" if j.worst < 1.0 else "  the learned input can "
@@ -144,6 +158,8 @@ def format_ranges(analysis: RangeAnalysis) -> str:
     worst = analysis.worst()
     lines.append(f"worst over the ranges {worst:.5f} -> " + (
         "learning converges for every patient in the ranges" if worst < 1.0 else
+        "some patient in the ranges makes the loop within a trial unstable"
+        if any(j.unstable for j in analysis.joints) else
         "some patient in the ranges makes the learned input grow"))
     return "\n".join(lines)
 

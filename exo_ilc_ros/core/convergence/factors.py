@@ -43,6 +43,7 @@ import numpy as np
 
 from ..learning.laws import Memory
 from ..learning.qfilter import QFilter, qfilter_of
+from ..loop.gains import feedback_gains
 from ..params.config import Config
 from ..reference.exercise import exercise_duration
 from .joint_loop import JointLoop
@@ -213,8 +214,9 @@ def analyze_loop(config: Config, law: str | None = None, points: int = 2001,
     forgetting = config["assist_as_needed.forgetting"] \
         if config["assist_as_needed.enabled"] else None
     joints = []
+    kp_all, kd_all = feedback_gains(config)
     for j, (name_j, kp, kd, gains) in enumerate(zip(
-            config["joint_names"], config["control.kp"], config["control.kd"],
+            config["joint_names"], kp_all.tolist(), kd_all.tolist(),
             learning_gains(config, name), strict=True)):
         stiffness, damping = (0.0, 0.0) if patient is None else \
             (float(patient.stiffness[j]), float(patient.damping[j]))

@@ -17,6 +17,7 @@ from ..learning.norm_optimal_model import (
     learning_matrices,
     lifted_model,
 )
+from ..loop.gains import feedback_gains
 from ..params.config import Config
 from ..reference.build import build_reference
 from .joint_loop import JointLoop
@@ -41,7 +42,8 @@ def frequency_factor(config: Config, delta: float, frequency_hz: np.ndarray,
     model_gain = 1.0 / (1.0 + float(config["norm_optimal.model_mass_uncertainty"]))
     weights = Weights.of(config)
     out = []
-    for j, (kp, kd) in enumerate(zip(config["control.kp"], config["control.kd"], strict=True)):
+    kp_all, kd_all = feedback_gains(config)
+    for j, (kp, kd) in enumerate(zip(kp_all.tolist(), kd_all.tolist(), strict=True)):
         s, d = (0.0, 0.0) if patient is None else \
             (float(patient.stiffness[j]), float(patient.damping[j]))
         pm, _ = JointLoop(model_gain, kp, kd, period, *((s, d) if about else (0.0, 0.0))

@@ -20,24 +20,45 @@ joint. With the law's own update only (identification's inverse left out: the ro
 and, where the config has them, the progress gain on and off and the averaging gain at
 ``min_gain`` and 1 (u_ff,k+1 = (1 - K) u_ff,k + K F u_ff,k: the factor (1 - K) + K F).
 
+The stretch reflex is in the loop too (issue 33): each MAS preset's reflex gain G, per unit
+of the same inertia (reflex_j = G max_t (a_N(q_d(t))^-1)_jj, s^-1), on the velocity
+``reflex_delay`` ago (0.1 s, SpasticMyoElbow's, rounded to control periods), linearised where
+it is active (above its threshold, below its ceiling: the worst case, as during the movement).
+The reflex is counted on a joint whose reference moves faster than the preset's threshold
+somewhere (max_t |qdot_d,j(t)| > v_th; the paper's quintic moves the elbow at up to 0.196
+rad/s, above MAS 3's 0.1, below MAS 2's 0.2). The patient's stiffness and damping act within
+the period as the plant integrates them (``continuous_patient``), the reflex and the PD held
+over it. A delayed damping can make the loop *within a trial* unstable, where eq (*) means
+nothing: so every corner's poles are checked first
+(:meth:`.joint_loop.JointLoop.spectral_radius`), and a corner whose loop has a pole on or
+outside the unit circle is the worst there is (factor inf, reported with the pole's radius and
+frequency). Against a delayed velocity feedback G an undelayed damping D > G keeps the loop
+stable for any delay; the paper arm's elbow (I >= 0.011 kg m^2) would need K_D > (G - B) / I
+~ 110 s^-1 against MAS 3's 2 N m s/rad, and a PD sampled at 100 Hz does not get there: over
+K_P 225-6400 s^-2 and K_D 30-150 s^-1 its loop keeps a pole at radius 1.04-1.16 (4.8 Hz, the
+chatter the population's MAS 3 patients show, at the lower K_D).
+
 Left out, as in :mod:`.patient_load`: the Coulomb friction (it saturates: a bounded torque
-each trial, learned like any repeating disturbance) and the stretch reflex (a delayed,
-thresholded damping); the coupling between joints (what a_N^-1 carries from the elbow's
-torque to the wrist's acceleration, a repeating disturbance of the wrist learned like the
-others); and the identified forces' inverse (it makes the factor the arm's alone once the
-patient is identified: ``--scenarios``).
+each trial, learned like any repeating disturbance), the reflex's threshold and ceiling (they
+bound an unstable loop's oscillation, a limit cycle, not remove it), the sensors (a
+differentiated, low-passed encoder velocity lags the controller's damping further); the
+coupling between joints (what a_N^-1 carries from the elbow's torque to the wrist's
+acceleration, a repeating disturbance of the wrist learned like the others); and the
+identified forces' inverse (it makes the factor the arm's alone once the patient is
+identified: ``--scenarios``).
 """
 
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..arm.build import build_arm
 from ..learning.laws import Memory
 from ..learning.qfilter import qfilter_of
+from ..loop.gains import feedback_gains, lightest_inverse_inertia
 from ..loop.patient import MAS_PRESETS, patient_joint_indices
 from ..params.config import Config
 from ..reference.build import build_reference
@@ -56,20 +77,17 @@ class PatientRanges:
     viscous: float = 0.4
     mas_grades: tuple[str, ...] = ("0", "1", "1+", "2", "3")
     mass_uncertainty: tuple[float, float] = (0.05, 0.15)
+    reflex_delay: float = 0.1
+    """s: the stretch reflex's delay (SpasticMyoElbow's 0.1 s, the presets'); each MAS
+    preset's reflex gain acts on the velocity this long ago."""
+    reflex: bool = True
+    """The presets' stretch reflex in the loop (False: left out, as before issue 33's
+    MAS 3 patients)."""
 
     def corners(self) -> list[tuple[float, float, str, float]]:
         """(K, B, MAS grade, delta) of every corner."""
         return list(itertools.product((0.0, self.stiffness), (0.0, self.viscous),
                                       self.mas_grades, self.mass_uncertainty))
-
-
-def lightest_inverse_inertia(config: Config) -> np.ndarray:
-    """max over the reference's samples of (a_N(q_d)^-1)_jj per arm joint (kg^-1 m^-2): the
-    acceleration per N m of a torque on joint j, the others free (PR)."""
-    positions = build_reference(config).position
-    tensors = build_arm(config).metric_tensors(positions)
-    inverse = np.linalg.inv(tensors)
-    return np.asarray(np.max(np.diagonal(inverse, axis1=1, axis2=2), axis=0))
 
 
 @dataclass(frozen=True)
@@ -90,6 +108,18 @@ class JointWorst:
     """max_t (a_N^-1)_jj of (PR)."""
     patient: bool = True
     """A patient's joint acts on this arm joint (``patient.joints``)."""
+    radius: float = 0.0
+    """The largest pole radius of the loop within a trial at the worst corner (>= 1: unstable
+    there, :attr:`worst` is inf)."""
+    radius_hz: float = 0.0
+    """That pole's frequency (Hz)."""
+    reflex_gain: float = 0.0
+    """N m s/rad: the corner's stretch reflex gain (its MAS preset's; 0 where none)."""
+
+    @property
+    def unstable(self) -> bool:
+        """The loop within a trial is unstable at the worst corner (the reflex's delay)."""
+        return self.radius >= 1.0
 
 
 @dataclass(frozen=True)
@@ -123,34 +153,48 @@ def analyze_patient_ranges(config: Config, ranges: PatientRanges | None = None,
     on_patient = np.zeros(config.joints, dtype=bool)
     on_patient[patient_joint_indices(config)] = True
     inverse_inertia = lightest_inverse_inertia(config)
+    delay = int(round(ranges.reflex_delay / period))
+    peak_speed = np.max(np.abs(build_reference(config).velocity), axis=0)
     out = []
-    for j, (name, kp, kd) in enumerate(zip(config["joint_names"], config["control.kp"],
-                                           config["control.kd"], strict=True)):
-        best: tuple[float, int, tuple[float, float, str, float]] | None = None
+    kp_all, kd_all = feedback_gains(config)
+    for j, (name, kp, kd) in enumerate(zip(config["joint_names"], kp_all.tolist(),
+                                           kd_all.tolist(), strict=True)):
+        best: tuple[float, int, tuple[float, float, str, float], float, float] | None = None
         nominal = 0.0
         corners = ranges.corners() if on_patient[j] else \
             [(0.0, 0.0, "0", d) for d in ranges.mass_uncertainty]
         for corner in corners:
             k, b, grade, delta = corner
-            spastic_k, spastic_b = MAS_PRESETS[grade][:2]
+            spastic_k, spastic_b, reflex_gain = MAS_PRESETS[grade][:3]
             stiffness = (k + spastic_k) * inverse_inertia[j] if on_patient[j] else 0.0
             damping = (b + spastic_b) * inverse_inertia[j] if on_patient[j] else 0.0
+            active = on_patient[j] and ranges.reflex and \
+                peak_speed[j] > MAS_PRESETS[grade][3]
+            reflex = reflex_gain * inverse_inertia[j] if active else 0.0
             loop = JointLoop(1.0 / (1.0 + delta), float(kp), float(kd), period, stiffness,
-                             damping)
-            factor = factor_with_patient(loop, frequency, memory, gains_of[j], progress[j],
-                                   averaging, q)
-            value, index = float(np.max(factor)), int(np.argmax(factor))
-            if stiffness == 0.0 and damping == 0.0:
+                             damping, reflex, delay, continuous_patient=True)
+            radius, radius_hz = loop.spectral_radius()
+            if radius >= 1.0:
+                value, index = math.inf, int(np.argmin(np.abs(frequency - radius_hz)))
+            else:
+                factor = factor_with_patient(loop, frequency, memory, gains_of[j],
+                                             progress[j], averaging, q)
+                value, index = float(np.max(factor)), int(np.argmax(factor))
+            if stiffness == 0.0 and damping == 0.0 and reflex == 0.0:
                 nominal = max(nominal, value)
-            if best is None or value > best[0]:
-                best = (value, index, corner)
+            if best is None or value > best[0] or (value == best[0] == math.inf
+                                                   and radius > best[3]):
+                best = (value, index, corner, radius, radius_hz)
         assert best is not None
-        value, index, (k, b, grade, delta) = best
-        spastic_k, spastic_b = MAS_PRESETS[grade][:2]
+        value, index, (k, b, grade, delta), radius, radius_hz = best
+        spastic_k, spastic_b, reflex_gain = MAS_PRESETS[grade][:3]
         total_k = k + spastic_k if on_patient[j] else 0.0
         total_b = b + spastic_b if on_patient[j] else 0.0
+        total_g = reflex_gain if on_patient[j] and ranges.reflex and \
+            peak_speed[j] > MAS_PRESETS[grade][3] else 0.0
         out.append(JointWorst(name, value, float(frequency[index]), total_k, total_b, grade,
-                              delta, nominal, float(inverse_inertia[j]), bool(on_patient[j])))
+                              delta, nominal, float(inverse_inertia[j]), bool(on_patient[j]),
+                              radius, radius_hz, total_g))
     return RangeAnalysis(ranges, out)
 
 

@@ -21,6 +21,7 @@ from scipy.linalg import cho_factor, cho_solve
 from .. import _numba_cache  # noqa: F401  (sets numba's cache directory before any kernel)
 from ..arm.build import build_arm
 from ..arm.dynamics import inertia_and_bias
+from ..loop.gains import feedback_gains
 from ..params import schema
 from ..params.config import Config
 from ..reference.build import build_reference
@@ -36,7 +37,8 @@ class ModelKind(Enum):
 
 
 MODEL_KEYS = ("norm_optimal.model_kind", "norm_optimal.model_mass_uncertainty", "control.period",
-              "control.kp", "control.kd", "trajectory.start", "trajectory.goal",
+              "control.kp", "control.kd", "control.min_stiffness", "control.min_damping",
+              "trajectory.start", "trajectory.goal",
               "trajectory.duration", "model.link_masses", "model.link_lengths",
               "model.radius_proximal", "model.radius_distal", "model.joint_axes",
               "model.gravity", "model.gravity_direction", "exercise.name", "exercise.file",
@@ -190,7 +192,8 @@ def build_lifted_model(config: Config, patient: PatientLinearisation | None = No
         cont[:, n:2 * n, n:2 * n] -= gain * minv * patient.damping[:, None, :]
     disc = _expm_batch(cont * period)
     a, b = disc[:, :2 * n, :2 * n], disc[:, :2 * n, 2 * n:]
-    k = np.hstack([np.diag(config["control.kp"]), np.diag(config["control.kd"])])
+    kp, kd = feedback_gains(config)
+    k = np.hstack([np.diag(kp), np.diag(kd)])
     return LiftedModel(np.ascontiguousarray(a), np.ascontiguousarray(b), k)
 
 

@@ -411,8 +411,9 @@ class Config:
         its path); ``model.urdf_joint_dynamics`` only when it applies them; the person's keys
         only with ``person.enabled``, the neural drive's and the strapping's only with a
         ``musculoskeletal.model``, ``patient.joints`` only when given,
-        ``model.gravity_direction`` only when it is not -z (so, too, for the keys that came
-        before them)."""
+        ``model.gravity_direction`` only when it is not -z, ``control.min_stiffness`` and
+        ``control.min_damping`` only when some joint's is not 0 (so, too, for the keys that
+        came before them)."""
         urdf = self._values["model.source"] == "urdf"
         left_out = set(schema.CONE_KEYS if urdf else schema.URDF_KEYS + schema.URDF_PLANT_KEYS)
         if self._values["model.urdf_joint_dynamics"] == "ignore":  # keys as before it existed
@@ -424,6 +425,9 @@ class Config:
             left_out.update(schema.STRAPPED_KEYS)
         if not self._values[schema.PATIENT_JOINTS]:
             left_out.add(schema.PATIENT_JOINTS)
+        for floor in ("control.min_stiffness", "control.min_damping"):
+            if not any(self._values[floor]):  # 0: the gains as given, as before the keys
+                left_out.add(floor)
         down = self._values["model.gravity_direction"]
         if down[0] == 0.0 and down[1] == 0.0 and down[2] < 0.0:  # -z: as before the key
             left_out.add("model.gravity_direction")

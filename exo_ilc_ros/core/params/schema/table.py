@@ -246,6 +246,17 @@ PARAMETERS: tuple[Parameter, ...] = (
               minimum=0.0),
     Parameter("control.kd", SHARED, Kind.DOUBLE_ARRAY, "K_D of eq (11)", per_joint=True,
               minimum=0.0),
+    Parameter("control.min_stiffness", SHARED, Kind.DOUBLE_ARRAY,
+              "absolute stiffness floor (N m/rad) of the feedback on the arm joints a patient's "
+              "joint acts on: K_P,j = max(kp_j, min_stiffness_j / I_j), I_j the joint's "
+              "lightest inertia along the reference, 1 / max_t (a_N(q_d)^-1)_jj; the floor "
+              "capped at (0.8 / control.period)^2 / 4 (core/loop/gains.py); 0: kp as given",
+              per_joint=True, minimum=0.0),
+    Parameter("control.min_damping", SHARED, Kind.DOUBLE_ARRAY,
+              "absolute damping floor (N m s/rad) of the feedback on the arm joints a patient's "
+              "joint acts on: K_D,j = max(kd_j, min_damping_j / I_j) (against a delayed stretch "
+              "reflex on a light joint); the floor capped at 0.8 / control.period "
+              "(core/loop/gains.py); 0: kd as given", per_joint=True, minimum=0.0),
     Parameter("control.effort_limit", SHARED, Kind.DOUBLE_ARRAY,
               "|effort| limit per joint (N m)", per_joint=True, strictly_positive=True),
     Parameter("safety.error_envelope", SHARED, Kind.DOUBLE_ARRAY,

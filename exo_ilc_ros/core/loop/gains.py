@@ -1,0 +1,71 @@
+"""The feedback gains the controller runs (:func:`feedback_gains`): ``control.kp`` and
+``control.kd`` (s^-2, s^-1, through a_N(q), eqs (11)/(16)), raised on a light joint to the
+absolute stiffness and damping ``control.min_stiffness`` (N m/rad) and ``control.min_damping``
+(N m s/rad) ask for (issue 33).
+
+Computed torque makes K_P and K_D arm-independent for the arm itself, but not against the
+patient: a patient's torque on joint j accelerates it by (a_N(q)^-1)_jj per N m, so the same
+K_D is a damping of only K_D / (a_N^-1)_jj N m s/rad against the patient's forces. On the
+paper arm's elbow (1 / max_t (a_N(q_d(t))^-1)_jj = 0.011 kg m^2) K_D 30 s^-1 is 0.33 N m s/rad
+against a MAS 3 stretch reflex of 2 N m s/rad, 0.1 s late: the elbow limit-cycles at ~5 Hz
+(``exo-ilc analyze-loop --patient-ranges``). So, on every arm joint a patient's joint acts on
+(``patient.joints``; every arm joint when it is empty), with I_j^-1 = max_t (a_N(q_d(t))^-1)_jj
+the joint's lightest inertia along the reference (the one the range analysis takes):
+
+    K_P,j = max(kp_j, min(min_stiffness_j I_j^-1, K_P,max)),
+    K_D,j = max(kd_j, min(min_damping_j I_j^-1, K_D,max)),                          (G)
+
+the floors capped at K_D,max = :data:`MAX_KD_PERIOD` / T and K_P,max = K_D,max^2 / 4 (critically
+damped at the cap; a kp or kd above them is the config's own and kept):
+a discrete PD with its command about a period late is stable only for K_D T below ~0.85
+(:mod:`.hold`), and a differentiated 14-bit encoder's velocity is that late. Arm joints no
+patient joint acts on keep kp and kd (the patient's forces act on them only through a_N^-1,
+a repeating disturbance learned like any other). With the minimums 0 (the default) the gains
+are ``control.kp`` and ``control.kd`` exactly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..arm.build import build_arm
+from ..params.config import Config
+from ..reference.build import build_reference
+from .patient import patient_joint_indices
+
+MAX_KD_PERIOD = 0.8
+"""K_D,max T of (G): below the ~0.85 at which a critically damped PD with its command one
+period late stops being stable (:mod:`.hold`)."""
+
+
+def lightest_inverse_inertia(config: Config) -> np.ndarray:
+    """max over the reference's samples of (a_N(q_d)^-1)_jj per arm joint (kg^-1 m^-2): the
+    acceleration per N m of a torque on joint j, the others free."""
+    positions = build_reference(config).position
+    tensors = build_arm(config).metric_tensors(positions)
+    inverse = np.linalg.inv(tensors)
+    return np.asarray(np.max(np.diagonal(inverse, axis1=1, axis2=2), axis=0))
+
+
+def gain_caps(period: float) -> tuple[float, float]:
+    """(K_P,max, K_D,max) of (G) at the control period ``period`` (s)."""
+    kd_max = MAX_KD_PERIOD / float(period)
+    return kd_max * kd_max / 4.0, kd_max
+
+
+def feedback_gains(config: Config) -> tuple[np.ndarray, np.ndarray]:
+    """(K_P, K_D) per arm joint by (G): what the controller, the learning law's memory and the
+    loop analyses use."""
+    kp = np.asarray(config["control.kp"], dtype=float)
+    kd = np.asarray(config["control.kd"], dtype=float)
+    min_stiffness = np.asarray(config["control.min_stiffness"], dtype=float)
+    min_damping = np.asarray(config["control.min_damping"], dtype=float)
+    if not (np.any(min_stiffness > 0.0) or np.any(min_damping > 0.0)):
+        return kp, kd
+    inverse = lightest_inverse_inertia(config)
+    kp_max, kd_max = gain_caps(config["control.period"])
+    on = patient_joint_indices(config)
+    kp, kd = kp.copy(), kd.copy()
+    kp[on] = np.maximum(kp[on], np.minimum(min_stiffness[on] * inverse[on], kp_max))
+    kd[on] = np.maximum(kd[on], np.minimum(min_damping[on] * inverse[on], kd_max))
+    return kp, kd

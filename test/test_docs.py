@@ -92,7 +92,9 @@ def prose_lines(path: Path) -> list[str]:
 
 def slug(title: str) -> str:
     """A heading's anchor as GitHub and MyST (``myst_heading_anchors``) make it."""
-    text = re.sub(r"[`*_]{1,2}(?=\S)|(?<=\S)[`*_]{1,2}", "", title.strip()).lower()
+    # markup out: code and strong/emphasis marks, but an underscore inside a word stays
+    # (`control.min_stiffness` -> controlmin_stiffness, as MyST makes it)
+    text = re.sub(r"`|\*{1,2}|(?<!\w)_{1,2}|_{1,2}(?!\w)", "", title.strip()).lower()
     text = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", text)
     return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
 

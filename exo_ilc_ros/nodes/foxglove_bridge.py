@@ -72,6 +72,7 @@ from ..wire.tf import TF
 from .bag_recorder import message_class
 from .common import Inbox, run_nodes
 from .parameters import command_line_parameters
+from .realtime import own_threads
 
 NAME = "foxglove_bridge"
 FORWARDED = topics.LIVE_TOPICS
@@ -323,7 +324,7 @@ def yield_to_the_loop(policy: str) -> str:
         return "normal"
     idle = policy == "idle" and hasattr(os, "SCHED_IDLE")
     try:
-        for tid in _threads():
+        for tid in own_threads():
             try:
                 if idle:
                     os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
@@ -337,14 +338,6 @@ def yield_to_the_loop(policy: str) -> str:
     except OSError as exc:
         return f"normal ({exc.strerror})"
     return ("SCHED_IDLE" if idle else "SCHED_BATCH, nice 10") + _nice_autogroup()
-
-
-def _threads() -> list[int]:
-    """This process's thread ids (0, the calling thread, where there is no /proc)."""
-    try:
-        return [int(tid) for tid in os.listdir("/proc/self/task")]
-    except OSError:
-        return [0]
 
 
 def _nice_autogroup() -> str:

@@ -64,10 +64,7 @@ def fifo_scheduling(priority: int) -> tuple[bool, str]:
         return False, f"{NORMAL} (no SCHED_FIFO on this system)"
     param = os.sched_param(priority)
     policy = os.SCHED_FIFO
-    try:
-        threads = [int(tid) for tid in os.listdir("/proc/self/task")]
-    except OSError:
-        threads = [0]  # no /proc: this thread only
+    threads = own_threads()
     done = 0
     for tid in threads:
         try:
@@ -84,6 +81,14 @@ def fifo_scheduling(priority: int) -> tuple[bool, str]:
             return False, (f"{NORMAL} (SCHED_FIFO {priority} refused: {exc.strerror}; needs "
                            f"CAP_SYS_NICE or an rtprio limit >= {priority}, now {soft})")
     return True, f"SCHED_FIFO {priority}"
+
+
+def own_threads() -> list[int]:
+    """This process's thread ids (``[0]``, the calling thread, where there is no /proc)."""
+    try:
+        return [int(tid) for tid in os.listdir("/proc/self/task")]
+    except OSError:
+        return [0]
 
 
 def plant_scheduling(node: Any, priority: int, lock_step: bool) -> str:

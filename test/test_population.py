@@ -289,6 +289,13 @@ def test_a_rows_file_serves_any_population_size_and_loses_no_patient(
     capsys.readouterr()
     assert main([*args, "--population", "2", "--seed", "4"]) == 2
     assert "another population or law" in capsys.readouterr().err
+    # the same files after the law's values changed: refused, not resumed under another law
+    (tmp_path / "short.yaml").write_text(
+        '"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.1\n')
+    assert main([*args, "--population", "2"]) == 2
+    assert "another population or law" in capsys.readouterr().err
+    assert sorted(json.loads(x)["outcome"]["index"]
+                  for x in rows.read_text().splitlines()[1:]) == [0, 1, 2]
 
 
 def test_pool_workers_run_one_blas_thread_and_give_the_same_bits(

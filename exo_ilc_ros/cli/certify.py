@@ -139,8 +139,10 @@ def certify(args: argparse.Namespace) -> int:
         f"{min(workers, len(cells))} local process(es)"
     print(f"certify {label}: {args.population} patients (seed {args.seed}) x {args.trials} "
           f"trials on {base.joints} joints, on {where}", file=sys.stderr)
+    # The law's digest: a rows file of the same files after the law changed is refused, not
+    # resumed with its patients run under another law.
     setup = {"label": label, "config": args.config, "overlays": overlays,
-             "population": args.population, "seed": args.seed, "trials": args.trials,
+             "law": base.digest(), "population": args.population, "seed": args.seed, "trials": args.trials,
              "encoder_share": args.encoder_share, "voluntary_share": args.voluntary_share}
     rows = Path(args.rows) if args.rows else \
         (Path(args.json).with_suffix(".rows.jsonl") if args.json else None)

@@ -142,8 +142,9 @@ def certify(args: argparse.Namespace) -> int:
     # The law's digest: a rows file of the same files after the law changed is refused, not
     # resumed with its patients run under another law.
     setup = {"label": label, "config": args.config, "overlays": overlays,
-             "law": base.digest(), "population": args.population, "seed": args.seed, "trials": args.trials,
-             "encoder_share": args.encoder_share, "voluntary_share": args.voluntary_share}
+             "law": base.digest(), "population": args.population, "seed": args.seed,
+             "trials": args.trials, "encoder_share": args.encoder_share,
+             "voluntary_share": args.voluntary_share}
     rows = Path(args.rows) if args.rows else \
         (Path(args.json).with_suffix(".rows.jsonl") if args.json else None)
     with progress_bar(total=len(cells), desc="certify", unit="patient") as bar:

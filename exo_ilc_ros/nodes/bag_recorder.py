@@ -29,7 +29,8 @@ Parameters (the recorder's own, not part of the experiment's schema):
 ``bag_path`` (default ``bags/<run_name>``), ``run_name`` (default ``run_<date>-<time>``),
 ``config_file`` (the run's effective parameter YAML, for the provenance), ``split_every``
 (trials per storage file, default 1; 0: one file), ``storage`` (``mcap`` or ``sqlite3``),
-``relay`` (a Unix socket path: hand every message of ``topics.LIVE_TOPICS`` it takes to the
+``relay`` (a Unix socket path: hand every message of ``topics.LIVE_TOPICS`` (and of
+``topics.PERSON_LIVE_TOPICS``) it takes to the
 live view listening there, at the bag's log time, :mod:`~exo_ilc_ros.wire.relay`; then the
 other topics are also taken every :data:`RELAY_PERIOD`, and written when they would be
 without a view; default none) and ``relay_rate`` (the
@@ -83,8 +84,9 @@ READY_TOPICS = (topics.JOINT_STATES, topics.CLOCK, topics.EFFORT_COMMANDS, topic
 each reader-writer pair is discovered on its own, and a volatile topic published before its
 pair matched is lost to the recorder (/clock was not waited for, and once its first 26
 messages of trial 1 were missing)."""
-LIVE = frozenset(topics.LIVE_TOPICS)
-"""Topics relayed to the live view (``relay``)."""
+LIVE = frozenset((*topics.LIVE_TOPICS, *topics.PERSON_LIVE_TOPICS))
+"""Topics relayed to the live view (``relay``; the person's only where recorded: a person's
+run)."""
 VIEWED = frozenset({topics.JOINT_STATES, topics.FEEDFORWARD})
 """Topics the arm's view (/tf) is computed from."""
 PROTOCOL_TOPICS = frozenset({topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.PARAMETER_EVENTS})
@@ -180,7 +182,7 @@ class BagRecorder(Node):
         self.events = Inbox(self, "events")  # PROTOCOL_TOPICS, read at every poll
         self.inbox = Inbox(self)  # every other topic, taken at events (see poll)
         self.subscriptions_by_topic: dict[str, Any] = {}
-        recorded = {**topics.TYPES, **(topics.CUFF_TYPES if str(
+        recorded = {**topics.TYPES, **(topics.PERSON_TYPES if str(
             config["musculoskeletal.model"]) != "none" else {})}  # a person: the cuffs too
         for topic, msgtype in recorded.items():
             self.writer.add_topic(topic, msgtype, offered_qos(topic))

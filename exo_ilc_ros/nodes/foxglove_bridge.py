@@ -8,7 +8,8 @@ forwards the bytes untouched, each logged at its sim time
 (:class:`~exo_ilc_ros.wire.sim_time.SimClock`, the bags' rule), on channels advertised with
 their ``ros2msg`` schema:
 ``/joint_states``, ``/effort_controller/commands``, ``/ilc/feedforward``, ``/clock``,
-``/ilc/trial_events``, ``/ilc/trial_summary``, ``/ilc/trial_metrics``, ``/diagnostics``. It
+``/ilc/trial_events``, ``/ilc/trial_summary``, ``/ilc/trial_metrics``, ``/diagnostics``, and
+with a person strapped in (``musculoskeletal.model``) each cuff's ``/cuffs/<cuff>/wrench``. It
 adds the arm's view (:class:`~exo_ilc_ros.bag.view.ArmView`, the same messages every bag
 holds): ``/robot_description`` (``std_msgs/String``, the arm's URDF from the run's config),
 ``/reference/robot_description`` (the same arm, links prefixed ``reference/``) and ``/tf``
@@ -64,7 +65,7 @@ from ..bag.messages import typestore
 from ..bag.view import ArmView
 from ..core.arm.assets import AssetResolver, urdf_packages
 from ..core.errors import ConfigError
-from ..core.params.config import load_config, urdf_source
+from ..core.params.config import Config, load_config, urdf_source
 from ..wire import topics
 from ..wire.relay import DISPLAY_RATE, RelayReceiver, SampleGate
 from ..wire.sim_time import SimClock
@@ -94,6 +95,14 @@ DEFAULT_SCHEDULING = "idle"
 """The view yields to the control loop (:func:`yield_to_the_loop`): on a busy machine it falls
 behind (its readers hold 10 000 messages per topic; a client then sees the run late, or loses
 the oldest), never the loop."""
+
+
+def forwarded_topics(config: Config) -> tuple[str, ...]:
+    """The graph's topics the view forwards for the run of ``config``: :data:`FORWARDED`, and
+    with a person strapped in (``musculoskeletal.model``) :data:`topics.PERSON_LIVE_TOPICS`
+    (the cuffs' wrenches per sample)."""
+    person = str(config["musculoskeletal.model"]) != "none"
+    return (*FORWARDED, *(topics.PERSON_LIVE_TOPICS if person else ()))
 
 
 SAMPLED = topics.PER_SAMPLE
@@ -169,9 +178,11 @@ class FoxgloveBridge(Node):
             topic: [(0, raw)] for topic, raw in self.view.descriptions().items()}
         self._trial: dict[str, list[tuple[int, bytes]]] = {topic: [] for topic in SAMPLED}
         """The current trial's per-sample messages shown so far (for a late viewer)."""
+        forwarded = forwarded_topics(config)
+        types = {**topics.BAG_TYPES, **topics.PERSON_TYPES}
         self.channels: dict[str, Channel] = {
-            topic: ros2_channel(topic, topics.BAG_TYPES[topic])
-            for topic in (*FORWARDED, *topics.VIEW_TYPES)}
+            topic: ros2_channel(topic, types[topic]) for topic in (*forwarded,
+                                                                   *topics.VIEW_TYPES)}
         try:
             self.server = foxglove.start_server(
                 name="exo_ilc_ros", host=host, port=port, capabilities=[Capability.Time],
@@ -189,9 +200,8 @@ class FoxgloveBridge(Node):
             raise ConfigError("sample_rate", str(exc), NAME) from None
         self.relay = RelayReceiver(relay) if relay else None
         self.inbox = Inbox(self)
-        for topic in FORWARDED if self.relay is None else ():
-            self.inbox.subscribe(message_class(topics.TYPES[topic]), topic,
-                                 reader_qos(topic, samples))
+        for topic in forwarded if self.relay is None else ():
+            self.inbox.subscribe(message_class(types[topic]), topic, reader_qos(topic, samples))
         self.forwarded = 0
         feed = f"fed by the recorder at {relay}" if relay else "reading the graph's topics"
         # started at the priority it was given (imports, middleware, server: a few s of CPU

@@ -56,8 +56,14 @@ and the bag writers compute them from the recorded samples and feed-forward."""
 LIVE_TOPICS = (JOINT_STATES, EFFORT_COMMANDS, FEEDFORWARD, CLOCK, TRIAL_EVENTS, TRIAL_SUMMARY,
                TRIAL_METRICS, DIAGNOSTICS)
 """The graph's topics the live view forwards as they are (besides :data:`VIEW_TYPES`)."""
-PER_SAMPLE = frozenset({JOINT_STATES, EFFORT_COMMANDS, CLOCK})
-"""The control loop's per-sample topics (a view that falls behind may lose these, only)."""
+PERSON_LIVE_TOPICS = CUFF_WRENCHES
+"""With a person strapped in (``musculoskeletal.model``), the live view forwards these too, as
+they are (their types: :data:`PERSON_TYPES`)."""
+PERSON_TYPES: dict[str, str] = {**CUFF_TYPES}
+"""The topics a person's run adds to the graph's recorded ones, and their types."""
+PER_SAMPLE = frozenset({JOINT_STATES, EFFORT_COMMANDS, CLOCK, *CUFF_WRENCHES})
+"""The control loop's per-sample topics (a view that falls behind may lose these, only; the
+live view shows each at its display rate)."""
 
 BAG_TYPES: dict[str, str] = {**TYPES, **VIEW_TYPES}
 """Every topic a bag lists (the graph's recorder and ``exo-ilc simulate --bag`` alike)."""

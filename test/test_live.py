@@ -35,6 +35,7 @@ from exo_ilc_ros.core.arm.build import build_arm
 from exo_ilc_ros.core.arm.forward_kinematics import UrdfKinematics, quaternion
 from exo_ilc_ros.core.arm.urdf import arm_urdf
 from exo_ilc_ros.core.params.config import load_config
+from exo_ilc_ros.core.person.display import PERSON_WORLD
 from exo_ilc_ros.orchestration.live import LiveView
 from exo_ilc_ros.wire import topics
 from exo_ilc_ros.wire.tf import TF, TF_TYPE, tf_message
@@ -823,6 +824,7 @@ def test_a_persons_layout_draws_each_cuffs_force_per_sample_and_per_trial(
     the same entries; a run without a person has no cuff plot (above)."""
     from exo_ilc_ros.cli.main import main
     from exo_ilc_ros.core.person.cuffs import CUFF_METRICS, CUFFS
+    from exo_ilc_ros.orchestration.live_layout import _three_d
 
     config = load_config(ELBOW)
     names = list(config["joint_names"])
@@ -869,6 +871,10 @@ def test_a_persons_layout_draws_each_cuffs_force_per_sample_and_per_trial(
                 assert field == f"wrench.force.{axis}"
                 shown.add((CUFFS[c], axis))
     assert shown == {(c, m) for c in CUFFS for m in (*titles.values(), "x", "y", "z")}
+    person = panels["3D!arm"]["layers"]["person"]  # the person from its own URDF
+    assert (person["layerId"], person["sourceType"], person["topic"]) == \
+        ("foxglove.Urdf", "topic", topics.PERSON_DESCRIPTION)
+    assert "person" not in _three_d("foxglove", "base_link")["layers"]
     xml = tmp_path / "elbow.xml"
     assert main(["layout", "--config", str(ELBOW), "--plotjuggler", "-o", str(xml)]) == 0
     curves = {c.get("name") for c in ET.parse(xml).iter("curve")}
@@ -885,12 +891,14 @@ def test_a_persons_layout_draws_each_cuffs_force_per_sample_and_per_trial(
 
 @pytest.mark.graph
 @pytest.mark.parametrize("relayed", [True, False], ids=["relay", "dds"])
-def test_the_live_view_forwards_a_persons_cuff_wrenches(tmp_path: Path, relayed: bool) -> None:
+def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(tmp_path: Path,
+                                                                      relayed: bool) -> None:
     """``exo-ilc run --live`` with the elbow model (2 trials of 0.5 s), fed by the recorder's
     relay or, with ``--no-bag``, reading DDS (reliable, so none is lost): the view advertises each
     ``/cuffs/<cuff>/wrench`` with its ros2msg schema and forwards every sample's wrench
     (every one at ``--live-rate 0``), logged at its stamp, equal to the bag's (relay) or to
-    ``simulate``'s (DDS) wrench of that sample."""
+    ``simulate``'s (DDS) wrench of that sample; and it draws the person: its URDF, its joints
+    per sample and the person's /tf per sample, equal to the bag's (or simulate's)."""
     from exo_ilc_ros.bag import read_bag
 
     overlay = tmp_path / "short.yaml"
@@ -939,3 +947,28 @@ def test_the_live_view_forwards_a_persons_cuff_wrenches(tmp_path: Path, relayed:
             w = wrench[k][(stamp - starts[k - 1]) // period, c]  # type: ignore[index]
             f, t = msg.wrench.force, msg.wrench.torque
             assert [f.x, f.y, f.z, t.x, t.y, t.z] == list(w), (topic, stamp)
+
+    # The person drawn: its URDF (latched, once in the bag), its joints per sample and their
+    # /tf, as the bag (relay) or simulate's bag (DDS: the in-process run) holds them.
+    reference = _bag_messages(bag)
+    ((_, _, description),) = reference[topics.PERSON_DESCRIPTION]
+    assert {m.data for _, m in live[topics.PERSON_DESCRIPTION]} == {description.data}
+    for topic, schema in ((topics.PERSON_DESCRIPTION, "std_msgs/msg/String"),
+                          (topics.PERSON_JOINT_STATES, "sensor_msgs/msg/JointState")):
+        (channel,) = [c for c in received.channels.values() if c["topic"] == topic]
+        assert channel["schemaName"] == schema
+    person = {_stamp(m): m for _, m in live[topics.PERSON_JOINT_STATES]}
+    expected = {_stamp(m): m for _, _, m in reference[topics.PERSON_JOINT_STATES]}
+    assert sorted(person) == sorted(expected) == sorted(samples)
+    for stamp, msg in expected.items():
+        got = person[stamp]
+        assert list(got.name) == list(msg.name) and list(got.position) == list(msg.position)
+        assert list(got.velocity) == list(msg.velocity)
+
+    def person_tf(messages: list[Any]) -> dict[int, tuple[Any, ...]]:
+        return {_stamp(m.transforms[0]): _transform_values(m) for m in messages
+                if any(t.child_frame_id == PERSON_WORLD for t in m.transforms)}
+
+    drawn = person_tf([m for _, m in live[TF]])
+    assert sorted(drawn) == sorted(samples)
+    assert drawn == person_tf([m for _, _, m in reference[TF]])

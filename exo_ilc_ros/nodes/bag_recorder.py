@@ -17,6 +17,9 @@ bag as one batch (``BagWriter.write_many``).
 The bag also holds the arm as the live view shows it (:class:`~exo_ilc_ros.bag.view.ArmView`,
 the view's own code): ``/robot_description`` and ``/reference/robot_description`` once, at the
 start, and a ``/tf`` per recorded JointState at its stamp (publish time: the JointState's).
+With a person strapped in, also the person's display URDF and joints (recorded as the plant
+publishes them) and a ``/tf`` of the person's frames per ``/person/joint_states`` sample
+(:meth:`~exo_ilc_ros.bag.view.ArmView.person_tf`).
 The transforms are computed when a trial's file is finished (:meth:`BagRecorder._split`),
 between trials, never within one.
 ``exo-ilc run`` starts it in the supervisor's process (``container ilc_supervisor
@@ -87,8 +90,9 @@ messages of trial 1 were missing)."""
 LIVE = frozenset((*topics.LIVE_TOPICS, *topics.PERSON_LIVE_TOPICS))
 """Topics relayed to the live view (``relay``; the person's only where recorded: a person's
 run)."""
-VIEWED = frozenset({topics.JOINT_STATES, topics.FEEDFORWARD})
-"""Topics the arm's view (/tf) is computed from."""
+VIEWED = frozenset({topics.JOINT_STATES, topics.FEEDFORWARD, topics.PERSON_JOINT_STATES,
+                    topics.PERSON_DESCRIPTION})
+"""Topics the arm's view (/tf) is computed from (and, a person strapped in, the person's)."""
 PROTOCOL_TOPICS = frozenset({topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.PARAMETER_EVENTS})
 """Topics the recorder reads as well as writes (trial boundaries, parameter changes); the rest
 are written in batches."""
@@ -274,7 +278,14 @@ class BagRecorder(Node):
         if view is None:
             return 0
         batch: list[tuple[int, str, bytes, int]] = []
-        for received, topic, raw in pending:
+        for received, topic, raw in sorted(  # the person's URDF before its samples
+                pending, key=lambda m: m[1] != topics.PERSON_DESCRIPTION):
+            if topic == topics.PERSON_DESCRIPTION:
+                try:
+                    view.load_person(raw)
+                except ValueError as exc:
+                    self.get_logger().warning(f"/tf without the person: {exc}", once=True)
+                continue
             if topic == topics.FEEDFORWARD:
                 try:
                     view.load_reference(raw)
@@ -282,7 +293,7 @@ class BagRecorder(Node):
                     self.get_logger().warning(f"/tf without the reference arm: {exc}",
                                               once=True)
                 continue
-            tf = view.tf(raw)
+            tf = view.sample_tf(topic, raw)
             if tf is not None:
                 batch.append((tf[0], topics.TF, tf[1], received))
         written = self.writer.write_many(batch)

@@ -6,7 +6,8 @@ per-trial numbers the run has (``/ilc/trial_metrics``; the identified B only wit
 ``identification.enabled``, the step gain M only under the sign law) and, with a person
 strapped in (``musculoskeletal.model``), the cuff forces: per sample the force components of
 each cuff (``/cuffs/<cuff>/wrench``) and per trial each cuff's peak and RMS |F| (the metrics'
-cuff block, :func:`cuff_index`).
+cuff block, :func:`cuff_index`), and the 3D panel draws the person from its own URDF
+(``/person/robot_description``, a URDF layer) on the /tf the view computes.
 
 Per-trial series are placed by the layout the metrics message declares
 (:func:`~exo_ilc_ros.wire.trial_metrics.index`: ``data_offset`` + row x joints + joint, the
@@ -229,6 +230,15 @@ def foxglove_layout(arm: ArmLayout, app: str = "foxglove") -> dict[str, Any]:
     metrics = topics.TRIAL_METRICS
     trial = f"{metrics}.data[0]"
     panels: dict[str, Any] = {"3D!arm": _three_d(app, arm.root_link)}
+    if arm.cuffs:  # a person strapped in: drawn from its own URDF, on /tf as simulated
+        three_d = panels["3D!arm"]
+        three_d[TITLE_KEYS[app]] = ("the arm (measured), the reference q_d (orange) and the "
+                                    "person")
+        three_d["layers"]["person"] = {
+            "layerId": "foxglove.Urdf", "instanceId": "person",
+            "label": "the person (person/ frames)", "visible": True, "frameLocked": True,
+            "sourceType": "topic", "topic": topics.PERSON_DESCRIPTION, "displayMode": "auto",
+            "order": 3}
     panels["Plot!tracking_error"] = _plot(
         app, "tracking error e = q_d - q, rad (script tracking_error)",
         [_series(f"{SCRIPT_TOPIC}.error[{j}]", n, j, "headerStamp")

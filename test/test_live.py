@@ -908,18 +908,35 @@ def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(tmp_path: P
     client = threading.Thread(target=collect, args=(f"ws://127.0.0.1:{port}", 120.0),
                               kwargs={"received": received}, daemon=True)
     client.start()
+    late = Received()
+
+    def join_late() -> None:
+        """Connected once trial 1's metrics went out: the person's URDF is sent again."""
+        deadline = time.monotonic() + 250
+        while not received.messages.get(topics.TRIAL_METRICS) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        collect(f"ws://127.0.0.1:{port}", 30.0, received=late)
+
+    late_client = threading.Thread(target=join_late, daemon=True)
+    late_client.start()
     main_args = [sys.executable, "-m", "exo_ilc_ros.cli.main"]
     storage = ["--bag-dir", str(tmp_path / "bags")] if relayed else [
         "--no-bag", "--live-param", "sample_reliability:=reliable"]  # no sample lost to DDS
     run = subprocess.run(
         [*main_args, "run", "--config", str(ELBOW), "--scenario", str(overlay), "--trials", "2",
          "--live", "--live-port", str(port), "--live-rate", "0", *storage, "--no-store",
+         "--live-pace", "1.0",  # 0.5 s of wall time per trial: time for the late client
          "--quiet"], text=True, capture_output=True, timeout=300, stdin=subprocess.DEVNULL,
         check=False)
     assert run.returncode == 0, run.stderr[-3000:]
     client.join(30)
+    late_client.join(30)
     assert not client.is_alive()
     live = _decoded(received)
+    assert late.first_subscribed is not None and received.first_subscribed is not None
+    assert late.first_subscribed > received.first_subscribed
+    assert [m.data for _, m in _decoded(late)[topics.PERSON_DESCRIPTION]][:1] == \
+        [m.data for _, m in live[topics.PERSON_DESCRIPTION]]
     for topic in topics.CUFF_WRENCHES:
         (channel,) = [c for c in received.channels.values() if c["topic"] == topic]
         assert channel["schemaName"] == "geometry_msgs/msg/WrenchStamped"

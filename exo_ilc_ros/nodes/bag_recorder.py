@@ -187,12 +187,17 @@ class BagRecorder(Node):
         self.inbox = Inbox(self)  # every other topic, taken at events (see poll)
         self.subscriptions_by_topic: dict[str, Any] = {}
         recorded = {**topics.TYPES, **(topics.PERSON_TYPES if str(
-            config["musculoskeletal.model"]) != "none" else {})}  # a person: the cuffs too
+            config["musculoskeletal.model"]) != "none" else {})}  # a person: its topics too
         for topic, msgtype in recorded.items():
             self.writer.add_topic(topic, msgtype, offered_qos(topic))
             inbox = self.events if topic in PROTOCOL_TOPICS else self.inbox
             self.subscriptions_by_topic[topic] = inbox.subscribe(
                 message_class(msgtype), topic, subscription_qos(topic))
+        self.ready_topics = (*READY_TOPICS, *sorted(topic for topic in topics.PER_SAMPLE
+                                                    if topic in topics.PERSON_TYPES
+                                                    and topic in recorded))
+        """:data:`READY_TOPICS`, and a person's per-sample topics when recorded (volatile as
+        the samples: a reader matched late would miss the first)."""
         for topic, msgtype in topics.VIEW_TYPES.items():  # computed here, not subscribed to
             self.writer.add_topic(topic, msgtype, offered_qos(topic))
         for topic, raw in (self.view.descriptions() if self.view else {}).items():
@@ -214,10 +219,10 @@ class BagRecorder(Node):
         self.get_logger().info(f"recording {len(recorded)} topics to {path}")
 
     def on_status_timer(self) -> None:
-        """``ready`` on /diagnostics once the subscription of every :data:`READY_TOPICS` is
+        """``ready`` on /diagnostics once the subscription of every :attr:`ready_topics` is
         matched with a publisher (the supervisor waits for it when ``wait_for_recorder`` is
         set)."""
-        missing = [topic for topic in READY_TOPICS
+        missing = [topic for topic in self.ready_topics
                    if self.subscriptions_by_topic[topic].get_publisher_count() < 1]
         message = "waiting" if missing else "ready"
         values = [*self.status_values(), *(("waiting_for", topic) for topic in missing)]

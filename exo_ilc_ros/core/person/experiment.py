@@ -106,8 +106,7 @@ class StrappedExperiment(Experiment):
             q_log[i] = q
             qd_log[i] = qd
             wrench_log[i] = arm.wrench
-            person_q[i] = arm.person_qpos()
-            person_qd[i] = arm.person_qvel()
+            arm.person_state_into(person_q[i], person_qd[i])
             if state[ABORT] < 0 and beyond_cuff_limit(arm.wrench, limit) >= 0:
                 state[ABORT] = i
                 state[HOLD_COUNT] = 0

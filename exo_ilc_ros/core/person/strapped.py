@@ -306,6 +306,7 @@ class StrappedArm:
         """Force (N) and torque (N m) each cuff applies to the person at the state of the
         last :meth:`measure` (or step), in the cuff's frame."""
         self._fresh = False
+        self._person_views: tuple[np.ndarray, np.ndarray] | None = None
         self.applied = np.zeros(n)
         self._no_count = np.zeros(n, dtype=np.int64)
         if drive is not None:
@@ -449,6 +450,17 @@ class StrappedArm:
     def person_qpos(self) -> np.ndarray:
         """The person's joint angles (rad, the model's person joints, a copy)."""
         return np.array(self.data.qpos[:self.model.nq - len(self.joint_names)])
+
+    def person_state_into(self, position: np.ndarray, velocity: np.ndarray) -> None:
+        """The person's joint angles and velocities (as :meth:`person_qpos`,
+        :meth:`person_qvel`) into ``position``, ``velocity``, without allocating (per
+        sample)."""
+        if self._person_views is None:
+            n = len(self.joint_names)
+            self._person_views = (self.data.qpos[:self.model.nq - n],
+                                  self.data.qvel[:self.model.nv - n])
+        position[:] = self._person_views[0]
+        velocity[:] = self._person_views[1]
 
     def person_qvel(self) -> np.ndarray:
         """The person's joint velocities (rad/s, as :meth:`person_qpos`, a copy)."""

@@ -103,7 +103,7 @@ the oldest), never the loop."""
 def forwarded_topics(config: Config) -> tuple[str, ...]:
     """The graph's topics the view forwards for the run of ``config``: :data:`FORWARDED`, and
     with a person strapped in (``musculoskeletal.model``) :data:`topics.PERSON_LIVE_TOPICS`
-    (the cuffs' wrenches per sample)."""
+    (the cuffs' wrenches and the person's joints per sample, the person's display URDF)."""
     person = str(config["musculoskeletal.model"]) != "none"
     return (*FORWARDED, *(topics.PERSON_LIVE_TOPICS if person else ()))
 

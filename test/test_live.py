@@ -35,6 +35,7 @@ from exo_ilc_ros.core.arm.build import build_arm
 from exo_ilc_ros.core.arm.forward_kinematics import UrdfKinematics, quaternion
 from exo_ilc_ros.core.arm.urdf import arm_urdf
 from exo_ilc_ros.core.params.config import load_config
+from exo_ilc_ros.core.person.display import PERSON_WORLD
 from exo_ilc_ros.orchestration.live import LiveView
 from exo_ilc_ros.wire import topics
 from exo_ilc_ros.wire.tf import TF, TF_TYPE, tf_message
@@ -794,3 +795,197 @@ def test_the_bridge_starts_at_its_priority_then_serves_below_the_loop(tmp_path: 
         process.terminate()
         process.wait(timeout=30)
     assert "scheduling: SCHED_IDLE" in log.read_text()
+
+
+# ---- a person strapped in: the cuffs' forces live and in the layouts (issue 34) ----
+
+ELBOW = ROOT / "config" / "myoelbow.yaml"
+SHORT_PERSON = ('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 0.5\n'
+                'plant_simulator:\n  ros__parameters:\n    musculoskeletal:\n'
+                '      settle_time: 0.2\n')
+"""Laid over config/myoelbow.yaml: 0.5 s trials, 0.2 s of settling (a short graph)."""
+
+
+def _wrench_message(force: tuple[float, float, float]) -> Any:
+    store = typestore()
+    vector = store.types["geometry_msgs/msg/Vector3"]
+    return store.types["geometry_msgs/msg/WrenchStamped"](
+        header=store.types["std_msgs/msg/Header"](
+            stamp=store.types["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=""),
+        wrench=store.types["geometry_msgs/msg/Wrench"](force=vector(*force),
+                                                       torque=vector(0.0, 0.0, 0.0)))
+
+
+def test_a_persons_layout_draws_each_cuffs_force_per_sample_and_per_trial(
+        tmp_path: Path) -> None:
+    """``exo-ilc layout`` for the elbow model: per trial each cuff's peak and RMS |F|, the
+    path resolving against a metrics message with cuff values (decoded by its labels) to that
+    cuff's value; per sample each cuff's force components from its wrench topic; PlotJuggler
+    the same entries; a run without a person has no cuff plot (above)."""
+    from exo_ilc_ros.cli.main import main
+    from exo_ilc_ros.core.person.cuffs import CUFF_METRICS, CUFFS
+    from exo_ilc_ros.orchestration.live_layout import _three_d
+
+    config = load_config(ELBOW)
+    names = list(config["joint_names"])
+    values = {"trial": "7"}
+    for c, cuff in enumerate(CUFFS):
+        for m, metric in enumerate(CUFF_METRICS):
+            values[f"cuff/{cuff}/{metric}"] = str(1000 + 10 * c + m + 0.5)
+    array = trial_metrics(values, names, warn=False)
+    store = typestore()
+    layout_type = store.types["std_msgs/msg/MultiArrayLayout"]
+    metrics = store.types["std_msgs/msg/Float64MultiArray"](
+        layout=layout_type(dim=[store.types["std_msgs/msg/MultiArrayDimension"](
+            label=d.label, size=d.size, stride=d.stride) for d in array.dims],
+            data_offset=array.data_offset), data=np.asarray(array.data))
+    decoded = decode([d.label for d in metrics.layout.dim], metrics.layout.data_offset,
+                     list(metrics.data))["cuff"]
+    assert isinstance(decoded, dict)
+    wrenches = {topic: _wrench_message((c + 0.1, c + 0.2, c + 0.3))
+                for c, topic in enumerate(topics.CUFF_WRENCHES)}
+    out = tmp_path / "elbow.json"
+    assert main(["layout", "--config", str(ELBOW), "-o", str(out)]) == 0
+    panels = json.loads(out.read_text())["configById"]
+    titles = {"peak cuff force": "peak_force_N", "RMS cuff force": "rms_force_N"}
+    shown = set()
+    for panel in panels.values():
+        title = str(panel.get("foxglovePanelTitle", ""))
+        metric = [m for text, m in titles.items() if title.startswith(text)]
+        if metric:
+            assert [p["label"] for p in panel["paths"]] == list(CUFFS)
+            for p in panel["paths"]:
+                got = _resolve(p["value"], {topics.TRIAL_METRICS: metrics})
+                assert got == decoded[f"{p['label']}/{metric[0]}"], (title, p)
+                shown.add((p["label"], metric[0]))
+        elif title.startswith("cuff force on the person"):
+            labels = [p["label"] for p in panel["paths"]]
+            assert labels == [f"{c} F{a}" for c in CUFFS for a in "xyz"]
+            for p in panel["paths"]:
+                topic, _, field = p["value"].partition(".")
+                c = topics.CUFF_WRENCHES.index(topic)
+                assert p["label"].startswith(CUFFS[c])
+                axis = field.rpartition(".")[2]
+                assert getattr(wrenches[topic].wrench.force, axis) == \
+                    (c + 0.1, c + 0.2, c + 0.3)["xyz".index(axis)]
+                assert field == f"wrench.force.{axis}"
+                shown.add((CUFFS[c], axis))
+    assert shown == {(c, m) for c in CUFFS for m in (*titles.values(), "x", "y", "z")}
+    person = panels["3D!arm"]["layers"]["person"]  # the person from its own URDF
+    assert (person["layerId"], person["sourceType"], person["topic"]) == \
+        ("foxglove.Urdf", "topic", topics.PERSON_DESCRIPTION)
+    assert "person" not in _three_d("foxglove", "base_link")["layers"]
+    xml = tmp_path / "elbow.xml"
+    assert main(["layout", "--config", str(ELBOW), "--plotjuggler", "-o", str(xml)]) == 0
+    curves = {c.get("name") for c in ET.parse(xml).iter("curve")}
+    for cuff, topic in zip(CUFFS, topics.CUFF_WRENCHES, strict=True):
+        assert {f"{topic}/wrench/force/{a}" for a in "xyz"} <= curves
+        for metric in titles.values():
+            entry = next(i for i, v in enumerate(metrics.data)
+                         if v == float(values[f"cuff/{cuff}/{metric}"]))
+            assert f"{topics.TRIAL_METRICS}/data[{entry}]" in curves
+    plain = tmp_path / "plain.xml"
+    assert main(["layout", "--plotjuggler", "-o", str(plain)]) == 0
+    assert "/cuffs/" not in plain.read_text()
+
+
+@pytest.mark.graph
+@pytest.mark.parametrize("relayed", [True, False], ids=["relay", "dds"])
+def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(tmp_path: Path,
+                                                                      relayed: bool) -> None:
+    """``exo-ilc run --live`` with the elbow model (2 trials of 0.5 s), fed by the recorder's
+    relay or, with ``--no-bag``, reading DDS (reliable, so none is lost): the view advertises each
+    ``/cuffs/<cuff>/wrench`` with its ros2msg schema and forwards every sample's wrench
+    (every one at ``--live-rate 0``), logged at its stamp, equal to the bag's (relay) or to
+    ``simulate``'s (DDS) wrench of that sample; and it draws the person: its URDF, its joints
+    per sample and the person's /tf per sample, equal to the bag's (or simulate's)."""
+    from exo_ilc_ros.bag import read_bag
+
+    overlay = tmp_path / "short.yaml"
+    overlay.write_text(SHORT_PERSON)
+    port = _free_port()
+    received = Received()
+    client = threading.Thread(target=collect, args=(f"ws://127.0.0.1:{port}", 120.0),
+                              kwargs={"received": received}, daemon=True)
+    client.start()
+    late = Received()
+
+    def join_late() -> None:
+        """Connected once trial 1's metrics went out: the person's URDF is sent again."""
+        deadline = time.monotonic() + 250
+        while not received.messages.get(topics.TRIAL_METRICS) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        collect(f"ws://127.0.0.1:{port}", 30.0, received=late)
+
+    late_client = threading.Thread(target=join_late, daemon=True)
+    late_client.start()
+    main_args = [sys.executable, "-m", "exo_ilc_ros.cli.main"]
+    storage = ["--bag-dir", str(tmp_path / "bags")] if relayed else [
+        "--no-bag", "--live-param", "sample_reliability:=reliable"]  # no sample lost to DDS
+    run = subprocess.run(
+        [*main_args, "run", "--config", str(ELBOW), "--scenario", str(overlay), "--trials", "2",
+         "--live", "--live-port", str(port), "--live-rate", "0", *storage, "--no-store",
+         "--live-pace", "1.0",  # 0.5 s of wall time per trial: time for the late client
+         "--quiet"], text=True, capture_output=True, timeout=300, stdin=subprocess.DEVNULL,
+        check=False)
+    assert run.returncode == 0, run.stderr[-3000:]
+    client.join(30)
+    late_client.join(30)
+    assert not client.is_alive()
+    live = _decoded(received)
+    assert late.first_subscribed is not None and received.first_subscribed is not None
+    assert late.first_subscribed > received.first_subscribed
+    assert [m.data for _, m in _decoded(late)[topics.PERSON_DESCRIPTION]][:1] == \
+        [m.data for _, m in live[topics.PERSON_DESCRIPTION]]
+    for topic in topics.CUFF_WRENCHES:
+        (channel,) = [c for c in received.channels.values() if c["topic"] == topic]
+        assert channel["schemaName"] == "geometry_msgs/msg/WrenchStamped"
+        assert all(log == _stamp(m) for log, m in live[topic])
+    if relayed:
+        (bag,) = list((tmp_path / "bags").iterdir())
+        wrench = {k: t.cuff_wrench for k, t in read_bag(bag).trials.items()}
+        samples = {_stamp(m): m for _, _, m in _bag_messages(bag)[topics.JOINT_STATES]}
+    else:  # the graph's trials are the in-process ones (tested elsewhere): simulate's
+        sim = subprocess.run([*main_args, "simulate", "--config", str(ELBOW), "--scenario",
+                              str(overlay), "--trials", "2", "--bag", str(tmp_path / "sim")],
+                             text=True, capture_output=True, timeout=300, check=False)
+        assert sim.returncode == 0, sim.stderr[-3000:]
+        (bag,) = list((tmp_path / "sim").iterdir())
+        wrench = {k: t.cuff_wrench for k, t in read_bag(bag).trials.items()}
+        samples = {_stamp(m): m for _, _, m in _bag_messages(bag)[topics.JOINT_STATES]}
+    period = int(load_config(ELBOW)["control.period"] * 1e9)
+    starts = sorted({_stamp(m) for _, m in live[topics.FEEDFORWARD]})[:2]  # (and the next's)
+    assert len(starts) == 2 and sorted(wrench) == [1, 2]
+    for c, topic in enumerate(topics.CUFF_WRENCHES):
+        shown = {_stamp(m): m for _, m in live[topic]}
+        assert sorted(shown) == sorted(samples)  # every sample's, at its stamp
+        for stamp, msg in shown.items():
+            k = max(i for i, t0 in enumerate(starts, start=1) if t0 <= stamp)
+            w = wrench[k][(stamp - starts[k - 1]) // period, c]  # type: ignore[index]
+            f, t = msg.wrench.force, msg.wrench.torque
+            assert [f.x, f.y, f.z, t.x, t.y, t.z] == list(w), (topic, stamp)
+
+    # The person drawn: its URDF (latched, once in the bag), its joints per sample and their
+    # /tf, as the bag (relay) or simulate's bag (DDS: the in-process run) holds them.
+    reference = _bag_messages(bag)
+    ((_, _, description),) = reference[topics.PERSON_DESCRIPTION]
+    assert {m.data for _, m in live[topics.PERSON_DESCRIPTION]} == {description.data}
+    for topic, schema in ((topics.PERSON_DESCRIPTION, "std_msgs/msg/String"),
+                          (topics.PERSON_JOINT_STATES, "sensor_msgs/msg/JointState")):
+        (channel,) = [c for c in received.channels.values() if c["topic"] == topic]
+        assert channel["schemaName"] == schema
+    person = {_stamp(m): m for _, m in live[topics.PERSON_JOINT_STATES]}
+    expected = {_stamp(m): m for _, _, m in reference[topics.PERSON_JOINT_STATES]}
+    assert sorted(person) == sorted(expected) == sorted(samples)
+    for stamp, msg in expected.items():
+        got = person[stamp]
+        assert list(got.name) == list(msg.name) and list(got.position) == list(msg.position)
+        assert list(got.velocity) == list(msg.velocity)
+
+    def person_tf(messages: list[Any]) -> dict[int, tuple[Any, ...]]:
+        return {_stamp(m.transforms[0]): _transform_values(m) for m in messages
+                if any(t.child_frame_id == PERSON_WORLD for t in m.transforms)}
+
+    drawn = person_tf([m for _, m in live[TF]])
+    assert sorted(drawn) == sorted(samples)
+    assert drawn == person_tf([m for _, _, m in reference[TF]])

@@ -10,7 +10,9 @@ sample), the controller's ``done``, the summary, the trial metrics and ``end`` a
 sample; ``finished`` after the last trial. The arm's view
 (:class:`~.view.ArmView`, as the live view shows it): ``/robot_description`` and
 ``/reference/robot_description`` once, at the start (log time 0), and per sample a ``/tf`` at
-its stamp. The same topics and types as the recorder's bag, one storage file per trial
+its stamp; with a person strapped in the person's display URDF once (log time 0) and per
+sample the person's joints and their ``/tf``, as the graph's recorder holds them. The same
+topics and types as the recorder's bag, one storage file per trial
 (``split_every``), each file's metadata with the run's configuration. Log and publish times
 equal the sim stamps (the recorder's rule, see ``nodes/bag_recorder.py``). Not written (the
 graph's, not the run's): the nodes' once-a-second health on ``/diagnostics`` and
@@ -34,6 +36,7 @@ from ..core.session.result import RunResult
 from ..wire import protocol, topics
 from ..wire.qos import offered_qos
 from . import messages
+from . import view as view_module
 from .provenance import TRIALS_COMPLETED, provenance_data
 from .view import ArmView
 from .writer import BagWriter
@@ -60,10 +63,12 @@ def unique_path(parent: Path | str, name: str) -> Path:
 
 
 def declare_topics(writer: BagWriter, person: bool = False) -> None:
-    """Every topic of :data:`topics.BAG_TYPES` (and with a ``person`` strapped in the cuffs'
-    :data:`topics.CUFF_TYPES`), with the QoS their publishers offer."""
+    """Every topic of :data:`topics.BAG_TYPES` (and with a ``person`` strapped in
+    :data:`topics.PERSON_TYPES`: the cuffs' wrenches, the person's joints and display URDF),
+    with the QoS their publishers offer."""
 
-    for topic, msgtype in {**topics.BAG_TYPES, **(topics.CUFF_TYPES if person else {})}.items():
+    for topic, msgtype in {**topics.BAG_TYPES,
+                           **(topics.PERSON_TYPES if person else {})}.items():
         writer.add_topic(topic, msgtype, offered_qos(topic))
 
 
@@ -87,6 +92,12 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
         declare_topics(writer, any(r.cuff_wrench is not None for r in result.records))
         for topic, raw in view.descriptions().items():
             writer.write(topic, 0, raw)
+        person_names: list[str] = []
+        if result.person_description:  # as the plant publishes it, before the trials
+            raw = view_module.string_message(result.person_description)
+            writer.write(topics.PERSON_DESCRIPTION, 0, raw)
+            view.load_person(raw)
+            person_names = list(view.person.moving) if view.person is not None else []
         for k, record in enumerate(result.records, start=1):
             ref = record.reference
             samples = ref.samples
@@ -107,6 +118,15 @@ def write_run(path: Path | str, config: Config, result: RunResult, *, storage: s
                     for c, topic in enumerate(topics.CUFF_WRENCHES):
                         writer.write(topic, ns, messages.cuff_wrench(ns, c,
                                                                      record.cuff_wrench[i, c]))
+                if record.person_position is not None and record.person_velocity is not None \
+                        and person_names:  # as the plant: the person's joints, then the arm's
+                    person = messages.joint_state(
+                        ns, person_names, record.person_position[i], record.person_velocity[i],
+                        np.full(len(person_names), np.nan))
+                    writer.write(topics.PERSON_JOINT_STATES, ns, person)
+                    person_tf = view.person_tf(person)
+                    if person_tf is not None:
+                        writer.write(topics.TF, ns, person_tf[1])
                 state = messages.joint_state(ns, names, record.position[i],
                                              record.velocity[i], applied[i])
                 writer.write(topics.JOINT_STATES, ns, state)

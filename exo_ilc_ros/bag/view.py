@@ -7,6 +7,12 @@ joint of the measured arm (:class:`~exo_ilc_ros.core.arm.forward_kinematics.Urdf
 the reference arm's base :data:`REFERENCE_OFFSET` beside it, and the reference pose q_d(t_i)
 of the last feed-forward's trial at that sample on the ``reference/`` tree.
 
+With a person strapped in, the person too (``core/person/display.py``): from its display URDF
+(``/person/robot_description``, which the plant publishes, :meth:`ArmView.load_person`) and
+each ``/person/joint_states`` sample a ``/tf`` of the person's frames ``person/<body>`` on the
+arm's root link, stamped with the sample (:meth:`ArmView.person_tf`): the person where MuJoCo
+has it, not rigidly on the exoskeleton's links.
+
 One :class:`ArmView` serves the live view (``nodes/foxglove_bridge.py``), the graph's recorder
 (``nodes/bag_recorder.py``, between trials) and ``exo-ilc simulate --bag``
 (:mod:`.run_writer`), so all three carry the same messages for the same samples.
@@ -63,11 +69,49 @@ class ArmView:
         self.reference_names = [REFERENCE_PREFIX + n for n in self.joint_names]
         self.reference: tuple[int, np.ndarray] | None = None
         """(t0 ns, q_d per sample) of the last feed-forward loaded."""
+        self.person: UrdfKinematics | None = None
+        """A person strapped in: the kinematics of its display URDF (:meth:`load_person`)."""
 
     def descriptions(self) -> dict[str, bytes]:
         """``/robot_description`` and ``/reference/robot_description`` (CDR)."""
         return {topics.ROBOT_DESCRIPTION: string_message(self.urdf),
                 topics.REFERENCE_DESCRIPTION: string_message(self.reference_urdf)}
+
+    def load_person(self, raw: bytes) -> None:
+        """The person's display URDF (a ``/person/robot_description`` message, CDR:
+        ``core/person/display.py``), for :meth:`person_tf`. ValueError (nothing changed) for
+        one that is not a URDF."""
+        try:
+            text = str(typestore().deserialize_cdr(raw, "std_msgs/msg/String").data)
+            self.person = UrdfKinematics(text)
+        except Exception as exc:  # a foreign or damaged message
+            raise ValueError(f"not a person's URDF: {exc}") from None
+
+    def person_tf(self, raw: bytes) -> tuple[int, bytes] | None:
+        """(stamp, /tf CDR) of one ``/person/joint_states`` message (CDR): every joint of the
+        person's URDF (its placement on the arm's root link, each body's joints at the
+        sample's angles, the fixed ones), stamped with the sample's stamp; None before the
+        URDF (:meth:`load_person`) or for a sample that is not the person's."""
+        if self.person is None:
+            return None
+        try:
+            stamp, position, _ = read_joint_state(raw)
+        except ValueError:
+            return None
+        if position.shape[0] != len(self.person.moving):
+            return None
+        transforms = self.person.transforms(dict(zip(self.person.moving, position.tolist(),
+                                                     strict=True)))
+        return stamp, tf_message(stamp, transforms)
+
+    def sample_tf(self, topic: str, raw: bytes) -> tuple[int, bytes] | None:
+        """The /tf of one per-sample message of ``topic``: the arm's (:meth:`tf`) or the
+        person's (:meth:`person_tf`); None for another topic."""
+        if topic == topics.JOINT_STATES:
+            return self.tf(raw)
+        if topic == topics.PERSON_JOINT_STATES:
+            return self.person_tf(raw)
+        return None
 
     def load_reference(self, raw: bytes) -> None:
         """The reference of the trial a /ilc/feedforward message (CDR) profiles: its t0 (the

@@ -17,6 +17,9 @@ bag as one batch (``BagWriter.write_many``).
 The bag also holds the arm as the live view shows it (:class:`~exo_ilc_ros.bag.view.ArmView`,
 the view's own code): ``/robot_description`` and ``/reference/robot_description`` once, at the
 start, and a ``/tf`` per recorded JointState at its stamp (publish time: the JointState's).
+With a person strapped in, also the person's display URDF and joints (recorded as the plant
+publishes them) and a ``/tf`` of the person's frames per ``/person/joint_states`` sample
+(:meth:`~exo_ilc_ros.bag.view.ArmView.person_tf`).
 The transforms are computed when a trial's file is finished (:meth:`BagRecorder._split`),
 between trials, never within one.
 ``exo-ilc run`` starts it in the supervisor's process (``container ilc_supervisor
@@ -29,7 +32,8 @@ Parameters (the recorder's own, not part of the experiment's schema):
 ``bag_path`` (default ``bags/<run_name>``), ``run_name`` (default ``run_<date>-<time>``),
 ``config_file`` (the run's effective parameter YAML, for the provenance), ``split_every``
 (trials per storage file, default 1; 0: one file), ``storage`` (``mcap`` or ``sqlite3``),
-``relay`` (a Unix socket path: hand every message of ``topics.LIVE_TOPICS`` it takes to the
+``relay`` (a Unix socket path: hand every message of ``topics.LIVE_TOPICS`` (and of
+``topics.PERSON_LIVE_TOPICS``) it takes to the
 live view listening there, at the bag's log time, :mod:`~exo_ilc_ros.wire.relay`; then the
 other topics are also taken every :data:`RELAY_PERIOD`, and written when they would be
 without a view; default none) and ``relay_rate`` (the
@@ -83,10 +87,12 @@ READY_TOPICS = (topics.JOINT_STATES, topics.CLOCK, topics.EFFORT_COMMANDS, topic
 each reader-writer pair is discovered on its own, and a volatile topic published before its
 pair matched is lost to the recorder (/clock was not waited for, and once its first 26
 messages of trial 1 were missing)."""
-LIVE = frozenset(topics.LIVE_TOPICS)
-"""Topics relayed to the live view (``relay``)."""
-VIEWED = frozenset({topics.JOINT_STATES, topics.FEEDFORWARD})
-"""Topics the arm's view (/tf) is computed from."""
+LIVE = frozenset((*topics.LIVE_TOPICS, *topics.PERSON_LIVE_TOPICS))
+"""Topics relayed to the live view (``relay``; the person's only where recorded: a person's
+run)."""
+VIEWED = frozenset({topics.JOINT_STATES, topics.FEEDFORWARD, topics.PERSON_JOINT_STATES,
+                    topics.PERSON_DESCRIPTION})
+"""Topics the arm's view (/tf) is computed from (and, a person strapped in, the person's)."""
 PROTOCOL_TOPICS = frozenset({topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY, topics.PARAMETER_EVENTS})
 """Topics the recorder reads as well as writes (trial boundaries, parameter changes); the rest
 are written in batches."""
@@ -180,13 +186,18 @@ class BagRecorder(Node):
         self.events = Inbox(self, "events")  # PROTOCOL_TOPICS, read at every poll
         self.inbox = Inbox(self)  # every other topic, taken at events (see poll)
         self.subscriptions_by_topic: dict[str, Any] = {}
-        recorded = {**topics.TYPES, **(topics.CUFF_TYPES if str(
-            config["musculoskeletal.model"]) != "none" else {})}  # a person: the cuffs too
+        recorded = {**topics.TYPES, **(topics.PERSON_TYPES if str(
+            config["musculoskeletal.model"]) != "none" else {})}  # a person: its topics too
         for topic, msgtype in recorded.items():
             self.writer.add_topic(topic, msgtype, offered_qos(topic))
             inbox = self.events if topic in PROTOCOL_TOPICS else self.inbox
             self.subscriptions_by_topic[topic] = inbox.subscribe(
                 message_class(msgtype), topic, subscription_qos(topic))
+        self.ready_topics = (*READY_TOPICS, *sorted(topic for topic in topics.PER_SAMPLE
+                                                    if topic in topics.PERSON_TYPES
+                                                    and topic in recorded))
+        """:data:`READY_TOPICS`, and a person's per-sample topics when recorded (volatile as
+        the samples: a reader matched late would miss the first)."""
         for topic, msgtype in topics.VIEW_TYPES.items():  # computed here, not subscribed to
             self.writer.add_topic(topic, msgtype, offered_qos(topic))
         for topic, raw in (self.view.descriptions() if self.view else {}).items():
@@ -208,10 +219,10 @@ class BagRecorder(Node):
         self.get_logger().info(f"recording {len(recorded)} topics to {path}")
 
     def on_status_timer(self) -> None:
-        """``ready`` on /diagnostics once the subscription of every :data:`READY_TOPICS` is
+        """``ready`` on /diagnostics once the subscription of every :attr:`ready_topics` is
         matched with a publisher (the supervisor waits for it when ``wait_for_recorder`` is
         set)."""
-        missing = [topic for topic in READY_TOPICS
+        missing = [topic for topic in self.ready_topics
                    if self.subscriptions_by_topic[topic].get_publisher_count() < 1]
         message = "waiting" if missing else "ready"
         values = [*self.status_values(), *(("waiting_for", topic) for topic in missing)]
@@ -272,7 +283,14 @@ class BagRecorder(Node):
         if view is None:
             return 0
         batch: list[tuple[int, str, bytes, int]] = []
-        for received, topic, raw in pending:
+        for received, topic, raw in sorted(  # the person's URDF before its samples
+                pending, key=lambda m: m[1] != topics.PERSON_DESCRIPTION):
+            if topic == topics.PERSON_DESCRIPTION:
+                try:
+                    view.load_person(raw)
+                except ValueError as exc:
+                    self.get_logger().warning(f"/tf without the person: {exc}", once=True)
+                continue
             if topic == topics.FEEDFORWARD:
                 try:
                     view.load_reference(raw)
@@ -280,7 +298,7 @@ class BagRecorder(Node):
                     self.get_logger().warning(f"/tf without the reference arm: {exc}",
                                               once=True)
                 continue
-            tf = view.tf(raw)
+            tf = view.sample_tf(topic, raw)
             if tf is not None:
                 batch.append((tf[0], topics.TF, tf[1], received))
         written = self.writer.write_many(batch)

@@ -8,7 +8,11 @@ forwards the bytes untouched, each logged at its sim time
 (:class:`~exo_ilc_ros.wire.sim_time.SimClock`, the bags' rule), on channels advertised with
 their ``ros2msg`` schema:
 ``/joint_states``, ``/effort_controller/commands``, ``/ilc/feedforward``, ``/clock``,
-``/ilc/trial_events``, ``/ilc/trial_summary``, ``/ilc/trial_metrics``, ``/diagnostics``. It
+``/ilc/trial_events``, ``/ilc/trial_summary``, ``/ilc/trial_metrics``, ``/diagnostics``, and
+with a person strapped in (``musculoskeletal.model``) each cuff's ``/cuffs/<cuff>/wrench``,
+``/person/joint_states`` and ``/person/robot_description`` (the person's display URDF, kept
+and sent again to a late subscriber; ``/tf`` then also carries the person's frames per person
+sample, :meth:`~exo_ilc_ros.bag.view.ArmView.person_tf`). It
 adds the arm's view (:class:`~exo_ilc_ros.bag.view.ArmView`, the same messages every bag
 holds): ``/robot_description`` (``std_msgs/String``, the arm's URDF from the run's config),
 ``/reference/robot_description`` (the same arm, links prefixed ``reference/``) and ``/tf``
@@ -64,7 +68,7 @@ from ..bag.messages import typestore
 from ..bag.view import ArmView
 from ..core.arm.assets import AssetResolver, urdf_packages
 from ..core.errors import ConfigError
-from ..core.params.config import load_config, urdf_source
+from ..core.params.config import Config, load_config, urdf_source
 from ..wire import topics
 from ..wire.relay import DISPLAY_RATE, RelayReceiver, SampleGate
 from ..wire.sim_time import SimClock
@@ -78,10 +82,10 @@ NAME = "foxglove_bridge"
 FORWARDED = topics.LIVE_TOPICS
 """The graph's topics the view forwards as they are."""
 LATCHED = frozenset({topics.FEEDFORWARD, topics.TRIAL_EVENTS, topics.TRIAL_SUMMARY,
-                     topics.TRIAL_METRICS, topics.DIAGNOSTICS})
+                     topics.TRIAL_METRICS, topics.DIAGNOSTICS, topics.PERSON_DESCRIPTION})
 """Topics read transient local (their publishers keep a history for late joiners)."""
 REPLAYED = {topics.FEEDFORWARD: 1, topics.TRIAL_EVENTS: None, topics.TRIAL_SUMMARY: None,
-            topics.TRIAL_METRICS: None}
+            topics.TRIAL_METRICS: None, topics.PERSON_DESCRIPTION: 1}
 """Topic -> how many of its last messages a new subscriber gets again (None: all)."""
 TRIAL_SAMPLES = 100_000
 """Per-sample messages of the current trial kept per topic for a late viewer (at most; the
@@ -96,8 +100,18 @@ behind (its readers hold 10 000 messages per topic; a client then sees the run l
 the oldest), never the loop."""
 
 
+def forwarded_topics(config: Config) -> tuple[str, ...]:
+    """The graph's topics the view forwards for the run of ``config``: :data:`FORWARDED`, and
+    with a person strapped in (``musculoskeletal.model``) :data:`topics.PERSON_LIVE_TOPICS`
+    (the cuffs' wrenches and the person's joints per sample, the person's display URDF)."""
+    person = str(config["musculoskeletal.model"]) != "none"
+    return (*FORWARDED, *(topics.PERSON_LIVE_TOPICS if person else ()))
+
+
 SAMPLED = topics.PER_SAMPLE
 """The control loop's per-sample topics."""
+VIEWED_SAMPLES = (topics.JOINT_STATES, topics.PERSON_JOINT_STATES)
+"""The per-sample topics /tf is computed from (the arm's, the person's)."""
 SAMPLE_RELIABILITY = ("best_effort", "reliable")
 
 
@@ -169,9 +183,11 @@ class FoxgloveBridge(Node):
             topic: [(0, raw)] for topic, raw in self.view.descriptions().items()}
         self._trial: dict[str, list[tuple[int, bytes]]] = {topic: [] for topic in SAMPLED}
         """The current trial's per-sample messages shown so far (for a late viewer)."""
+        forwarded = forwarded_topics(config)
+        types = {**topics.BAG_TYPES, **topics.PERSON_TYPES}
         self.channels: dict[str, Channel] = {
-            topic: ros2_channel(topic, topics.BAG_TYPES[topic])
-            for topic in (*FORWARDED, *topics.VIEW_TYPES)}
+            topic: ros2_channel(topic, types[topic]) for topic in (*forwarded,
+                                                                   *topics.VIEW_TYPES)}
         try:
             self.server = foxglove.start_server(
                 name="exo_ilc_ros", host=host, port=port, capabilities=[Capability.Time],
@@ -189,9 +205,8 @@ class FoxgloveBridge(Node):
             raise ConfigError("sample_rate", str(exc), NAME) from None
         self.relay = RelayReceiver(relay) if relay else None
         self.inbox = Inbox(self)
-        for topic in FORWARDED if self.relay is None else ():
-            self.inbox.subscribe(message_class(topics.TYPES[topic]), topic,
-                                 reader_qos(topic, samples))
+        for topic in forwarded if self.relay is None else ():
+            self.inbox.subscribe(message_class(types[topic]), topic, reader_qos(topic, samples))
         self.forwarded = 0
         feed = f"fed by the recorder at {relay}" if relay else "reading the graph's topics"
         # started at the priority it was given (imports, middleware, server: a few s of CPU
@@ -210,10 +225,11 @@ class FoxgloveBridge(Node):
         computed again from its JointStates)."""
         channel = self.channels.get(topic)
         with self._lock:
-            if topic == TF:
-                kept = [out for out in (self.view.tf(raw) for _, raw in
-                                        self._trial.get(topics.JOINT_STATES, ()))
-                        if out is not None]
+            if topic == TF:  # the arm's and the person's, in sample order
+                samples = sorted((log_time, sampled, raw) for sampled in VIEWED_SAMPLES
+                                 for log_time, raw in self._trial.get(sampled, ()))
+                kept = [out for out in (self.view.sample_tf(sampled, raw)
+                                        for _, sampled, raw in samples) if out is not None]
             else:
                 kept = list(self._kept.get(topic, ())) + list(self._trial.get(topic, ()))
         if channel is not None:
@@ -246,8 +262,11 @@ class FoxgloveBridge(Node):
                         samples.append((log_time, raw))
             if channel.has_sinks():
                 channel.log(raw, log_time=log_time)
-            if topic == topics.JOINT_STATES:
-                self._transforms(raw)
+            if topic in VIEWED_SAMPLES:
+                self._transforms(topic, raw)
+            elif topic == topics.PERSON_DESCRIPTION:
+                with self._lock:
+                    self._load_person(raw)
             elif topic == topics.CLOCK:
                 self.server.broadcast_time(log_time)
         self.forwarded += len(taken)
@@ -271,12 +290,19 @@ class FoxgloveBridge(Node):
         except ValueError as exc:  # a foreign profile: no reference pose, the rest goes on
             self.get_logger().warning(f"feed-forward not shown as the reference: {exc}")
 
-    def _transforms(self, raw: bytes) -> None:
-        """/tf of one sample (:meth:`ArmView.tf`), while someone subscribes to it."""
+    def _load_person(self, raw: bytes) -> None:
+        try:
+            self.view.load_person(raw)
+        except ValueError as exc:  # no person drawn, the rest goes on
+            self.get_logger().warning(f"the person not shown: {exc}")
+
+    def _transforms(self, topic: str, raw: bytes) -> None:
+        """/tf of one sample (:meth:`ArmView.sample_tf`: the arm's or the person's), while
+        someone subscribes to it."""
         channel = self.channels[TF]
         if not channel.has_sinks():
             return
-        out = self.view.tf(raw)
+        out = self.view.sample_tf(topic, raw)
         if out is not None:
             channel.log(out[1], log_time=out[0])
 

@@ -24,7 +24,11 @@ the arm back at x_d(0).
 
 A person strapped in (``musculoskeletal.model``): every sample's cuff wrenches go out on
 ``/cuffs/<cuff>/wrench`` (``geometry_msgs/WrenchStamped``, stamped as the sample, just before
-its /joint_states). The first sample of a trial at which a cuff presses past
+its /joint_states), and the person's own joints on ``/person/joint_states`` (just before
+the sample's /joint_states too); the person's display URDF
+(:func:`~exo_ilc_ros.core.person.display.person_urdf`) goes out once on
+``/person/robot_description`` (transient local), so a view draws the person where the
+simulation has it. The first sample of a trial at which a cuff presses past
 ``safety.cuff_force_limit`` (:func:`~exo_ilc_ros.core.person.cuffs.beyond_cuff_limit`, the
 in-process rule), the error envelope not left before, latches the controller's safe hold
 around the pose of that sample: from that sample on the plant applies the hold (the same
@@ -41,9 +45,11 @@ import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from rclpy.timer import Timer
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from ..core.arm.build import view_urdf
 from ..core.loop.controller import outside_envelope
 from ..core.loop.divergence import state_divergence
 from ..core.loop.plant import clamp_counted, finite_state
@@ -54,7 +60,7 @@ from ..wire import topics
 from ..wire.cdr import JointStateWriter
 from ..wire.protocol import trial_of_frame
 from ..wire.publishers import max_bytes
-from .common import SAMPLES_QOS, CountingPublisher, spin, wall_clock
+from .common import LATCHED_QOS, SAMPLES_QOS, CountingPublisher, spin, wall_clock
 from .diagnostics import diagnostic_array, stamp_ns, status
 from .plant_base import NAME, Pace, PlantNode
 from .realtime import plant_scheduling
@@ -107,6 +113,20 @@ class PlantSimulator(PlantNode):
                                                 publisher_class=CountingPublisher)
                           for topic in topics.CUFF_WRENCHES] if self.person is not None else []
         """A person strapped in: each cuff's wrench per sample (empty: no person)."""
+        self.person_state = JointStateWriter(self.person.person_joint_names()) \
+            if self.person is not None else None
+        """A person strapped in: the person's joints per sample (/person/joint_states)."""
+        self.person_pub = self.create_publisher(
+            JointState, topics.PERSON_JOINT_STATES, SAMPLES_QOS,
+            publisher_class=CountingPublisher) if self.person is not None else None
+        self.not_given = np.full(len(self.person.person_joint_names()), np.nan) \
+            if self.person is not None else None
+        if self.person is not None:  # the person's display URDF, once, latched
+            description = String(data=self.person.person_description(view_urdf(config)[2]))
+            self.description_pub = self.create_publisher(
+                String, topics.PERSON_DESCRIPTION, LATCHED_QOS,
+                publisher_class=CountingPublisher)
+            self.description_pub.publish(description)
         self.cuff_msgs = [WrenchStamped() for _ in self.cuff_pubs]
         for msg, frame in zip(self.cuff_msgs, topics.CUFF_FRAMES, strict=False):
             msg.header.frame_id = frame
@@ -289,6 +309,11 @@ class PlantSimulator(PlantNode):
         position, velocity = stepper.measure()
         if self.person is not None:
             self._cuffs(self.person.wrench, position)
+            if self.person_pub is not None and self.person_state is not None and \
+                    self.not_given is not None:
+                self.person_pub.publish(self.person_state.write(
+                    self.now_ns, self.person.person_qpos(), self.person.person_qvel(),
+                    self.not_given))
         self.state_pub.publish(self.state.write(self.now_ns, position, velocity,
                                                 stepper.applied))
         if self.truth_pub is not None:

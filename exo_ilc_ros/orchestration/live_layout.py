@@ -3,7 +3,11 @@ apps' ``configById`` format, "Import from file") and a PlotJuggler one (XML), ge
 the config: the arm's joints (names, count, order: the order the graph publishes them in
 ``/joint_states`` and the commands), its root link (the 3D panel follows it), and which
 per-trial numbers the run has (``/ilc/trial_metrics``; the identified B only with
-``identification.enabled``, the step gain M only under the sign law).
+``identification.enabled``, the step gain M only under the sign law) and, with a person
+strapped in (``musculoskeletal.model``), the cuff forces: per sample the force components of
+each cuff (``/cuffs/<cuff>/wrench``) and per trial each cuff's peak and RMS |F| (the metrics'
+cuff block, :func:`cuff_index`), and the 3D panel draws the person from its own URDF
+(``/person/robot_description``, a URDF layer) on the /tf the view computes.
 
 Per-trial series are placed by the layout the metrics message declares
 (:func:`~exo_ilc_ros.wire.trial_metrics.index`: ``data_offset`` + row x joints + joint, the
@@ -22,8 +26,9 @@ from typing import Any, NamedTuple
 
 from ..core.arm.build import view_urdf
 from ..core.params.config import Config
+from ..core.person.cuffs import CUFF_METRICS, CUFFS
 from ..wire import topics
-from ..wire.trial_metrics import ROW_NAMES, index
+from ..wire.trial_metrics import HEADER_SIZE, ROW_NAMES, index
 
 APPS = ("foxglove", "lichtblick")
 TITLE_KEYS = {"foxglove": "foxglovePanelTitle", "lichtblick": "lichtblickPanelTitle"}
@@ -42,6 +47,9 @@ class ArmLayout(NamedTuple):
     root_link: str
     per_trial_rows: tuple[str, ...]
     """The ``/ilc/trial_metrics`` rows drawn per trial (:data:`PER_TRIAL_PLOTS`)."""
+    cuffs: tuple[str, ...] = ()
+    """A person strapped in: the cuffs (``core.person.cuffs.CUFFS``) whose forces are drawn,
+    per sample (``/cuffs/<cuff>/wrench``) and per trial (:data:`CUFF_PLOTS`); empty: none."""
 
 
 class PerTrialPlot(NamedTuple):
@@ -64,6 +72,28 @@ gains (the cuff forces, when they are measured) joins here with one line; it sho
 :func:`per_trial_rows` says the run has that row."""
 
 
+CUFF_PLOTS = (
+    PerTrialPlot("cuff_peak_force", "peak_force_N", "peak cuff force |F| per trial, N"),
+    PerTrialPlot("cuff_rms_force", "rms_force_N", "RMS cuff force |F| per trial, N"),
+)
+"""The per-trial cuff plots of a person's run: one series per cuff, the entry of the metrics'
+cuff block (:func:`cuff_index`) whose metric is ``row`` (a ``CUFF_METRICS`` name)."""
+FORCE_AXES = ("x", "y", "z")
+
+
+def cuff_index(cuff: str, metric: str, joints: int) -> int:
+    """Position in ``/ilc/trial_metrics``' data of ``cuff``'s ``metric`` (the cuff block after
+    the joints' matrix, :mod:`~exo_ilc_ros.wire.trial_metrics`: cuffs in ``CUFFS`` order, each
+    its ``CUFF_METRICS``)."""
+    return (HEADER_SIZE + len(ROW_NAMES) * joints + CUFFS.index(cuff) * len(CUFF_METRICS)
+            + CUFF_METRICS.index(metric))
+
+
+def cuff_topic(cuff: str) -> str:
+    """The per-sample wrench topic of ``cuff``."""
+    return topics.CUFF_WRENCHES[CUFFS.index(cuff)]
+
+
 def per_trial_rows(config: Config) -> tuple[str, ...]:
     """The rows the run fills: max |e| and RMS e always, M under the sign law (the only law
     with step gains), the identified B with ``identification.enabled``."""
@@ -78,7 +108,9 @@ def per_trial_rows(config: Config) -> tuple[str, ...]:
 def arm_layout(config: Config) -> ArmLayout:
     """The layout's inputs from the run's config."""
     _, _, root = view_urdf(config)
-    return ArmLayout(tuple(config["joint_names"]), root, per_trial_rows(config))
+    person = str(config["musculoskeletal.model"]) != "none"
+    return ArmLayout(tuple(config["joint_names"]), root, per_trial_rows(config),
+                     CUFFS if person else ())
 
 
 def _series(path: str, label: str, j: int, stamp: str, line: bool = False) -> dict[str, Any]:
@@ -198,6 +230,15 @@ def foxglove_layout(arm: ArmLayout, app: str = "foxglove") -> dict[str, Any]:
     metrics = topics.TRIAL_METRICS
     trial = f"{metrics}.data[0]"
     panels: dict[str, Any] = {"3D!arm": _three_d(app, arm.root_link)}
+    if arm.cuffs:  # a person strapped in: drawn from its own URDF, on /tf as simulated
+        three_d = panels["3D!arm"]
+        three_d[TITLE_KEYS[app]] = ("the arm (measured), the reference q_d (orange) and the "
+                                    "person")
+        three_d["layers"]["person"] = {
+            "layerId": "foxglove.Urdf", "instanceId": "person",
+            "label": "the person (person/ frames)", "visible": True, "frameLocked": True,
+            "sourceType": "topic", "topic": topics.PERSON_DESCRIPTION, "displayMode": "auto",
+            "order": 3}
     panels["Plot!tracking_error"] = _plot(
         app, "tracking error e = q_d - q, rad (script tracking_error)",
         [_series(f"{SCRIPT_TOPIC}.error[{j}]", n, j, "headerStamp")
@@ -220,6 +261,22 @@ def foxglove_layout(arm: ArmLayout, app: str = "foxglove") -> dict[str, Any]:
             [_series(f"{metrics}.data[{index(plot.row, j, count)}]", n, j, "receiveTime",
                      line=True) for j, n in enumerate(joints)], x_path=trial)
         per_trial.append(panel)
+    for plot in CUFF_PLOTS if arm.cuffs else ():
+        panel = f"Plot!{plot.panel}"
+        panels[panel] = _plot(
+            app, f"{plot.title} ({metrics})",
+            [_series(f"{metrics}.data[{cuff_index(c, plot.row, count)}]", c, k, "receiveTime",
+                     line=True) for k, c in enumerate(arm.cuffs)], x_path=trial)
+        per_trial.append(panel)
+    samples = ["Plot!position", "Plot!commands"]
+    if arm.cuffs:
+        panels["Plot!cuff_force"] = _plot(
+            app, "cuff force on the person, N (/cuffs/<cuff>/wrench, cuff frame: x "
+            "mediolateral, y anteroposterior, z along the limb)",
+            [_series(f"{cuff_topic(c)}.wrench.force.{axis}", f"{c} F{axis}",
+                     k * len(FORCE_AXES) + a, "headerStamp")
+             for k, c in enumerate(arm.cuffs) for a, axis in enumerate(FORCE_AXES)])
+        samples.append("Plot!cuff_force")
     panels["DiagnosticSummary!diagnostics"] = {TITLE_KEYS[app]: "the nodes' health",
                                                "topicToRender": topics.DIAGNOSTICS,
                                                "sortByLevel": True}
@@ -236,8 +293,9 @@ def foxglove_layout(arm: ArmLayout, app: str = "foxglove") -> dict[str, Any]:
             "direction": "row", "splitPercentage": 62,
             "first": {"direction": "column", "splitPercentage": 55, "first": "3D!arm",
                       "second": {"direction": "row", "first": "Plot!tracking_error",
-                                 "second": {"direction": "column", "first": "Plot!position",
-                                            "second": "Plot!commands"}}},
+                                 "second": _column(samples) if arm.cuffs else
+                                 {"direction": "column", "first": "Plot!position",
+                                  "second": "Plot!commands"}}},
             "second": {"direction": "column", "splitPercentage": 60,
                        "first": _column(per_trial),
                        "second": {"direction": "column",
@@ -283,7 +341,14 @@ def plotjuggler_xml(arm: ArmLayout) -> str:
     tab("per trial", [(f"{plot.title} ({', '.join(joints)})",
                        [f"{metrics}/data[{index(plot.row, j, len(joints))}]"
                         for j in range(len(joints))])
-                      for plot in PER_TRIAL_PLOTS if plot.row in arm.per_trial_rows])
+                      for plot in PER_TRIAL_PLOTS if plot.row in arm.per_trial_rows]
+        + [(f"{plot.title} ({', '.join(arm.cuffs)})",
+            [f"{metrics}/data[{cuff_index(c, plot.row, len(joints))}]" for c in arm.cuffs])
+           for plot in CUFF_PLOTS if arm.cuffs])
+    if arm.cuffs:
+        tab("cuffs", [(f"{c} cuff force, N (cuff frame)",
+                       [f"{cuff_topic(c)}/wrench/force/{axis}" for axis in FORCE_AXES])
+                      for c in arm.cuffs])
     ET.SubElement(tabs, "currentTabIndex", index="0")
     ET.SubElement(root, "use_relative_time_offset", enabled="1")
     plugins = ET.SubElement(root, "Plugins")
@@ -293,7 +358,8 @@ def plotjuggler_xml(arm: ArmLayout) -> str:
     ET.SubElement(ros2, "discard_large_arrays", value="true")
     ET.SubElement(ros2, "max_array_size", value="100")
     selected = ET.SubElement(ros2, "selected_topics")
-    for topic in (js, topics.EFFORT_COMMANDS, metrics, topics.TRIAL_SUMMARY):
+    for topic in (js, topics.EFFORT_COMMANDS, metrics, topics.TRIAL_SUMMARY,
+                  *(cuff_topic(c) for c in arm.cuffs)):
         ET.SubElement(selected, "topic", name=topic)
     ET.indent(root, " ")
     comment = (f"<!-- PlotJuggler layout for exo_ilc_ros (File > Load layout), with a bag (MCAP) "

@@ -29,7 +29,7 @@ dropped ~1 % when read per message; 10 000 leaves seconds of slack)."""
 
 TRANSIENT_LOCAL_TOPICS = frozenset({topics.FEEDFORWARD, topics.TRIAL_EVENTS,
                                     topics.TRIAL_SUMMARY, topics.TRIAL_METRICS,
-                                    topics.DIAGNOSTICS})
+                                    topics.DIAGNOSTICS, topics.PERSON_DESCRIPTION})
 """Topics the recorder subscribes to transient local: those whose publishers keep a history
 for late joiners (see :data:`OFFERED`). A recorder matched after a message was sent still gets
 it from that history: the latched feed-forward (depth 1), every trial event, summary and
@@ -51,6 +51,7 @@ OFFERED: dict[str, tuple[tuple[str, int], ...]] = {
     topics.ROBOT_DESCRIPTION: ((TRANSIENT_LOCAL, 1),),
     topics.REFERENCE_DESCRIPTION: ((TRANSIENT_LOCAL, 1),),
     topics.TF: ((VOLATILE, TF_DEPTH),),
+    topics.PERSON_DESCRIPTION: ((TRANSIENT_LOCAL, 1),),
 }
 """Per topic, the (durability, depth) of each distinct publisher profile, all reliable and
 keep-last: /diagnostics has the nodes' health (depth 10) and bag_recorder's status (depth

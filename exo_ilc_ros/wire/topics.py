@@ -56,8 +56,28 @@ and the bag writers compute them from the recorded samples and feed-forward."""
 LIVE_TOPICS = (JOINT_STATES, EFFORT_COMMANDS, FEEDFORWARD, CLOCK, TRIAL_EVENTS, TRIAL_SUMMARY,
                TRIAL_METRICS, DIAGNOSTICS)
 """The graph's topics the live view forwards as they are (besides :data:`VIEW_TYPES`)."""
-PER_SAMPLE = frozenset({JOINT_STATES, EFFORT_COMMANDS, CLOCK})
-"""The control loop's per-sample topics (a view that falls behind may lose these, only)."""
+PERSON_JOINT_STATES = "/person/joint_states"
+"""A person strapped in: per sample the person's own joints (``sensor_msgs/JointState``, the
+MuJoCo joints of the person in qpos order: position rad, velocity rad/s, effort NaN: not
+given), stamped as the sample's /joint_states and published by the plant just before it. What
+drawing the person needs (with :data:`PERSON_DESCRIPTION`); the exoskeleton's joints are not
+the person's (soft cuffs, misaligned axes)."""
+PERSON_DESCRIPTION = "/person/robot_description"
+"""A person strapped in: the person's display URDF (``std_msgs/String``,
+``core/person/display.py``), published once by the plant, transient local (as
+robot_state_publisher publishes ``/robot_description``): frames ``person/<body>`` hung from the
+exoskeleton's root link, joints named as in :data:`PERSON_JOINT_STATES`."""
+PERSON_LIVE_TOPICS = (*CUFF_WRENCHES, PERSON_JOINT_STATES, PERSON_DESCRIPTION)
+"""With a person strapped in (``musculoskeletal.model``), the live view forwards these too, as
+they are (their types: :data:`PERSON_TYPES`)."""
+PERSON_TYPES: dict[str, str] = {**CUFF_TYPES,
+                                PERSON_JOINT_STATES: "sensor_msgs/msg/JointState",
+                                PERSON_DESCRIPTION: "std_msgs/msg/String"}
+"""The topics a person's run adds to the graph's recorded ones, and their types."""
+PER_SAMPLE = frozenset({JOINT_STATES, EFFORT_COMMANDS, CLOCK, *CUFF_WRENCHES,
+                        PERSON_JOINT_STATES})
+"""The control loop's per-sample topics (a view that falls behind may lose these, only; the
+live view shows each at its display rate)."""
 
 BAG_TYPES: dict[str, str] = {**TYPES, **VIEW_TYPES}
 """Every topic a bag lists (the graph's recorder and ``exo-ilc simulate --bag`` alike)."""

@@ -43,6 +43,12 @@ class TrialRecord:
     """A person strapped in cuffs (:mod:`exo_ilc_ros.core.person`): per sample and cuff
     (upper arm, forearm) the force (N) and torque (N m) the cuff applies to the person, in the
     cuff's frame, shape (N+1, 2, 6); None: no person."""
+    person_position: np.ndarray | None = None
+    """A person strapped in: the person's own joint angles per sample (rad, its MuJoCo joints
+    in qpos order; what ``/person/joint_states`` carries), shape (N+1, joints); None: no
+    person (or a record rebuilt from the wire, which does not read them)."""
+    person_velocity: np.ndarray | None = None
+    """As ``person_position``: the person's joint velocities (rad/s)."""
 
     @property
     def aborted(self) -> bool:

@@ -89,6 +89,9 @@ class StrappedExperiment(Experiment):
         u_log = np.full((n_samples, n), np.nan)
         effort_log = np.full((n_samples, n), np.nan)
         wrench_log = np.full((n_samples, len(CUFFS), 6), np.nan)
+        person_joints = len(self.arm.person_joint_names())
+        person_q = np.full((n_samples, person_joints), np.nan)
+        person_qd = np.full((n_samples, person_joints), np.nan)
         controller = controller_of(self)
         guard = guard_of(np.empty(n))
         state, q_hold = guard.state, guard.q_hold
@@ -103,6 +106,7 @@ class StrappedExperiment(Experiment):
             q_log[i] = q
             qd_log[i] = qd
             wrench_log[i] = arm.wrench
+            arm.person_state_into(person_q[i], person_qd[i])
             if state[ABORT] < 0 and beyond_cuff_limit(arm.wrench, limit) >= 0:
                 state[ABORT] = i
                 state[HOLD_COUNT] = 0
@@ -115,7 +119,8 @@ class StrappedExperiment(Experiment):
         abort = int(state[ABORT])
         return TrialRecord(trial, ref, q_log, qd_log, u_ff, u_log, effort_log, levels,
                            None if abort < 0 else abort, None, None,
-                           None if joint_force is None else force, wrench_log)
+                           None if joint_force is None else force, wrench_log,
+                           person_q, person_qd)
 
 
 def experiment_for(config: Config, drive: DriveFactory = drive_for) -> Experiment:

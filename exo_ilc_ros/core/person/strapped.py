@@ -69,6 +69,7 @@ from ..loop.plant import clamp_counted
 from ..params.config import Config
 from ..sim.mujoco_arm import arm_mjcf
 from .cuffs import CUFFS
+from .display import person_joint_names, person_urdf
 from .model import ANATOMY, MuscleDrive, PersonAnatomy, muscle_names, person_spec
 
 EXO_PREFIX = "exo_"
@@ -223,6 +224,11 @@ class StrappedArm:
                         * 1e-3)
         base_rotation = turn @ fit
         base_position = p_shoulder + offset - base_rotation @ e_shoulder
+        self.base_position = base_position
+        """Where the exoskeleton's base frame (its URDF's root link) sits in MuJoCo's world,
+        the person's (m), misalignment included."""
+        self.base_rotation = base_rotation
+        """Its orientation there (rotation matrix, base axes in world)."""
         self.elbow_offset = float(np.linalg.norm(
             base_position + base_rotation @ e_elbow - p_elbow))
         """Distance (m) of the exoskeleton's elbow anchor from the person's elbow centre at
@@ -300,6 +306,7 @@ class StrappedArm:
         """Force (N) and torque (N m) each cuff applies to the person at the state of the
         last :meth:`measure` (or step), in the cuff's frame."""
         self._fresh = False
+        self._person_views: tuple[np.ndarray, np.ndarray] | None = None
         self.applied = np.zeros(n)
         self._no_count = np.zeros(n, dtype=np.int64)
         if drive is not None:
@@ -443,6 +450,31 @@ class StrappedArm:
     def person_qpos(self) -> np.ndarray:
         """The person's joint angles (rad, the model's person joints, a copy)."""
         return np.array(self.data.qpos[:self.model.nq - len(self.joint_names)])
+
+    def person_state_into(self, position: np.ndarray, velocity: np.ndarray) -> None:
+        """The person's joint angles and velocities (as :meth:`person_qpos`,
+        :meth:`person_qvel`) into ``position``, ``velocity``, without allocating (per
+        sample)."""
+        if self._person_views is None:
+            n = len(self.joint_names)
+            self._person_views = (self.data.qpos[:self.model.nq - n],
+                                  self.data.qvel[:self.model.nv - n])
+        position[:] = self._person_views[0]
+        velocity[:] = self._person_views[1]
+
+    def person_qvel(self) -> np.ndarray:
+        """The person's joint velocities (rad/s, as :meth:`person_qpos`, a copy)."""
+        return np.array(self.data.qvel[:self.model.nv - len(self.joint_names)])
+
+    def person_joint_names(self) -> list[str]:
+        """The person's joints in the order of :meth:`person_qpos`."""
+        return person_joint_names(self.model, EXO_PREFIX)
+
+    def person_description(self, root_link: str) -> str:
+        """The person's display URDF (:func:`.display.person_urdf`), hung from the
+        exoskeleton's ``root_link`` where this model places it."""
+        return person_urdf(self.model, root_link, self.base_position, self.base_rotation,
+                           EXO_PREFIX)
 
 
 @njit(cache=True, error_model="numpy")

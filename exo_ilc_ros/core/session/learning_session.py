@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from ..arm.build import build_arm
+from ..arm.build import build_arm, view_urdf
 from ..errors import SafetyError, StoreError
 from ..learning.averaging import AveragingGain, averaging_of
 from ..learning.factory import build_law
@@ -54,7 +54,7 @@ from ..params import schema
 from ..params.config import Config
 from ..persistence.profiles import load_initial
 from ..persistence.store import RunStore, StoredTrial
-from ..person.experiment import experiment_for
+from ..person.experiment import StrappedExperiment, experiment_for
 from ..reference.build import build_reference
 from ..sim.experiment import Experiment
 from .abort import AbortTrip, partial_update, pass_length_record, stop_message, trip_of
@@ -539,6 +539,9 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
     experiment = experiment_for(effective)
     result = RunResult(experiment.mass_uncertainty, effective["law"],
                        float(effective["error_bound"]))
+    if isinstance(experiment, StrappedExperiment):  # how a view draws the person
+        result.person_description = experiment.arm.person_description(
+            view_urdf(effective)[2])
     if patient is None and experiment.patient.learns:
         patient = PatientLearning(experiment.patient, experiment.reference.samples)
     if patient is not None and patient_memory is not None:  # the same patient, a new session

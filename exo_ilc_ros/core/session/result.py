@@ -49,6 +49,9 @@ class RunResult:
     joint_forces: dict[int, JointForceStep] = field(default_factory=dict)
     """The identification of the patient's joint forces after each trial, by trial
     (``identification.enabled``; empty: off)."""
+    person_description: str = ""
+    """A person strapped in: the person's display URDF (``core/person/display.py``), which a
+    bag of the run carries on ``/person/robot_description`` (""; none)."""
 
     @property
     def aborted(self) -> list[int]:

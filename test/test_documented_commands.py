@@ -8,7 +8,9 @@ earlier one wrote: ``analyze bags/*`` after ``run``), made short:
   ``--seeds`` 2, ``--jobs``/``--workers`` 1, ``--lifted`` 50, ``--trial K`` at most 2;
 * ``--config`` and every other ``.yaml`` a command reads: a shipped one (``config/robust.yaml``)
   is copied with a 1 s movement; one the page only names (``my_params.yaml``) is written as just
-  that 1 s movement; a command that takes ``--config`` and names none gets it;
+  that 1 s movement; a command that takes ``--config`` and names none gets it, and with it the
+  shipped exercises with every session plan at most 2 trials an exercise (``--session
+  upper_limb``: 3 x 2 trials, not 3 x 20);
 * ``<date>`` and other ``<placeholders>`` in a path match anything (``*``, the newest match;
   a path that matches nothing fails); a command with a placeholder that is no path
   (``--resume <session id>``) is only parsed; ``[optional]`` parts are left out;
@@ -183,6 +185,24 @@ def _short_yaml(source: Path | None) -> str:
     return yaml.safe_dump(data, sort_keys=False)
 
 
+def _short_exercises() -> str:
+    """The shipped exercises file with every session plan at most 2 trials an exercise (as
+    ``--trials N`` becomes 2; the exercises themselves as shipped)."""
+    data = yaml.safe_load((ROOT / "config" / "exercises" / "default.yaml").read_text())
+    for plan in data["sessions"].values():
+        for item in plan:
+            item["trials"] = min(int(item["trials"]), int(SMALL["--trials"]))
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+def _default_config(cwd: Path) -> str:
+    """``short.yaml``: the 1 s movement and the short session plans (module docstring)."""
+    (cwd / "exercises.yaml").write_text(_short_exercises())
+    data = yaml.safe_load(_short_yaml(None))
+    data["/**"]["ros__parameters"]["exercise"] = {"file": str(cwd / "exercises.yaml")}
+    return yaml.safe_dump(data, sort_keys=False)
+
+
 def _make_inputs(words: list[str], cwd: Path) -> None:
     """Write every ``.yaml`` the command reads and ``cwd`` lacks (module docstring)."""
     for k, word in enumerate(words):
@@ -241,7 +261,7 @@ class Outcome:
 def _run_page(page: Path, tmp: Path, graph: bool) -> list[Outcome]:
     """Run ``page``'s commands in order in ``tmp``: the in-process ones, and the graph ones
     when ``graph`` (a graph command with the same flags as one already run is run once)."""
-    (tmp / "short.yaml").write_text(_short_yaml(None))
+    (tmp / "short.yaml").write_text(_default_config(tmp))
     outcomes, seen = [], set()
     old = Path.cwd()
     os.chdir(tmp)

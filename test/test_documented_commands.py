@@ -15,7 +15,8 @@ earlier one wrote: ``analyze bags/*`` after ``run``), made short:
   a path that matches nothing fails); a command with a placeholder that is no path
   (``--resume <session id>``) is only parsed; ``[optional]`` parts are left out;
 * what needs something outside this machine (``postgresql://``, ``tcp://<host>``) or a running
-  graph (``exo-ilc param``) is only parsed, with the page's values;
+  graph (``exo-ilc param``) is only parsed, with the page's values, and so is a ``run`` another
+  test runs with the same flags and more checks (:data:`RUN_BY`);
 * a live view (``run --live``) serves on a free port (``--live-port 0``, the page's port
   replaced or the flag added): the default 8765 (or the page's 9000) may be held by another
   test session on the machine, and the bridge then refuses to start.
@@ -250,6 +251,24 @@ def _prepare(command: Command, cwd: Path, graph: bool) -> list[str] | None:
     return out
 
 
+def _written_flags(command: Command) -> frozenset[str]:
+    """The flags of ``command`` as its page writes them."""
+    return frozenset(w.split("=", 1)[0] for w in command.words if w.startswith("--"))
+
+
+def test_the_commands_left_to_other_tests_are_run_there() -> None:
+    """Every :data:`RUN_BY` entry names a test that exists and runs ``run`` with each of the
+    flags (else the page's command would be run by no test), and some page shows it."""
+    shown = {_written_flags(c) for c in ALL if c.name == "run"}
+    for flags, where in RUN_BY.items():
+        assert flags in shown, (sorted(flags), "no page shows it: drop the entry")
+        file, name = where.split("::")
+        source = (ROOT / "test" / file).read_text()
+        assert f"\ndef {name}(" in source, where
+        body = source.split(f"\ndef {name}(")[1].split("\ndef ")[0]
+        assert '"run"' in body and all(f'"{flag}"' in body for flag in flags), (where, flags)
+
+
 @dataclass
 class Outcome:
     command: Command
@@ -257,6 +276,17 @@ class Outcome:
     code: int
     output: str
 
+
+RUN_BY: dict[frozenset[str], str] = {
+    frozenset({"--live", "--live-rate"}):
+        "test_live.py::test_live_view_shows_what_the_bag_holds",
+    frozenset({"--live", "--live-pace"}):
+        "test_live.py::test_live_pace_changes_only_the_wall_time",
+}
+"""Graph commands (``run`` with exactly these flags, as the page writes it) that another test
+runs with these flags, checking its exit 0 and more: only parsed here (each graph run is
+~15 s of the suite). :func:`test_the_commands_left_to_other_tests_are_run_there` checks that
+the test named runs ``run`` with every one of the flags."""
 
 GRAPH_RUNS: set[tuple[str, ...]] = set()
 """The graph commands (as run) a page of this session already ran."""
@@ -278,6 +308,8 @@ def _run_page(page: Path, tmp: Path, graph: bool) -> list[Outcome]:
             if argv is None:
                 continue
             if command.name in GRAPH_COMMANDS and "--in-process" not in argv:
+                if command.name == "run" and _written_flags(command) in RUN_BY:
+                    continue
                 flags = (command.name, frozenset(w for w in argv if w.startswith("--")))
                 if not graph or flags in seen or tuple(argv) in GRAPH_RUNS:
                     continue

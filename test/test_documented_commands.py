@@ -8,9 +8,9 @@ earlier one wrote: ``analyze bags/*`` after ``run``), made short:
   ``--seeds`` 2, ``--jobs``/``--workers`` 1, ``--lifted`` 50, ``--trial K`` at most 2;
 * ``--config`` and every other ``.yaml`` a command reads: a shipped one (``config/robust.yaml``)
   is copied with a 1 s movement; one the page only names (``my_params.yaml``) is written as just
-  that 1 s movement; a command that takes ``--config`` and names none gets it, and with it the
-  shipped exercises with every session plan at most 2 trials an exercise (``--session
-  upper_limb``: 3 x 2 trials, not 3 x 20);
+  that 1 s movement; a command that takes ``--config`` and names none gets it (a ``--session``
+  command with the shipped exercises' session plans at most 2 trials an exercise: ``--session
+  upper_limb`` runs 3 x 2 trials, not 3 x 20);
 * ``<date>`` and other ``<placeholders>`` in a path match anything (``*``, the newest match;
   a path that matches nothing fails); a command with a placeholder that is no path
   (``--resume <session id>``) is only parsed; ``[optional]`` parts are left out;
@@ -196,8 +196,10 @@ def _short_exercises() -> str:
     return yaml.safe_dump(data, sort_keys=False)
 
 
-def _default_config(cwd: Path) -> str:
-    """``short.yaml``: the 1 s movement and the short session plans (module docstring)."""
+def _sessions_config(cwd: Path) -> str:
+    """``short_sessions.yaml``, for a ``--session`` command: the 1 s movement and the short
+    session plans (only there: ``exercise.file`` names this scratch directory, and a tuning
+    study's journal records the config it was made for)."""
     (cwd / "exercises.yaml").write_text(_short_exercises())
     data = yaml.safe_load(_short_yaml(None))
     data["/**"]["ros__parameters"]["exercise"] = {"file": str(cwd / "exercises.yaml")}
@@ -247,7 +249,7 @@ def _prepare(command: Command, cwd: Path, graph: bool) -> list[str] | None:
         if flag not in out and "--replay" not in out and _takes(command.name, flag):
             out += [flag, SMALL[flag]]
     if "--config" not in out and "--replay" not in out and _takes(command.name, "--config"):
-        out += ["--config", "short.yaml"]
+        out += ["--config", "short_sessions.yaml" if "--session" in out else "short.yaml"]
     return out
 
 
@@ -298,7 +300,8 @@ def _run_page(page: Path, tmp: Path, graph: bool) -> list[Outcome]:
     once, and one an earlier page ran word for word is not run again: README.md's and
     ros-graph.md's ``run --mass-uncertainty 0.10 --trials 150 --json run.json``; a later
     command of the page that reads what it would have written then fails, it does not pass)."""
-    (tmp / "short.yaml").write_text(_default_config(tmp))
+    (tmp / "short.yaml").write_text(_short_yaml(None))
+    (tmp / "short_sessions.yaml").write_text(_sessions_config(tmp))
     outcomes, seen = [], set()
     old = Path.cwd()
     os.chdir(tmp)

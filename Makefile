@@ -60,8 +60,8 @@ docs: $(STAMP)
 
 test: bytecode lint docs
 	@$(NUMBA_NOTE)
-	@echo "make: running the whole test suite (35-40 min on 2 cores, most of it real"
-	@echo "make: ROS 2 graphs over DDS and a colcon build); pytest prints a dot per test"
+	@echo "make: running the whole test suite (about 27 min on 2 idle cores, an estimate;"
+	@echo "make: most of it real ROS 2 graphs over DDS and a colcon build); pytest prints a dot per test"
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)

@@ -8,12 +8,15 @@ earlier one wrote: ``analyze bags/*`` after ``run``), made short:
   ``--seeds`` 2, ``--jobs``/``--workers`` 1, ``--lifted`` 50, ``--trial K`` at most 2;
 * ``--config`` and every other ``.yaml`` a command reads: a shipped one (``config/robust.yaml``)
   is copied with a 1 s movement; one the page only names (``my_params.yaml``) is written as just
-  that 1 s movement; a command that takes ``--config`` and names none gets it;
+  that 1 s movement; a command that takes ``--config`` and names none gets it (a ``--session``
+  command with the shipped exercises' session plans at most 2 trials an exercise: ``--session
+  upper_limb`` runs 3 x 2 trials, not 3 x 20);
 * ``<date>`` and other ``<placeholders>`` in a path match anything (``*``, the newest match;
   a path that matches nothing fails); a command with a placeholder that is no path
   (``--resume <session id>``) is only parsed; ``[optional]`` parts are left out;
 * what needs something outside this machine (``postgresql://``, ``tcp://<host>``) or a running
-  graph (``exo-ilc param``) is only parsed, with the page's values;
+  graph (``exo-ilc param``) is only parsed, with the page's values, and so is a ``run`` another
+  test runs with the same flags and more checks (:data:`RUN_BY`);
 * a live view (``run --live``) serves on a free port (``--live-port 0``, the page's port
   replaced or the flag added): the default 8765 (or the page's 9000) may be held by another
   test session on the machine, and the bridge then refuses to start.
@@ -183,6 +186,26 @@ def _short_yaml(source: Path | None) -> str:
     return yaml.safe_dump(data, sort_keys=False)
 
 
+def _short_exercises() -> str:
+    """The shipped exercises file with every session plan at most 2 trials an exercise (as
+    ``--trials N`` becomes 2; the exercises themselves as shipped)."""
+    data = yaml.safe_load((ROOT / "config" / "exercises" / "default.yaml").read_text())
+    for plan in data["sessions"].values():
+        for item in plan:
+            item["trials"] = min(int(item["trials"]), int(SMALL["--trials"]))
+    return yaml.safe_dump(data, sort_keys=False)
+
+
+def _sessions_config(cwd: Path) -> str:
+    """``short_sessions.yaml``, for a ``--session`` command: the 1 s movement and the short
+    session plans (only there: ``exercise.file`` names this scratch directory, and a tuning
+    study's journal records the config it was made for)."""
+    (cwd / "exercises.yaml").write_text(_short_exercises())
+    data = yaml.safe_load(_short_yaml(None))
+    data["/**"]["ros__parameters"]["exercise"] = {"file": str(cwd / "exercises.yaml")}
+    return yaml.safe_dump(data, sort_keys=False)
+
+
 def _make_inputs(words: list[str], cwd: Path) -> None:
     """Write every ``.yaml`` the command reads and ``cwd`` lacks (module docstring)."""
     for k, word in enumerate(words):
@@ -226,8 +249,26 @@ def _prepare(command: Command, cwd: Path, graph: bool) -> list[str] | None:
         if flag not in out and "--replay" not in out and _takes(command.name, flag):
             out += [flag, SMALL[flag]]
     if "--config" not in out and "--replay" not in out and _takes(command.name, "--config"):
-        out += ["--config", "short.yaml"]
+        out += ["--config", "short_sessions.yaml" if "--session" in out else "short.yaml"]
     return out
+
+
+def _written_flags(command: Command) -> frozenset[str]:
+    """The flags of ``command`` as its page writes them."""
+    return frozenset(w.split("=", 1)[0] for w in command.words if w.startswith("--"))
+
+
+def test_the_commands_left_to_other_tests_are_run_there() -> None:
+    """Every :data:`RUN_BY` entry names a test that exists and runs ``run`` with each of the
+    flags (else the page's command would be run by no test), and some page shows it."""
+    shown = {_written_flags(c) for c in ALL if c.name == "run"}
+    for flags, where in RUN_BY.items():
+        assert flags in shown, (sorted(flags), "no page shows it: drop the entry")
+        file, name = where.split("::")
+        source = (ROOT / "test" / file).read_text()
+        assert f"\ndef {name}(" in source, where
+        body = source.split(f"\ndef {name}(")[1].split("\ndef ")[0]
+        assert '"run"' in body and all(f'"{flag}"' in body for flag in flags), (where, flags)
 
 
 @dataclass
@@ -238,10 +279,29 @@ class Outcome:
     output: str
 
 
+RUN_BY: dict[frozenset[str], str] = {
+    frozenset({"--live", "--live-rate"}):
+        "test_live.py::test_live_view_shows_what_the_bag_holds",
+    frozenset({"--live", "--live-pace"}):
+        "test_live.py::test_live_pace_changes_only_the_wall_time",
+}
+"""Graph commands (``run`` with exactly these flags, as the page writes it) that another test
+runs with these flags, checking its exit 0 and more: only parsed here (each graph run is
+~15 s of the suite). :func:`test_the_commands_left_to_other_tests_are_run_there` checks that
+the test named runs ``run`` with every one of the flags."""
+
+GRAPH_RUNS: set[tuple[str, ...]] = set()
+"""The graph commands (as run) a page of this session already ran."""
+
+
 def _run_page(page: Path, tmp: Path, graph: bool) -> list[Outcome]:
     """Run ``page``'s commands in order in ``tmp``: the in-process ones, and the graph ones
-    when ``graph`` (a graph command with the same flags as one already run is run once)."""
+    when ``graph`` (a graph command with the same flags as one already run on the page is run
+    once, and one an earlier page ran word for word is not run again: README.md's and
+    ros-graph.md's ``run --mass-uncertainty 0.10 --trials 150 --json run.json``; a later
+    command of the page that reads what it would have written then fails, it does not pass)."""
     (tmp / "short.yaml").write_text(_short_yaml(None))
+    (tmp / "short_sessions.yaml").write_text(_sessions_config(tmp))
     outcomes, seen = [], set()
     old = Path.cwd()
     os.chdir(tmp)
@@ -251,10 +311,13 @@ def _run_page(page: Path, tmp: Path, graph: bool) -> list[Outcome]:
             if argv is None:
                 continue
             if command.name in GRAPH_COMMANDS and "--in-process" not in argv:
+                if command.name == "run" and _written_flags(command) in RUN_BY:
+                    continue
                 flags = (command.name, frozenset(w for w in argv if w.startswith("--")))
-                if not graph or flags in seen:
+                if not graph or flags in seen or tuple(argv) in GRAPH_RUNS:
                     continue
                 seen.add(flags)
+                GRAPH_RUNS.add(tuple(argv))
             began = time.perf_counter()
             # A real file, not a StringIO: the graph hands the nodes' output its descriptor.
             with tempfile.TemporaryFile("w+") as text:

@@ -217,6 +217,17 @@ def _make_inputs(words: list[str], cwd: Path) -> None:
             (cwd / value).write_text(_short_yaml(shipped if shipped.is_file() else None))
 
 
+def _inside(word: str, cwd: Path) -> str:
+    """``word``, or an absolute path that names no existing file (a page's example of a
+    shared journal, ``/shared/exo-ilc/tune.journal``) moved under ``cwd``: a test writes
+    nothing outside its own directory, and nothing of one run is left for the next."""
+    if not word.startswith("/") or Path(word).exists():
+        return word
+    moved = cwd / "absolute" / word.lstrip("/")
+    moved.parent.mkdir(parents=True, exist_ok=True)
+    return str(moved)
+
+
 def _prepare(command: Command, cwd: Path, graph: bool) -> list[str] | None:
     """The command's words made short and runnable in ``cwd`` (module docstring); None when it
     can only be parsed, or (not ``graph``) reads what only a graph command makes."""
@@ -238,7 +249,7 @@ def _prepare(command: Command, cwd: Path, graph: bool) -> list[str] | None:
                 matches = matches[-1:]
             out += matches or [word]
             continue
-        out.append(word)
+        out.append(_inside(word, cwd))
     _make_inputs(out, cwd)
     if "--live" in out:
         if "--live-port" in out:

@@ -31,6 +31,7 @@ import numpy as np
 from ..arm.build import build_arm
 from ..params.config import Config
 from ..reference.build import build_reference
+from .observer import observer_gains
 from .patient import patient_joint_indices
 
 MAX_KD_PERIOD = 0.8
@@ -69,3 +70,16 @@ def feedback_gains(config: Config) -> tuple[np.ndarray, np.ndarray]:
     kp[on] = np.maximum(kp[on], np.minimum(min_stiffness[on] * inverse[on], kp_max))
     kd[on] = np.maximum(kd[on], np.minimum(min_damping[on] * inverse[on], kd_max))
     return kp, kd
+
+
+def velocity_observer_gains(config: Config) -> np.ndarray:
+    """(4, n) gains of the velocity observer (:mod:`.observer`) per arm joint: with
+    ``control.velocity_observer`` p < 1, on the joints whose K_D the damping floor raised above
+    ``control.kd`` by (G) (the light patient joints, where a lagging velocity meets a delayed
+    reflex); zeros elsewhere and with p = 1 (the measured velocity fed back)."""
+    kd = np.asarray(config["control.kd"], dtype=float)
+    pole = float(config["control.velocity_observer"])
+    if pole >= 1.0:
+        return np.zeros((4, kd.shape[0]))
+    raised = feedback_gains(config)[1] > kd
+    return observer_gains(np.full(kd.shape[0], pole), raised, float(config["control.period"]))

@@ -74,12 +74,13 @@ def feedback_gains(config: Config) -> tuple[np.ndarray, np.ndarray]:
 
 def velocity_observer_gains(config: Config) -> np.ndarray:
     """(4, n) gains of the velocity observer (:mod:`.observer`) per arm joint: with
-    ``control.velocity_observer`` p < 1, on the joints whose K_D the damping floor raised above
-    ``control.kd`` by (G) (the light patient joints, where a lagging velocity meets a delayed
+    ``control.velocity_observer`` p < 1, on the joints whose K_P or K_D a floor raised above
+    ``control.kp``, ``control.kd`` by (G) (the light patient joints, where a lagging velocity meets a delayed
     reflex); zeros elsewhere and with p = 1 (the measured velocity fed back)."""
     kd = np.asarray(config["control.kd"], dtype=float)
     pole = float(config["control.velocity_observer"])
     if pole >= 1.0:
         return np.zeros((4, kd.shape[0]))
-    raised = feedback_gains(config)[1] > kd
+    kp_floor, kd_floor = feedback_gains(config)
+    raised = (kd_floor > kd) | (kp_floor > np.asarray(config["control.kp"], dtype=float))
     return observer_gains(np.full(kd.shape[0], pole), raised, float(config["control.period"]))

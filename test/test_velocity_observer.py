@@ -11,8 +11,8 @@ import pytest
 from exo_ilc_ros.core.errors import ConfigError
 from exo_ilc_ros.core.loop.gains import velocity_observer_gains
 from exo_ilc_ros.core.loop.observer import (
-    feedback_velocity_into,
     fed_back_velocity,
+    feedback_velocity_into,
     observer_gains,
     observer_state,
     remember_command,
@@ -88,7 +88,7 @@ def test_on_the_joints_the_floors_raised_only() -> None:
 
 
 def test_a_pole_above_one_is_refused_naming_the_key() -> None:
-    with pytest.raises(ConfigError, match="control.velocity_observer"):
+    with pytest.raises(ConfigError, match=r"control\.velocity_observer"):
         load_config(None, overrides={"control.velocity_observer": 1.5})
 
 

@@ -46,8 +46,8 @@ from ..learning.patient_model import JointForceModel, JointForceStep
 from ..learning.progress_gain import progress_gain_of
 from ..learning.qfilter import feedforward_limit_of
 from ..loop.gains import feedback_gains, velocity_observer_gains
-from ..loop.patient import PatientLearning, PatientModel, true_error
 from ..loop.observer import fed_back_velocity
+from ..loop.patient import PatientLearning, PatientModel, true_error
 from ..loop.record import TrialRecord, position_velocity_record
 from ..loop.trial import record_from_samples
 from ..loop.wire_input import Rejection, check_feedforward_array

@@ -34,7 +34,7 @@ def _estimates(position: np.ndarray, command: np.ndarray, pole: float) -> np.nda
     one = np.empty(1)
     for i, q in enumerate(position):
         feedback_velocity_into(i, np.array([q]), np.zeros(1), gains, state, one)
-        remember_command(gains, state, np.array([command[i]]))
+        remember_command(i, gains, state, np.array([command[i]]))
         out[i] = one[0]
     return out
 
@@ -52,13 +52,23 @@ def test_an_unknown_constant_acceleration_is_tracked_in_three_samples() -> None:
     assert np.allclose(v[3:], A * times[3:], rtol=1e-11, atol=0.0)
 
 
-def test_a_motion_the_command_explains_is_estimated_exactly_from_sample_1() -> None:
-    """The same motion with the command u = A: every prediction is the measured position
-    (residual 0), so v^_i = i A T from sample 1 on, whatever the pole."""
-    times = T * np.arange(6)
+def test_a_joint_held_at_rest_by_its_command_is_estimated_at_rest() -> None:
+    """A command u = 5 rad/s^2 that only holds the joint against a patient's pull (q stays 0):
+    d^ starts at -u_0, so every prediction is q = 0 (residual 0) and v^ is exactly 0 at every
+    sample, whatever the pole."""
     for pole in (0.0, 0.5):
-        v = _estimates(0.5 * A * times ** 2, np.full(6, A), pole)
-        assert np.allclose(v[1:], A * times[1:], rtol=1e-12, atol=0.0)
+        v = _estimates(np.zeros(6), np.full(6, 5.0), pole)
+        assert np.array_equal(v, np.zeros(6))
+
+
+def test_a_motion_the_command_explains_is_tracked_after_its_start() -> None:
+    """q = A t^2 / 2 under the command u = A: d^ starts at -A (the joint taken at rest) for a
+    true unknown acceleration 0, the residuals are those of the test above, so deadbeat
+    v^_1 = 0.75 A T, then v^_i = i A T from sample 2 on."""
+    times = T * np.arange(8)
+    v = _estimates(0.5 * A * times ** 2, np.full(8, A), 0.0)
+    assert v[1] == pytest.approx(0.75 * A * T, rel=1e-12)
+    assert np.allclose(v[2:], A * times[2:], rtol=1e-11, atol=0.0)
 
 
 def test_a_slower_pole_tracks_more_slowly() -> None:

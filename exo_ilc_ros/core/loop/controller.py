@@ -163,7 +163,7 @@ def feedback_control_into(i: int, setpoint: Setpoint, q: np.ndarray, qd: np.ndar
     feedback_velocity_into(i, q, qd, controller.observer, guard.observer, velocity)
     control_into(setpoint, q, velocity, tau_p, controller.kp, controller.kd,
                  controller.torque, u_out, effort_out)
-    remember_command(controller.observer, guard.observer, u_out)
+    remember_command(i, controller.observer, guard.observer, u_out)
 
 
 @njit(cache=True, error_model="numpy")

@@ -21,7 +21,11 @@ before:
 and v^_i is the velocity eq (11)'s K_D multiplies. With l_q = 1 - p^3, l_v = 3/2 (1 - p)^2
 (1 + p) and l_d = (1 - p)^3 the estimate's error decays with the triple pole p (the
 observer's ``control.velocity_observer``; 0: deadbeat, the error of a constant d gone in three
-samples). At i = 0 the estimate starts at the measured (q_0, qdot_0) and d^ = 0.
+samples). At i = 0 the estimate starts at the measured (q_0, qdot_0) and, once the command
+u_0 is formed, d^ = -u_0: the joint at rest over the first period (a learned input that holds
+a patient's pull at the start is no acceleration; with d^ = 0 the prediction took u_0 for one,
+and the kick it gave the velocity fed back left a ~1e-3 rad error at the trial's start that no
+trial removed: patients with ideal sensors 0.0014 rad off at trial 25 instead of 2e-5).
 """
 
 from __future__ import annotations
@@ -90,12 +94,17 @@ def feedback_velocity_into(i: int, q: np.ndarray, qd: np.ndarray, gains: np.ndar
 
 
 @njit(cache=True, error_model="numpy")
-def remember_command(gains: np.ndarray, state: np.ndarray, u: np.ndarray) -> None:
-    """Keep the command u of eq (11) the controller formed at this sample for the next
-    sample's prediction in (O) (on the joints with the observer)."""
+def remember_command(i: int, gains: np.ndarray, state: np.ndarray, u: np.ndarray) -> None:
+    """Keep the command u of eq (11) the controller formed at sample ``i`` for the next
+    sample's prediction in (O) (on the joints with the observer). At i = 0 the unknown
+    acceleration starts at d^ = -u_0: the joint is taken to start at rest (no acceleration
+    over the first period), whatever the command (a learned input that holds a patient's pull
+    is not an acceleration of the joint)."""
     for j in range(u.shape[0]):
         if gains[GAIN_POSITION, j] != 0.0:
             state[COMMAND, j] = u[j]
+            if i == 0:
+                state[DISTURBANCE, j] = -u[j]
 
 
 def fed_back_velocity(position: np.ndarray, velocity: np.ndarray, control_input: np.ndarray,
@@ -108,5 +117,5 @@ def fed_back_velocity(position: np.ndarray, velocity: np.ndarray, control_input:
     out = np.empty((n_samples, n))
     for i in range(n_samples):
         feedback_velocity_into(i, position[i], velocity[i], gains, state, out[i])
-        remember_command(gains, state, control_input[i])
+        remember_command(i, gains, state, control_input[i])
     return out

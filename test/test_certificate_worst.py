@@ -86,7 +86,7 @@ def test_the_floors_damp_the_elbows_chatter() -> None:
     trial 1 (the learned input is still zero) and gone by trial 4 (measured 0.0007 rad about
     the mean, elbow 0.015 rad off; 0.04 and 0.33 rad under the old gains). The floors alone:
     the measured velocity fed back, as before the velocity observer (with it, 0.0038 rad about
-    the mean at trial 4 and settled from trial 7, not 16)."""
+    the mean at trial 4 and settled from trial 6, not 16)."""
     base = _base().replace({"control.velocity_observer": 1.0})
     patient = draw_patient(base, PopulationSpec(), 0, WORST)
     result = run_trials(patient_config(base, patient, 4))
@@ -103,7 +103,7 @@ trial 25, never within)."""
 def test_the_worst_patient_with_the_floors_meets_the_certificate() -> None:
     """With the velocity observer on the floors' joints (patient_aware.yaml's
     ``control.velocity_observer: 0``): the certificate's per-patient criteria over 25 trials,
-    and within the bound by trial 10 (measured: settled from trial 8, 1.9e-3 rad at 25)."""
+    and within the bound by trial 10 (measured: settled from trial 7, 2.6e-3 rad at 25)."""
     base = _base()
     patient = draw_patient(base, PopulationSpec(), 0, WORST_WITH_FLOORS)
     assert patient.mas_grade == "3" and patient.overrides["patient.sensor.quantisation"] > 0

@@ -20,7 +20,8 @@ from exo_ilc_ros.core.learning.norm_optimal_model import PatientLinearisation, b
 from exo_ilc_ros.core.learning.patient_model import JointForceModel
 from exo_ilc_ros.core.learning.progress_gain import ProgressGain
 from exo_ilc_ros.core.learning.qfilter import qfilter_of
-from exo_ilc_ros.core.loop.gains import feedback_gains
+from exo_ilc_ros.core.loop.gains import feedback_gains, velocity_observer_gains
+from exo_ilc_ros.core.loop.observer import fed_back_velocity
 from exo_ilc_ros.core.loop.record import position_velocity_record
 from exo_ilc_ros.core.params.config import Config, config_dir, load_config, scenario_path
 from exo_ilc_ros.core.session.learning_session import LearningSession, run_trials
@@ -53,7 +54,10 @@ def _learned_from(config: Config, record: Any) -> Any:
     position``: the velocity from the measured position)."""
     if config["learning_velocity"] != "position":
         return record
-    return position_velocity_record(record, feedback_gains(config)[1])
+    gains = velocity_observer_gains(config)  # the velocity the controller fed back
+    fed_back = fed_back_velocity(record.position, record.velocity, record.control_input,
+                                 gains) if np.any(gains[0]) else None
+    return position_velocity_record(record, feedback_gains(config)[1], fed_back)
 
 
 @functools.cache

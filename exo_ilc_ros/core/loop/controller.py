@@ -34,6 +34,7 @@ from numba import njit
 from .. import _numba_cache  # noqa: F401  (sets numba's cache directory before any kernel)
 from ..arm.dynamics import inertia_and_bias_into, workspace
 from .hold import hold_gains_into
+from .observer import VELOCITY_FED_BACK, feedback_velocity_into, observer_state, remember_command
 from .plant import clamp
 from .setup import LoopSetup
 
@@ -77,6 +78,9 @@ class Controller(NamedTuple):
     """The safe hold's damping."""
     hold_ramp: int
     """Samples the hold's gains ramp over."""
+    observer: np.ndarray
+    """(4, n) the velocity observer's gains per joint (:mod:`.observer`: l_q, l_v / T,
+    l_d / T^2, T); a joint whose l_q is 0 feeds back the measured velocity."""
 
 
 class Guard(NamedTuple):
@@ -89,6 +93,9 @@ class Guard(NamedTuple):
     """The pose the safe hold keeps."""
     gains: np.ndarray
     """(2, n) scratch: the hold's ramped K_P and K_D."""
+    observer: np.ndarray
+    """(5, n) the velocity observer's state (:mod:`.observer`: its estimates, the last
+    command, the velocity fed back)."""
 
 
 def controller_of(experiment: LoopSetup, envelope: np.ndarray | None = None) -> Controller:
@@ -99,13 +106,15 @@ def controller_of(experiment: LoopSetup, envelope: np.ndarray | None = None) -> 
                       ComputedTorque(experiment.nominal.kernel_args, experiment.effort_limit,
                                      workspace(n)),
                       experiment.error_envelope if envelope is None else envelope,
-                      experiment.hold_kp, experiment.hold_kd, int(experiment.hold_ramp))
+                      experiment.hold_kp, experiment.hold_kd, int(experiment.hold_ramp),
+                      experiment.velocity_observer)
 
 
 def guard_of(q_hold: np.ndarray) -> Guard:
     """A fresh :class:`Guard` (not aborted, no hold command yet) around the pose array
     ``q_hold`` (read and written by the kernels)."""
-    return Guard(guard_state(), q_hold, np.empty((2, q_hold.shape[0])))
+    return Guard(guard_state(), q_hold, np.empty((2, q_hold.shape[0])),
+                 observer_state(q_hold.shape[0]))
 
 
 @njit(cache=True, error_model="numpy")
@@ -141,6 +150,20 @@ def control_into(setpoint: Setpoint, q: np.ndarray, qd: np.ndarray, tau_p: np.nd
     then the effort by eq (16) with the joint forces ``tau_p`` (clamped) into ``effort_out``."""
     feedback_into(setpoint.u_ff, setpoint.q_ref, setpoint.qd_ref, q, qd, kp, kd, u_out)
     computed_torque_into(q, qd, u_out, tau_p, torque, effort_out)
+
+
+@njit(cache=True, error_model="numpy")
+def feedback_control_into(i: int, setpoint: Setpoint, q: np.ndarray, qd: np.ndarray,
+                          tau_p: np.ndarray, controller: Controller, guard: Guard,
+                          u_out: np.ndarray, effort_out: np.ndarray) -> None:
+    """:func:`control_into` at trial sample ``i`` with the velocity the feedback uses: the
+    measured ``qd``, or on a joint with the velocity observer its estimate
+    (:func:`.observer.feedback_velocity_into`), which then remembers the command u."""
+    velocity = guard.observer[VELOCITY_FED_BACK]
+    feedback_velocity_into(i, q, qd, controller.observer, guard.observer, velocity)
+    control_into(setpoint, q, velocity, tau_p, controller.kp, controller.kd,
+                 controller.torque, u_out, effort_out)
+    remember_command(i, controller.observer, guard.observer, u_out)
 
 
 @njit(cache=True, error_model="numpy")
@@ -216,8 +239,7 @@ def guarded_control_into(i: int, holding: bool, setpoint: Setpoint, q: np.ndarra
     if state[ABORT] >= 0 or holding:
         hold_into(guard, q, qd, controller, u_out, effort_out)
     else:
-        control_into(setpoint, q, qd, tau_p, controller.kp, controller.kd, controller.torque,
-                     u_out, effort_out)
+        feedback_control_into(i, setpoint, q, qd, tau_p, controller, guard, u_out, effort_out)
     return aborted_now
 
 
@@ -295,7 +317,7 @@ class GuardedControlStep(ControlStep):
         """The error envelope (changed in place by a live parameter change)."""
         self._controller = Controller(self._kp, self._kd, self._torque, self.envelope,
                                       experiment.hold_kp, experiment.hold_kd,
-                                      int(experiment.hold_ramp))
+                                      int(experiment.hold_ramp), experiment.velocity_observer)
         self._guard = guard_of(np.empty(experiment.reference.position.shape[1]))
         self.q_hold = self._guard.q_hold
         self.state = self._guard.state

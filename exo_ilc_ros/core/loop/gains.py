@@ -22,6 +22,11 @@ a discrete PD with its command about a period late is stable only for K_D T belo
 patient joint acts on keep kp and kd (the patient's forces act on them only through a_N^-1,
 a repeating disturbance learned like any other). With the minimums 0 (the default) the gains
 are ``control.kp`` and ``control.kd`` exactly.
+
+On the joints a floor raised, ``control.velocity_observer`` (below 1) makes K_D multiply an
+observer's velocity instead of the measured one (:func:`velocity_observer_gains`,
+:mod:`.observer`): a differenced, low-passed encoder velocity is too late against the reflex
+there.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import numpy as np
 from ..arm.build import build_arm
 from ..params.config import Config
 from ..reference.build import build_reference
+from .observer import observer_gains
 from .patient import patient_joint_indices
 
 MAX_KD_PERIOD = 0.8
@@ -69,3 +75,18 @@ def feedback_gains(config: Config) -> tuple[np.ndarray, np.ndarray]:
     kp[on] = np.maximum(kp[on], np.minimum(min_stiffness[on] * inverse[on], kp_max))
     kd[on] = np.maximum(kd[on], np.minimum(min_damping[on] * inverse[on], kd_max))
     return kp, kd
+
+
+def velocity_observer_gains(config: Config) -> np.ndarray:
+    """(4, n) gains of the velocity observer (:mod:`.observer`) per arm joint: with
+    ``control.velocity_observer`` p < 1, on the joints whose K_P or K_D a floor raised above
+    ``control.kp``, ``control.kd`` by (G) (the light patient joints, where a lagging velocity
+    meets a delayed reflex); zeros elsewhere and with p = 1 (the measured velocity fed
+    back)."""
+    kd = np.asarray(config["control.kd"], dtype=float)
+    pole = float(config["control.velocity_observer"])
+    if pole >= 1.0:
+        return np.zeros((4, kd.shape[0]))
+    kp_floor, kd_floor = feedback_gains(config)
+    raised = (kd_floor > kd) | (kp_floor > np.asarray(config["control.kp"], dtype=float))
+    return observer_gains(np.full(kd.shape[0], pole), raised, float(config["control.period"]))

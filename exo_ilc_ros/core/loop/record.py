@@ -91,7 +91,8 @@ class TrialRecord:
         return np.asarray(np.max(np.abs(error[:end]), axis=0))
 
 
-def position_velocity_record(record: TrialRecord, kd: np.ndarray) -> TrialRecord:
+def position_velocity_record(record: TrialRecord, kd: np.ndarray,
+                             fed_back: np.ndarray | None = None) -> TrialRecord:
     """``record`` re-read with qdot from its measured position by central differences
     (``numpy.gradient``: zero phase, possible between trials; the first and last sample take
     their neighbour's: the one-sided differences there are twice as noisy, and the last
@@ -101,10 +102,13 @@ def position_velocity_record(record: TrialRecord, kd: np.ndarray) -> TrialRecord
     filtered encoder velocity lags (half a period for the difference, the filter's time
     constant on top); a law that learns from it drives K_P e + K_D (e_dot + tau qddot) + ...
     to zero, not e, and keeps a repeating error ~ tau K_D / K_P qddot_d
-    (docs/patient-aware.md). The learning law's ``learning_velocity: position``."""
+    (docs/patient-aware.md). The learning law's ``learning_velocity: position``.
+    ``fed_back``: the velocity the controller fed back where it was not the measured one (the
+    velocity observer's, :func:`.observer.fed_back_velocity`; None: the measured), so u +
+    K_D (qdot_fed_back - qdot_position)."""
     velocity = np.gradient(record.position, record.reference.period, axis=0)
     if velocity.shape[0] > 2:  # the ends held at their neighbours' (one-sided differences
         velocity[0], velocity[-1] = velocity[1], velocity[-2]  # spiked the last u_ff sample)
     control_input = record.control_input + np.asarray(kd, dtype=float) * (
-        record.velocity - velocity)
+        (record.velocity if fed_back is None else fed_back) - velocity)
     return replace(record, velocity=velocity, control_input=control_input)

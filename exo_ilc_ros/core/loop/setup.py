@@ -30,6 +30,8 @@ class LoopSetup(Protocol):
     hold_kd: np.ndarray
     hold_ramp: int
     """The safe hold's gains and ramp (samples), :mod:`.hold`."""
+    velocity_observer: np.ndarray
+    """(4, n) the velocity observer's gains per joint (:mod:`.observer`; zeros: none)."""
     period: float
     substeps: int
     dynamics: PlantDynamics

@@ -19,8 +19,8 @@ from .controller import (
     Controller,
     Guard,
     Setpoint,
-    control_into,
     controller_of,
+    feedback_control_into,
     guarded_control_into,
     hold_into,
 )
@@ -78,7 +78,8 @@ def simulate_trial_guarded(u_ff: np.ndarray, joint_force: np.ndarray, controller
     else:
         q_true = q_log
         qd_true = qd_log
-    guard = Guard(np.array([-1, 0], dtype=np.int64), q.copy(), np.empty((2, n)))
+    guard = Guard(np.array([-1, 0], dtype=np.int64), q.copy(), np.empty((2, n)),
+                  np.zeros((5, n)))  # controller.guard_of
     state = guard.state  # controller.guard_state()
     for i in range(n_samples):
         if on:
@@ -124,11 +125,12 @@ def control_inputs(u_ff: np.ndarray, q_ref: np.ndarray, qd_ref: np.ndarray, q: n
     n_samples, n = q.shape
     u = np.empty((n_samples, n))
     effort = np.empty((n_samples, n))
-    guard = Guard(np.array([-1, 0], dtype=np.int64), q[aborted_at], np.empty((2, n)))
+    guard = Guard(np.array([-1, 0], dtype=np.int64), q[aborted_at], np.empty((2, n)),
+                  np.zeros((5, n)))
     for i in range(n_samples):
         if aborted_at < 0 or i < aborted_at:
-            control_into(Setpoint(u_ff[i], q_ref[i], qd_ref[i]), q[i], qd[i], joint_force[i],
-                         controller.kp, controller.kd, controller.torque, u[i], effort[i])
+            feedback_control_into(i, Setpoint(u_ff[i], q_ref[i], qd_ref[i]), q[i], qd[i],
+                                  joint_force[i], controller, guard, u[i], effort[i])
         else:
             hold_into(guard, q[i], qd[i], controller, u[i], effort[i])
     return u, effort

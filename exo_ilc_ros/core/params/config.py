@@ -412,8 +412,8 @@ class Config:
         only with ``person.enabled``, the neural drive's and the strapping's only with a
         ``musculoskeletal.model``, ``patient.joints`` only when given,
         ``model.gravity_direction`` only when it is not -z, ``control.min_stiffness`` and
-        ``control.min_damping`` only when some joint's is not 0 (so, too, for the keys that
-        came before them)."""
+        ``control.min_damping`` only when some joint's is not 0, ``control.velocity_observer``
+        only when it is on (below 1) (so, too, for the keys that came before them)."""
         urdf = self._values["model.source"] == "urdf"
         left_out = set(schema.CONE_KEYS if urdf else schema.URDF_KEYS + schema.URDF_PLANT_KEYS)
         if self._values["model.urdf_joint_dynamics"] == "ignore":  # keys as before it existed
@@ -428,6 +428,8 @@ class Config:
         for floor in ("control.min_stiffness", "control.min_damping"):
             if not any(self._values[floor]):  # 0: the gains as given, as before the keys
                 left_out.add(floor)
+        if self._values["control.velocity_observer"] >= 1.0:  # off: as before the key
+            left_out.add("control.velocity_observer")
         down = self._values["model.gravity_direction"]
         if down[0] == 0.0 and down[1] == 0.0 and down[2] < 0.0:  # -z: as before the key
             left_out.add("model.gravity_direction")

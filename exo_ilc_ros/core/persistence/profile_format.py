@@ -27,7 +27,7 @@ PROFILE_FORMAT = 1
 MODEL_KEYS = ("joint_names", "model.link_masses", "model.link_lengths", "model.radius_proximal",
               "model.radius_distal", "model.joint_axes", "model.gravity",
               "model.gravity_direction", "control.period", "control.kp", "control.kd",
-              "control.min_stiffness", "control.min_damping",
+              "control.min_stiffness", "control.min_damping", "control.velocity_observer",
               *schema.URDF_KEYS, *schema.PERSON_KEYS)
 """What a feed-forward was learned *for*: the controller's nominal model and loop (a URDF arm by
 its file's contents, a person's segments only with ``person.enabled``,

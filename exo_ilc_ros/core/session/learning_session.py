@@ -45,7 +45,8 @@ from ..learning.norm_optimal_model import PatientLinearisation
 from ..learning.patient_model import JointForceModel, JointForceStep
 from ..learning.progress_gain import progress_gain_of
 from ..learning.qfilter import feedforward_limit_of
-from ..loop.gains import feedback_gains
+from ..loop.gains import feedback_gains, velocity_observer_gains
+from ..loop.observer import fed_back_velocity
 from ..loop.patient import PatientLearning, PatientModel, true_error
 from ..loop.record import TrialRecord, position_velocity_record
 from ..loop.trial import record_from_samples
@@ -265,7 +266,8 @@ class LearningSession:
         tripping joints (``abort.backoff``)."""
         law_record = pass_length_record(record)
         if self.config["learning_velocity"] == "position":
-            law_record = position_velocity_record(law_record, self._feedback_kd())
+            law_record = position_velocity_record(law_record, self._feedback_kd(),
+                                                  self._fed_back(law_record))
         backoff = float(self.config["abort.backoff"])
         return partial_update(self.active_law.update(law_record), record, trip.tripped, backoff)
 
@@ -360,16 +362,28 @@ class LearningSession:
         learned from)."""
         if self.config["learning_velocity"] != "position" or record.aborted:
             return record
-        return position_velocity_record(record, self._feedback_kd())
+        return position_velocity_record(record, self._feedback_kd(), self._fed_back(record))
 
     def _feedback_kd(self) -> np.ndarray:
         """The K_D the controller ran (control.kd with its floor, :mod:`..loop.gains`), for
         the config in force (computed once per config)."""
         held = getattr(self, "_kd_of", None)
         if held is None or held[0] is not self.config:
-            held = (self.config, feedback_gains(self.config)[1])
+            held = (self.config, feedback_gains(self.config)[1],
+                    velocity_observer_gains(self.config))
             self._kd_of = held
         return held[1]
+
+    def _fed_back(self, record: TrialRecord) -> np.ndarray | None:
+        """The velocity the controller fed back in ``record`` where the velocity observer
+        made it differ from the measured one (:func:`..loop.observer.fed_back_velocity`);
+        None: the measured velocity on every joint."""
+        self._feedback_kd()
+        gains = self._kd_of[2]
+        if not np.any(gains[0]):
+            return None
+        return fed_back_velocity(record.position, record.velocity, record.control_input,
+                                 gains)
 
     def _rebuild_about_patient(self) -> str:
         """Norm-optimal's model rebuilt about the identified plant once the linearised forces

@@ -9,7 +9,7 @@ from ..arm.build import build_arm, build_plant
 from ..errors import SafetyError
 from ..loop.controller import controller_of
 from ..loop.divergence import plant_damping, stable_substeps
-from ..loop.gains import feedback_gains
+from ..loop.gains import feedback_gains, velocity_observer_gains
 from ..loop.hold import ramp_samples
 from ..loop.patient import PatientModel, patient_trial
 from ..loop.plant import PlantDynamics, plant_integration
@@ -35,6 +35,8 @@ class Experiment:
         self.reference = build_reference(config)
         self.kp, self.kd = feedback_gains(config)
         """K_P, K_D of eq (11): control.kp, control.kd with their floors (:mod:`..loop.gains`)."""
+        self.velocity_observer = velocity_observer_gains(config)
+        """The velocity observer's gains per joint (:mod:`..loop.observer`; zeros: none)."""
         self.effort_limit = np.asarray(config["control.effort_limit"], dtype=float)
         self.error_envelope = np.asarray(config["safety.error_envelope"], dtype=float)
         self.hold_kp = np.asarray(config["safety.hold_kp"], dtype=float)

@@ -86,5 +86,9 @@ def _retention_rule(value: Any) -> str | None:
     return None if value <= 1.0 else f"must be <= 1 (a share kept per trial), got {value!r}"
 
 
+def _pole_rule(value: Any) -> str | None:
+    return None if value <= 1.0 else f"must be <= 1 (a pole's radius; 1: off), got {value!r}"
+
+
 def _share_rule(value: Any) -> str | None:
     return None if value <= 1.0 else f"must be <= 1 (a share of the periods), got {value!r}"

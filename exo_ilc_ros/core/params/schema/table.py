@@ -24,6 +24,7 @@ from .rules import (
     _name_rule,
     _node_name_rule,
     _patient_joints_problem,
+    _pole_rule,
     _priority_rule,
     _range_rule,
     _retention_rule,
@@ -257,6 +258,12 @@ PARAMETERS: tuple[Parameter, ...] = (
               "joint acts on: K_D,j = max(kd_j, min_damping_j / I_j) (against a delayed stretch "
               "reflex on a light joint); the floor capped at 0.8 / control.period "
               "(core/loop/gains.py); 0: kd as given", per_joint=True, minimum=0.0),
+    Parameter("control.velocity_observer", SHARED, Kind.DOUBLE,
+              "the velocity eq (11)'s K_D multiplies on the joints whose damping floor "
+              "(control.min_damping) raised K_D: an observer's estimate from the measured "
+              "position and the command (core/loop/observer.py), its error decaying with this "
+              "triple pole (0: deadbeat); 1: off, the measured velocity on every joint",
+              minimum=0.0, extra_rule=_pole_rule),
     Parameter("control.effort_limit", SHARED, Kind.DOUBLE_ARRAY,
               "|effort| limit per joint (N m)", per_joint=True, strictly_positive=True),
     Parameter("safety.error_envelope", SHARED, Kind.DOUBLE_ARRAY,

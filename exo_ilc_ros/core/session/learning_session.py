@@ -375,12 +375,10 @@ class LearningSession:
         return held[1]
 
     def _fed_back(self, record: TrialRecord) -> np.ndarray | None:
-        """The velocity the controller fed back in ``record`` where the velocity observer
-        made it differ from the measured one (:func:`..loop.observer.fed_back_velocity`);
-        None: the measured velocity on every joint."""
-        self._feedback_kd()
-        gains = self._kd_of[2]
-        if not np.any(gains[0]):
+        """The velocity fed back in ``record`` (:func:`..loop.observer.fed_back_velocity`);
+        None where no joint has the velocity observer (the measured velocity)."""
+        self._feedback_kd()  # computes self._kd_of for the config in force
+        if not np.any((gains := self._kd_of[2])[0]):
             return None
         return fed_back_velocity(record.position, record.velocity, record.control_input,
                                  gains)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numba
 
 KERNEL_MODULES = ("arm/dynamics.py", "arm/joint_forces.py", "loop/plant.py", "loop/controller.py",
-                  "loop/trial.py", "loop/patient.py", "loop/hold.py",
+                  "loop/trial.py", "loop/patient.py", "loop/hold.py", "loop/observer.py",
                   "learning/norm_optimal_model.py", "learning/norm_optimal_qp.py",
                   "learning/norm_optimal_recursive.py", "learning/joint_force_regressors.py",
                   "person/neural_drive.py", "person/strapped.py")

@@ -50,11 +50,9 @@ def test_live_change_shows_in_run_and_analyze_and_a_mistyped_node_fails_fast(
     claim = claim_domain_id()
     env = dict(os.environ, ROS_DOMAIN_ID=str(claim.domain_id))  # exported, no --domain-id
     out = tmp_path / "run.json"
-    # 50 trials of 1 s: the change is started with the graph and lands in trial 2 (seen at
-    # load 9); 300 only added ~250 trials of the same law to run, record and analyze.
     run = subprocess.Popen(
         [sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--config", "short.yaml",
-         "--trials", "50", "--no-store", "--quiet", "--json", str(out)],
+         "--trials", "300", "--no-store", "--quiet", "--json", str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env,
         text=True, cwd=tmp_path)
     try:

@@ -219,6 +219,12 @@ class JointForceIdentifier:
 
     def _separate(self, info: JointInformation
                   ) -> tuple[np.ndarray, tuple[tuple[str, str, float], ...]]:
+        """:meth:`_separation`, once per trial and joint information."""
+        mask, pairs = info.derived("separate", lambda: self._separation(info))
+        return mask.copy(), pairs
+
+    def _separation(self, info: JointInformation
+                    ) -> tuple[np.ndarray, tuple[tuple[str, str, float], ...]]:
         """The base columns fitted (``info.fitted`` less those the trials cannot separate from
         another) and the pairs found, (kept, left out, correlation; nan: by the movement's
         shape). Then (``reversal_speed`` > 0 only), one at a time, the less needed
@@ -238,7 +244,7 @@ class JointForceIdentifier:
             else:  # too slow for either: both reported, neither left out
                 pairs.append(("viscous", "coulomb", math.nan))
         for _ in range(len(names) if s.reversal_speed > 0.0 else 0):
-            solution = solve_scaled(info.R, info.b, info.yy, mask)
+            solution = info.solve(mask)
             found = [pair for pair in inseparable_pairs(solution.covariance_scaled, names,
                                                         s.max_correlation)
                      if "coulomb" in pair[:2]]
@@ -248,7 +254,7 @@ class JointForceIdentifier:
             keep, drop = sorted((a, b), key=KEEP_ORDER.index)
             pairs.append((keep, drop, r))
             mask[names.index(drop)] = False
-        solution = solve_scaled(info.R, info.b, info.yy, mask)
+        solution = info.solve(mask)
         pairs += [(a, b, r) for a, b, r in inseparable_pairs(solution.covariance_scaled, names,
                                                              s.max_correlation)]
         return mask, tuple(pairs)
@@ -256,8 +262,13 @@ class JointForceIdentifier:
     def _selected(self, info: JointInformation, mask: np.ndarray
                   ) -> tuple[int | None, Solution, Solution]:
         """The best reflex grid point (None: no reflex column), its solution, the base one
-        (the base columns of ``mask``)."""
-        base = solve_scaled(info.R, info.b, info.yy, mask)
+        (the base columns of ``mask``); once per trial, information and mask."""
+        return info.derived(("selected", mask.tobytes()),
+                            lambda: self._selection(info, mask.copy()))
+
+    def _selection(self, info: JointInformation, mask: np.ndarray
+                   ) -> tuple[int | None, Solution, Solution]:
+        base = info.solve(mask)
         if info.Rgg.shape[0] == 0 or info.trials == 0:
             return None, base, base
         rss = info.grid_rss()
@@ -290,7 +301,7 @@ class JointForceIdentifier:
             phi = np.column_stack([phi, col])
             theta = chosen.theta
         else:
-            theta = solve_scaled(info.R, info.b, info.yy, mask).theta
+            theta = info.solve(mask).theta
         if rows is not None:
             phi, target = phi[rows], target[rows]
         use = np.isfinite(theta)

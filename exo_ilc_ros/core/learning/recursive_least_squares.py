@@ -6,11 +6,15 @@ the base columns and every reflex grid point."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
 
 from .identification_settings import BASE_PARAMETERS
+
+_T = TypeVar("_T")
 
 
 @dataclass
@@ -115,6 +119,7 @@ class JointInformation:
         self.inflation = np.full(p + 1, np.nan)
         self.unresolved = 0.0
         self._rss: np.ndarray | None = None
+        self._derived: dict[Hashable, Any] = {}
 
     def add(self, phi: np.ndarray, reflex: np.ndarray, active: np.ndarray, y: np.ndarray,
             forgetting: float, velocity: np.ndarray, unresolved: float) -> None:
@@ -140,6 +145,20 @@ class JointInformation:
         self.fastest = np.maximum(self.fastest, [max(float(np.max(velocity)), 0.0),
                                                  max(float(-np.min(velocity)), 0.0)])
         self._rss = None
+        self._derived.clear()
+
+    def derived(self, key: Hashable, compute: Callable[[], _T]) -> _T:
+        """``compute()``, kept under ``key`` until the next :meth:`add`: what the identifier
+        derives from this information (a solve, a separation) is asked for several times per
+        trial and depends on nothing else. The result is shared: callers must not change it."""
+        if key not in self._derived:
+            self._derived[key] = compute()
+        return self._derived[key]
+
+    def solve(self, mask: np.ndarray) -> Solution:
+        """:func:`solve_scaled` of the base columns of ``mask`` (kept until the next trial)."""
+        return self.derived(("solve", mask.tobytes()),
+                            lambda: solve_scaled(self.R, self.b, self.yy, mask.copy()))
 
     def grid_rss(self) -> np.ndarray:
         """Residual of the base columns plus each reflex grid point's column (inf where that

@@ -410,7 +410,8 @@ class Config:
         without the cone keys and with ``model.urdf`` as the sha256 of the file's contents (not
         its path); ``model.urdf_joint_dynamics`` only when it applies them; the person's keys
         only with ``person.enabled``, the neural drive's and the strapping's only with a
-        ``musculoskeletal.model``, ``patient.joints`` only when given,
+        ``musculoskeletal.model`` (and the person's body size with ``musculoskeletal.body_size:
+        person``, not its default ``model``), ``patient.joints`` only when given,
         ``model.gravity_direction`` only when it is not -z, ``control.min_stiffness`` and
         ``control.min_damping`` only when some joint's is not 0, ``control.velocity_observer``
         only when it is on (below 1) (so, too, for the keys that came before them)."""
@@ -423,6 +424,10 @@ class Config:
         if self._values["musculoskeletal.model"] == "none":  # no muscles, no cuffs
             left_out.update(schema.DRIVE_KEYS)
             left_out.update(schema.STRAPPED_KEYS)
+        elif self._values["musculoskeletal.body_size"] == "person":  # the person's size counts
+            left_out.difference_update(schema.BODY_SIZE_KEYS)
+        if self._values["musculoskeletal.body_size"] == "model":  # as before the key
+            left_out.add("musculoskeletal.body_size")
         if not self._values[schema.PATIENT_JOINTS]:
             left_out.add(schema.PATIENT_JOINTS)
         for floor in ("control.min_stiffness", "control.min_damping"):

@@ -26,6 +26,7 @@ pass through the torso). Joint limits are the model's own (anatomical ranges, so
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from importlib import resources
 from typing import Any, Protocol
@@ -179,3 +180,32 @@ def muscle_names(model: Any) -> list[str]:
 
     return [model.actuator(i).name for i in range(model.nu)
             if model.actuator_dyntype[i] == mujoco.mjtDyn.mjDYN_MUSCLE]
+
+
+def rest_pose(model: Any, anatomy: PersonAnatomy) -> np.ndarray:
+    """qpos of the person at rest: :attr:`PersonAnatomy.rest`, every other joint at 0 and
+    joints coupled by a joint equality (MyoArm's shoulder girdle) at their coupled value."""
+    import mujoco
+
+    qpos = np.array(model.qpos0)
+    for name, value in anatomy.rest:
+        qpos[model.jnt_qposadr[model.joint(name).id]] = value
+    for i in range(model.neq):
+        if model.eq_type[i] != mujoco.mjtEq.mjEQ_JOINT:
+            continue
+        a = model.jnt_qposadr[model.eq_obj1id[i]]
+        x = 0.0
+        if model.eq_obj2id[i] >= 0:
+            b = model.jnt_qposadr[model.eq_obj2id[i]]
+            x = qpos[b] - model.qpos0[b]
+        c = model.eq_data[i]
+        qpos[a] = model.qpos0[a] + c[0] + c[1] * x + c[2] * x ** 2 + c[3] * x ** 3 + c[4] * x ** 4
+    return qpos
+
+
+def compile_quietly(spec: Any) -> Any:
+    """``spec.compile()`` without MuJoCo's notice that MyoArm's torso was attached with an
+    empty prefix (myo-sim composes it so; nothing is wrong)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Attaching a spec with an empty prefix")
+        return spec.compile()

@@ -53,7 +53,6 @@ The learning law sees only the exoskeleton's joints (:attr:`position`, :attr:`ve
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -68,9 +67,10 @@ from ..errors import ConfigError, ModelError
 from ..loop.plant import clamp_counted
 from ..params.config import Config
 from ..sim.mujoco_arm import arm_mjcf
+from .body_size import scaled_person_spec
 from .cuffs import CUFFS
 from .display import person_joint_names, person_urdf
-from .model import ANATOMY, MuscleDrive, PersonAnatomy, muscle_names, person_spec
+from .model import ANATOMY, MuscleDrive, compile_quietly, muscle_names, rest_pose
 
 EXO_PREFIX = "exo_"
 """Prefix of the exoskeleton's elements in the composed model."""
@@ -132,35 +132,6 @@ def _quat(rotation: np.ndarray) -> np.ndarray:
     return q
 
 
-def rest_pose(model: Any, anatomy: PersonAnatomy) -> np.ndarray:
-    """qpos of the person at rest: :attr:`PersonAnatomy.rest`, every other joint at 0 and
-    joints coupled by a joint equality (MyoArm's shoulder girdle) at their coupled value."""
-    import mujoco
-
-    qpos = np.array(model.qpos0)
-    for name, value in anatomy.rest:
-        qpos[model.jnt_qposadr[model.joint(name).id]] = value
-    for i in range(model.neq):
-        if model.eq_type[i] != mujoco.mjtEq.mjEQ_JOINT:
-            continue
-        a = model.jnt_qposadr[model.eq_obj1id[i]]
-        x = 0.0
-        if model.eq_obj2id[i] >= 0:
-            b = model.jnt_qposadr[model.eq_obj2id[i]]
-            x = qpos[b] - model.qpos0[b]
-        c = model.eq_data[i]
-        qpos[a] = model.qpos0[a] + c[0] + c[1] * x + c[2] * x ** 2 + c[3] * x ** 3 + c[4] * x ** 4
-    return qpos
-
-
-def compile_quietly(spec: Any) -> Any:
-    """``spec.compile()`` without MuJoCo's notice that MyoArm's torso was attached with an
-    empty prefix (myo-sim composes it so; nothing is wrong)."""
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Attaching a spec with an empty prefix")
-        return spec.compile()
-
-
 def _joint_frame(model: Any, data: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
     joint = model.joint(name).id
     return np.array(data.xanchor[joint]), np.array(data.xaxis[joint])
@@ -196,7 +167,7 @@ class StrappedArm:
             if joint not in self.joint_names:
                 raise ConfigError(key, f"{joint!r} is not one of joint_names "
                                   f"{self.joint_names}")
-        person = person_spec(name)
+        person = scaled_person_spec(config)
         person.option.timestep = timestep
         person.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
         alone = compile_quietly(person)

@@ -40,7 +40,8 @@ Sources of each quantity (:data:`SOURCES`; docs/every-patient.md), per joint of 
   patient): voluntary.yaml's spring-damper toward the reference scaled by 0-1, its trial-to-trial
   amplitude and timing sd (Emken et al. 2007, J NeuroEng Rehabil 4:8) and fatigue (Xu, Chu and
   Rogers 2014) scaled alike.
-- **Body size** (only where the arm file carries a person, ``person.enabled``): sex 50/50,
+- **Body size** (only where the arm file carries a person, ``person.enabled``, or scales a
+  person with muscles to one, ``musculoskeletal.body_size: person``): sex 50/50,
   height and body mass each at a percentile drawn uniformly in 5-95 % of the adult table
   :data:`ADULT_PERCENTILES` (NHANES 2003-2006, McDowell et al. 2008, Natl Health Stat Report 10,
   adults 20 years and over; rounded), interpolated linearly; de Leva 1996 makes the segments
@@ -63,8 +64,10 @@ exoskeleton's joints (the virtual patient's ``patient.*`` effects are refused th
   and mean individual regressions, both load directions) on every axis at once
   (:data:`STRAP_STIFFNESS_RANGE`): the spread of the published fits, not of the 21 subjects.
 - **Mass error**: the exoskeleton's masses, as above.
+- **Body size**, as above, when the config scales the person (``musculoskeletal.body_size:
+  person``, core/person/body_size.py); with ``model`` every person is MyoSuite's one adult.
 - Not drawn: the sensors (the strapped plant has no sensor model: its measured state is the
-  true one), body size (MyoSuite's models are one adult, not scaled), voluntary effort.
+  true one), voluntary effort.
 """
 
 from __future__ import annotations
@@ -208,7 +211,8 @@ class PopulationSpec:
         if muscles:
             return ["mas", "mass.size", "mass.sign", "misalignment.radius",
                     "misalignment.polar", "misalignment.azimuth", "misalignment.rotation.x",
-                    "misalignment.rotation.y", "misalignment.rotation.z", "strap.stiffness"]
+                    "misalignment.rotation.y", "misalignment.rotation.z", "strap.stiffness",
+                    *(BODY_COORDINATES if person else ())]
         names = ["mas", "encoder", "mass.size", "mass.sign"]
         for j in joints:
             names += [f"stiffness.{j}", f"rest.{j}", f"viscous.{j}", f"coulomb.{j}"]
@@ -216,8 +220,12 @@ class PopulationSpec:
             names += ["voluntary", "voluntary.gain", "voluntary.amplitude",
                       "voluntary.timing", "voluntary.fatigue"]
         if person:
-            names += ["body.sex", "body.height", "body.mass"]
+            names += BODY_COORDINATES
         return names
+
+
+BODY_COORDINATES = ("body.sex", "body.height", "body.mass")
+"""The unit-cube coordinates of a person's body size (sex, height and body mass)."""
 
 
 def coordinate_family(name: str) -> str:
@@ -232,10 +240,18 @@ def has_muscles(base: Config) -> bool:
     return str(base.values["musculoskeletal.model"]) != "none"
 
 
+def has_body_size(base: Config) -> bool:
+    """The config's person takes a body size: the URDF person (``person.enabled``) or a
+    person with muscles scaled to it (``musculoskeletal.body_size: person``)."""
+    values = base.values
+    if has_muscles(base):
+        return str(values["musculoskeletal.body_size"]) == "person"
+    return bool(values["person.enabled"])
+
+
 def cube_coordinates(base: Config, spec: PopulationSpec) -> list[str]:
     """The unit-cube coordinates of a patient on the arm of ``base``."""
-    values = base.values
-    return spec.coordinates(schema.patient_joint_names(values), bool(values["person.enabled"]),
+    return spec.coordinates(schema.patient_joint_names(base.values), has_body_size(base),
                             has_muscles(base))
 
 
@@ -267,7 +283,7 @@ class Patient:
                     f"{vector('strapping.misalignment.offset', 1)} mm "
                     f"{vector('strapping.misalignment.rotation', 1)} deg, straps "
                     f"{'/'.join(f'{x / 1000:.2f}' for x in o['strapping.stiffness'])} N/mm, "
-                    f"mass {100 * o['mass_uncertainty']:+.1f} %")
+                    f"mass {100 * o['mass_uncertainty']:+.1f} %{self._body()}")
 
         def joints(key: str) -> str:
             return "/".join(f"{x:.2f}" for x in o[key])
@@ -276,10 +292,13 @@ class Patient:
                 f"{joints('patient.friction.viscous')}, F_c {joints('patient.friction.coulomb')}"
                 f", {'14-bit encoder' if o['patient.sensor.quantisation'] else 'ideal sensors'}"
                 f", mass {100 * o['mass_uncertainty']:+.1f} %")
-        if "person.body_mass" in o:
-            text += (f", {o['person.sex']} {o['person.height']:.2f} m "
-                     f"{o['person.body_mass']:.0f} kg")
-        return text
+        return text + self._body()
+
+    def _body(self) -> str:
+        o = self.overrides
+        if "person.body_mass" not in o:
+            return ""
+        return f", {o['person.sex']} {o['person.height']:.2f} m {o['person.body_mass']:.0f} kg"
 
 
 def _percentile(table: tuple[float, float, float], p: float) -> float:
@@ -305,7 +324,7 @@ def patient_from_unit(base: Config, spec: PopulationSpec, unit: Mapping[str, flo
     of the MAS coordinate alike (a search covers the rare grades as well as the common)."""
     values = base.values
     joints = schema.patient_joint_names(values)
-    person = bool(values["person.enabled"])
+    person = has_body_size(base)
     missing = [c for c in cube_coordinates(base, spec) if c not in unit]
     if missing:
         raise ValueError(f"the patient's point lacks the coordinates {missing}")
@@ -316,7 +335,8 @@ def patient_from_unit(base: Config, spec: PopulationSpec, unit: Mapping[str, flo
         probabilities = {g: 1.0 / len(grades) for g in grades}
     grade = _grade(u["mas"], probabilities)
     if has_muscles(base):
-        return Patient(index, u, person_overrides(spec, u, grade))
+        return Patient(index, u, {**person_overrides(spec, u, grade),
+                                  **(body_overrides(u) if person else {})})
     low, high = STIFFNESS_BANDS[grade]
     reach = REST_BANDS[grade]
     # q_0 counts from patient.joint_zero, signed as patient.joints (core/loop/patient.py
@@ -351,14 +371,20 @@ def patient_from_unit(base: Config, spec: PopulationSpec, unit: Mapping[str, flo
             "patient.voluntary.fatigue_rate": VOLUNTARY_FATIGUE_RATE * u["voluntary.fatigue"],
         })
     if person:
-        sex = "male" if u["body.sex"] < 0.5 else "female"
-        table = ADULT_PERCENTILES[sex]
-        overrides.update({
-            "person.sex": sex,
-            "person.height": _percentile(table["height"], 0.05 + 0.9 * u["body.height"]),
-            "person.body_mass": _percentile(table["body_mass"], 0.05 + 0.9 * u["body.mass"]),
-        })
+        overrides.update(body_overrides(u))
     return Patient(index, u, overrides)
+
+
+def body_overrides(u: Mapping[str, float]) -> dict[str, Any]:
+    """The person's sex, height and body mass at a point of the unit cube (module docstring,
+    *Body size*)."""
+    sex = "male" if u["body.sex"] < 0.5 else "female"
+    table = ADULT_PERCENTILES[sex]
+    return {
+        "person.sex": sex,
+        "person.height": _percentile(table["height"], 0.05 + 0.9 * u["body.height"]),
+        "person.body_mass": _percentile(table["body_mass"], 0.05 + 0.9 * u["body.mass"]),
+    }
 
 
 def mass_error(spec: PopulationSpec, u: Mapping[str, float]) -> float:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from .key_groups import (
     AXIS_VECTORS,
+    BODY_SIZE_KEYS,
     CONE_KEYS,
     DRIVE_KEYS,
     MODEL_SOURCES,
@@ -59,6 +60,7 @@ from .validator import (
 
 __all__ = [
     "AXIS_VECTORS",
+    "BODY_SIZE_KEYS",
     "BY_NAME",
     "CONE_KEYS",
     "CONTROLLER",

@@ -42,7 +42,8 @@ DRIVE_KEYS = tuple(f"person.drive.{name}" for name in (
 digest while ``musculoskeletal.model`` is none (no muscles to drive), so a run keeps the
 digest it had before they existed."""
 STRAPPED_KEYS = ("musculoskeletal.model", "musculoskeletal.timestep",
-                 "musculoskeletal.settle_time", "strapping.shoulder_joint",
+                 "musculoskeletal.settle_time", "musculoskeletal.body_size",
+                 "strapping.shoulder_joint",
                  "strapping.elbow_joint", "strapping.misalignment.offset",
                  "strapping.misalignment.rotation", "strapping.upper_arm_cuff",
                  "strapping.forearm_cuff", "strapping.stiffness", "strapping.damping",
@@ -51,3 +52,6 @@ STRAPPED_KEYS = ("musculoskeletal.model", "musculoskeletal.timestep",
 """A person with muscles strapped in the exoskeleton (core/person/strapped.py, the schema's
 musculoskeletal.py): left out of every digest while ``musculoskeletal.model`` is none, so a
 run keeps the digest it had before they existed."""
+BODY_SIZE_KEYS = ("person.body_mass", "person.height", "person.sex")
+"""The person's body size: de Leva's segments of the URDF person (``person.enabled``) and the
+size a person with muscles is scaled to (``musculoskeletal.body_size: person``)."""

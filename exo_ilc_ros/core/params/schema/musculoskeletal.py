@@ -43,6 +43,11 @@ def musculoskeletal_parameters() -> list[Parameter]:
         p("musculoskeletal.settle_time", Kind.DOUBLE, "simulated s the person hangs in the "
           "cuffs, the exoskeleton held at x_d(0), before the state every trial starts from "
           "is kept", minimum=0.0),
+        p("musculoskeletal.body_size", Kind.STRING, "model: the person model's own adult as "
+          "MyoSuite builds it; person: its upper arm and forearm scaled to person.height, "
+          "person.body_mass and person.sex by de Leva's (1996) segments, the muscles' lengths "
+          "and peak forces with them (core/person/body_size.py)",
+          choices=("model", "person")),
         p("strapping.shoulder_joint", Kind.STRING, "the exoskeleton joint placed on the "
           "person's shoulder centre (its body takes the upper-arm cuff); empty: the first of "
           "joint_names"),

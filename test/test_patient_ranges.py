@@ -224,3 +224,28 @@ def test_hard_patients_on_other_arms_within_the_bound(arm: Path, patient: str) -
     result = run_trials(config, mass_uncertainty=0.15, trials=25)
     assert not result.aborted
     assert np.all(result.true_max_abs_errors()[-1] <= 0.005)
+
+
+def test_the_reflex_over_the_sampled_inertia_says_when_no_gains_can_help(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """G T / I at the worst corner, by hand: MAS 3's 2 N m s/rad over the paper arm's elbow's
+    lightest inertia (0.01091 kg m^2, printed) at T 0.01 s is 1.83 >= 1 (no velocity feedback
+    at 100 Hz holds it; a period below I / G = 5.5 ms is needed); on shoulder flexion (0.06619)
+    0.30, and 0 on a joint without a reflex; halved at T 0.005 s."""
+    config = load_config(AWARE)
+    by_joint = {j.joint: j for j in analyze_patient_ranges(config).joints}
+    elbow, shoulder = by_joint["elbow_flexion"], by_joint["shoulder_flexion"]
+    assert elbow.sampled_reflex == pytest.approx(2.0 * 0.01 / 0.01091, rel=2e-3)
+    assert elbow.reflex_outruns_period and elbow.unstable
+    assert shoulder.sampled_reflex == pytest.approx(2.0 * 0.01 / 0.06619, rel=2e-3)
+    assert not shoulder.reflex_outruns_period
+    no_reflex = analyze_patient_ranges(config, PatientRanges(reflex=False)).joints
+    assert all(j.sampled_reflex == 0.0 and not j.reflex_outruns_period for j in no_reflex)
+    faster = {j.joint: j for j in
+              analyze_patient_ranges(config.replace({"control.period": 0.005})).joints}
+    assert faster["elbow_flexion"].sampled_reflex == pytest.approx(elbow.sampled_reflex / 2.0)
+    assert not faster["elbow_flexion"].reflex_outruns_period
+    assert main(["analyze-loop", "--config", str(AWARE), "--patient-ranges"]) == 0
+    out = capsys.readouterr().out
+    assert "G T / I 1.83 >= 1: no velocity feedback at this period holds it (a period below " \
+           "I / G = 5.5 ms" in out

@@ -149,7 +149,11 @@ def format_ranges(analysis: RangeAnalysis) -> str:
             lines.append(f"  {j.joint:<20} UNSTABLE within a trial: a pole at radius "
                          f"{j.radius:.4f}, {j.radius_hz:.2f} Hz ({where}; I >= "
                          f"{1.0 / j.inverse_inertia:.4g} kg m^2): the loop oscillates whatever "
-                         "is learned")
+                         "is learned" + (f"; G T / I {j.sampled_reflex:.2f} >= 1: no velocity "
+                                         "feedback at this period holds it (a period below "
+                                         f"I / G = {1e3 / (j.inverse_inertia * j.reflex_gain):.2g}"
+                                         " ms, or damping inside the period, can)"
+                                         if j.reflex_outruns_period else ""))
             continue
         lines.append(f"  {j.joint:<20} worst |F| {j.worst:.5f} at {j.frequency_hz:6.2f} Hz "
                      f"({where}; I >= {1.0 / j.inverse_inertia:.4g} kg m^2; without a patient "

@@ -36,7 +36,9 @@ frequency). Against a delayed velocity feedback G an undelayed damping D > G kee
 stable for any delay; the paper arm's elbow (I >= 0.011 kg m^2) would need K_D > (G - B) / I
 ~ 110 s^-1 against MAS 3's 2 N m s/rad, and a PD sampled at 100 Hz does not get there: over
 K_P 225-6400 s^-2 and K_D 30-150 s^-1 its loop keeps a pole at radius 1.04-1.16 (4.8 Hz, the
-chatter the population's MAS 3 patients show, at the lower K_D).
+chatter the population's MAS 3 patients show, at the lower K_D). Nor does any other velocity
+feedback at 100 Hz: with G T / I >= 1 (``JointWorst.sampled_reflex``: 1.83 there) even the
+deadbeat one leaves a pole outside the unit circle, and the report says so.
 
 Left out, as in :mod:`.patient_load`: the Coulomb friction (it saturates: a bounded torque
 each trial, learned like any repeating disturbance), the reflex's threshold and ceiling (they
@@ -115,6 +117,18 @@ class JointWorst:
     """That pole's frequency (Hz)."""
     reflex_gain: float = 0.0
     """N m s/rad: the corner's stretch reflex gain (its MAS preset's; 0 where none)."""
+    sampled_reflex: float = 0.0
+    """G T / I at the worst corner: its reflex gain over the joint's lightest inertia times the
+    control period. At 1 or above no velocity feedback at this period holds the loop while the
+    reflex is active, whatever the gains: against v_{i+1} = -(G T / I) v_{i-d} the best one
+    (deadbeat, K_D T = 1) leaves poles of radius (G T / I)^(1 / (d + 1)); only a shorter period
+    (below I / G) or damping inside the period (the patient's own, a damper) can."""
+
+    @property
+    def reflex_outruns_period(self) -> bool:
+        """G T / I >= 1 (:attr:`sampled_reflex`): the period, not the gains, leaves the loop
+        unstable."""
+        return self.sampled_reflex >= 1.0
 
     @property
     def unstable(self) -> bool:
@@ -194,7 +208,8 @@ def analyze_patient_ranges(config: Config, ranges: PatientRanges | None = None,
             peak_speed[j] > MAS_PRESETS[grade][3] else 0.0
         out.append(JointWorst(name, value, float(frequency[index]), total_k, total_b, grade,
                               delta, nominal, float(inverse_inertia[j]), bool(on_patient[j]),
-                              radius, radius_hz, total_g))
+                              radius, radius_hz, total_g,
+                              total_g * float(inverse_inertia[j]) * period))
     return RangeAnalysis(ranges, out)
 
 

@@ -1,7 +1,8 @@
 """The feedback gains' absolute floors (core/loop/gains.py, control.min_stiffness and
 control.min_damping): K_P,j >= k_min / I_j and K_D,j >= d_min / I_j on the joints a patient
-acts on, I_j the lightest inertia along the reference, capped at K_D T = 0.8 (issue 33: MAS 3's
-delayed stretch reflex on the paper arm's light elbow)."""
+acts on, I_j the lightest inertia along the reference, and on the others by the coupling of the
+patient's torques into them, capped at K_D T = 0.8 (issue 33: MAS 3's delayed stretch reflex on
+the paper arm's light elbow; the light hand of a human arm beyond the patient's elbow)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from exo_ilc_ros.core.arm.build import build_arm
 from exo_ilc_ros.core.loop.gains import feedback_gains, gain_caps
 from exo_ilc_ros.core.params import schema
 from exo_ilc_ros.core.params.config import config_dir
+from exo_ilc_ros.core.reference.build import build_reference
 from exo_ilc_ros.core.sim.experiment import Experiment
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -52,18 +54,28 @@ def test_floors_by_hand_on_one_joint() -> None:
     assert kp.tolist() == [10.0] and kd.tolist() == [7.0]
 
 
-def test_only_the_patients_joints_are_raised_and_the_controller_runs_them() -> None:
-    """On the Panda (patient on joints 2, 1 and 4) floors as large as the caps raise those three
-    and leave the wrist, whose inertia is the smallest, as it was; the controller of the
+def test_patient_joints_by_their_inertia_the_others_by_the_coupling() -> None:
+    """On the Panda (patient on joints 2, 1 and 4) a patient's joint's floor scales with its
+    own lightest inverse inertia, max_t (a_N^-1)_jj, and every other joint's with the largest
+    acceleration a patient's torque gives it, max_t max_j |(a_N^-1)_kj| over the patient's
+    joints j (a_N computed here from the arm and the reference); the controller of the
     in-process loop runs the raised gains. A config without floors keeps its digest (the keys
     are left out of the identity at 0: stores made before them still match)."""
     panda = load_config(ROOT / "config" / "arms" / "panda.yaml", overlays=[AWARE])
-    raised = panda.replace({"control.min_stiffness": 1e4, "control.min_damping": 1e3})
+    raised = panda.replace({"control.min_stiffness": 60.0, "control.min_damping": 10.0})
     kp, kd = feedback_gains(raised)
-    on = [1, 0, 3]
-    assert np.allclose(kp[on], 1600.0) and np.allclose(kd[on], 80.0)
-    off = [2, 4, 5, 6]
-    assert np.allclose(kp[off], 225.0) and np.allclose(kd[off], 30.0)
+    inverse = np.linalg.inv(build_arm(raised).metric_tensors(
+        build_reference(raised).position))
+    on, off = [1, 0, 3], [2, 4, 5, 6]
+    own = np.max(np.diagonal(inverse, axis1=1, axis2=2), axis=0)
+    coupled = np.max(np.abs(inverse[:, :, on]), axis=(0, 2))
+    for joints, scale in ((on, own), (off, coupled)):
+        np.testing.assert_allclose(kp[joints], np.maximum(225.0, np.minimum(
+            60.0 * scale[joints], 1600.0)), rtol=1e-12)
+        np.testing.assert_allclose(kd[joints], np.maximum(30.0, np.minimum(
+            10.0 * scale[joints], 80.0)), rtol=1e-12)
+    assert np.any(kp[off] > 225.0) and np.any(kp[off] == 225.0)  # the coupling decides
+    assert np.all(own[4:] > coupled[4:])  # the wrist's own inertia would raise it more
     experiment = Experiment(raised)
     assert np.array_equal(experiment.kp, kp) and np.array_equal(experiment.kd, kd)
     floorless = panda.replace({"control.min_stiffness": 0.0, "control.min_damping": 0.0})

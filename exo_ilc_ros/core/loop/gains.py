@@ -10,7 +10,10 @@ paper arm's elbow (1 / max_t (a_N(q_d(t))^-1)_jj = 0.011 kg m^2) K_D 30 s^-1 is 
 against a MAS 3 stretch reflex of 2 N m s/rad, 0.1 s late: the elbow limit-cycles at ~5 Hz
 (``exo-ilc analyze-loop --patient-ranges``). So, on every arm joint a patient's joint acts on
 (``patient.joints``; every arm joint when it is empty), with I_j^-1 = max_t (a_N(q_d(t))^-1)_jj
-the joint's lightest inertia along the reference (the one the range analysis takes):
+the joint's lightest inertia along the reference (the one the range analysis takes), and on
+every other arm joint k with I_k^-1 = max over the reference and the patient's joints j of
+|(a_N(q_d(t))^-1)_kj|, the acceleration a patient's torque gives it through the coupling
+(:func:`patient_inverse_inertia`):
 
     K_P,j = max(kp_j, min(min_stiffness_j I_j^-1, K_P,max)),
     K_D,j = max(kd_j, min(min_damping_j I_j^-1, K_D,max)),                          (G)
@@ -18,10 +21,13 @@ the joint's lightest inertia along the reference (the one the range analysis tak
 the floors capped at K_D,max = :data:`MAX_KD_PERIOD` / T and K_P,max = K_D,max^2 / 4 (critically
 damped at the cap; a kp or kd above them is the config's own and kept):
 a discrete PD with its command about a period late is stable only for K_D T below ~0.85
-(:mod:`.hold`), and a differentiated 14-bit encoder's velocity is that late. Arm joints no
-patient joint acts on keep kp and kd (the patient's forces act on them only through a_N^-1,
-a repeating disturbance learned like any other). With the minimums 0 (the default) the gains
-are ``control.kp`` and ``control.kd`` exactly.
+(:mod:`.hold`), and a differentiated 14-bit encoder's velocity is that late. An arm joint
+no patient joint acts on meets the patient's forces only through a_N^-1; on a light one (the
+hand of a human arm from a whole-body URDF: 0.45 kg beyond an elbow the patient acts on) that
+coupling left trial 1 1 rad off under PD alone, so its floor scales with the coupling. The
+paper arm (every joint a patient's), the UR5 and the Panda (their wrists' coupling times the
+minimums is below their kp and kd) keep the gains they had. With the minimums 0 (the default)
+the gains are ``control.kp`` and ``control.kd`` exactly.
 
 On the joints a floor raised, ``control.velocity_observer`` (below 1) makes K_D multiply an
 observer's velocity instead of the measured one (:func:`velocity_observer_gains`,
@@ -44,13 +50,32 @@ MAX_KD_PERIOD = 0.8
 period late stops being stable (:mod:`.hold`)."""
 
 
+def _inverse_metric_tensors(config: Config) -> np.ndarray:
+    """a_N(q_d)^-1 at every sample of the reference, (N+1, n, n)."""
+    positions = build_reference(config).position
+    return np.asarray(np.linalg.inv(build_arm(config).metric_tensors(positions)))
+
+
 def lightest_inverse_inertia(config: Config) -> np.ndarray:
     """max over the reference's samples of (a_N(q_d)^-1)_jj per arm joint (kg^-1 m^-2): the
     acceleration per N m of a torque on joint j, the others free."""
-    positions = build_reference(config).position
-    tensors = build_arm(config).metric_tensors(positions)
-    inverse = np.linalg.inv(tensors)
+    inverse = _inverse_metric_tensors(config)
     return np.asarray(np.max(np.diagonal(inverse, axis1=1, axis2=2), axis=0))
+
+
+def patient_inverse_inertia(config: Config) -> np.ndarray:
+    """Per arm joint k, the acceleration per N m of the patient's torque (kg^-1 m^-2) that the
+    floors of (G) scale: on a joint a patient's joint acts on, its own lightest inverse inertia
+    (:func:`lightest_inverse_inertia`); on another, max over the reference and the patient's
+    joints j of |(a_N(q_d)^-1)_kj|, the acceleration the coupling gives it (a light wrist
+    beyond a patient's elbow)."""
+    inverse = _inverse_metric_tensors(config)
+    out = np.max(np.diagonal(inverse, axis1=1, axis2=2), axis=0)
+    on = patient_joint_indices(config)
+    off = np.setdiff1d(np.arange(out.shape[0]), on)
+    if off.size and len(on):
+        out[off] = np.max(np.abs(inverse[:, off][:, :, on]), axis=(0, 2))
+    return np.asarray(out)
 
 
 def gain_caps(period: float) -> tuple[float, float]:
@@ -68,12 +93,10 @@ def feedback_gains(config: Config) -> tuple[np.ndarray, np.ndarray]:
     min_damping = np.asarray(config["control.min_damping"], dtype=float)
     if not (np.any(min_stiffness > 0.0) or np.any(min_damping > 0.0)):
         return kp, kd
-    inverse = lightest_inverse_inertia(config)
+    inverse = patient_inverse_inertia(config)
     kp_max, kd_max = gain_caps(config["control.period"])
-    on = patient_joint_indices(config)
-    kp, kd = kp.copy(), kd.copy()
-    kp[on] = np.maximum(kp[on], np.minimum(min_stiffness[on] * inverse[on], kp_max))
-    kd[on] = np.maximum(kd[on], np.minimum(min_damping[on] * inverse[on], kd_max))
+    kp = np.maximum(kp, np.minimum(min_stiffness * inverse, kp_max))
+    kd = np.maximum(kd, np.minimum(min_damping * inverse, kd_max))
     return kp, kd
 
 

@@ -271,6 +271,55 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+class LiveClients:
+    """Two WebSocket clients of a live view about to start on a free ``port``: ``received``
+    connects at once (retrying until the view serves) and collects from the start; ``late``
+    connects once trial 1's metrics went out, so it must get again what came before it (no
+    latching in the protocol: the view re-sends the descriptions and every trial's metrics on
+    subscribe). Both collect until the server closes the connection."""
+
+    CONNECT_TIMEOUT = 120.0
+    """Seconds the first client keeps trying to connect (the run's graph starts first)."""
+    LATE_WAIT = 250.0
+    """Seconds the late client waits for trial 1's metrics before connecting anyway."""
+
+    def __init__(self) -> None:
+        self.port = _free_port()
+        self.url = f"ws://127.0.0.1:{self.port}"
+        self.received = Received()
+        self.late = Received()
+        self._first = threading.Thread(target=collect, args=(self.url, self.CONNECT_TIMEOUT),
+                                       kwargs={"received": self.received}, daemon=True)
+        self._second = threading.Thread(target=self._join_late, daemon=True)
+        self._first.start()
+        self._second.start()
+
+    def _join_late(self) -> None:
+        deadline = time.monotonic() + self.LATE_WAIT
+        while not self.received.messages.get(topics.TRIAL_METRICS) and \
+                time.monotonic() < deadline:
+            time.sleep(0.05)
+        collect(self.url, 30.0, received=self.late)
+
+    def finish(self) -> None:
+        """After the run exited: both clients were closed by the server, and the late one
+        subscribed after the first."""
+        self._first.join(30)
+        self._second.join(30)
+        assert not self._first.is_alive(), "the server did not close the connection at the end"
+        assert not self._second.is_alive(), "the server did not close the late connection"
+        assert self.late.first_subscribed is not None and \
+            self.received.first_subscribed is not None
+        assert self.late.first_subscribed > self.received.first_subscribed
+
+
+@pytest.fixture
+def live_clients() -> LiveClients:
+    """:class:`LiveClients` on a free port (the default 8765 may be held by another test
+    session on the machine), started before the test starts its run."""
+    return LiveClients()
+
+
 def _bag_messages(bag: Path) -> dict[str, list[tuple[int, int, Any]]]:
     """Per topic: (log time, publish time, decoded message), from the bag's own schemas."""
     out: dict[str, list[tuple[int, int, Any]]] = {}
@@ -307,30 +356,14 @@ def _topic_types(bag: Path) -> dict[str, str]:
 
 
 @pytest.mark.graph
-def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
+def test_live_view_shows_what_the_bag_holds(tmp_path: Path, live_clients: LiveClients) -> None:
     """``exo-ilc run --live``: a WebSocket client subscribed to every advertised channel gets
     every JointState, trial summary and trial metrics the bag holds, equal; the URDF; /tf per
     sample equal to Pinocchio's forward kinematics (the arm and the reference) to 1e-9. The bag
     logs at the sim stamps; ``simulate --bag`` lists the same topics and types."""
     config_file = tmp_path / "short.yaml"
     config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n')
-    port = _free_port()
-    received = Received()
-    client = threading.Thread(target=collect, args=(f"ws://127.0.0.1:{port}", 90.0),
-                              kwargs={"received": received}, daemon=True)
-    client.start()
-    late = Received()
-
-    def join_late() -> None:
-        """A second client, connected once trial 1's metrics went out: it must get them
-        again (no latching in the protocol: the view re-sends on subscribe)."""
-        deadline = time.monotonic() + 200
-        while not received.messages.get(topics.TRIAL_METRICS) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        collect(f"ws://127.0.0.1:{port}", 30.0, received=late)
-
-    late_client = threading.Thread(target=join_late, daemon=True)
-    late_client.start()
+    port, received, late = live_clients.port, live_clients.received, live_clients.late
     run = subprocess.run(
         [sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--config", str(config_file),
          "--trials", "2", "--live", "--live-port", str(port),
@@ -340,10 +373,8 @@ def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
          str(tmp_path / "bags"), "--no-store", "--quiet"],
         text=True, capture_output=True, timeout=240, stdin=subprocess.DEVNULL, check=False)
     assert run.returncode == 0, run.stderr[-3000:]
-    client.join(30)
-    late_client.join(30)
-    assert not client.is_alive(), "the server did not close the connection at the end"
-    assert f"ws://127.0.0.1:{port}" in run.stderr
+    live_clients.finish()
+    assert live_clients.url in run.stderr
     (bag,) = list((tmp_path / "bags").iterdir())
     recorded = _bag_messages(bag)
     live = _decoded(received)
@@ -394,8 +425,6 @@ def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
     # The late client got what came before it: the URDF and trial 1's metrics, again.
     late_live = _decoded(late)
     assert 1 in {int(m.data[0]) for _, m in late_live[topics.TRIAL_METRICS]}
-    assert late.first_subscribed is not None and received.first_subscribed is not None
-    assert late.first_subscribed > received.first_subscribed
     assert [m.data for _, m in late_live[ROBOT_DESCRIPTION]][:1] == [_urdf()]
 
     # The URDF, as the run's config makes it (and the reference arm's).
@@ -891,8 +920,8 @@ def test_a_persons_layout_draws_each_cuffs_force_per_sample_and_per_trial(
 
 @pytest.mark.graph
 @pytest.mark.parametrize("relayed", [True, False], ids=["relay", "dds"])
-def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(tmp_path: Path,
-                                                                      relayed: bool) -> None:
+def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(
+        tmp_path: Path, relayed: bool, live_clients: LiveClients) -> None:
     """``exo-ilc run --live`` with the elbow model (2 trials of 0.5 s), fed by the recorder's
     relay or, with ``--no-bag``, reading DDS (reliable, so none is lost): the view advertises each
     ``/cuffs/<cuff>/wrench`` with its ros2msg schema and forwards every sample's wrench
@@ -903,22 +932,7 @@ def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(tmp_path: P
 
     overlay = tmp_path / "short.yaml"
     overlay.write_text(SHORT_PERSON)
-    port = _free_port()
-    received = Received()
-    client = threading.Thread(target=collect, args=(f"ws://127.0.0.1:{port}", 120.0),
-                              kwargs={"received": received}, daemon=True)
-    client.start()
-    late = Received()
-
-    def join_late() -> None:
-        """Connected once trial 1's metrics went out: the person's URDF is sent again."""
-        deadline = time.monotonic() + 250
-        while not received.messages.get(topics.TRIAL_METRICS) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        collect(f"ws://127.0.0.1:{port}", 30.0, received=late)
-
-    late_client = threading.Thread(target=join_late, daemon=True)
-    late_client.start()
+    port, received, late = live_clients.port, live_clients.received, live_clients.late
     main_args = [sys.executable, "-m", "exo_ilc_ros.cli.main"]
     storage = ["--bag-dir", str(tmp_path / "bags")] if relayed else [
         "--no-bag", "--live-param", "sample_reliability:=reliable"]  # no sample lost to DDS
@@ -929,12 +943,9 @@ def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(tmp_path: P
          "--quiet"], text=True, capture_output=True, timeout=300, stdin=subprocess.DEVNULL,
         check=False)
     assert run.returncode == 0, run.stderr[-3000:]
-    client.join(30)
-    late_client.join(30)
-    assert not client.is_alive()
+    live_clients.finish()
     live = _decoded(received)
-    assert late.first_subscribed is not None and received.first_subscribed is not None
-    assert late.first_subscribed > received.first_subscribed
+    # The late client got the person's URDF again.
     assert [m.data for _, m in _decoded(late)[topics.PERSON_DESCRIPTION]][:1] == \
         [m.data for _, m in live[topics.PERSON_DESCRIPTION]]
     for topic in topics.CUFF_WRENCHES:

@@ -295,11 +295,24 @@ RUN_BY: dict[frozenset[str], str] = {
         "test_live.py::test_live_view_shows_what_the_bag_holds",
     frozenset({"--live", "--live-pace"}):
         "test_live.py::test_live_pace_changes_only_the_wall_time",
+    frozenset({"--live", "--live-param"}):  # live-view.md (sample_reliability:=reliable there)
+        "test_live.py::test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person",
+    frozenset({"--mass-uncertainty", "--trials", "--json"}):  # README.md, ros-graph.md
+        "test_graph.py::test_run_reports_the_mass_uncertainty_it_ran",
+    frozenset({"--config"}):  # ros-graph.md's ``run --config my.yaml``
+        "test_graph.py::test_run_json_equals_simulate",
+    frozenset({"--trials", "--store"}):  # safety.md: killed mid-run, ...
+        "test_reliability.py::test_kill_9_the_supervisor_then_exo_ilc_run_resume",
+    frozenset({"--trials", "--store", "--resume"}):  # ... then resumed
+        "test_reliability.py::test_kill_9_the_supervisor_then_exo_ilc_run_resume",
+    frozenset({"--plant", "--law", "--mass-uncertainty", "--trials"}):  # your-arm.md, MuJoCo
+        "test_arm_graph.py::test_mujoco_with_homing_matches_simulate_and_survives_a_kill",
 }
 """Graph commands (``run`` with exactly these flags, as the page writes it) that another test
 runs with these flags, checking its exit 0 and more: only parsed here (each graph run is
-~15 s of the suite). :func:`test_the_commands_left_to_other_tests_are_run_there` checks that
-the test named runs ``run`` with every one of the flags."""
+~10 s of the suite). :func:`test_the_commands_left_to_other_tests_are_run_there` checks that
+the test named runs ``run`` with every one of the flags. A page whose graph commands are all
+run elsewhere is an in-process page here."""
 
 GRAPH_RUNS: set[tuple[str, ...]] = set()
 """The graph commands (as run) a page of this session already ran."""
@@ -361,7 +374,9 @@ def _failures(outcomes: list[Outcome]) -> str:
 
 
 def _has_graph_commands(page: Path) -> bool:
-    return any(c.name in ("run", "paper") for c in documented_commands(page))
+    """``page`` shows a graph command that no other test runs (:data:`RUN_BY`)."""
+    return any(c.name == "paper" or (c.name == "run" and _written_flags(c) not in RUN_BY)
+               for c in documented_commands(page) if "--in-process" not in c.words)
 
 
 GRAPH_PAGES = [p for p in PAGES if _has_graph_commands(p)]

@@ -6,10 +6,12 @@ finds the run's bag in it."""
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import json
 import math
 import os
+import signal
 import socket
 import struct
 import subprocess
@@ -28,6 +30,7 @@ from live_client import SUBPROTOCOL, Received, collect
 from mcap.reader import make_reader
 from mcap_ros2._dynamic import generate_dynamic
 from mcap_ros2.decoder import DecoderFactory
+from processes import children
 
 from exo_ilc_ros.bag.messages import typestore
 from exo_ilc_ros.bag.view import REFERENCE_OFFSET, REFERENCE_PREFIX, prefixed_urdf
@@ -276,7 +279,12 @@ class LiveClients:
     connects at once (retrying until the view serves) and collects from the start; ``late``
     connects once trial 1's metrics went out, so it must get again what came before it (no
     latching in the protocol: the view re-sends the descriptions and every trial's metrics on
-    subscribe). Both collect until the server closes the connection."""
+    subscribe). Both collect until the server closes the connection.
+
+    The run (:meth:`run`) cannot end before the late client is in, whatever the machine's
+    speed: once trial 1's metrics are seen, the run's supervisor is stopped (SIGSTOP: no next
+    trial starts, no trial concludes) until the late client subscribed, then continued. The
+    lock-step trials' numbers do not depend on when their steps happen."""
 
     CONNECT_TIMEOUT = 120.0
     """Seconds the first client keeps trying to connect (the run's graph starts first)."""
@@ -288,18 +296,59 @@ class LiveClients:
         self.url = f"ws://127.0.0.1:{self.port}"
         self.received = Received()
         self.late = Received()
+        self._run: subprocess.Popen[str] | None = None
+        self._running = threading.Event()
         self._first = threading.Thread(target=collect, args=(self.url, self.CONNECT_TIMEOUT),
                                        kwargs={"received": self.received}, daemon=True)
         self._second = threading.Thread(target=self._join_late, daemon=True)
         self._first.start()
         self._second.start()
 
+    def run(self, argv: list[str], timeout: float) -> subprocess.CompletedProcess[str]:
+        """``exo-ilc`` with ``argv`` (a ``run --live --live-port PORT``) to its end, while the
+        clients collect; its output."""
+        process = subprocess.Popen([sys.executable, "-m", "exo_ilc_ros.cli.main", *argv],
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                   stdin=subprocess.DEVNULL, text=True)
+        self._run = process
+        self._running.set()
+        try:
+            out, err = process.communicate(timeout=timeout)
+        finally:
+            if process.poll() is None:
+                process.kill()
+                process.wait()
+        return subprocess.CompletedProcess(process.args, process.returncode, out, err)
+
+    def _supervisors(self) -> list[int]:
+        """The run's supervisor process (the recorder in it, by default)."""
+        assert self._run is not None
+        found = []
+        for pid in children(self._run.pid):
+            with contextlib.suppress(FileNotFoundError):
+                if "ilc_supervisor" in Path(f"/proc/{pid}/cmdline").read_text():
+                    found.append(pid)
+        return found
+
     def _join_late(self) -> None:
         deadline = time.monotonic() + self.LATE_WAIT
         while not self.received.messages.get(topics.TRIAL_METRICS) and \
                 time.monotonic() < deadline:
-            time.sleep(0.05)
-        collect(self.url, 30.0, received=self.late)
+            time.sleep(0.01)
+        self._running.wait(self.LATE_WAIT)
+        held = self._supervisors()
+        for pid in held:
+            os.kill(pid, signal.SIGSTOP)
+        late = threading.Thread(target=collect, args=(self.url, 30.0),
+                                kwargs={"received": self.late}, daemon=True)
+        late.start()
+        try:
+            while self.late.first_subscribed is None and late.is_alive():
+                time.sleep(0.01)
+        finally:
+            for pid in held:
+                os.kill(pid, signal.SIGCONT)
+        late.join()
 
     def finish(self) -> None:
         """After the run exited: both clients were closed by the server, and the late one
@@ -364,14 +413,13 @@ def test_live_view_shows_what_the_bag_holds(tmp_path: Path, live_clients: LiveCl
     config_file = tmp_path / "short.yaml"
     config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n')
     port, received, late = live_clients.port, live_clients.received, live_clients.late
-    run = subprocess.run(
-        [sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--config", str(config_file),
-         "--trials", "2", "--live", "--live-port", str(port),
+    run = live_clients.run(
+        ["run", "--config", str(config_file), "--trials", "2", "--live", "--live-port",
+         str(port),
          # every sample is asked for: by default the view shows a lock-step run at 200
          # samples per second of wall time (its display rate), not every sample
-         "--live-rate", "0", "--bag-dir",
-         str(tmp_path / "bags"), "--no-store", "--quiet"],
-        text=True, capture_output=True, timeout=240, stdin=subprocess.DEVNULL, check=False)
+         "--live-rate", "0", "--bag-dir", str(tmp_path / "bags"), "--no-store", "--quiet"],
+        timeout=240)
     assert run.returncode == 0, run.stderr[-3000:]
     live_clients.finish()
     assert live_clients.url in run.stderr
@@ -936,12 +984,10 @@ def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(
     main_args = [sys.executable, "-m", "exo_ilc_ros.cli.main"]
     storage = ["--bag-dir", str(tmp_path / "bags")] if relayed else [
         "--no-bag", "--live-param", "sample_reliability:=reliable"]  # no sample lost to DDS
-    run = subprocess.run(
-        [*main_args, "run", "--config", str(ELBOW), "--scenario", str(overlay), "--trials", "2",
-         "--live", "--live-port", str(port), "--live-rate", "0", *storage, "--no-store",
-         "--live-pace", "1.0",  # 0.5 s of wall time per trial: time for the late client
-         "--quiet"], text=True, capture_output=True, timeout=300, stdin=subprocess.DEVNULL,
-        check=False)
+    run = live_clients.run(
+        ["run", "--config", str(ELBOW), "--scenario", str(overlay), "--trials", "2", "--live",
+         "--live-port", str(port), "--live-rate", "0", *storage, "--no-store", "--quiet"],
+        timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
     live_clients.finish()
     live = _decoded(received)

@@ -492,11 +492,12 @@ def test_live_view_shows_what_the_bag_holds(tmp_path: Path, live_clients: LiveCl
         sorted(_transform_values(m) for _, m in live[TF])
     _assert_descriptions(recorded)
 
-    # simulate --bag writes the same topics and types as the graph's recorder.
-    sim = subprocess.run([sys.executable, "-m", "exo_ilc_ros.cli.main", "simulate", "--config",
-                          str(config_file), "--trials", "2", "--bag", str(tmp_path / "sim")],
-                         text=True, capture_output=True, timeout=120, check=False)
-    assert sim.returncode == 0, sim.stderr[-3000:]
+    # simulate --bag writes the same topics and types as the graph's recorder (simulate in
+    # this process: no interpreter start-up).
+    from exo_ilc_ros.cli.main import main as exo_ilc
+
+    assert exo_ilc(["simulate", "--config", str(config_file), "--trials", "2", "--bag",
+                    str(tmp_path / "sim")]) == 0
     (sim_bag,) = list((tmp_path / "sim").iterdir())
     assert _topic_types(sim_bag) == _topic_types(bag) == dict(topics.BAG_TYPES)
     sim_messages = _bag_messages(sim_bag)
@@ -782,10 +783,10 @@ def test_live_pace_changes_only_the_wall_time(tmp_path: Path) -> None:
                             stdin=subprocess.DEVNULL, check=False)
     assert result.returncode == 0, result.stderr[-3000:]
     assert "foxglove_layout.json" in result.stderr  # the layout made for the run, offered
-    local = subprocess.run([*main_args, "simulate", "--config", str(config_file), "--trials",
-                            "2", "--json", str(local_json)], text=True, capture_output=True,
-                           timeout=120, check=False)
-    assert local.returncode == 0, local.stderr[-3000:]
+    from exo_ilc_ros.cli.main import main as exo_ilc  # simulate in this process: no start-up
+
+    assert exo_ilc(["simulate", "--config", str(config_file), "--trials", "2", "--json",
+                    str(local_json)]) == 0
     (g,), (r,) = json.loads(graph_json.read_text())["runs"], \
         json.loads(local_json.read_text())["runs"]
     assert len(g["trials"]) == len(r["trials"]) == 2
@@ -981,7 +982,6 @@ def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(
     overlay = tmp_path / "short.yaml"
     overlay.write_text(SHORT_PERSON)
     port, received, late = live_clients.port, live_clients.received, live_clients.late
-    main_args = [sys.executable, "-m", "exo_ilc_ros.cli.main"]
     storage = ["--bag-dir", str(tmp_path / "bags")] if relayed else [
         "--no-bag", "--live-param", "sample_reliability:=reliable"]  # no sample lost to DDS
     run = live_clients.run(
@@ -1003,10 +1003,10 @@ def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(
         wrench = {k: t.cuff_wrench for k, t in read_bag(bag).trials.items()}
         samples = {_stamp(m): m for _, _, m in _bag_messages(bag)[topics.JOINT_STATES]}
     else:  # the graph's trials are the in-process ones (tested elsewhere): simulate's
-        sim = subprocess.run([*main_args, "simulate", "--config", str(ELBOW), "--scenario",
-                              str(overlay), "--trials", "2", "--bag", str(tmp_path / "sim")],
-                             text=True, capture_output=True, timeout=300, check=False)
-        assert sim.returncode == 0, sim.stderr[-3000:]
+        from exo_ilc_ros.cli.main import main as exo_ilc  # in this process: no start-up
+
+        assert exo_ilc(["simulate", "--config", str(ELBOW), "--scenario", str(overlay),
+                        "--trials", "2", "--bag", str(tmp_path / "sim")]) == 0
         (bag,) = list((tmp_path / "sim").iterdir())
         wrench = {k: t.cuff_wrench for k, t in read_bag(bag).trials.items()}
         samples = {_stamp(m): m for _, _, m in _bag_messages(bag)[topics.JOINT_STATES]}

@@ -7,10 +7,10 @@ earlier one wrote: ``analyze bags/*`` after ``run``), made short:
 * ``--trials N`` becomes ``--trials 2`` (added where the command takes it), ``--budget`` 2,
   ``--seeds`` 2, ``--jobs``/``--workers`` 1, ``--lifted`` 50, ``--trial K`` at most 2;
 * ``--config`` and every other ``.yaml`` a command reads: a shipped one (``config/robust.yaml``)
-  is copied with a 1 s movement; one the page only names (``my_params.yaml``) is written as just
-  that 1 s movement; a command that takes ``--config`` and names none gets it (a ``--session``
-  command with the shipped exercises' session plans at most 2 trials an exercise: ``--session
-  upper_limb`` runs 3 x 2 trials, not 3 x 20);
+  is copied with a 1 s movement (and a person's 0.2 s of settling, not 1 s); one the page
+  only names (``my_params.yaml``) is written as just that; a command that takes ``--config``
+  and names none gets it (a ``--session`` command with the shipped exercises' session plans
+  at most 2 trials an exercise: ``--session upper_limb`` runs 3 x 2 trials, not 3 x 20);
 * ``<date>`` and other ``<placeholders>`` in a path match anything (``*``, the newest match;
   a path that matches nothing fails); a command with a placeholder that is no path
   (``--resume <session id>``) is only parsed; ``[optional]`` parts are left out;
@@ -55,6 +55,10 @@ ROOT = Path(__file__).resolve().parents[1]
 PAGES = sorted([ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))])
 SHORT_MOVEMENT = 1.0
 """Seconds of the movement in the scratch configs (101 samples a trial)."""
+SHORT_SETTLE = 0.2
+"""Simulated seconds a person with muscles hangs in the cuffs before trial 1 in the scratch
+configs (``musculoskeletal.settle_time``, 1 s as shipped: the myoarm's 1 s of settling cost as
+much as a trial), unless the config sets it."""
 SMALL = {"--trials": "2", "--budget": "2", "--seeds": "2", "--jobs": "1", "--workers": "1",
          "--lifted": "50", "--trial": "2", "--population": "4", "--falsify": "2"}
 """Counts made small, and added where the command takes the flag but does not give it."""
@@ -183,6 +187,8 @@ def _short_yaml(source: Path | None) -> str:
     data = data or {}
     params = data.setdefault("/**", {}).setdefault("ros__parameters", {})
     params.setdefault("trajectory", {})["duration"] = SHORT_MOVEMENT
+    plant = data.setdefault("plant_simulator", {}).setdefault("ros__parameters", {})
+    plant.setdefault("musculoskeletal", {}).setdefault("settle_time", SHORT_SETTLE)
     return yaml.safe_dump(data, sort_keys=False)
 
 

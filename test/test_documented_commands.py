@@ -313,6 +313,10 @@ RUN_BY: dict[frozenset[str], str] = {
         "test_reliability.py::test_kill_9_the_supervisor_then_exo_ilc_run_resume",
     frozenset({"--plant", "--law", "--mass-uncertainty", "--trials"}):  # your-arm.md, MuJoCo
         "test_arm_graph.py::test_mujoco_with_homing_matches_simulate_and_survives_a_kill",
+    frozenset({"--patient", "--exercise", "--trials"}):  # therapy.md: from the profile
+        "test_therapy.py::test_graph_session_from_the_profile_equals_in_process",
+    frozenset({"--scenario", "--trials"}):  # virtual-patient.md: a scenario through the graph
+        "test_graph.py::test_urdf_arm_through_the_graph_equals_in_process",
 }
 """Graph commands (``run`` with exactly these flags, as the page writes it) that another test
 runs with these flags, checking its exit 0 and more: only parsed here (each graph run is

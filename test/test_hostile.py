@@ -502,9 +502,10 @@ def test_fuzzing_a_running_graph_changes_nothing_learned() -> None:
     ends = {int(v["trial"]): t for m, v, t in events if m == "end"}
     fuzzed = [k for k in ends if ends[k] > fuzz_from and starts[k] < fuzz_over]
     quiet = [k for k in ends if starts[k] > fuzz_over]
-    # The wall times are printed, not judged: they are the machine's (the feed-forward pushed
-    # again for want of an acknowledgement costs ACK_RETRY, 0.25 s, a lost sample or
-    # acknowledgement more than the watchdog floor: an ``aborted`` event, refused above).
+    # The wall times are printed, not judged: they are the machine's. A feed-forward pushed
+    # again for want of an acknowledgement costs ACK_RETRY (0.25 s; counted on the supervisor's
+    # health, printed: a loaded machine may answer late); a lost sample stalls its trial until
+    # the watchdog floor: an ``aborted`` event, refused above.
     print(f"\nfuzz: {total} messages in {fuzz_over - fuzz_from:.2f} s; trial wall "
           f"durations (s): {', '.join(f'{ends[k] - starts[k]:.2f}' for k in sorted(ends))}"
           f"; fuzzed trials {fuzzed}, quiet ones {quiet}; feed-forwards pushed again: "

@@ -7,10 +7,10 @@ earlier one wrote: ``analyze bags/*`` after ``run``), made short:
 * ``--trials N`` becomes ``--trials 2`` (added where the command takes it), ``--budget`` 2,
   ``--seeds`` 2, ``--jobs``/``--workers`` 1, ``--lifted`` 50, ``--trial K`` at most 2;
 * ``--config`` and every other ``.yaml`` a command reads: a shipped one (``config/robust.yaml``)
-  is copied with a 1 s movement; one the page only names (``my_params.yaml``) is written as just
-  that 1 s movement; a command that takes ``--config`` and names none gets it (a ``--session``
-  command with the shipped exercises' session plans at most 2 trials an exercise: ``--session
-  upper_limb`` runs 3 x 2 trials, not 3 x 20);
+  is copied with a 1 s movement (and a person's 0.2 s of settling, not 1 s); one the page
+  only names (``my_params.yaml``) is written as just that; a command that takes ``--config``
+  and names none gets it (a ``--session`` command with the shipped exercises' session plans
+  at most 2 trials an exercise: ``--session upper_limb`` runs 3 x 2 trials, not 3 x 20);
 * ``<date>`` and other ``<placeholders>`` in a path match anything (``*``, the newest match;
   a path that matches nothing fails); a command with a placeholder that is no path
   (``--resume <session id>``) is only parsed; ``[optional]`` parts are left out;
@@ -55,6 +55,10 @@ ROOT = Path(__file__).resolve().parents[1]
 PAGES = sorted([ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))])
 SHORT_MOVEMENT = 1.0
 """Seconds of the movement in the scratch configs (101 samples a trial)."""
+SHORT_SETTLE = 0.2
+"""Simulated seconds a person with muscles hangs in the cuffs before trial 1 in the scratch
+configs (``musculoskeletal.settle_time``, 1 s as shipped: the myoarm's 1 s of settling cost as
+much as a trial), unless the config sets it."""
 SMALL = {"--trials": "2", "--budget": "2", "--seeds": "2", "--jobs": "1", "--workers": "1",
          "--lifted": "50", "--trial": "2", "--population": "4", "--falsify": "2"}
 """Counts made small, and added where the command takes the flag but does not give it."""
@@ -183,6 +187,8 @@ def _short_yaml(source: Path | None) -> str:
     data = data or {}
     params = data.setdefault("/**", {}).setdefault("ros__parameters", {})
     params.setdefault("trajectory", {})["duration"] = SHORT_MOVEMENT
+    plant = data.setdefault("plant_simulator", {}).setdefault("ros__parameters", {})
+    plant.setdefault("musculoskeletal", {}).setdefault("settle_time", SHORT_SETTLE)
     return yaml.safe_dump(data, sort_keys=False)
 
 
@@ -295,11 +301,28 @@ RUN_BY: dict[frozenset[str], str] = {
         "test_live.py::test_live_view_shows_what_the_bag_holds",
     frozenset({"--live", "--live-pace"}):
         "test_live.py::test_live_pace_changes_only_the_wall_time",
+    frozenset({"--live", "--live-param"}):  # live-view.md (sample_reliability:=reliable there)
+        "test_live.py::test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person",
+    frozenset({"--mass-uncertainty", "--trials", "--json"}):  # README.md, ros-graph.md
+        "test_graph.py::test_run_reports_the_mass_uncertainty_it_ran",
+    frozenset({"--config"}):  # ros-graph.md's ``run --config my.yaml``
+        "test_graph.py::test_run_json_equals_simulate",
+    frozenset({"--trials", "--store"}):  # safety.md: killed mid-run, ...
+        "test_reliability.py::test_kill_9_the_supervisor_then_exo_ilc_run_resume",
+    frozenset({"--trials", "--store", "--resume"}):  # ... then resumed
+        "test_reliability.py::test_kill_9_the_supervisor_then_exo_ilc_run_resume",
+    frozenset({"--plant", "--law", "--mass-uncertainty", "--trials"}):  # your-arm.md, MuJoCo
+        "test_arm_graph.py::test_mujoco_with_homing_matches_simulate_and_survives_a_kill",
+    frozenset({"--patient", "--exercise", "--trials"}):  # therapy.md: from the profile
+        "test_therapy.py::test_graph_session_from_the_profile_equals_in_process",
+    frozenset({"--scenario", "--trials"}):  # virtual-patient.md: a scenario through the graph
+        "test_graph.py::test_urdf_arm_through_the_graph_equals_in_process",
 }
 """Graph commands (``run`` with exactly these flags, as the page writes it) that another test
 runs with these flags, checking its exit 0 and more: only parsed here (each graph run is
-~15 s of the suite). :func:`test_the_commands_left_to_other_tests_are_run_there` checks that
-the test named runs ``run`` with every one of the flags."""
+~10 s of the suite). :func:`test_the_commands_left_to_other_tests_are_run_there` checks that
+the test named runs ``run`` with every one of the flags. A page whose graph commands are all
+run elsewhere is an in-process page here."""
 
 GRAPH_RUNS: set[tuple[str, ...]] = set()
 """The graph commands (as run) a page of this session already ran."""
@@ -361,7 +384,9 @@ def _failures(outcomes: list[Outcome]) -> str:
 
 
 def _has_graph_commands(page: Path) -> bool:
-    return any(c.name in ("run", "paper") for c in documented_commands(page))
+    """``page`` shows a graph command that no other test runs (:data:`RUN_BY`)."""
+    return any(c.name == "paper" or (c.name == "run" and _written_flags(c) not in RUN_BY)
+               for c in documented_commands(page) if "--in-process" not in c.words)
 
 
 GRAPH_PAGES = [p for p in PAGES if _has_graph_commands(p)]

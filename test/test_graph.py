@@ -45,7 +45,7 @@ def _exo_ilc(*args: str, timeout: float, **kwargs: Any) -> subprocess.CompletedP
                           check=False, **kwargs)
 
 
-def test_run_json_equals_simulate(tmp_path: Path) -> None:
+def test_run_json_equals_simulate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """`exo-ilc run` through the graph gives simulate's per-trial numbers to 1e-9."""
     config_file = tmp_path / "short.yaml"
     config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n')
@@ -54,9 +54,12 @@ def test_run_json_equals_simulate(tmp_path: Path) -> None:
                       "--json", str(graph_json), timeout=150, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
     assert "Iterations to the bound" in result.stdout
-    local = _exo_ilc("simulate", "--config", str(config_file), "--trials", "3", "--json",
-                     str(local_json), timeout=120)
-    assert local.returncode == 0, local.stderr[-3000:]
+    from exo_ilc_ros.cli.main import main as exo_ilc  # simulate in this process: no start-up
+
+    capsys.readouterr()
+    assert exo_ilc(["simulate", "--config", str(config_file), "--trials", "3", "--json",
+                    str(local_json)]) == 0
+    local_out = capsys.readouterr().out
     graph, reference = json.loads(graph_json.read_text()), json.loads(local_json.read_text())
     assert graph["config"] == reference["config"]
     (g,), (r,) = graph["runs"], reference["runs"]
@@ -67,7 +70,7 @@ def test_run_json_equals_simulate(tmp_path: Path) -> None:
     assert g["iterations_to_bound"] == r["iterations_to_bound"]
     # The per-trial table and the iterations are the same text as simulate's.
     for marker in ("(* above the bound)", "('-': never within"):
-        assert result.stdout.split(marker)[0] == local.stdout.split(marker)[0]
+        assert result.stdout.split(marker)[0] == local_out.split(marker)[0]
 
 
 def test_norm_optimal_graph_equals_in_process(tmp_path: Path) -> None:
@@ -439,8 +442,9 @@ def test_urdf_arm_through_the_graph_equals_in_process(tmp_path: Path) -> None:
     result = _exo_ilc("run", "--no-bag", "--no-store", *common, "--json", str(graph_json),
                       timeout=200, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
-    local = _exo_ilc("simulate", *common, "--json", str(local_json), timeout=120)
-    assert local.returncode == 0, local.stderr[-3000:]
+    from exo_ilc_ros.cli.main import main as exo_ilc  # simulate in this process: no start-up
+
+    assert exo_ilc(["simulate", *common, "--json", str(local_json)]) == 0
     (g,), (r,) = json.loads(graph_json.read_text())["runs"], json.loads(
         local_json.read_text())["runs"]
     for key in ("max_abs_error", "max_abs_feedforward", "max_abs_effort"):

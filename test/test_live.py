@@ -14,7 +14,6 @@ import socket
 import struct
 import subprocess
 import sys
-import threading
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -25,6 +24,7 @@ import pinocchio as pin
 import pytest
 import yaml
 from live_client import SUBPROTOCOL, Received, collect
+from live_clients import LiveClients
 from mcap.reader import make_reader
 from mcap_ros2._dynamic import generate_dynamic
 from mcap_ros2.decoder import DecoderFactory
@@ -265,10 +265,11 @@ def test_simulate_bag_shows_the_arm_as_the_live_view(tmp_path: Path) -> None:
     np.testing.assert_array_equal(run.trials[2].position, result.records[1].position)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+@pytest.fixture
+def live_clients() -> LiveClients:
+    """:class:`LiveClients` on a free port (the default 8765 may be held by another test
+    session on the machine), started before the test starts its run."""
+    return LiveClients()
 
 
 def _bag_messages(bag: Path) -> dict[str, list[tuple[int, int, Any]]]:
@@ -307,43 +308,24 @@ def _topic_types(bag: Path) -> dict[str, str]:
 
 
 @pytest.mark.graph
-def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
+def test_live_view_shows_what_the_bag_holds(tmp_path: Path, live_clients: LiveClients) -> None:
     """``exo-ilc run --live``: a WebSocket client subscribed to every advertised channel gets
     every JointState, trial summary and trial metrics the bag holds, equal; the URDF; /tf per
     sample equal to Pinocchio's forward kinematics (the arm and the reference) to 1e-9. The bag
     logs at the sim stamps; ``simulate --bag`` lists the same topics and types."""
     config_file = tmp_path / "short.yaml"
     config_file.write_text('"/**":\n  ros__parameters:\n    trajectory:\n      duration: 1.0\n')
-    port = _free_port()
-    received = Received()
-    client = threading.Thread(target=collect, args=(f"ws://127.0.0.1:{port}", 90.0),
-                              kwargs={"received": received}, daemon=True)
-    client.start()
-    late = Received()
-
-    def join_late() -> None:
-        """A second client, connected once trial 1's metrics went out: it must get them
-        again (no latching in the protocol: the view re-sends on subscribe)."""
-        deadline = time.monotonic() + 200
-        while not received.messages.get(topics.TRIAL_METRICS) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        collect(f"ws://127.0.0.1:{port}", 30.0, received=late)
-
-    late_client = threading.Thread(target=join_late, daemon=True)
-    late_client.start()
-    run = subprocess.run(
-        [sys.executable, "-m", "exo_ilc_ros.cli.main", "run", "--config", str(config_file),
-         "--trials", "2", "--live", "--live-port", str(port),
+    port, received, late = live_clients.port, live_clients.received, live_clients.late
+    run = live_clients.run(
+        ["run", "--config", str(config_file), "--trials", "2", "--live", "--live-port",
+         str(port),
          # every sample is asked for: by default the view shows a lock-step run at 200
          # samples per second of wall time (its display rate), not every sample
-         "--live-rate", "0", "--bag-dir",
-         str(tmp_path / "bags"), "--no-store", "--quiet"],
-        text=True, capture_output=True, timeout=240, stdin=subprocess.DEVNULL, check=False)
+         "--live-rate", "0", "--bag-dir", str(tmp_path / "bags"), "--no-store", "--quiet"],
+        timeout=240)
     assert run.returncode == 0, run.stderr[-3000:]
-    client.join(30)
-    late_client.join(30)
-    assert not client.is_alive(), "the server did not close the connection at the end"
-    assert f"ws://127.0.0.1:{port}" in run.stderr
+    live_clients.finish()
+    assert live_clients.url in run.stderr
     (bag,) = list((tmp_path / "bags").iterdir())
     recorded = _bag_messages(bag)
     live = _decoded(received)
@@ -394,8 +376,6 @@ def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
     # The late client got what came before it: the URDF and trial 1's metrics, again.
     late_live = _decoded(late)
     assert 1 in {int(m.data[0]) for _, m in late_live[topics.TRIAL_METRICS]}
-    assert late.first_subscribed is not None and received.first_subscribed is not None
-    assert late.first_subscribed > received.first_subscribed
     assert [m.data for _, m in late_live[ROBOT_DESCRIPTION]][:1] == [_urdf()]
 
     # The URDF, as the run's config makes it (and the reference arm's).
@@ -415,11 +395,12 @@ def test_live_view_shows_what_the_bag_holds(tmp_path: Path) -> None:
         sorted(_transform_values(m) for _, m in live[TF])
     _assert_descriptions(recorded)
 
-    # simulate --bag writes the same topics and types as the graph's recorder.
-    sim = subprocess.run([sys.executable, "-m", "exo_ilc_ros.cli.main", "simulate", "--config",
-                          str(config_file), "--trials", "2", "--bag", str(tmp_path / "sim")],
-                         text=True, capture_output=True, timeout=120, check=False)
-    assert sim.returncode == 0, sim.stderr[-3000:]
+    # simulate --bag writes the same topics and types as the graph's recorder (simulate in
+    # this process: no interpreter start-up).
+    from exo_ilc_ros.cli.main import main as exo_ilc
+
+    assert exo_ilc(["simulate", "--config", str(config_file), "--trials", "2", "--bag",
+                    str(tmp_path / "sim")]) == 0
     (sim_bag,) = list((tmp_path / "sim").iterdir())
     assert _topic_types(sim_bag) == _topic_types(bag) == dict(topics.BAG_TYPES)
     sim_messages = _bag_messages(sim_bag)
@@ -705,10 +686,10 @@ def test_live_pace_changes_only_the_wall_time(tmp_path: Path) -> None:
                             stdin=subprocess.DEVNULL, check=False)
     assert result.returncode == 0, result.stderr[-3000:]
     assert "foxglove_layout.json" in result.stderr  # the layout made for the run, offered
-    local = subprocess.run([*main_args, "simulate", "--config", str(config_file), "--trials",
-                            "2", "--json", str(local_json)], text=True, capture_output=True,
-                           timeout=120, check=False)
-    assert local.returncode == 0, local.stderr[-3000:]
+    from exo_ilc_ros.cli.main import main as exo_ilc  # simulate in this process: no start-up
+
+    assert exo_ilc(["simulate", "--config", str(config_file), "--trials", "2", "--json",
+                    str(local_json)]) == 0
     (g,), (r,) = json.loads(graph_json.read_text())["runs"], \
         json.loads(local_json.read_text())["runs"]
     assert len(g["trials"]) == len(r["trials"]) == 2
@@ -891,8 +872,8 @@ def test_a_persons_layout_draws_each_cuffs_force_per_sample_and_per_trial(
 
 @pytest.mark.graph
 @pytest.mark.parametrize("relayed", [True, False], ids=["relay", "dds"])
-def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(tmp_path: Path,
-                                                                      relayed: bool) -> None:
+def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(
+        tmp_path: Path, relayed: bool, live_clients: LiveClients) -> None:
     """``exo-ilc run --live`` with the elbow model (2 trials of 0.5 s), fed by the recorder's
     relay or, with ``--no-bag``, reading DDS (reliable, so none is lost): the view advertises each
     ``/cuffs/<cuff>/wrench`` with its ros2msg schema and forwards every sample's wrench
@@ -903,38 +884,18 @@ def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(tmp_path: P
 
     overlay = tmp_path / "short.yaml"
     overlay.write_text(SHORT_PERSON)
-    port = _free_port()
-    received = Received()
-    client = threading.Thread(target=collect, args=(f"ws://127.0.0.1:{port}", 120.0),
-                              kwargs={"received": received}, daemon=True)
-    client.start()
-    late = Received()
-
-    def join_late() -> None:
-        """Connected once trial 1's metrics went out: the person's URDF is sent again."""
-        deadline = time.monotonic() + 250
-        while not received.messages.get(topics.TRIAL_METRICS) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        collect(f"ws://127.0.0.1:{port}", 30.0, received=late)
-
-    late_client = threading.Thread(target=join_late, daemon=True)
-    late_client.start()
-    main_args = [sys.executable, "-m", "exo_ilc_ros.cli.main"]
+    port, received, late = live_clients.port, live_clients.received, live_clients.late
     storage = ["--bag-dir", str(tmp_path / "bags")] if relayed else [
         "--no-bag", "--live-param", "sample_reliability:=reliable"]  # no sample lost to DDS
-    run = subprocess.run(
-        [*main_args, "run", "--config", str(ELBOW), "--scenario", str(overlay), "--trials", "2",
-         "--live", "--live-port", str(port), "--live-rate", "0", *storage, "--no-store",
-         "--live-pace", "1.0",  # 0.5 s of wall time per trial: time for the late client
-         "--quiet"], text=True, capture_output=True, timeout=300, stdin=subprocess.DEVNULL,
-        check=False)
+    run = live_clients.run(
+        ["run", "--config", str(ELBOW), "--scenario", str(overlay), "--trials", "2", "--live",
+         "--live-port", str(port), "--live-rate", "0", *storage, "--no-store",
+         "--live-pace", "1.0",  # trial 2 takes >= 0.5 s of wall time: the supervisor is
+         "--quiet"], timeout=300)  # stopped for the late client before the run ends
     assert run.returncode == 0, run.stderr[-3000:]
-    client.join(30)
-    late_client.join(30)
-    assert not client.is_alive()
+    live_clients.finish()
     live = _decoded(received)
-    assert late.first_subscribed is not None and received.first_subscribed is not None
-    assert late.first_subscribed > received.first_subscribed
+    # The late client got the person's URDF again.
     assert [m.data for _, m in _decoded(late)[topics.PERSON_DESCRIPTION]][:1] == \
         [m.data for _, m in live[topics.PERSON_DESCRIPTION]]
     for topic in topics.CUFF_WRENCHES:
@@ -946,10 +907,10 @@ def test_the_live_view_forwards_a_persons_cuffs_and_draws_the_person(tmp_path: P
         wrench = {k: t.cuff_wrench for k, t in read_bag(bag).trials.items()}
         samples = {_stamp(m): m for _, _, m in _bag_messages(bag)[topics.JOINT_STATES]}
     else:  # the graph's trials are the in-process ones (tested elsewhere): simulate's
-        sim = subprocess.run([*main_args, "simulate", "--config", str(ELBOW), "--scenario",
-                              str(overlay), "--trials", "2", "--bag", str(tmp_path / "sim")],
-                             text=True, capture_output=True, timeout=300, check=False)
-        assert sim.returncode == 0, sim.stderr[-3000:]
+        from exo_ilc_ros.cli.main import main as exo_ilc  # in this process: no start-up
+
+        assert exo_ilc(["simulate", "--config", str(ELBOW), "--scenario", str(overlay),
+                        "--trials", "2", "--bag", str(tmp_path / "sim")]) == 0
         (bag,) = list((tmp_path / "sim").iterdir())
         wrench = {k: t.cuff_wrench for k, t in read_bag(bag).trials.items()}
         samples = {_stamp(m): m for _, _, m in _bag_messages(bag)[topics.JOINT_STATES]}

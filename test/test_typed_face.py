@@ -38,9 +38,13 @@ def test_mypy_sees_run_trials_as_a_function(tmp_path: Path) -> None:
     probe.write_text("from exo_ilc_ros.core import Config, run_trials\n"
                      "reveal_type(run_trials)\nreveal_type(Config)\n")
     env = {**os.environ, "MYPYPATH": str(ROOT)}
+    # The package from MYPYPATH, nothing from site-packages (numpy's and the others' stubs are
+    # Any): what the face shows is ours, and mypy takes a fifth of the time (12 s, not 60 s,
+    # on a loaded machine).
     done = subprocess.run([sys.executable, "-m", "mypy", "--no-error-summary",
-                           "--ignore-missing-imports", "--cache-dir", str(tmp_path / "cache"),
-                           str(probe)], capture_output=True, text=True, cwd=tmp_path, env=env)
+                           "--ignore-missing-imports", "--no-site-packages", "--cache-dir",
+                           str(tmp_path / "cache"), str(probe)], capture_output=True, text=True,
+                          cwd=tmp_path, env=env)
     revealed = [line.split("Revealed type is ", 1)[1] for line in done.stdout.splitlines()
                 if "Revealed type is" in line]
     assert len(revealed) == 2, done.stdout + done.stderr

@@ -177,7 +177,8 @@ def certify(args: argparse.Namespace) -> int:
                       f"{item.outcome.settled}.\nA scenario overlay: laid over the same "
                       "config (docs/every-patient.md).")
             written.append(str(write_scenario(path, item.patient, header)))
-        print(f"Falsification ({args.falsify} patients, CMA-ES from the worst drawn one):")
+        print(f"Falsification ({args.falsify} patients, CMA-ES from the worst of the "
+              f"{len(cert.outcomes)} drawn patients):")
         for item in found[:args.worst]:
             o = item.outcome
             final = f"{o.final_error:.2e} rad" if o.finite else "not finite"

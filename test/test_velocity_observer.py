@@ -126,3 +126,32 @@ def test_a_trials_commands_are_formed_again_from_its_samples() -> None:
     assert np.allclose(formed, record.control_input, rtol=0.0, atol=1e-9)
     assert not np.array_equal(fed[:, 2], record.velocity[:, 2])  # the elbow's is the observer's
     assert np.array_equal(fed[:, 1], record.velocity[:, 1])  # the abduction's the measured
+
+
+@pytest.mark.parametrize("person", ["myoelbow.yaml", "myoarm.yaml"])
+def test_a_strapped_person_feeds_back_its_measured_velocity(person: str) -> None:
+    """On a strapped person (a plant with no sensor model: MuJoCo's true velocity) the floors
+    still raise the elbow's and the shoulder flexion's gains, but no joint gets the observer,
+    even with control.velocity_observer 0 (patient_aware.yaml): the commands of a trial are
+    K_P e + K_D (qdot_d - qdot) of the measured velocity, and fed_back_velocity is it."""
+    from exo_ilc_ros.core.loop.gains import feedback_gains
+    from exo_ilc_ros.core.person.experiment import StrappedExperiment
+
+    config = load_config(config_dir() / person, overlays=[config_dir() / "patient_aware.yaml"])
+    assert config["control.velocity_observer"] == 0.0
+    kp, kd = feedback_gains(config)
+    raised = (kp > np.asarray(config["control.kp"])) | (kd > np.asarray(config["control.kd"]))
+    assert raised.tolist() == [True, False, True]  # the floors do act on the person's arm
+    assert not np.any(velocity_observer_gains(config))
+    experiment = StrappedExperiment(config.replace({"musculoskeletal.settle_time": 0.2}))
+    assert not np.any(experiment.velocity_observer)
+    feedforward = np.zeros_like(experiment.reference.position)
+    record = experiment.run_trial(feedforward, 1)
+    fed = fed_back_velocity(record.position, record.velocity, record.control_input,
+                            experiment.velocity_observer)
+    assert np.array_equal(fed, record.velocity)
+    ref = experiment.reference
+    done = record.aborted_at if record.aborted_at is not None else ref.samples
+    formed = (experiment.kp * (ref.position - record.position)
+              + experiment.kd * (ref.velocity - record.velocity))[:done]
+    assert np.allclose(formed, record.control_input[:done], rtol=0.0, atol=1e-9)

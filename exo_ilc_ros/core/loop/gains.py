@@ -32,7 +32,12 @@ the gains are ``control.kp`` and ``control.kd`` exactly.
 On the joints a floor raised, ``control.velocity_observer`` (below 1) makes K_D multiply an
 observer's velocity instead of the measured one (:func:`velocity_observer_gains`,
 :mod:`.observer`): a differenced, low-passed encoder velocity is too late against the reflex
-there.
+there. The observer stands in for an encoder's velocity, so it is engaged only on a plant
+whose measured velocity can be one (the rigid arm, whose ``patient.sensor`` is the device's
+encoder); a strapped person (``musculoskeletal.model``) is a plant with no sensor model,
+whose measured velocity is the joint's own (MuJoCo's qvel, no lag), and there it is not
+engaged: the observer's prediction from the command assumes the nominal arm, which the
+person's strapped segments and the cuffs' springs are not (docs/person-with-muscles.md).
 """
 
 from __future__ import annotations
@@ -100,15 +105,23 @@ def feedback_gains(config: Config) -> tuple[np.ndarray, np.ndarray]:
     return kp, kd
 
 
+def measures_true_velocity(config: Config) -> bool:
+    """Whether the plant ``config`` runs measures each joint's true velocity whatever the
+    config says of sensors: the exoskeleton strapped to a person (``musculoskeletal.model``
+    set), a MuJoCo plant with no sensor model (``patient.sensor.*`` is refused with it)."""
+    return str(config["musculoskeletal.model"]) != "none"
+
+
 def velocity_observer_gains(config: Config) -> np.ndarray:
     """(4, n) gains of the velocity observer (:mod:`.observer`) per arm joint: with
     ``control.velocity_observer`` p < 1, on the joints whose K_P or K_D a floor raised above
     ``control.kp``, ``control.kd`` by (G) (the light patient joints, where a lagging velocity
-    meets a delayed reflex); zeros elsewhere and with p = 1 (the measured velocity fed
-    back)."""
+    meets a delayed reflex); zeros elsewhere, with p = 1 (the measured velocity fed back)
+    and on a strapped person (``musculoskeletal.model`` set: a plant with no sensor model,
+    whose measured velocity is the true one)."""
     kd = np.asarray(config["control.kd"], dtype=float)
     pole = float(config["control.velocity_observer"])
-    if pole >= 1.0:
+    if pole >= 1.0 or measures_true_velocity(config):
         return np.zeros((4, kd.shape[0]))
     kp_floor, kd_floor = feedback_gains(config)
     raised = (kd_floor > kd) | (kp_floor > np.asarray(config["control.kp"], dtype=float))

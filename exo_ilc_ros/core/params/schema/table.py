@@ -262,7 +262,8 @@ PARAMETERS: tuple[Parameter, ...] = (
               "the velocity eq (11)'s K_D multiplies on the joints whose damping floor "
               "(control.min_damping) raised K_D: an observer's estimate from the measured "
               "position and the command (core/loop/observer.py), its error decaying with this "
-              "triple pole (0: deadbeat); 1: off, the measured velocity on every joint",
+              "triple pole (0: deadbeat); 1: off, the measured velocity on every joint; never on "
+              "a strapped person (musculoskeletal.model: no sensor model, the true velocity)",
               minimum=0.0, extra_rule=_pole_rule),
     Parameter("control.effort_limit", SHARED, Kind.DOUBLE_ARRAY,
               "|effort| limit per joint (N m)", per_joint=True, strictly_positive=True),

@@ -7,7 +7,8 @@ elbow model, its torso fixed to the world), and the exoskeleton generated from t
 any URDF chain, masses scaled by 1 + ``mass_uncertainty``: :func:`~..arm.build.build_plant`),
 attached to the world at a frame that puts the exoskeleton's joints on the person's:
 
-* at the exoskeleton's zero pose, the anchor of its shoulder joint
+* at the exoskeleton's start pose x_d(0) (where every trial starts; zero for the paper's arm
+  and the shipped person configs), the anchor of its shoulder joint
   (``strapping.shoulder_joint``) is on the person's shoulder centre (the humerus' origin,
   on the glenohumeral joint of :data:`.model.ANATOMY`), the line from it to the anchor of its
   elbow joint (``strapping.elbow_joint``) runs along the person's humerus (shoulder centre to
@@ -180,6 +181,8 @@ class StrappedArm:
         forearm_com = np.array(alone_data.xipos[alone.body(self.anatomy.forearm).id])
         exo_alone = exo.compile()
         exo_data = mujoco.MjData(exo_alone)
+        for j, joint in enumerate(self.joint_names):  # fitted where every trial starts
+            exo_data.qpos[exo_alone.jnt_qposadr[exo_alone.joint(joint).id]] = start[j]
         mujoco.mj_kinematics(exo_alone, exo_data)
         e_shoulder, _ = _joint_frame(exo_alone, exo_data, shoulder)
         e_elbow, e_axis = _joint_frame(exo_alone, exo_data, elbow)
@@ -222,7 +225,7 @@ class StrappedArm:
         cuff_points = [p_shoulder + float(config["strapping.upper_arm_cuff"]) * humerus_dir,
                        p_elbow + float(config["strapping.forearm_cuff"]) * forearm_dir]
         # the bodies' poses at rest: the person's from its own model at the rest pose, the
-        # exoskeleton's from its own at the zero pose, carried by the base frame
+        # exoskeleton's from its own at the start pose, carried by the base frame
         poses = {}
         for exo_body, bone in self._cuff_bodies:
             b = exo_alone.body(exo_body[len(EXO_PREFIX):]).id

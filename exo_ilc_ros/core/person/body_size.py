@@ -103,9 +103,18 @@ def _subtree(body: Any) -> list[Any]:
     return out
 
 
+def _scale_place(element: Any, length: float) -> None:
+    """A geom's or a site's position, size and ``fromto`` (where given) by ``length``."""
+    element.pos = np.asarray(element.pos) * length
+    element.size = np.asarray(element.size) * length
+    fromto = np.asarray(element.fromto)
+    if np.all(np.isfinite(fromto)):
+        element.fromto = fromto * length
+
+
 def _scale_body(body: Any, length: float, mass: float, meshes: dict[str, float]) -> None:
-    """One body's own elements by ``length`` and its inertia by ``mass`` (given, or of its
-    geoms; its children's places are scaled by the caller, with their parent's factor)."""
+    """One body's own elements and its children's places by ``length``, its inertia by
+    ``mass`` (given, or of its geoms)."""
     body.ipos = np.asarray(body.ipos) * length
     body.mass = body.mass * mass
     inertia = mass * length ** 2
@@ -114,11 +123,7 @@ def _scale_body(body: Any, length: float, mass: float, meshes: dict[str, float])
     if np.all(np.isfinite(full)):
         body.fullinertia = full * inertia
     for geom in body.geoms:
-        geom.pos = np.asarray(geom.pos) * length
-        geom.size = np.asarray(geom.size) * length
-        fromto = np.asarray(geom.fromto)
-        if np.all(np.isfinite(fromto)):
-            geom.fromto = fromto * length
+        _scale_place(geom, length)
         if geom.meshname:
             meshes[geom.meshname] = length
         if not body.explicitinertial:  # its inertia is its geoms': their mass scales by mass
@@ -126,13 +131,11 @@ def _scale_body(body: Any, length: float, mass: float, meshes: dict[str, float])
             if np.isfinite(geom.mass):
                 geom.mass = geom.mass * mass
     for site in body.sites:
-        site.pos = np.asarray(site.pos) * length
-        site.size = np.asarray(site.size) * length
-        fromto = np.asarray(site.fromto)
-        if np.all(np.isfinite(fromto)):
-            site.fromto = fromto * length
+        _scale_place(site, length)
     for joint in body.joints:
         joint.pos = np.asarray(joint.pos) * length
+    for child in body.bodies:  # where each child sits on this body
+        child.pos = np.asarray(child.pos) * length
 
 
 def _muscle_lengths(model: Any, anatomy: PersonAnatomy) -> dict[str, float]:
@@ -146,22 +149,17 @@ def _muscle_lengths(model: Any, anatomy: PersonAnatomy) -> dict[str, float]:
             if model.actuator_dyntype[i] == mujoco.mjtDyn.mjDYN_MUSCLE}
 
 
-def scale_person(spec: Any, anatomy: PersonAnatomy, size: BodySize) -> None:
-    """Scale the arm of ``spec`` (an uncompiled person model) in place by ``size`` (module
-    docstring)."""
+def scale_person(spec: Any, model: Any, anatomy: PersonAnatomy, size: BodySize) -> None:
+    """Scale the arm of ``spec`` (an uncompiled person model; ``model``: it compiled, before
+    the scaling) in place by ``size`` (module docstring)."""
     import mujoco
 
-    before = _muscle_lengths(compile_quietly(spec.copy()), anatomy)
-    humerus = spec.body(anatomy.upper_arm)
-    forearm = spec.body(anatomy.forearm)
+    before = _muscle_lengths(model, anatomy)
     meshes: dict[str, float] = {}
-    _scale_body(humerus, size.upper_arm_length, size.upper_arm_mass, meshes)
-    for child in humerus.bodies:  # where the elbow sits on the humerus
-        child.pos = np.asarray(child.pos) * size.upper_arm_length
-    for body in _subtree(forearm):
+    _scale_body(spec.body(anatomy.upper_arm), size.upper_arm_length, size.upper_arm_mass,
+                meshes)  # the humerus, and where the elbow sits on it
+    for body in _subtree(spec.body(anatomy.forearm)):
         _scale_body(body, size.forearm_length, size.forearm_mass, meshes)
-        for child in body.bodies:
-            child.pos = np.asarray(child.pos) * size.forearm_length
     for mesh in spec.meshes:
         if mesh.name in meshes:
             mesh.scale = np.asarray(mesh.scale) * meshes[mesh.name]
@@ -194,8 +192,8 @@ def scaled_person_spec(config: Config) -> Any:
         raise ConfigError("musculoskeletal.body_size", f"one of {', '.join(BODY_SIZES)}, got "
                           f"{how!r}")
     anatomy = ANATOMY[name]
-    measures = measure_arm(compile_quietly(spec.copy()), anatomy)
-    scale_person(spec, anatomy, body_size(measures, float(config["person.body_mass"]),
-                                          float(config["person.height"]),
-                                          str(config["person.sex"])))
+    model = compile_quietly(spec.copy())
+    size = body_size(measure_arm(model, anatomy), float(config["person.body_mass"]),
+                     float(config["person.height"]), str(config["person.sex"]))
+    scale_person(spec, model, anatomy, size)
     return spec

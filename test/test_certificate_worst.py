@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from exo_ilc_ros.core.loop.gains import feedback_gains
+from exo_ilc_ros.core.loop.rate import with_control_rate
 from exo_ilc_ros.core.params.config import Config, config_dir, load_config
 from exo_ilc_ros.core.population.certificate import (
     feedforward_limit,
@@ -28,7 +30,15 @@ the start, 14-bit encoder, mass -9.1 %."""
 
 
 def _base() -> Config:
-    return load_config(None, overlays=[config_dir() / "patient_aware.yaml"])
+    """patient_aware.yaml at 100 Hz (``control.period_rule: fixed``), where these patients were
+    measured: the floors, the observer and the certificate's first 1000 of seed 0."""
+    return load_config(None, {"control.period_rule": "fixed"},
+                       overlays=[config_dir() / "patient_aware.yaml"])
+
+
+def _shipped() -> Config:
+    """patient_aware.yaml as every program runs it: its period_rule gives the paper arm 5 ms."""
+    return with_control_rate(load_config(None, overlays=[config_dir() / "patient_aware.yaml"]))
 
 
 def test_the_worst_patient_is_the_one_the_certificate_names() -> None:
@@ -187,8 +197,9 @@ def test_the_reflex_outruns_any_velocity_feedback_at_100_hz() -> None:
 @pytest.mark.xfail(strict=True, reason="patient 464 at 100 Hz: the elbow's delayed-reflex "
                    "mode no PD can hold (docs/every-patient.md); strict, so a fix shows")
 def test_the_patient_the_observer_left_meets_the_certificate() -> None:
-    """The certificate's per-patient criteria for 464 under patient_aware.yaml as shipped
-    (measured: 0.0111 rad at trial 25, never within: trials 12-23 0.035-0.086 rad)."""
+    """The certificate's per-patient criteria for 464 under patient_aware.yaml at 100 Hz, as
+    it was shipped before its period_rule (measured: 0.0111 rad at trial 25, never within:
+    trials 12-23 0.035-0.086 rad)."""
     base = _base()
     patient = draw_patient(base, PopulationSpec(), 0, LEFT_WITH_THE_OBSERVER)
     config = patient_config(base, patient, 25)
@@ -199,7 +210,7 @@ def test_the_patient_the_observer_left_meets_the_certificate() -> None:
 
 
 def test_why_the_patient_the_observer_left_fails() -> None:
-    """Trial 12 of 464 (the shipped law): the elbow's true velocity swings at ~32 Hz with more
+    """Trial 12 of 464 (the law at 100 Hz): the elbow's true velocity swings at ~32 Hz with more
     than 1 rad/s RMS in the trial's last second (the delayed reflex's mode, grown into the
     reflex's ceiling; measured 3.4 and 4.2), though the reference moves it at 0.2 rad/s at most,
     and the trial ends more than 0.03 rad off (0.067); no identified force is used in any
@@ -220,14 +231,18 @@ def test_why_the_patient_the_observer_left_fails() -> None:
 
 
 def test_the_patient_the_observer_left_meets_the_certificate_at_200_hz() -> None:
-    """The same law with the loop sampled at 200 Hz (``control.period: 0.005``, the floors
-    and the observer at that period: the elbow K_P 1649 / K_D 82): the delayed reflex no
-    longer outruns the feedback (G T / I < 1), and 464 meets the certificate's per-patient
-    criteria, within the bound by trial 10 (measured: settled from trial 5, 0.0016 rad at 25).
-    Not shipped: the rate is the arm's, and the other arms' patients would change."""
-    base = _base()
+    """The shipped law: its ``control.period_rule: reflex`` runs the paper arm at 200 Hz (5 ms,
+    the floors and the observer at that period: the elbow K_P 1649 / K_D 137, min_damping 1.5
+    over its 0.011 kg m^2), where the delayed reflex no longer outruns the feedback
+    (G T / I < 1), and 464 meets the certificate's per-patient criteria, within the bound by
+    trial 10 (measured: settled from trial 5, 8.5e-4 rad at 25)."""
+    base = _shipped()
+    assert base["control.period"] == 0.005
+    kp, kd = feedback_gains(base)
+    assert kp[2] == pytest.approx(18.0 / 0.01091, rel=2e-3)
+    assert kd[2] == pytest.approx(1.5 / 0.01091, rel=2e-3)
     patient = draw_patient(base, PopulationSpec(), 0, LEFT_WITH_THE_OBSERVER)
-    config = patient_config(base, patient, 25, {"control.period": 0.005})
+    config = patient_config(base, patient, 25)
     result = run_cell(patient_cell("patient_aware", config, patient))
     outcome = patient_outcome(LEFT_WITH_THE_OBSERVER, result, 25,
                               feedforward_limit(config.values))

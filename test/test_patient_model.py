@@ -43,9 +43,11 @@ def _config(scenario: str, **overrides: Any) -> Config:
     """patient_aware.yaml with the tanh friction law trusted at every speed
     (``identification.reversal_speed`` 0): the rules of the loop are checked on the paper's
     movement, which never reverses, where the shipped 0.2 leaves Coulomb friction to the
-    offset and nothing may be used (test_identification_honest.py)."""
+    offset and nothing may be used (test_identification_honest.py). At 100 Hz
+    (``control.period_rule: fixed``, the shipped rule runs this arm at 5 ms): the checks below
+    form the session's update from the config's own gains and Q-filter."""
     return load_config(overlays=[AWARE, scenario_path(scenario)],
-                       overrides={"mass_uncertainty": 0.1,
+                       overrides={"mass_uncertainty": 0.1, "control.period_rule": "fixed",
                                   "identification.reversal_speed": 0.0, **overrides})
 
 

@@ -25,6 +25,14 @@ from exo_ilc_ros.core.params.config import config_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 AWARE = config_dir() / "patient_aware.yaml"
+
+
+def fixed_rate(tmp_path: Path) -> Path:
+    """An overlay that runs the config's control.period as given (patient_aware.yaml's
+    period_rule would shorten it on the paper arm)."""
+    path = tmp_path / "fixed_rate.yaml"
+    path.write_text('"/**":\n  ros__parameters:\n    control:\n      period_rule: fixed\n')
+    return path
 ARMS = [None, ROOT / "config" / "arms" / "panda.yaml", ROOT / "config" / "arms" / "ur5.yaml"]
 
 
@@ -161,8 +169,10 @@ def test_mas3_reflex_makes_the_paper_elbow_unstable_at_the_frequency_it_chatters
     its floors, 1600 / 80, and under K_P 2500 / K_D 100: no gain at 100 Hz removes it), the
     UR5's and the Panda's elbows (inertia >= 0.19 kg m^2) stable; and the pole's frequency is
     the one the elbow of a MAS 3 patient of the population oscillates at in its first trial
-    under 225 / 30 (seed 0's patient 93, ideal sensors: 4.4-5.2 Hz)."""
-    shipped = load_config(None, overlays=[AWARE])
+    under 225 / 30 (seed 0's patient 93, ideal sensors: 4.4-5.2 Hz). At 100 Hz
+    (``control.period_rule: fixed``): the shipped rule runs this arm at 5 ms
+    (test_control_rate.py)."""
+    shipped = load_config(None, {"control.period_rule": "fixed"}, overlays=[AWARE])
     # the gains without their floors: the elbow at K_P 225 / K_D 30
     config = shipped.replace({"control.min_stiffness": 0.0, "control.min_damping": 0.0})
     elbow = analyze_patient_ranges(config).joints[2]
@@ -188,19 +198,29 @@ def test_mas3_reflex_makes_the_paper_elbow_unstable_at_the_frequency_it_chatters
     assert abs(peak - elbow.radius_hz) < 0.8, (peak, elbow.radius_hz)
 
 
-def test_analyze_loop_prints_the_factor_with_the_patient(capsys: pytest.CaptureFixture[str]
-                                                         ) -> None:
+def test_analyze_loop_prints_the_factor_with_the_patient(capsys: pytest.CaptureFixture[str],
+                                                         tmp_path: Path) -> None:
     assert main(["analyze-loop", "--config", str(AWARE), "--patient-ranges",
                  "--range-mas", "2"]) == 0
     out = capsys.readouterr().out
     assert "with the patient in the loop, worst over passive stiffness 0-4 N m/rad" in out
     assert "MAS 0, 1, 1+, 2, mass error" in out
     assert "learning converges for every patient in the ranges" in out
-    assert main(["analyze-loop", "--config", str(AWARE), "--patient-ranges"]) == 0
+    assert main(["analyze-loop", "--config", str(AWARE), str(fixed_rate(tmp_path)),
+                 "--patient-ranges"]) == 0
     out = capsys.readouterr().out
-    assert "elbow_flexion        UNSTABLE within a trial: a pole at radius 1.02" in out
+    assert "period 0.01 s" in out
+    assert "elbow_flexion        UNSTABLE within a trial: a pole at radius 1.0" in out
     assert "reflex 2 N m s/rad (MAS 3)" in out
     assert "some patient in the ranges makes the loop within a trial unstable" in out
+    # the shipped law's period_rule: 5 ms on this arm, where the MAS 3 elbow's loop is stable
+    # within a trial (its learned input may still grow in the linear analysis, which leaves the
+    # identification's inverse out: the certificate is the nonlinear answer)
+    assert main(["analyze-loop", "--config", str(AWARE), "--patient-ranges"]) == 0
+    out = capsys.readouterr().out
+    assert "period 0.005 s" in out
+    assert "UNSTABLE" not in out
+    assert "elbow_flexion        worst |F|" in out
 
 
 HARD = {
@@ -227,7 +247,7 @@ def test_hard_patients_on_other_arms_within_the_bound(arm: Path, patient: str) -
 
 
 def test_the_reflex_over_the_sampled_inertia_says_when_no_gains_can_help(
-        capsys: pytest.CaptureFixture[str]) -> None:
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     """G T / I at the worst corner, by hand: MAS 3's 2 N m s/rad over the paper arm's elbow's
     lightest inertia (0.01091 kg m^2, printed) at T 0.01 s is 1.83 >= 1 (no velocity feedback
     at 100 Hz holds it; a period below I / G = 5.5 ms is needed); on shoulder flexion (0.06619)
@@ -245,7 +265,9 @@ def test_the_reflex_over_the_sampled_inertia_says_when_no_gains_can_help(
               analyze_patient_ranges(config.replace({"control.period": 0.005})).joints}
     assert faster["elbow_flexion"].sampled_reflex == pytest.approx(elbow.sampled_reflex / 2.0)
     assert not faster["elbow_flexion"].reflex_outruns_period
-    assert main(["analyze-loop", "--config", str(AWARE), "--patient-ranges"]) == 0
+    assert main(["analyze-loop", "--config", str(AWARE), str(fixed_rate(tmp_path)),
+                 "--patient-ranges"]) == 0
     out = capsys.readouterr().out
     assert "G T / I 1.83 >= 1: no velocity feedback at this period holds it (a period below " \
            "I / G = 5.5 ms" in out
+    assert "control.period_rule: reflex picks one" in out

@@ -152,7 +152,8 @@ def format_ranges(analysis: RangeAnalysis) -> str:
                          "is learned" + (f"; G T / I {j.sampled_reflex:.2f} >= 1: no velocity "
                                          "feedback at this period holds it (a period below "
                                          f"I / G = {1e3 / (j.inverse_inertia * j.reflex_gain):.2g}"
-                                         " ms, or damping inside the period, can)"
+                                         " ms, or damping inside the period, can; "
+                                         "control.period_rule: reflex picks one)"
                                          if j.reflex_outruns_period else ""))
             continue
         lines.append(f"  {j.joint:<20} worst |F| {j.worst:.5f} at {j.frequency_hz:6.2f} Hz "

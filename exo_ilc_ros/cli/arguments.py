@@ -262,14 +262,18 @@ def write_output(text: str, out: str | None) -> None:
 def config_with_flags(path: str | None, flags: Mapping[str, tuple[str, Any]],
                       overlays: Sequence[str] = ()) -> Config:
     """The shipped config, ``path`` (``--config``) and ``overlays`` (``--scenario``) each
-    validated whole, then the flags' values ``{parameter: (flag, value)}``; a rule the flags
-    break (e.g. one between parameters) names the flag and its value, not the file."""
+    validated whole, then the flags' values ``{parameter: (flag, value)}``, then the period
+    ``control.period_rule`` gives (:func:`~exo_ilc_ros.core.loop.rate.with_control_rate`); a
+    rule the flags break (e.g. one between parameters) names the flag and its value, not the
+    file."""
+    from ..core.loop.rate import with_control_rate  # numba's arm model: not at CLI start
+
     config = load_config(path, overlays=overlays)
     values = {name: value for name, (_, value) in flags.items()}
     if not values:
-        return config
+        return with_control_rate(config)
     try:
-        return config.replace(values)
+        return with_control_rate(config.replace(values))
     except ConfigError as exc:
         if exc.key in flags:
             flag, value = flags[exc.key]

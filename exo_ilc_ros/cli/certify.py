@@ -96,6 +96,7 @@ def certify(args: argparse.Namespace) -> int:
     )
     from ..analysis.falsification import Pool, Search, falsification_json, falsify
     from ..core.errors import ConfigError
+    from ..core.loop.rate import with_control_rate
     from ..core.params.config import load_config
     from ..core.params.redact import redact
     from ..core.population.certificate import (
@@ -115,7 +116,7 @@ def certify(args: argparse.Namespace) -> int:
         raise ConfigError("--workers", "applies to the local process pool; with --dask the "
                           "cluster's workers run the patients")
     overlays = list(args.scenario or [])
-    base = load_config(args.config, overlays=overlays)
+    base = with_control_rate(load_config(args.config, overlays=overlays))
     muscles = has_muscles(base)
     if args.encoder_share is None:
         args.encoder_share = 0.0 if muscles else 0.5

@@ -59,7 +59,9 @@ effort_controller:
 
 
 def write_controllers(args: argparse.Namespace) -> int:
-    """Generate and write."""
-    text = controllers_yaml(load_config(args.config))
+    """Generate and write (the update rate of the period ``control.period_rule`` gives)."""
+    from ..core.loop.rate import with_control_rate  # numba's arm model: not at CLI start
+
+    text = controllers_yaml(with_control_rate(load_config(args.config)))
     write_output(text, args.out)
     return 0

@@ -127,7 +127,8 @@ def format_before_after(result: TuningResult, joint_names: Sequence[str]) -> str
 def tune(args: argparse.Namespace) -> int:
     """Run the study, print before/after, write the tuned YAML."""
     from ..analysis.tuning import TuningProblem, best_result, optimize
-    config = load_config(args.config, overlays=args.scenario or [])
+    from ..core.loop.rate import with_control_rate
+    config = with_control_rate(load_config(args.config, overlays=args.scenario or []))
     trials = int(args.trials if args.trials is not None else config["max_trials"])
     problem = TuningProblem.from_config(config, args.mass_uncertainty, trials,
                                         args.peak_weight, args.aggregate, args.law)

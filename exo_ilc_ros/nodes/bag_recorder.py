@@ -70,6 +70,7 @@ from ..bag.provenance import (
 from ..bag.view import ArmView
 from ..bag.writer import BagWriter
 from ..core.errors import ConfigError
+from ..core.loop.rate import with_control_rate
 from ..core.params.config import load_config
 from ..wire import topics
 from ..wire.protocol import int_value, key_values
@@ -148,7 +149,7 @@ class BagRecorder(Node):
 
         custom = {VERSION: "", RECORDED_BY: NAME, RUN_NAME: self.run_name}
         if config_file:
-            config = load_config(config_file)
+            config = with_control_rate(load_config(config_file))
             custom = provenance_data(config, recorded_by=NAME, run_name=self.run_name)
         else:
             config = load_config()

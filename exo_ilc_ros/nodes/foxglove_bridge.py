@@ -68,6 +68,7 @@ from ..bag.messages import typestore
 from ..bag.view import ArmView
 from ..core.arm.assets import AssetResolver, urdf_packages
 from ..core.errors import ConfigError
+from ..core.loop.rate import with_control_rate
 from ..core.params.config import Config, load_config, urdf_source
 from ..wire import topics
 from ..wire.relay import DISPLAY_RATE, RelayReceiver, SampleGate
@@ -170,7 +171,7 @@ class FoxgloveBridge(Node):
         policy = str(self.declare_parameter("scheduling", DEFAULT_SCHEDULING).value)
         if policy not in SCHEDULING:
             raise ConfigError("scheduling", f"use one of {', '.join(SCHEDULING)}", NAME)
-        config = load_config(config_file or None)
+        config = with_control_rate(load_config(config_file or None))
         self.view = ArmView(config)
         self.assets = AssetResolver(
             Path(urdf_source(config.values)[1]) if config["model.source"] == "urdf" else None,

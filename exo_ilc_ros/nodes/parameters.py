@@ -17,6 +17,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from ..core.errors import ConfigError
+from ..core.loop.rate import with_control_rate
 from ..core.params import schema
 from ..core.params.config import Config, flatten_tree, load_config, load_ros_yaml
 from ..core.params.validation import validate_update
@@ -64,8 +65,17 @@ class SchemaParameters:
         values = defaults.values
         values.update(other_sections(_command_line(), self._params))  # e.g. a 7-joint arm's
         values.update({name: node.get_parameter(name).value for name in self._params})
-        self.config: Config = Config(values, f"parameters of node {node.get_name()}")
-        """The configuration the node started with (validated)."""
+        given_config = Config(values, f"parameters of node {node.get_name()}")
+        self.config: Config = with_control_rate(given_config)
+        """The configuration the node started with (validated; ``control.period`` as
+        ``control.period_rule`` gives it, :mod:`exo_ilc_ros.core.loop.rate`)."""
+        if self.config is not given_config:  # the parameter says the period the node runs
+            period = self.config["control.period"]
+            node.set_parameters([Parameter("control.period", value=period)])
+            node.get_logger().info(
+                f"control.period {given_config['control.period']:g} s -> {period:g} s "
+                "(control.period_rule reflex: MAS 3's stretch reflex held on every patient "
+                "joint)")
         self.pending: Config = self.config
         """The configuration including accepted live changes."""
         self.listeners: list[Callable[[Config], None]] = []

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..core.loop.divergence import DIVERGED
+from ..core.loop.rate import with_control_rate
 from ..core.params.config import Config
 from ..core.persistence.store import RunStore
 from ..core.person.cuffs import cuff_table
@@ -153,7 +154,7 @@ class GraphSession:
                  extra: Sequence[NodeSpec] = (), log_dir: Path | None = None,
                  on_summary: Callable[[TrialSummary], None] | None = None,
                  nodes: Sequence[NodeSpec] = GRAPH_NODES) -> None:
-        self.config = config
+        self.config = config = with_control_rate(config)  # the period the nodes run
         self._claim: DomainClaim = claim_domain_id(domain_id)
         self.domain_id = self._claim.domain_id
         self._tmp = tempfile.TemporaryDirectory(prefix="exo_ilc_run_")

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..arm.model import ArmModel
+from ..loop.rate import with_control_rate
 from ..loop.record import TrialRecord
 from ..params.config import Config
 from ..reference.trajectory import SampledReference
@@ -108,6 +109,7 @@ class JointForceModel:
     """The identified joint forces of one session (module docstring)."""
 
     def __init__(self, config: Config, nominal: ArmModel, reference: SampledReference) -> None:
+        config = with_control_rate(config)  # the period the reference was sampled at
         self.settings = JointForceSettings.from_config(config)
         self.reference = reference
         self.identifier = JointForceIdentifier(nominal, self.settings.identification)

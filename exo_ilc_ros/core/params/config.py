@@ -414,7 +414,8 @@ class Config:
         person``, not its default ``model``), ``patient.joints`` only when given,
         ``model.gravity_direction`` only when it is not -z, ``control.min_stiffness`` and
         ``control.min_damping`` only when some joint's is not 0, ``control.velocity_observer``
-        only when it is on (below 1) (so, too, for the keys that came before them)."""
+        only when it is on (below 1), ``control.period_rule`` only when it is not ``fixed``
+        (so, too, for the keys that came before them)."""
         urdf = self._values["model.source"] == "urdf"
         left_out = set(schema.CONE_KEYS if urdf else schema.URDF_KEYS + schema.URDF_PLANT_KEYS)
         if self._values["model.urdf_joint_dynamics"] == "ignore":  # keys as before it existed
@@ -435,6 +436,8 @@ class Config:
                 left_out.add(floor)
         if self._values["control.velocity_observer"] >= 1.0:  # off: as before the key
             left_out.add("control.velocity_observer")
+        if self._values["control.period_rule"] == "fixed":  # as before the key
+            left_out.add("control.period_rule")
         down = self._values["model.gravity_direction"]
         if down[0] == 0.0 and down[1] == 0.0 and down[2] < 0.0:  # -z: as before the key
             left_out.add("model.gravity_direction")

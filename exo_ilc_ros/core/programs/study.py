@@ -26,6 +26,7 @@ import numpy as np
 
 from ... import __version__
 from ..errors import ConfigError, ExoIlcError
+from ..loop.rate import with_control_rate
 from ..loop.record import TrialRecord
 from ..params.config import Config, config_dir, load_config, scenario_names, scenario_path
 from ..person.cuffs import cuff_metrics
@@ -126,12 +127,13 @@ def cell_config(law: LawSpec, scenario: ScenarioSpec, mass_uncertainty: float, s
                 trials: int) -> Config:
     """The configuration of one cell: the shipped config, the law's file, the scenario overlay,
     then the law's values, the uncertainty, the trial count (every trial runs:
-    ``stop_when_settled`` 0) and the seed. A broken file is named in the error."""
+    ``stop_when_settled`` 0) and the seed, at the period ``control.period_rule`` gives. A broken
+    file is named in the error."""
     overrides: dict[str, Any] = {**law.values, "max_trials": int(trials),
                                  "mass_uncertainty": float(mass_uncertainty),
                                  "stop_when_settled": 0, SEED_PARAMETER: int(seed)}
     try:
-        return load_config(law.path, overrides, overlays=[scenario.path])
+        return with_control_rate(load_config(law.path, overrides, overlays=[scenario.path]))
     except ConfigError as exc:
         if exc.source:
             raise

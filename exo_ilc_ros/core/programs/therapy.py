@@ -20,6 +20,7 @@ from ..arm.build import build_arm
 from ..errors import ProfileError
 from ..learning.patient_model import JointForceModel
 from ..loop.patient import PatientLearning, PatientModel
+from ..loop.rate import with_control_rate
 from ..loop.record import TrialRecord
 from ..params.config import Config
 from ..persistence.patient_states import PatientState, read_legacy
@@ -160,6 +161,7 @@ def identified_of_records(config: Config,
     record)."""
     if not config["identification.enabled"] or not records:
         return None
+    config = with_control_rate(config)  # the period the records were run at
     model = JointForceModel(config, build_arm(config), build_reference(config))
     steps = [model.conclude(record) for record in records]
     return Identified.from_step(steps[-1], config["joint_names"])

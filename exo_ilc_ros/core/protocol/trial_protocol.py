@@ -36,6 +36,7 @@ import numpy as np
 from ..errors import ExoIlcError
 from ..loop.controller import outside_envelope
 from ..loop.divergence import PlantDivergence
+from ..loop.rate import with_control_rate
 from ..loop.trial import record_from_samples, sample_index
 from ..params.config import Config
 from ..persistence.store import RunStore
@@ -94,7 +95,7 @@ class TrialProtocol:
     def __init__(self, config: Config, port: GraphPort,
                  live: Callable[[], Config] | None = None,
                  clock: Callable[[], float] = time.monotonic) -> None:
-        self.config = config
+        self.config = config = with_control_rate(config)  # the period the nodes run
         self.port = port
         self.live = live or (lambda: config)
         """The node's parameters now (accepted live changes are staged at the boundary)."""

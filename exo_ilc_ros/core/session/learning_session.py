@@ -48,6 +48,7 @@ from ..learning.qfilter import feedforward_limit_of
 from ..loop.gains import feedback_gains, velocity_observer_gains
 from ..loop.observer import fed_back_velocity
 from ..loop.patient import PatientLearning, PatientModel, true_error
+from ..loop.rate import with_control_rate
 from ..loop.record import TrialRecord, position_velocity_record
 from ..loop.trial import record_from_samples
 from ..loop.wire_input import Rejection, check_feedforward_array
@@ -140,6 +141,7 @@ class LearningSession:
     """The step gain from the trials' statistics (``averaging``; None: off)."""
 
     def __post_init__(self) -> None:
+        self.config = with_control_rate(self.config)  # the period the experiment runs
         self._custom_law = self.law is not None
         self.active_law: LearningLaw = self.law or build_law(self.config)
         self.reference = build_reference(self.config)
@@ -534,7 +536,9 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
     learning patient itself (its state read by ``on_conclusion``: the state after the trial
     concluded), instead of a new one. Over 10 parameters because it is the in-process runner's
     public entry point: every option is a keyword with a default that leaves the config's
-    behaviour, as the CLI, benches and tests pass them.
+    behaviour, as the CLI, benches and tests pass them. The run is at the period
+    ``control.period_rule`` gives (:func:`~exo_ilc_ros.core.loop.rate.with_control_rate`), as
+    the graph's nodes run it.
     """
     overrides: dict[str, Any] = {}
     if trials is not None:
@@ -546,7 +550,7 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
     pending = {int(k): dict(v) for k, v in (changes or {}).items()}
     for k in sorted(k for k in pending if k <= 1):  # in effect from the start
         overrides.update(pending.pop(k))
-    effective = config.replace(overrides) if overrides else config
+    effective = with_control_rate(config.replace(overrides) if overrides else config)
     session = LearningSession(effective, learning_law)
     experiment = experiment_for(effective)
     result = RunResult(experiment.mass_uncertainty, effective["law"],

@@ -13,6 +13,7 @@ from ..loop.gains import feedback_gains, velocity_observer_gains
 from ..loop.hold import ramp_samples
 from ..loop.patient import PatientModel, patient_trial
 from ..loop.plant import PlantDynamics, plant_integration
+from ..loop.rate import with_control_rate
 from ..loop.record import TrialRecord
 from ..loop.stepper import ArmStepper, PlantStepper
 from ..loop.trial import simulate_trial_guarded
@@ -25,10 +26,11 @@ _NO_TORQUE = np.zeros((0, 0))
 class Experiment:
     """The closed loop of one configuration: nominal model in the controller, the plant with
     masses scaled by (1 + mass_uncertainty) and a person's segments (``person.*``), the sampled
-    reference, gains and limits."""
+    reference, gains and limits, at the period ``control.period_rule`` gives
+    (:func:`~..loop.rate.with_control_rate`)."""
 
     def __init__(self, config: Config) -> None:
-        self.config = config
+        self.config = config = with_control_rate(config)
         self.mass_uncertainty = float(config["mass_uncertainty"])
         self.nominal = build_arm(config)
         self.plant = build_plant(config)

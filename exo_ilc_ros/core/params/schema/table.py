@@ -243,6 +243,12 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("control.period", SHARED, Kind.DOUBLE,
               "control period (s): effort held over it; the error sums (13) are over its samples",
               strictly_positive=True),
+    Parameter("control.period_rule", SHARED, Kind.STRING,
+              "fixed: control.period as given; reflex: control.period is the longest period, "
+              "shortened to control.period / n so that MAS 3's stretch reflex G T / I stays "
+              "below 1 on every patient joint (I its lightest inertia along the reference; "
+              "core/loop/rate.py): the paper arm's elbow runs 5 ms, the UR5 and the Panda 10 ms",
+              choices=("fixed", "reflex")),
     Parameter("control.kp", SHARED, Kind.DOUBLE_ARRAY, "K_P of eq (11)", per_joint=True,
               minimum=0.0),
     Parameter("control.kd", SHARED, Kind.DOUBLE_ARRAY, "K_D of eq (11)", per_joint=True,

@@ -10,19 +10,19 @@ The rules, in the order :meth:`LearningSession.conclude` applies them at a trial
 2. A completed trial is learned from with the law, eq (11). A trial the error envelope aborted
    at sample a is kept, marked and learned from over the samples it has (variable pass length,
    :mod:`.abort`): the law's update on [0, a), the aborted feed-forward kept from a on, the change
-   on the tripping joints scaled by ``abort.backoff``. An aborted
-   feed-forward is never run again unchanged: ``abort.max_consecutive`` aborts in a row, or an
-   abort that left nothing to learn, or a plant that diverged, stop the session
-   (:attr:`StopReason.ABORTS`, :attr:`LearningSession.stop_message` says why, once). A learned
-   feed-forward that is not finite or of the wrong shape stops the session
-   (:class:`SafetyError`), nothing of it is used.
+   on the tripping joints scaled by ``abort.backoff``. An aborted feed-forward is never run again
+   unchanged: ``abort.max_consecutive`` aborts in a row, or an abort that left nothing to learn,
+   or a plant that diverged, stop the session (:attr:`StopReason.ABORTS`,
+   :attr:`LearningSession.stop_message` says why, once). A learned feed-forward that is not
+   finite or of the wrong shape stops the session (:class:`SafetyError`), nothing of it used.
 3. The "within the bound" streak counts consecutive completed trials with every joint's
    max |e_j| <= ``error_bound``; the session is finished after ``max_trials`` trials, once the
    streak reaches ``stop_when_settled`` (> 0), or by rule 2's aborts.
 
 A trial that must be run again (a watchdog trip, lost samples, a protocol step that made no
 progress) is :meth:`~LearningSession.discard`-ed: nothing is learned, the same trial number and
-feed-forward run again. A session resumes from the trials a :class:`RunStore` holds.
+feed-forward run again. A session resumes from the trials a :class:`RunStore` holds; it runs at
+``control.period_rule``'s period (:func:`..loop.rate.with_control_rate`).
 """
 
 from __future__ import annotations
@@ -113,10 +113,8 @@ class TrialConclusion:
 @dataclass
 class LearningSession:
     """The state of one learning run between trials (module docstring for the rules).
-
     ``config`` is the run's whole configuration, the plant's parameters included (it keys the
-    store). ``law`` replaces the config's law (then live changes cannot rebuild it).
-    """
+    store). ``law`` replaces the config's law (then live changes cannot rebuild it)."""
 
     config: Config
     law: LearningLaw | None = None
@@ -536,9 +534,7 @@ def run_trials(config: Config, mass_uncertainty: float | None = None,
     learning patient itself (its state read by ``on_conclusion``: the state after the trial
     concluded), instead of a new one. Over 10 parameters because it is the in-process runner's
     public entry point: every option is a keyword with a default that leaves the config's
-    behaviour, as the CLI, benches and tests pass them. The run is at the period
-    ``control.period_rule`` gives (:func:`~exo_ilc_ros.core.loop.rate.with_control_rate`), as
-    the graph's nodes run it.
+    behaviour, as the CLI, benches and tests pass them.
     """
     overrides: dict[str, Any] = {}
     if trials is not None:

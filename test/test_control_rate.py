@@ -80,14 +80,18 @@ def test_a_joint_the_movement_keeps_still_meets_no_reflex() -> None:
 
 def test_programs_run_the_rules_period(capsys: pytest.CaptureFixture[str],
                                        tmp_path: Path) -> None:
-    """The study's cells and the ros2_control file (update_rate 200 Hz) take the rule's
-    period."""
+    """The study's cells, the ros2_control file (update_rate 200 Hz) and the certificate (which
+    says the period it runs) take the rule's period."""
     cell = cell_config(LawSpec("patient_aware", AWARE), ScenarioSpec("ideal", config_dir() /
                        "scenarios" / "ideal.yaml"), 0.1, 0, 2)
     assert cell["control.period"] == 0.005
     out = tmp_path / "controllers.yaml"
     assert main(["ros2-control", "--config", str(AWARE), "--out", str(out)]) == 0
     assert "update_rate: 200" in out.read_text()
+    capsys.readouterr()
+    main(["certify", "--config", str(AWARE), "--population", "1", "--trials", "1",
+          "--workers", "1", "--rows", str(tmp_path / "rows.jsonl")])
+    assert "at 5 ms (control.period_rule reflex)" in capsys.readouterr().err
 
 
 def test_a_node_runs_and_says_the_rules_period() -> None:

@@ -139,7 +139,8 @@ def certify(args: argparse.Namespace) -> int:
     where = f"the Dask cluster at {redact(args.dask)}" if args.dask else \
         f"{min(workers, len(cells))} local process(es)"
     print(f"certify {label}: {args.population} patients (seed {args.seed}) x {args.trials} "
-          f"trials on {base.joints} joints, on {where}", file=sys.stderr)
+          f"trials on {base.joints} joints at {1e3 * base['control.period']:g} ms "
+          f"(control.period_rule {base['control.period_rule']}), on {where}", file=sys.stderr)
     # The law's digest: a rows file of the same files after the law changed is refused, not
     # resumed with its patients run under another law.
     setup = {"label": label, "config": args.config, "overlays": overlays,

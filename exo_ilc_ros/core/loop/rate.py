@@ -23,8 +23,9 @@ floors of (G) and the range analysis take it); T a whole number of the plant's R
 5 ms under config/patient_aware.yaml, the UR5 and the Panda keep 10 ms. A person with muscles
 (``musculoskeletal.model``) is left at the configured period: its reflexes are its muscles'
 (core/person/neural_drive.py), not the presets', and its MuJoCo step is a period's divisor
-of its own. :func:`with_control_rate` is the config every program and node runs: the one
-place the rule is applied.
+of its own. Every program and node runs its config through :func:`with_control_rate` (the
+in-process session, the experiment, the trial protocol, the graph's nodes, the CLI), so they
+all run the same period.
 """
 
 from __future__ import annotations

@@ -50,6 +50,7 @@ from ..errors import ModelError
 from ..loop.divergence import POSE_STRIDE
 from ..loop.patient import patient_values, rest_positions, spasticity_values
 from ..loop.plant import clamp_counted
+from ..loop.rate import with_control_rate
 from ..params.config import Config
 from ..reference.build import build_reference
 
@@ -251,8 +252,8 @@ class MujocoArm:
         """The plant of ``config`` (:func:`~exo_ilc_ros.core.arm.build.build_plant`: masses
         scaled by (1 + ``mass_uncertainty``), a person's segments), MuJoCo's time step =
         ``integration_step``; RK4, or ``implicitfast`` where the damping at the reference's
-        poses (every 25th sample and the last) needs it."""
-
+        poses (every 25th sample and the last) needs it; at ``control.period_rule``'s period."""
+        config = with_control_rate(config)
         arm = build_plant(config)
         poses = build_reference(config).position
         return cls(arm, config["joint_names"], config["control.period"],

@@ -25,6 +25,7 @@ from distributed import LocalCluster
 
 from exo_ilc_ros.analysis.certificate import run_population
 from exo_ilc_ros.analysis.study import BLAS_THREADS
+from exo_ilc_ros.core.loop.rate import with_control_rate
 from exo_ilc_ros.core.params.config import config_dir, load_config
 from exo_ilc_ros.core.population.certificate import certificate, patient_cell, patient_config
 from exo_ilc_ros.core.population.distributions import PopulationSpec, draw_population
@@ -36,7 +37,7 @@ TARGET = 1000
 
 def _cells(config: str, overlays: list[str], patients: int, trials: int,
            seed: int) -> list[StudyCell]:
-    base = load_config(config, overlays=overlays)
+    base = with_control_rate(load_config(config, overlays=overlays))  # as certify runs it
     return [patient_cell("bench", patient_config(base, p, trials), p)
             for p in draw_population(base, PopulationSpec(), patients, seed)]
 

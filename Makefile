@@ -60,7 +60,7 @@ docs: $(STAMP)
 
 test: bytecode lint docs
 	@$(NUMBA_NOTE)
-	@echo "make: running the whole test suite (about 24 min on 2 idle cores;"
+	@echo "make: running the whole test suite (20-25 min on 2 idle cores;"
 	@echo "make: most of it real ROS 2 graphs over DDS and a colcon build); pytest prints a dot per test"
 	$(BIN)/python -m pytest
 

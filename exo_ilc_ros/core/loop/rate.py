@@ -30,9 +30,12 @@ all run the same period.
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from ..errors import ConfigError
+from ..params import schema
 from ..params.config import Config
 from ..reference.build import build_reference
 from .gains import lightest_inverse_inertia
@@ -57,8 +60,11 @@ def sampled_reflex(config: Config, period: float | None = None) -> np.ndarray:
     return np.where(active, gain * period * lightest_inverse_inertia(config), 0.0)
 
 
-def _whole(x: float) -> bool:
-    return abs(x - round(x)) <= 1e-9 * max(abs(x), 1.0)
+_PERIODS: weakref.WeakKeyDictionary[Config, float] = weakref.WeakKeyDictionary()
+"""The period :func:`reflex_period` gave each config still alive (and the config it gave):
+a run hands one config to its session, experiment and identification, which each apply the
+rule; a Config is immutable, so it is worked out once (~10 ms: the reference and a_N^-1 along
+it)."""
 
 
 def reflex_period(config: Config) -> float:
@@ -74,9 +80,8 @@ def reflex_period(config: Config) -> float:
     duration = float(config["trajectory.duration"])
     for n in range(1, int(round(period / step)) + 1):
         candidate = float(f"{period / n:.12g}")
-        if not (_whole(candidate / step) and _whole(duration / candidate)):
-            continue
-        if worst * candidate / period < REFLEX_RATIO_LIMIT:
+        if schema.period_problem(candidate, step, duration) is None and \
+                worst * candidate / period < REFLEX_RATIO_LIMIT:
             return candidate
     raise ConfigError("control.period_rule",
                       f"no period below control.period {period:g} s in whole RK4 steps "
@@ -87,7 +92,11 @@ def reflex_period(config: Config) -> float:
 def with_control_rate(config: Config) -> Config:
     """``config`` with ``control.period`` the one :func:`reflex_period` gives (``config``
     itself when it is the same). Idempotent: the period it gives meets (R) itself."""
-    period = reflex_period(config)
+    period = _PERIODS.get(config)
+    if period is None:
+        period = _PERIODS[config] = reflex_period(config)
     if period == float(config["control.period"]):
         return config
-    return config.replace({"control.period": period})
+    rated = config.replace({"control.period": period})
+    _PERIODS[rated] = period
+    return rated

@@ -56,6 +56,7 @@ from .validator import (
     check_value,
     coerce,
     per_joint_values,
+    period_problem,
 )
 
 __all__ = [
@@ -92,4 +93,5 @@ __all__ = [
     "parse_patient_joints",
     "patient_joint_names",
     "per_joint_values",
+    "period_problem",
 ]

@@ -160,6 +160,20 @@ def check_value(param: Parameter, value: Any, joints: int,
             raise ConfigError(param.name, problem)
 
 
+def period_problem(period: float, step: float, duration: float) -> tuple[str, str] | None:
+    """(key, rule) a control period breaks against the RK4 step and the trial's duration (the
+    step must divide it, the trial be a whole number of it); None: it meets both. The schema's
+    rule, and the one :mod:`exo_ilc_ros.core.loop.rate` picks a period by."""
+    ratio = period / step
+    if step > period or abs(ratio - round(ratio)) > 1e-9 * ratio:
+        return "integration_step", \
+            f"must divide control.period ({period:g} s) a whole number of times"
+    steps = duration / period
+    if abs(steps - round(steps)) > 1e-9 * max(steps, 1.0):
+        return "trajectory.duration", f"must be a whole number of control periods ({period:g} s)"
+    return None
+
+
 def check_consistency(values: Mapping[str, Any]) -> None:
     """Rules between parameters: monotonic thresholds, a whole number of sub-steps, ..."""
     names = values["joint_names"]
@@ -172,15 +186,9 @@ def check_consistency(values: Mapping[str, Any]) -> None:
                                   f"thresholds must increase: joint {names[j]!r} has "
                                   f"threshold_low {lo:g} >= threshold_high {hi:g}")
     period = values["control.period"]
-    step = values["integration_step"]
-    ratio = period / step
-    if step > period or abs(ratio - round(ratio)) > 1e-9 * ratio:
-        raise ConfigError("integration_step",
-                          f"must divide control.period ({period:g} s) a whole number of times")
-    steps = values["trajectory.duration"] / period
-    if abs(steps - round(steps)) > 1e-9 * max(steps, 1.0):
-        raise ConfigError("trajectory.duration",
-                          f"must be a whole number of control periods ({period:g} s)")
+    problem = period_problem(period, values["integration_step"], values["trajectory.duration"])
+    if problem is not None:
+        raise ConfigError(*problem)
     if values["model.source"] == "cones":
         _check_cones(values)
         if values["model.urdf_joint_dynamics"] != "ignore":

@@ -36,9 +36,13 @@ least residual wins (separable least squares); G is linear.
 
 **Confidence**: Cov(theta) = s^2 R^-1 (sum lambda^2m / sum lambda^m), s^2 = RSS / (n - p),
 each variance inflated by the last trials' ratio of the autocorrelation-robust (Newey-West,
-Bartlett kernel) to the naive variance (filtered residuals are strongly autocorrelated);
-95 % intervals +-1.96 SE; q_0's by the delta method; v_th's and tau_r's from the residual's
-profile over the grid. **Trust**: the condition number of the column-scaled information matrix,
+Bartlett kernel) to the naive variance (filtered residuals are strongly autocorrelated).
+**Model error** (``reversal_speed`` > 0; 0 trusts the tanh law): the trial refitted with a hard
+Coulomb law, sgn(qdot) for the tanh, moves the estimate by d; Cov + d d^T (lambda-weighted over
+trials) gives the 95 % intervals +-1.96 SE; q_0's by the delta method; v_th's and tau_r's from
+the residual's profile over the grid.
+**Trust** (the precision rule reads the noise's SE alone): the condition number of the
+column-scaled information matrix,
 each parameter's variance inflation (collinearity), excitation, precision and physical bounds,
 and no sign of the patient's own effort in the residual (:class:`IdentificationSettings`); an
 estimate that fails any of them says why and is not usable (:attr:`JointEstimate.trustworthy`).
@@ -68,7 +72,9 @@ from .identification_settings import (
     BASE_PARAMETERS,
     KEEP_ORDER,
     PASSIVE_PARAMETERS,
+    Z95,
     IdentificationSettings,
+    judge,
 )
 from .joint_force_regressors import (
     RegressionFilters,
@@ -83,14 +89,12 @@ from .recursive_least_squares import (
     Solution,
     conditioning,
     hac_inflation,
+    law_difference,
     solve_scaled,
 )
-from .separability import inseparable_pairs, inseparable_reason
+from .separability import inseparable_pairs, inseparable_reason, most_correlated
 
 __all__ = ["JointForceIdentifier", "inseparable_pairs"]
-
-_Z95 = 1.959963984540054
-"""The normal distribution's 97.5 % quantile: 95 % intervals."""
 
 
 class JointForceIdentifier:
@@ -287,8 +291,8 @@ class JointForceIdentifier:
                           reflex: tuple[np.ndarray, np.ndarray],
                           estimate: JointEstimate, rows: np.ndarray | None) -> None:
         """The autocorrelation inflation of the variances, from this trial's residual under
-        the model now reported (lambda-weighted mean over trials); ``rows``: the samples
-        ``info`` holds (None: all)."""
+        the model now reported, and the friction law's model error (both lambda-weighted means
+        over trials); ``rows``: the samples ``info`` holds (None: all)."""
         mask, _ = self._separate(info)
         best, chosen, _ = self._selected(info, mask)
         phi = reg.base[:, j, :]
@@ -314,6 +318,15 @@ class JointForceIdentifier:
         lam = self.settings.forgetting
         old = info.inflation
         weight_old = lam * (info.w1 - 1.0)
+        shift = np.zeros(p + 1)
+        coulomb = BASE_PARAMETERS.index("coulomb")
+        if use[coulomb] and self.settings.reversal_speed > 0.0:  # 0: the tanh law trusted
+            hard = reg.hard_coulomb[:, j] if rows is None else reg.hard_coulomb[rows, j]
+            fitted = np.flatnonzero(use)
+            shift[fitted] = law_difference(phi[:, use], target,
+                                           int(np.searchsorted(fitted, coulomb)), hard)
+        info.model_covariance = ((weight_old * info.model_covariance + np.outer(shift, shift))
+                                 / (weight_old + 1.0))
         mixed = np.where(np.isfinite(old), (weight_old * old + new) / (weight_old + 1.0), new)
         info.inflation = np.where(np.isfinite(mixed), mixed, old)
 
@@ -350,6 +363,7 @@ class JointForceIdentifier:
         scale = np.where(chosen.excited, chosen.scale, np.nan)
         cov = sigma2 * weights * chosen.covariance_scaled / np.outer(scale, scale)
         cov = cov * np.sqrt(np.outer(inflation, inflation))
+        model = info.model_covariance[:scale.shape[0], :scale.shape[0]]
         vif = np.diag(chosen.covariance_scaled)
         theta = chosen.theta
         params: dict[str, ParameterEstimate] = {}
@@ -368,8 +382,9 @@ class JointForceIdentifier:
                     name, math.nan, math.nan, math.nan, math.nan, False, False,
                     inseparable_reason(name, absorbed[name], pairs, info.fastest, s))
                 continue
-            params[name] = self._parameter(name, theta[k], cov[k, k], chosen.excited[k],
-                                           vif[k], chosen.covariance_scaled, k, names)
+            params[name] = self._parameter(name, theta[k], cov[k, k], model[k, k],
+                                           chosen.excited[k], vif[k], chosen.covariance_scaled,
+                                           k, names)
             if name in ("viscous", "coulomb") and slow:
                 params[name] = dataclasses.replace(
                     params[name], identifiable=False, trustworthy=False,
@@ -380,7 +395,7 @@ class JointForceIdentifier:
             carried = tuple(drop for drop, keep in absorbed.items() if keep == name)
             if carried:
                 params[name] = dataclasses.replace(params[name], combined_with=carried)
-        params["rest_position"] = self._rest_position(theta, cov, params)
+        params["rest_position"] = self._rest_position(theta, cov, model, params)
         if detected and best is not None:
             params.update(self._reflex_grid(info, best, sigma2 * weights
                                             * float(inflation[p])))
@@ -388,7 +403,7 @@ class JointForceIdentifier:
             upper = math.nan
             if best is not None:
                 g, se = self._stats(info, with_reflex, p)
-                upper = max(g + _Z95 * se, 0.0) if math.isfinite(g + se) else math.nan
+                upper = max(g + Z95 * se, 0.0) if math.isfinite(g + se) else math.nan
             identifiable = not reflex_reason.startswith("not identifiable")
             params["reflex_gain"] = ParameterEstimate("reflex_gain", 0.0, math.nan, 0.0, upper,
                                                       identifiable, False, reflex_reason)
@@ -466,9 +481,9 @@ class JointForceIdentifier:
         if not vif <= s.max_variance_inflation:
             names = (*BASE_PARAMETERS, "reflex_gain")
             return (f"no reflex detected: G not identifiable (variance inflation {vif:.3g}, "
-                    f"collinear with {_most_correlated(with_reflex.covariance_scaled, p, names)})")
-        if g - _Z95 * se <= 0.0:
-            return f"no reflex detected: G = {g:.3g} +- {_Z95 * se:.2g} N m s/rad includes 0"
+                    f"collinear with {most_correlated(with_reflex.covariance_scaled, p, names)})")
+        if g - Z95 * se <= 0.0:
+            return f"no reflex detected: G = {g:.3g} +- {Z95 * se:.2g} N m s/rad includes 0"
         if torque < s.reflex_minimum_torque:
             return (f"no reflex detected: its torque at the fastest stretch ({torque:.3g} N m) "
                     f"is below {s.reflex_minimum_torque} N m")
@@ -493,10 +508,12 @@ class JointForceIdentifier:
                / solution.scale[k] ** 2 * infl)
         return float(solution.theta[k]), math.sqrt(var) if var >= 0.0 else math.nan
 
-    def _parameter(self, name: str, value: float, variance: float, excited: bool, vif: float,
-                   cov_scaled: np.ndarray, k: int, names: tuple[str, ...]) -> ParameterEstimate:
+    def _parameter(self, name: str, value: float, variance: float, model_variance: float,
+                   excited: bool, vif: float, cov_scaled: np.ndarray, k: int,
+                   names: tuple[str, ...]) -> ParameterEstimate:
         s = self.settings
         se = math.sqrt(variance) if variance >= 0.0 else math.nan
+        me = math.sqrt(model_variance)
         if not excited:
             return ParameterEstimate(name, math.nan, math.nan, math.nan, math.nan, False, False,
                                      "not identifiable: its regressor is zero (not excited)")
@@ -505,14 +522,15 @@ class JointForceIdentifier:
         if not identifiable:
             reason = (f"not identifiable: variance inflation {vif:.3g} > "
                       f"{s.max_variance_inflation:g}, collinear with "
-                      f"{_most_correlated(cov_scaled, k, names)}")
-        reason = reason or _judge(name, value, se, s)
-        return ParameterEstimate(name, value, se, value - _Z95 * se, value + _Z95 * se,
-                                 identifiable, not reason, reason)
+                      f"{most_correlated(cov_scaled, k, names)}")
+        reason = reason or judge(name, value, se, s)
+        half = Z95 * math.hypot(se, me)
+        return ParameterEstimate(name, value, se, value - half, value + half, identifiable,
+                                 not reason, reason, model_error=me)
 
-    def _rest_position(self, theta: np.ndarray, cov: np.ndarray,
+    def _rest_position(self, theta: np.ndarray, cov: np.ndarray, model: np.ndarray,
                        params: Mapping[str, ParameterEstimate]) -> ParameterEstimate:
-        """q_0 = -c / K, its variance by the delta method."""
+        """q_0 = -c / K, its variance and model error by the delta method."""
         k, c = theta[2], theta[3]
         stiffness = params["stiffness"]
         offset = params["offset"]
@@ -525,7 +543,7 @@ class JointForceIdentifier:
         if not (stiffness.identifiable and offset.identifiable):
             return ParameterEstimate("rest_position", math.nan, math.nan, math.nan, math.nan,
                                      False, False, "not identifiable: stiffness or offset is not")
-        if not (stiffness.low > 0.0):
+        if not (stiffness.value - Z95 * stiffness.standard_error > 0.0):
             return ParameterEstimate("rest_position", math.nan, math.nan, math.nan, math.nan,
                                      False, False, "not identifiable: no significant stiffness "
                                      "to define a rest position")
@@ -534,9 +552,11 @@ class JointForceIdentifier:
         sub = cov[np.ix_([2, 3], [2, 3])]
         var = float(grad @ sub @ grad)
         se = math.sqrt(var) if var >= 0.0 else math.nan
-        reason = _judge("rest_position", q0, se, self.settings)
-        return ParameterEstimate("rest_position", q0, se, q0 - _Z95 * se, q0 + _Z95 * se,
-                                 True, not reason, reason)
+        me = math.sqrt(max(float(grad @ model[np.ix_([2, 3], [2, 3])] @ grad), 0.0))
+        reason = judge("rest_position", q0, se, self.settings)
+        half = Z95 * math.hypot(se, me)
+        return ParameterEstimate("rest_position", q0, se, q0 - half, q0 + half, True,
+                                 not reason, reason, model_error=me)
 
     def _reflex_grid(self, info: JointInformation, best: int,
                      variance_scale: float) -> dict[str, ParameterEstimate]:
@@ -556,35 +576,6 @@ class JointForceIdentifier:
             at_edge = low <= grid[0] or high >= grid[-1]
             reason = ("its interval reaches the grid's edge (not determined)"
                       if at_edge and grid.shape[0] > 1 else "")
-            out[name] = ParameterEstimate(name, float(value), (high - low) / (2 * _Z95), low,
+            out[name] = ParameterEstimate(name, float(value), (high - low) / (2 * Z95), low,
                                           high, not reason, not reason, reason)
         return out
-
-
-def _most_correlated(cov_scaled: np.ndarray, k: int, names: tuple[str, ...]) -> str:
-    """The parameter whose estimate correlates most with parameter ``k``'s."""
-    c = cov_scaled
-    d = np.sqrt(np.abs(np.diag(c)))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        corr = c[k] / (d[k] * d)
-    corr = np.where(np.isfinite(corr), np.abs(corr), -1.0)
-    corr[k] = -1.0
-    other = int(np.argmax(corr[:len(names)]))
-    return f"{names[other]} (correlation {corr[other]:.3f})"
-
-
-def _judge(name: str, value: float, se: float, s: IdentificationSettings) -> str:
-    """"" if a parameter's estimate is usable, else why not."""
-    if not (math.isfinite(value) and math.isfinite(se)):
-        return "non-finite estimate"
-    if name in s.bounds:
-        low, high = s.bounds[name]
-        margin = max(3.0 * se, s.absolute_precision.get(name, 0.0))
-        if value < low - margin or value > high + margin:
-            return (f"absurd: {value:.4g} outside [{low:g}, {high:g}] by more than "
-                    f"{margin:.2g} (3 SE, or the precision floor)")
-    half = _Z95 * se
-    tolerance = max(s.relative_precision * abs(value), s.absolute_precision.get(name, 0.0))
-    if half > tolerance:
-        return f"imprecise: 95 % half-width {half:.3g} > {tolerance:.3g}"
-    return ""

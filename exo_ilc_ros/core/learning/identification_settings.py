@@ -39,6 +39,9 @@ def _default_bounds() -> dict[str, tuple[float, float]]:
             "reflex_gain": (0.0, 20.0)}
 
 
+Z95 = 1.959963984540054
+"""The normal distribution's 97.5 % quantile: 95 % intervals."""
+
 @dataclass(frozen=True)
 class IdentificationSettings:
     """How the identification filters, forgets and judges (module docstring)."""
@@ -149,3 +152,21 @@ class IdentificationSettings:
     def delay_samples(self) -> tuple[int, ...]:
         """The reflex delay grid in control periods (distinct, sorted)."""
         return tuple(sorted({int(round(d / self.period)) for d in self.reflex_delays}))
+
+
+def judge(name: str, value: float, se: float, s: IdentificationSettings) -> str:
+    """"" if a parameter's estimate is usable, else why not: finite, within ``s.bounds``
+    (3 SE or the precision floor), 95 % half-width of its noise within the precision."""
+    if not (math.isfinite(value) and math.isfinite(se)):
+        return "non-finite estimate"
+    if name in s.bounds:
+        low, high = s.bounds[name]
+        margin = max(3.0 * se, s.absolute_precision.get(name, 0.0))
+        if value < low - margin or value > high + margin:
+            return (f"absurd: {value:.4g} outside [{low:g}, {high:g}] by more than "
+                    f"{margin:.2g} (3 SE, or the precision floor)")
+    half = Z95 * se
+    tolerance = max(s.relative_precision * abs(value), s.absolute_precision.get(name, 0.0))
+    if half > tolerance:
+        return f"imprecise: 95 % half-width {half:.3g} > {tolerance:.3g}"
+    return ""

@@ -108,6 +108,10 @@ class TrialRegressors:
     unresolved: np.ndarray
     """(n,) rad: RMS of the measured position above the smoothing cutoff (the motion the
     regressors do not resolve: encoder noise, or chatter and stick-slip when large)."""
+    hard_coulomb: np.ndarray
+    """(m, n): the Coulomb column under a hard law, H[sgn(qdot)] (MuJoCo's ``frictionloss``,
+    a dry contact's), where the model's is H[tanh(qdot / v_s)]: the other law the friction
+    law's model error is measured against (:mod:`.identification`)."""
 
 
 def trial_regressors(nominal: ArmModel, settings: IdentificationSettings,
@@ -140,8 +144,9 @@ def trial_regressors(nominal: ArmModel, settings: IdentificationSettings,
     skip = min(int(round(settings.burn_in / period)), q.shape[0] - 1)
     basis = filters.start_transients(q.shape[0])[skip:]
     unresolved = np.sqrt(np.mean((q - smoothed)[skip:] ** 2, axis=0))
+    hard = filters.apply(filters.smooth, np.sign(velocity))
     return TrialRegressors(project_out(target[skip:], basis), project_out(columns[skip:], basis),
-                           velocity, skip, basis, unresolved)
+                           velocity, skip, basis, unresolved, project_out(hard[skip:], basis))
 
 
 def _voluntary_columns(settings: IdentificationSettings, filters: RegressionFilters, q: np.ndarray,

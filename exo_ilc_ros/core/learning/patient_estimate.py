@@ -27,8 +27,11 @@ class ParameterEstimate:
     name: str
     value: float
     standard_error: float
+    """The noise's (autocorrelation-robust); the precision rule of :attr:`trustworthy` reads
+    it."""
     low: float
     high: float
+    """The 95 % interval: value +- 1.96 :attr:`total_error` (noise and model error)."""
     identifiable: bool
     """The excitation determines it (excited, not collinear with another parameter)."""
     trustworthy: bool
@@ -39,6 +42,15 @@ class ParameterEstimate:
     """Parameters the movement cannot separate from this one, left out of the fit: this
     estimate carries their combination (e.g. ``offset`` = c + F_c sgn(qdot) on a joint that
     never reverses), its truth is that combination's."""
+    model_error: float = 0.0
+    """What the friction law's choice moves the estimate by (a smooth tanh, the model's, or
+    a hard sign, a dry contact's): a model error more samples do not shrink; 0 when Coulomb
+    friction is not fitted."""
+
+    @property
+    def total_error(self) -> float:
+        """The standard error of the noise and the model error together: the interval's."""
+        return math.hypot(self.standard_error, self.model_error)
 
     @property
     def unit(self) -> str:
@@ -102,8 +114,8 @@ class PatientEstimate:
 
     def as_dict(self) -> dict[str, Any]:
         """Plain JSON-able values (non-finite numbers as None), for a summary, a bag or
-        ``/diagnostics``: per joint every parameter's value, standard error, interval,
-        identifiable, trustworthy and reason, and the joint's condition number, residual,
+        ``/diagnostics``: per joint every parameter's value, standard error, model error,
+        interval, identifiable, trustworthy and reason, and the joint's condition number, residual,
         peak stretch velocity, trials, trustworthy and reasons."""
         return {"trial": self.trial, "rejected": self.rejected,
                 "trustworthy": self.trustworthy,
@@ -118,6 +130,7 @@ class PatientEstimate:
                                             for a, b, r in j.inseparable],
                             "parameters": {name: {"value": _plain(p.value),
                                                   "standard_error": _plain(p.standard_error),
+                                                  "model_error": _plain(p.model_error),
                                                   "low": _plain(p.low), "high": _plain(p.high),
                                                   "unit": p.unit,
                                                   "identifiable": bool(p.identifiable),

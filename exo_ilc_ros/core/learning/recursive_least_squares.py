@@ -1,6 +1,7 @@
 """The least squares of the identification of the patient's joint forces
 (:mod:`.identification`): a solve in column-scaled coordinates, the autocorrelation-robust
-variance inflation, and one joint's information, recursive over trials with forgetting, for
+variance inflation, what the choice of one term's law moves the estimate by, and one joint's
+information, recursive over trials with forgetting, for
 the base columns and every reflex grid point."""
 
 from __future__ import annotations
@@ -95,6 +96,18 @@ def hac_inflation(phi: np.ndarray, residual: np.ndarray, lags: int) -> np.ndarra
     return np.where(np.isfinite(ratio), np.maximum(ratio, 1.0), np.nan)
 
 
+def law_difference(phi: np.ndarray, target: np.ndarray, column: int,
+                   alternative: np.ndarray) -> np.ndarray:
+    """Per column of ``phi``: the least-squares estimate with column ``column`` replaced by
+    ``alternative`` (the same term under another law) minus the estimate with it, on the same
+    samples: what not knowing which of the two laws holds moves each parameter by (a model
+    error, which more samples do not shrink)."""
+    other = phi.copy()
+    other[:, column] = alternative
+    return np.asarray(np.linalg.lstsq(other, target, rcond=None)[0]
+                      - np.linalg.lstsq(phi, target, rcond=None)[0])
+
+
 class JointInformation:
     """One joint's accumulated (forgotten) information: the base columns' and every reflex
     grid point's."""
@@ -117,6 +130,9 @@ class JointInformation:
         self.fastest = np.zeros(2)
         """rad/s: the fastest qdot > 0 and -qdot of every trial so far (a reversal)."""
         self.inflation = np.full(p + 1, np.nan)
+        self.model_covariance = np.zeros((p + 1, p + 1))
+        """The friction law's model error, d d^T with d the hard-law fit minus the model's
+        (:func:`law_difference`; lambda-weighted mean over trials)."""
         self.unresolved = 0.0
         self._rss: np.ndarray | None = None
         self._derived: dict[Hashable, Any] = {}

@@ -43,3 +43,15 @@ def inseparable_reason(name: str, kept: str, pairs: tuple[tuple[str, str, float]
                 f"{kept} + F_c sgn(qdot) is determined, carried by {kept}")
     return (f"not separately identifiable from {kept} (correlation {r:.4f}): only their "
             f"combination is determined, carried by {kept}")
+
+
+def most_correlated(cov_scaled: np.ndarray, k: int, names: tuple[str, ...]) -> str:
+    """The parameter whose estimate correlates most with parameter ``k``'s."""
+    c = cov_scaled
+    d = np.sqrt(np.abs(np.diag(c)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        corr = c[k] / (d[k] * d)
+    corr = np.where(np.isfinite(corr), np.abs(corr), -1.0)
+    corr[k] = -1.0
+    other = int(np.argmax(corr[:len(names)]))
+    return f"{names[other]} (correlation {corr[other]:.3f})"

@@ -143,6 +143,9 @@ def main() -> None:
         else:
             print(line)
     print("first within 0.005:", run.first_within(0.005))
+    if run.records:
+        print(f"control period {run.records[0].reference.period * 1e3:g} ms "
+              f"(control.period_rule {config['control.period_rule']})")
 
 
 if __name__ == "__main__":

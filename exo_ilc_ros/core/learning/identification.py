@@ -325,8 +325,9 @@ class JointForceIdentifier:
             fitted = np.flatnonzero(use)
             shift[fitted] = law_difference(phi[:, use], target,
                                            int(np.searchsorted(fitted, coulomb)), hard)
-        info.model_covariance = ((weight_old * info.model_covariance + np.outer(shift, shift))
-                                 / (weight_old + 1.0))
+        if np.all(np.isfinite(shift)):  # else (no solve) the earlier trials' is kept
+            info.model_covariance = ((weight_old * info.model_covariance
+                                      + np.outer(shift, shift)) / (weight_old + 1.0))
         mixed = np.where(np.isfinite(old), (weight_old * old + new) / (weight_old + 1.0), new)
         info.inflation = np.where(np.isfinite(mixed), mixed, old)
 

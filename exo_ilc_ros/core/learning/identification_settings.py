@@ -42,6 +42,7 @@ def _default_bounds() -> dict[str, tuple[float, float]]:
 Z95 = 1.959963984540054
 """The normal distribution's 97.5 % quantile: 95 % intervals."""
 
+
 @dataclass(frozen=True)
 class IdentificationSettings:
     """How the identification filters, forgets and judges (module docstring)."""

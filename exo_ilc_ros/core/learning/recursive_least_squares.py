@@ -101,11 +101,14 @@ def law_difference(phi: np.ndarray, target: np.ndarray, column: int,
     """Per column of ``phi``: the least-squares estimate with column ``column`` replaced by
     ``alternative`` (the same term under another law) minus the estimate with it, on the same
     samples: what not knowing which of the two laws holds moves each parameter by (a model
-    error, which more samples do not shrink)."""
+    error, which more samples do not shrink); nan where the fit fails."""
     other = phi.copy()
     other[:, column] = alternative
-    return np.asarray(np.linalg.lstsq(other, target, rcond=None)[0]
-                      - np.linalg.lstsq(phi, target, rcond=None)[0])
+    try:
+        return np.asarray(np.linalg.lstsq(other, target, rcond=None)[0]
+                          - np.linalg.lstsq(phi, target, rcond=None)[0])
+    except np.linalg.LinAlgError:  # the SVD did not converge: unknown
+        return np.full(phi.shape[1], np.nan)
 
 
 class JointInformation:

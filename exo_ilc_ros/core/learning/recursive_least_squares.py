@@ -1,8 +1,8 @@
 """The least squares of the identification of the patient's joint forces
 (:mod:`.identification`): a solve in column-scaled coordinates, the autocorrelation-robust
 variance inflation, what the choice of one term's law moves the estimate by, and one joint's
-information, recursive over trials with forgetting, for
-the base columns and every reflex grid point."""
+information, recursive over trials with forgetting, for the base columns and every reflex grid
+point."""
 
 from __future__ import annotations
 
